@@ -1,0 +1,37 @@
+"""Incremental joint encoders: quantised joint angles with optional noise."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
+
+
+class JointEncoderConfig(SensorConfig):
+    """Encoder resolution and noise."""
+
+    counts_per_rev: int = Field(4096, gt=0, description="counts per joint revolution (after gearing)")
+    noise_counts: float = Field(0.0, ge=0, description="standard deviation of additive noise [counts]")
+
+
+class JointEncoder(Sensor):
+    """Joint angles as an encoder reads them: quantised to whole counts, optionally noisy."""
+
+    def __init__(self, config: JointEncoderConfig, context: Context):
+        self.rate_hz = config.rate_hz
+        self.step = 2 * np.pi / config.counts_per_rev
+        self.noise = config.noise_counts
+        self.rng = context.rng
+
+    def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
+        counts = np.round(q / self.step)
+        if self.noise:
+            counts = counts + np.round(self.rng.normal(0.0, self.noise, size=q.shape))
+        return {"position_rad": counts * self.step}
+
+
+@hookimpl
+def rehabkit_register_sensors(registry) -> None:
+    registry.add("joint-encoder", config=JointEncoderConfig, factory=JointEncoder)

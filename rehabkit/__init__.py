@@ -1,0 +1,24 @@
+"""rehabkit: rehabilitation and assistive robotics scenarios, from YAML to MuJoCo and Rerun."""
+
+from rehabkit.core.hookspecs import hookimpl
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    # the heavy parts (MuJoCo, Pinocchio, Rerun) load on first use, so that plugins
+    # importing `hookimpl` stay cheap to import
+    if name in ("run_scenario",):
+        from rehabkit import api
+
+        return getattr(api, name)
+    if name in ("load_scenario", "ScenarioError", "RunResult"):
+        from rehabkit.core.runner import RunResult
+        from rehabkit.core.scenario.errors import ScenarioError
+        from rehabkit.core.scenario.loader import load_scenario
+
+        return {"load_scenario": load_scenario, "ScenarioError": ScenarioError, "RunResult": RunResult}[name]
+    raise AttributeError(f"module 'rehabkit' has no attribute {name!r}")
+
+
+__all__ = ["hookimpl", "run_scenario", "load_scenario", "ScenarioError", "RunResult", "__version__"]

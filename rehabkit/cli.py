@@ -1,0 +1,134 @@
+"""``rehabkit`` command line: run, validate, plugins, schema.
+
+Exit codes: 0 success (all expectations met), 1 an expectation failed or the
+run stopped on a safety event, 2 invalid input. Errors are printed as
+messages, never as bare tracebacks (``REHABKIT_DEBUG=1`` shows them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import traceback
+from pathlib import Path
+
+from rehabkit.core.plugins import PluginError, default_registry
+from rehabkit.core.scenario.errors import ScenarioError
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+
+
+def _err(msg: str) -> None:
+    print(msg, file=sys.stderr)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from rehabkit.api import run_scenario
+
+    out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
+    result = run_scenario(args.scenario, overrides=args.set, out_dir=out, spawn=args.spawn, progress=True)
+    s = result.summary
+    print(f"{s['name']}: {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.3f} s "
+          f"(real-time factor {s['real_time_factor']:.1f})")
+    for e in s["expectations"]:
+        value = "missing" if e["value"] is None else f"{e['value']:.6g}"
+        print(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
+              + (f"  — {e['reason']}" if e.get("reason") else ""))
+    for ev in s["safety"]["events"]:
+        print(f"  SAFETY  {ev['message']}")
+    print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))
+    return EXIT_OK if result.passed else EXIT_FAILED
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from rehabkit.core.scenario.loader import load_scenario
+
+    status = EXIT_OK
+    for path in args.scenarios:
+        try:
+            load_scenario(path, args.set)
+            print(f"{path}: ok")
+        except ScenarioError as exc:
+            _err(str(exc))
+            status = EXIT_INVALID
+    return status
+
+
+def cmd_plugins(args: argparse.Namespace) -> int:
+    reg = default_registry()
+    if args.json:
+        print(json.dumps([
+            {"kind": p.kind, "name": p.name, "package": p.provider.package, "version": p.provider.version,
+             "description": p.description, "fields": [dict(zip(("name", "type", "default"), f)) for f in p.fields()]}
+            for p in reg.all()
+        ], indent=2))
+        return EXIT_OK
+    for p in reg.all():
+        print(f"{p.kind:<10} {p.name:<16} {p.provider.package} {p.provider.version}  — {p.description}")
+        for name, typ, default in p.fields():
+            print(f"{'':<12}{name}: {typ} = {default}")
+    for b in reg.broken:
+        print(f"BROKEN     {b.provider.entry_point:<16} {b.provider.package} {b.provider.version}  — {b.error}")
+    return EXIT_OK
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    from rehabkit.core.scenario.models import scenario_model
+
+    schema = scenario_model(default_registry()).model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "rehabkit scenario"
+    print(json.dumps(schema, indent=2))
+    return EXIT_OK
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="rehabkit", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run a scenario; writes DIR/run.rrd and DIR/summary.json")
+    r.add_argument("scenario")
+    r.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario name>)")
+    r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
+    r.add_argument("--spawn", action="store_true", help="also stream to a Rerun viewer")
+    r.set_defaults(func=cmd_run)
+    v = sub.add_parser("validate", help="check scenario files without running them")
+    v.add_argument("scenarios", nargs="+")
+    v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    v.set_defaults(func=cmd_validate)
+    pl = sub.add_parser("plugins", help="list installed plugins and their settings")
+    pl.add_argument("--json", action="store_true")
+    pl.set_defaults(func=cmd_plugins)
+    sc = sub.add_parser("schema", help="print the JSON Schema of scenarios (for editors)")
+    sc.set_defaults(func=cmd_schema)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ScenarioError as exc:
+        _err(str(exc))
+        return EXIT_INVALID
+    except PluginError as exc:
+        _err(f"error: {exc}")
+        return EXIT_INVALID
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return 130
+    except Exception as exc:  # the last line of defence: a message, and the traceback only on request
+        from rehabkit.core.runner import SetupError
+
+        if isinstance(exc, SetupError):
+            _err(f"error: {exc}")
+            return EXIT_INVALID
+        if os.environ.get("REHABKIT_DEBUG"):
+            traceback.print_exc()
+        _err(f"internal error: {type(exc).__name__}: {exc} (set REHABKIT_DEBUG=1 for the traceback)")
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,107 @@
+"""MuJoCo simulation backend (registered through the ``rehabkit`` entry point like any plugin)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import mujoco
+import numpy as np
+from pydantic import Field
+
+from rehabkit.core.backends.scene import INTEGRATORS, build_scene
+from rehabkit.core.hookspecs import hookimpl
+from rehabkit.core.interfaces import Backend, BodyPoses, Contact, Context, GeomVisual, StrictModel
+
+_GEOM_SHAPES = {
+    mujoco.mjtGeom.mjGEOM_BOX: "box", mujoco.mjtGeom.mjGEOM_SPHERE: "sphere",
+    mujoco.mjtGeom.mjGEOM_CAPSULE: "capsule", mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder",
+    mujoco.mjtGeom.mjGEOM_PLANE: "plane", mujoco.mjtGeom.mjGEOM_ELLIPSOID: "ellipsoid",
+}
+
+
+class MujocoConfig(StrictModel):
+    """Physics settings."""
+
+    timestep: float = Field(0.001, gt=0, le=0.01, description="physics step [s]")
+    integrator: Literal[tuple(INTEGRATORS)] = "implicitfast"  # type: ignore[valid-type]
+
+
+def _span(indices: np.ndarray) -> slice | np.ndarray:
+    """A slice when the indices are contiguous: cheaper than fancy indexing in the hot loop."""
+    if len(indices) and np.all(np.diff(indices) == 1):
+        return slice(int(indices[0]), int(indices[-1]) + 1)
+    return indices
+
+
+class MujocoBackend(Backend):
+    """MuJoCo physics: the robot's MJCF plus the scenario's world, driven by joint torques."""
+
+    def __init__(self, config: MujocoConfig, context: Context):
+        robot = context.robot.model
+        self.robot = robot
+        self.timestep = config.timestep
+        self.spec = build_scene(robot, context.world, config.timestep, config.integrator)
+        self.model = self.spec.compile()
+        self.data = mujoco.MjData(self.model)
+        jids = [self.model.joint(name).id for name in robot.joint_names]
+        self._q = _span(np.array([self.model.jnt_qposadr[j] for j in jids]))
+        self._v = _span(np.array([self.model.jnt_dofadr[j] for j in jids]))
+        robot_bodies = {self.model.jnt_bodyid[j] for j in jids}
+        # the fixed root and every body below it belong to the robot
+        root = self.model.body(self.spec.worldbody.first_body().name).id
+        self._robot_body = np.zeros(self.model.nbody, dtype=bool)
+        for b in range(self.model.nbody):
+            a = b
+            while a != 0 and a != root:
+                a = self.model.body_parentid[a]
+            self._robot_body[b] = a == root or b in robot_bodies
+        self._drawn = [b for b in range(1, self.model.nbody)]
+
+    def reset(self, q0: np.ndarray) -> None:
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[self._q] = q0
+        mujoco.mj_forward(self.model, self.data)
+
+    def state(self) -> tuple[float, np.ndarray, np.ndarray]:
+        d = self.data
+        return d.time, d.qpos[self._q], d.qvel[self._v]
+
+    def command(self, tau: np.ndarray) -> None:
+        self.data.qfrc_applied[self._v] = tau
+
+    def step(self, n: int = 1) -> None:
+        mujoco.mj_step(self.model, self.data, nstep=n)
+
+    def contacts(self) -> list[Contact]:
+        d, m = self.data, self.model
+        out = []
+        for c in d.contact[: d.ncon]:
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            if self._robot_body[b1] != self._robot_body[b2]:
+                out.append(Contact(m.geom(c.geom1).name, m.geom(c.geom2).name, c.pos.copy(), float(-c.dist)))
+        return out
+
+    def body_poses(self) -> BodyPoses:
+        names = [self.model.body(b).name for b in self._drawn]
+        return BodyPoses(names, self.data.xpos[self._drawn].copy(), self.data.xquat[self._drawn].copy())
+
+    def visual_geoms(self) -> list[GeomVisual]:
+        m = self.model
+        out = []
+        for g in range(m.ngeom):
+            shape = _GEOM_SHAPES.get(m.geom_type[g])
+            if shape is None:
+                continue
+            size = m.geom_size[g]
+            size = {"box": size[:3], "sphere": size[:1], "plane": size[:2], "ellipsoid": size[:3]}.get(shape, size[:2])
+            out.append(GeomVisual(
+                body=m.body(m.geom_bodyid[g]).name or "world", name=m.geom(g).name or f"geom{g}", shape=shape,
+                size=tuple(float(s) for s in size), position=tuple(m.geom_pos[g]), quat_wxyz=tuple(m.geom_quat[g]),
+                rgba=tuple(float(c) for c in m.geom_rgba[g]),
+            ))
+        return out
+
+
+@hookimpl
+def rehabkit_register_backends(registry) -> None:
+    registry.add("mujoco", config=MujocoConfig, factory=MujocoBackend)

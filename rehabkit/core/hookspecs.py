@@ -1,0 +1,65 @@
+"""Every hook a rehabkit plugin can implement.
+
+A plugin is a module registered under the ``rehabkit`` entry-point group. It
+implements one or more of the hooks below; each receives a *registrar* for one
+plugin kind and calls ``registry.add(name, config=Model, factory=Class)``.
+Built-in plugins are loaded the same way as third-party ones.
+
+Minimal plugin module::
+
+    from rehabkit import hookimpl
+
+    @hookimpl
+    def rehabkit_register_planners(registry):
+        registry.add("min-jerk", config=MinJerkConfig, factory=MinJerkPlanner)
+
+The hooks are *historic*: a plugin registered after the registry asked is
+still called, once, which is how each registration is credited to the package
+that made it.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import pluggy
+
+if TYPE_CHECKING:
+    from rehabkit.core.plugins import Registrar
+
+PROJECT = "rehabkit"
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+# ---------------------------------------------------------------------------
+# Registration hooks: called once per plugin module, at load time.
+# ---------------------------------------------------------------------------
+
+
+@hookspec(historic=True)
+def rehabkit_register_robots(registry: Registrar) -> None:
+    """Register robot plugins: ``factory(config, context)`` returns a :class:`rehabkit.core.interfaces.Robot`."""
+
+
+@hookspec(historic=True)
+def rehabkit_register_planners(registry: Registrar) -> None:
+    """Register planner plugins: ``factory(config, context)`` returns a :class:`rehabkit.core.interfaces.Planner`."""
+
+
+@hookspec(historic=True)
+def rehabkit_register_controllers(registry: Registrar) -> None:
+    """Register controller plugins: ``factory(config, context)`` returns a
+    :class:`rehabkit.core.interfaces.Controller`."""
+
+
+@hookspec(historic=True)
+def rehabkit_register_sensors(registry: Registrar) -> None:
+    """Register sensor plugins: ``factory(config, context)`` returns a :class:`rehabkit.core.interfaces.Sensor`."""
+
+
+@hookspec(historic=True)
+def rehabkit_register_backends(registry: Registrar) -> None:
+    """Register backend plugins: ``factory(config, context)`` returns a :class:`rehabkit.core.interfaces.Backend`."""
+
+
+KINDS: tuple[str, ...] = ("robot", "planner", "controller", "sensor", "backend")

@@ -1,0 +1,238 @@
+"""Base classes of the five plugin kinds and the small types they exchange."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from rehabkit.models.robot_model import RobotModel
+
+if TYPE_CHECKING:
+    from rehabkit.core.scenario.models import World
+
+
+class StrictModel(BaseModel):
+    """Base of every DSL model: unknown keys are errors, not silently ignored."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+@dataclass
+class Context:
+    """What every plugin factory receives besides its own config.
+
+    Attributes:
+        scenario_dir: Folder of the scenario file; relative paths resolve from here.
+        rng: The run's random generator (seeded from the scenario's ``seed``).
+        control_dt: Controller period [s].
+        robot: The robot plugin instance, once built (robots themselves get ``None``).
+        world: The scenario's world section.
+    """
+
+    scenario_dir: Path
+    rng: np.random.Generator
+    control_dt: float
+    robot: Robot | None = None
+    world: World | None = None
+
+    def resolve(self, path: str | Path) -> Path:
+        """A path from the scenario, made absolute relative to the scenario file."""
+        p = Path(path).expanduser()
+        return p if p.is_absolute() else (self.scenario_dir / p).resolve()
+
+
+class IKUnavailableError(NotImplementedError):
+    """The robot has no inverse kinematics for Cartesian targets."""
+
+
+class Robot(ABC):
+    """A robot plugin: its :class:`RobotModel` plus optional closed-form kinematics."""
+
+    model: RobotModel
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """End-effector pose (4x4) in the robot base frame. Default: Pinocchio."""
+        return self.model.ee_pose(np.asarray(q, dtype=float))
+
+    def ik(self, pose: np.ndarray) -> list[np.ndarray]:
+        """Every joint solution reaching ``pose`` (4x4, base frame). Robots without IK raise."""
+        raise IKUnavailableError(f"robot '{self.model.name}' has no inverse kinematics for Cartesian targets")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.model!r})"
+
+
+class Trajectory(Protocol):
+    """A joint-space reference: ``sample`` is vectorised over times [s] from its start."""
+
+    duration: float
+
+    def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities, accelerations, each ``(len(t), dof)``; held constant past the end."""
+        ...
+
+
+@dataclass
+class Target:
+    """A resolved task target.
+
+    Attributes:
+        name: Its name in the scenario.
+        q: Joint values [rad], when given in joint space or solved by IK.
+        pose: 4x4 base-frame pose, when Cartesian (orientation may be absent: ``position_only``).
+        position_only: The target constrains position only.
+    """
+
+    name: str
+    q: np.ndarray | None = None
+    pose: np.ndarray | None = None
+    position_only: bool = False
+
+
+@dataclass
+class PlanRequest:
+    """What a planner is asked: from the current state, through the targets."""
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    targets: list[Target]
+    robot: Robot
+
+
+@dataclass
+class Plan:
+    """A planner's answer.
+
+    Attributes:
+        trajectory: Joint reference starting at the request time.
+        diagnostics: Scalar figures merged into the run's metrics (e.g. continuity residuals).
+        waypoints: Joint values of the via points actually used, for logging.
+    """
+
+    trajectory: Trajectory
+    diagnostics: dict[str, float] = field(default_factory=dict)
+    waypoints: np.ndarray | None = None
+
+
+class PlanningError(RuntimeError):
+    """A planner could not produce a plan; the message says why."""
+
+
+class Planner(ABC):
+    """Computes a joint trajectory at start and on task events."""
+
+    @abstractmethod
+    def plan(self, request: PlanRequest) -> Plan:
+        """Plan from ``request.q`` through ``request.targets``."""
+
+
+class Controller(ABC):
+    """Turns a reference and the measured state into joint torques, at the control rate."""
+
+    @abstractmethod
+    def compute(
+        self, t: float, q: np.ndarray, qd: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray
+    ) -> np.ndarray:
+        """Joint torques [N·m]; called in the hot loop, so keep it allocation-light."""
+
+
+class SensorConfig(StrictModel):
+    """Base of every sensor plugin's config: each sensor runs at its own rate."""
+
+    rate_hz: float = Field(100.0, gt=0, description="sampling rate [Hz]")
+
+
+class Sensor(ABC):
+    """Reads something at its own rate; readings go to the log and to ``Runner.observations``."""
+
+    rate_hz: float
+
+    @abstractmethod
+    def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, Any]:
+        """One reading: name → value (arrays, scalars, or an image as ``HxWx3`` uint8)."""
+
+
+@dataclass
+class Contact:
+    """A contact between the robot (or an object) and something else."""
+
+    geom1: str
+    geom2: str
+    position: np.ndarray
+    depth: float
+
+
+@dataclass(frozen=True)
+class GeomVisual:
+    """A primitive shape fixed to a body, for drawing.
+
+    Attributes:
+        body: Body name (its pose comes from :meth:`Backend.body_poses`).
+        name: Geom name.
+        shape: ``box`` (half-extents), ``sphere`` (radius), ``capsule``/``cylinder``
+            (radius, half-length along local z), ``plane`` (half-sizes x, y).
+        size: Shape parameters [m].
+        position: Offset in the body frame [m].
+        quat_wxyz: Orientation in the body frame.
+        rgba: Colour, 0..1.
+    """
+
+    body: str
+    name: str
+    shape: str
+    size: tuple[float, ...]
+    position: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+    rgba: tuple[float, float, float, float]
+
+
+@dataclass
+class BodyPoses:
+    """World poses of the drawn bodies: names, positions (n, 3), quaternions (n, 4) w-x-y-z."""
+
+    names: list[str]
+    positions: np.ndarray
+    quats_wxyz: np.ndarray
+
+
+class Backend(ABC):
+    """Where commands go and state comes from: a simulator or a robot link."""
+
+    timestep: float
+
+    @abstractmethod
+    def reset(self, q0: np.ndarray) -> None:
+        """Put the robot at rest at ``q0``."""
+
+    @abstractmethod
+    def state(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Time [s], joint positions, joint velocities. Arrays may be views: copy to keep."""
+
+    @abstractmethod
+    def command(self, tau: np.ndarray) -> None:
+        """Set joint torques for the next steps (already checked by the safety layer)."""
+
+    @abstractmethod
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` timesteps."""
+
+    def contacts(self) -> list[Contact]:
+        """Current contacts involving the robot; backends without contact sensing return []."""
+        return []
+
+    def body_poses(self) -> BodyPoses:
+        """World poses of the bodies that carry :meth:`visual_geoms`; default none."""
+        return BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
+
+    def visual_geoms(self) -> list[GeomVisual]:
+        """Shapes to draw, fixed to bodies; default none."""
+        return []
+
+    def close(self) -> None:
+        """Release resources."""

@@ -1,0 +1,65 @@
+"""Run metrics from the recorded trace, and the ``expect:`` verdicts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.core.plugins import suggest
+from rehabkit.core.scenario.models import Bound
+from rehabkit.models.robot_model import RobotModel
+
+
+@dataclass
+class Trace:
+    """Everything recorded at the control rate, trimmed to the steps actually run."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    tau: np.ndarray
+    q_ref: np.ndarray
+    qd_ref: np.ndarray
+
+    def trimmed(self, n: int) -> Trace:
+        return Trace(*(getattr(self, f)[:n] for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref")))
+
+
+def tracking_metrics(trace: Trace, robot: RobotModel, goal_q: np.ndarray | None) -> tuple[dict, dict]:
+    """Scalar metrics and per-joint figures of how the robot followed its reference."""
+    err = np.degrees(trace.q_ref - trace.q)
+    metrics = {
+        "tracking_rms_deg": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
+        "tracking_max_deg": float(np.abs(err).max()) if err.size else float("nan"),
+        "max_velocity_ratio": float(np.max(np.abs(trace.qd) / robot.limits.velocity)) if err.size else 0.0,
+        "max_torque_ratio": float(np.max(np.abs(trace.tau) / robot.limits.effort)) if err.size else 0.0,
+    }
+    per_joint = {
+        name: {
+            "tracking_rms_deg": float(np.sqrt(np.mean(err[:, j] ** 2))),
+            "tracking_max_deg": float(np.abs(err[:, j]).max()),
+            "range_deg": [float(np.degrees(trace.q[:, j].min())), float(np.degrees(trace.q[:, j].max()))],
+        }
+        for j, name in enumerate(robot.joint_names)
+    } if err.size else {}
+    if goal_q is not None and err.size:
+        q_end = trace.q[-1]
+        metrics["final_joint_error_deg"] = float(np.degrees(np.abs(goal_q - q_end)).max())
+        ee = robot.ee_positions_world(np.vstack([goal_q, q_end]))
+        metrics["final_position_error_m"] = float(np.linalg.norm(ee[0] - ee[1]))
+    return metrics, per_joint
+
+
+def evaluate(expect: dict[str, Bound], metrics: dict[str, float]) -> list[dict]:
+    """One verdict per expectation; a metric the run did not produce fails, naming the closest ones."""
+    out = []
+    for key, bound in expect.items():
+        value = metrics.get(key)
+        entry = {"metric": key, "bound": bound.describe(), "value": value}
+        if value is None:
+            entry.update(passed=False, reason=f"the run produced no metric '{key}'{suggest(key, metrics)}")
+        else:
+            entry["passed"] = bound.check(float(value))
+        out.append(entry)
+    return out

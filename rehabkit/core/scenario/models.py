@@ -1,0 +1,225 @@
+"""The scenario DSL as pydantic models.
+
+The plugin sections (``robot``, ``backend``, ``planner``, ``controller``,
+``sensors``) are unions of the installed plugins' config models, discriminated
+by ``type``; :func:`scenario_model` builds them from the registry after plugins
+load. Angles in the DSL carry a ``_deg`` suffix; everything else is SI.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, create_model, model_validator
+
+from rehabkit.core.interfaces import StrictModel
+from rehabkit.core.plugins import PluginRegistry
+from rehabkit.core.safety import SafetyConfig
+
+Vec3 = tuple[float, float, float]
+
+
+class Pose(StrictModel):
+    """A pose: position [m] and fixed-axis roll-pitch-yaw [deg]."""
+
+    position: Vec3 = (0.0, 0.0, 0.0)
+    rpy_deg: Vec3 = (0.0, 0.0, 0.0)
+
+
+_SIZES = {"box": ("half-extents x, y, z", 3), "cylinder": ("radius, half-length", 2), "sphere": ("radius", 1)}
+
+
+class WorldObject(StrictModel):
+    """An obstacle (static) or a free object (``dynamic: true``) in the scene."""
+
+    name: str
+    shape: Literal["box", "cylinder", "sphere"]
+    size: list[Annotated[float, Field(gt=0)]] = Field(description="box: half-extents; cylinder: radius, half-length")
+    pose: Pose = Pose()
+    dynamic: bool = False
+    mass: float = Field(0.1, gt=0, description="[kg], dynamic objects only")
+    rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.3, 0.6)
+
+    @model_validator(mode="after")
+    def _size_matches_shape(self) -> WorldObject:
+        what, n = _SIZES[self.shape]
+        if len(self.size) != n:
+            raise ValueError(f"a {self.shape} takes {n} size value(s) ({what}), got {len(self.size)}")
+        return self
+
+
+class World(StrictModel):
+    """Everything in the scene besides the robot."""
+
+    floor: bool = True
+    objects: list[WorldObject] = []
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> World:
+        names = [o.name for o in self.objects]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"world object names must be unique; repeated: {dup}")
+        return self
+
+
+class TargetSpec(StrictModel):
+    """A task target: joint values, a Cartesian point (base frame), or a copy of another target."""
+
+    name: str
+    joints_deg: list[float] | None = None
+    joints_rad: list[float] | None = None
+    position: Vec3 | None = Field(None, description="end-effector position in the robot base frame [m]")
+    rpy_deg: Vec3 | None = Field(None, description="end-effector orientation; omit with orientation_of")
+    orientation_of: str | None = Field(None, description="use the orientation of this (joint-space) target")
+    same_as: str | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> TargetSpec:
+        given = [k for k in ("joints_deg", "joints_rad", "position", "same_as") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(
+                f"target '{self.name}' needs exactly one of joints_deg, joints_rad, position, same_as; got {given or 'none'}"
+            )
+        if self.position is None and (self.rpy_deg is not None or self.orientation_of is not None):
+            raise ValueError(f"target '{self.name}': rpy_deg/orientation_of only go with position")
+        if self.rpy_deg is not None and self.orientation_of is not None:
+            raise ValueError(f"target '{self.name}': give rpy_deg or orientation_of, not both")
+        return self
+
+
+class EventSpec(StrictModel):
+    """Something that happens during the run: at a time, or when a target is reached."""
+
+    at: float | None = Field(None, ge=0, description="[s] from the start")
+    reached: str | None = Field(None, description="fires when the end effector is within tolerance of this target")
+    tolerance_m: float = Field(0.005, gt=0, description="end-effector distance that counts as 'reached' [m]")
+    action: Literal["replan", "stop"] = "replan"
+    sequence: list[str] | None = Field(None, description="replan through these targets (default: the task's)")
+
+    @model_validator(mode="after")
+    def _one_trigger(self) -> EventSpec:
+        if (self.at is None) == (self.reached is None):
+            raise ValueError("an event needs exactly one trigger: 'at' or 'reached'")
+        return self
+
+
+class TaskSpec(StrictModel):
+    """Targets, the order to visit them, and the event timeline."""
+
+    targets: list[TargetSpec] = Field(min_length=1)
+    start: str | None = Field(None, description="joint-space target the robot starts at (default: first in sequence)")
+    sequence: list[str] | None = Field(None, description="order of targets (default: as listed)")
+    events: list[EventSpec] = []
+
+    @model_validator(mode="after")
+    def _names_exist(self) -> TaskSpec:
+        names = [t.name for t in self.targets]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"target names must be unique; repeated: {dup}")
+        refs = list(self.sequence or []) + ([self.start] if self.start else [])
+        for t in self.targets:
+            refs += [r for r in (t.same_as, t.orientation_of) if r]
+        for e in self.events:
+            refs += list(e.sequence or []) + ([e.reached] if e.reached else [])
+        unknown = sorted(set(refs) - set(names))
+        if unknown:
+            raise ValueError(f"unknown target name(s) {unknown}; targets are {names}")
+        return self
+
+    def order(self) -> list[str]:
+        return list(self.sequence) if self.sequence else [t.name for t in self.targets]
+
+
+class Rates(StrictModel):
+    """Loop rates. Physics runs at the backend's timestep."""
+
+    control_hz: float = Field(1000.0, gt=0)
+
+
+class Logging(StrictModel):
+    """What the run writes besides ``summary.json``."""
+
+    rrd: bool = True
+    rate_hz: float = Field(100.0, gt=0, description="rate of 3-D poses and time series in the .rrd")
+    application_id: str = "rehabkit"
+
+
+class Bound(StrictModel):
+    """An acceptance criterion on one metric; all given bounds must hold."""
+
+    lt: float | None = None
+    le: float | None = None
+    gt: float | None = None
+    ge: float | None = None
+    eq: float | None = None
+    tol: float = Field(1e-9, ge=0, description="tolerance for eq")
+
+    @model_validator(mode="after")
+    def _some_bound(self) -> Bound:
+        if all(getattr(self, k) is None for k in ("lt", "le", "gt", "ge", "eq")):
+            raise ValueError("give at least one of lt, le, gt, ge, eq")
+        return self
+
+    def check(self, value: float) -> bool:
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            return False
+        return all(
+            (
+                self.lt is None or value < self.lt,
+                self.le is None or value <= self.le,
+                self.gt is None or value > self.gt,
+                self.ge is None or value >= self.ge,
+                self.eq is None or abs(value - self.eq) <= self.tol,
+            )
+        )
+
+    def describe(self) -> str:
+        ops = {"lt": "<", "le": "<=", "gt": ">", "ge": ">=", "eq": "=="}
+        return " and ".join(f"{ops[k]} {getattr(self, k)}" for k in ops if getattr(self, k) is not None)
+
+
+class ScenarioBase(StrictModel):
+    """The plugin-independent part of a scenario."""
+
+    name: str | None = None
+    description: str | None = None
+    world: World = World()
+    task: TaskSpec
+    duration: float = Field(gt=0, description="simulated time [s]")
+    rates: Rates = Rates()
+    seed: int = 0
+    logging: Logging = Logging()
+    safety: SafetyConfig = SafetyConfig()
+    expect: dict[str, Bound] = {}
+
+
+PLUGIN_SECTIONS = {"robot": "robot", "backend": "backend", "planner": "planner", "controller": "controller"}
+
+
+def _union(registry: PluginRegistry, kind: str):
+    configs = tuple(info.config for info in registry.plugins[kind].values())
+    if not configs:
+        return None
+    if len(configs) == 1:
+        return configs[0]
+    return Annotated[Union[configs], Field(discriminator="type")]  # noqa: UP007 (runtime-built union)
+
+
+def scenario_model(registry: PluginRegistry) -> type[ScenarioBase]:
+    """The full Scenario model for the installed plugins."""
+    fields = {}
+    for section, kind in PLUGIN_SECTIONS.items():
+        union = _union(registry, kind)
+        if union is None:
+            continue
+        if kind == "backend":
+            fields[section] = (union, Field(default={"type": "mujoco"}, validate_default=True))
+        else:
+            fields[section] = (union, ...)
+    sensor_union = _union(registry, "sensor")
+    if sensor_union is not None:
+        fields["sensors"] = (dict[str, sensor_union], {})
+    return create_model("Scenario", __base__=ScenarioBase, **fields)

@@ -1,0 +1,103 @@
+"""Task targets: from the DSL to joint values, with IK where a target is Cartesian."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.core.interfaces import PlanningError, Robot, Target
+from rehabkit.core.scenario.models import TaskSpec
+from rehabkit.models.chain import rpy_to_matrix
+
+
+def resolve_targets(task: TaskSpec, robot: Robot) -> dict[str, Target]:
+    """Every named target as a :class:`Target` (joint values and/or a base-frame pose)."""
+    specs = {t.name: t for t in task.targets}
+    out: dict[str, Target] = {}
+
+    def get(name: str, stack: tuple[str, ...] = ()) -> Target:
+        if name in out:
+            return out[name]
+        if name in stack:
+            raise PlanningError(f"target '{name}' refers to itself through {' -> '.join((*stack, name))}")
+        spec = specs[name]
+        if spec.same_as:
+            ref = get(spec.same_as, (*stack, name))
+            tgt = Target(name, q=None if ref.q is None else ref.q.copy(),
+                         pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only)
+        elif spec.joints_deg is not None or spec.joints_rad is not None:
+            q = np.radians(spec.joints_deg) if spec.joints_deg is not None else np.asarray(spec.joints_rad, float)
+            if len(q) != robot.model.dof:
+                raise PlanningError(f"target '{name}' has {len(q)} joint values; robot has {robot.model.dof} joints")
+            tgt = Target(name, q=q, pose=robot.fk(q))
+        else:
+            pose = np.eye(4)
+            pose[:3, 3] = spec.position
+            position_only = False
+            if spec.orientation_of:
+                ref = get(spec.orientation_of, (*stack, name))
+                if ref.pose is None or ref.position_only:
+                    raise PlanningError(f"target '{name}': '{spec.orientation_of}' has no orientation to copy")
+                pose[:3, :3] = ref.pose[:3, :3]
+            elif spec.rpy_deg is not None:
+                pose[:3, :3] = rpy_to_matrix(np.radians(spec.rpy_deg))
+            else:
+                position_only = True
+            tgt = Target(name, pose=pose, position_only=position_only)
+        out[name] = tgt
+        return tgt
+
+    for name in specs:
+        get(name)
+    return out
+
+
+def angular_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-joint difference ``a - b`` wrapped to (-π, π]."""
+    return (np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi
+
+
+@dataclass
+class JointWaypoints:
+    """Joint values for a target sequence, and how well IK reproduced Cartesian ones."""
+
+    q: np.ndarray  # (n, dof)
+    ik_position_error_m: float
+    ik_orientation_error_deg: float
+    ik_branches: dict[str, int]
+
+
+def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) -> JointWaypoints:
+    """Joint values for each target; Cartesian ones by IK, nearest branch to the previous point.
+
+    The chosen branch is unwrapped relative to the previous waypoint so the arm
+    takes the short way round, then checked against the joint limits.
+    """
+    lim = robot.model.limits
+    prev = np.asarray(q_start, dtype=float)
+    rows, pos_err, rot_err, branches = [], 0.0, 0.0, {}
+    for tgt in targets:
+        if tgt.q is not None:
+            q = tgt.q
+        else:
+            if tgt.position_only:
+                raise PlanningError(
+                    f"target '{tgt.name}' is a position only; give rpy_deg or orientation_of for a 6-DoF IK"
+                )
+            sols = robot.ik(tgt.pose)
+            if not sols:
+                raise PlanningError(f"target '{tgt.name}' at {np.round(tgt.pose[:3, 3], 4).tolist()} m is out of reach")
+            sols = [prev + angular_distance(s, prev) for s in sols]
+            inside = [s for s in sols if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
+            if not inside:
+                raise PlanningError(f"target '{tgt.name}': none of {len(sols)} IK solutions is within the joint limits")
+            q = min(inside, key=lambda s: float(np.linalg.norm(s - prev)))
+            branches[tgt.name] = len(sols)
+            reached = robot.fk(q)
+            pos_err = max(pos_err, float(np.linalg.norm(reached[:3, 3] - tgt.pose[:3, 3])))
+            cos = (np.trace(reached[:3, :3].T @ tgt.pose[:3, :3]) - 1) / 2
+            rot_err = max(rot_err, float(np.degrees(np.arccos(np.clip(cos, -1, 1)))))
+        rows.append(np.asarray(q, dtype=float))
+        prev = rows[-1]
+    return JointWaypoints(np.array(rows), pos_err, rot_err, branches)

@@ -1,0 +1,146 @@
+"""The robot description every other part of rehabkit works from.
+
+A :class:`RobotModel` is one MJCF document (the robot alone, its root body at
+the origin of the robot base frame), a base pose in the world, joint limits and
+an end-effector site. MuJoCo simulates that document; Pinocchio loads the *same*
+file, so the controller's dynamics and the simulator's can't drift apart.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tempfile
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+SafeStop = Literal["hold", "zero-torque"]
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Per-joint limits, arrays of length ``dof``.
+
+    Attributes:
+        lower: Lowest position [rad] or [m].
+        upper: Highest position [rad] or [m].
+        velocity: Largest speed magnitude [rad/s] or [m/s].
+        effort: Largest torque/force magnitude [N·m] or [N].
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.lower)
+        for name in ("upper", "velocity", "effort"):
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"joint limits: '{name}' has {len(getattr(self, name))} values, expected {n}")
+        if np.any(self.lower >= self.upper):
+            bad = [i for i in range(n) if self.lower[i] >= self.upper[i]]
+            raise ValueError(f"joint limits: lower >= upper for joint index {bad}")
+
+    def override(self, index: int, **values: float | None) -> "JointLimits":
+        """A copy with some limits of joint ``index`` replaced (``None`` keeps the old one)."""
+        arrays = {k: getattr(self, k).copy() for k in ("lower", "upper", "velocity", "effort")}
+        for key, value in values.items():
+            if value is not None:
+                arrays[key][index] = value
+        return JointLimits(**arrays)
+
+
+@dataclass
+class RobotModel:
+    """A robot ready to simulate and to compute with.
+
+    Attributes:
+        name: Model name.
+        mjcf: MJCF XML of the robot alone; its root body is at the base frame origin.
+        joint_names: Actuated joints, in the order of ``q``.
+        limits: Joint limits in that order.
+        ee_site: Name of the end-effector site in ``mjcf``.
+        base_pose: 4x4 pose of the base frame in the world.
+        safe_stop: What the safety layer does to this robot when it trips.
+        gravity: World gravity [m/s^2].
+    """
+
+    name: str
+    mjcf: str
+    joint_names: list[str]
+    limits: JointLimits
+    ee_site: str
+    base_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+    safe_stop: SafeStop = "hold"
+    gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
+    asset_dir: Path | None = None
+
+    @property
+    def dof(self) -> int:
+        return len(self.joint_names)
+
+    @cached_property
+    def mjcf_path(self) -> Path:
+        """The MJCF written to a content-addressed file (Pinocchio's parser reads files only)."""
+        digest = hashlib.sha256(self.mjcf.encode()).hexdigest()[:16]
+        where = self.asset_dir or Path(tempfile.gettempdir())
+        path = where / f".rehabkit-{self.name}-{digest}.xml"
+        if not path.exists():
+            tmp = path.with_suffix(f".{digest}.tmp")
+            tmp.write_text(self.mjcf)
+            tmp.replace(path)
+        return path
+
+    @cached_property
+    def pin_model(self):
+        """Pinocchio model of the same MJCF, expressed in the robot base frame.
+
+        Pinocchio's MJCF parser ignores the root body's placement, so the model is
+        kept in the base frame and gravity is rotated into it here.
+        """
+        import pinocchio as pin
+
+        model = pin.buildModelFromMJCF(str(self.mjcf_path))
+        names = [model.names[i] for i in range(1, model.njoints)]
+        if names != self.joint_names:
+            raise ValueError(f"{self.name}: Pinocchio joint order {names} differs from {self.joint_names}")
+        model.gravity.linear = self.base_pose[:3, :3].T @ self.gravity
+        return model
+
+    @cached_property
+    def ee_frame_id(self) -> int:
+        model = self.pin_model
+        if not model.existFrame(self.ee_site):
+            frames = [f.name for f in model.frames]
+            raise ValueError(f"{self.name}: end-effector '{self.ee_site}' is not a frame; frames: {frames}")
+        return model.getFrameId(self.ee_site)
+
+    def new_pin_data(self):
+        """A fresh Pinocchio data object (one per user: they are scratch space)."""
+        return self.pin_model.createData()
+
+    def ee_pose(self, q: np.ndarray, data=None) -> np.ndarray:
+        """End-effector pose in the base frame, by Pinocchio."""
+        import pinocchio as pin
+
+        data = data if data is not None else self.new_pin_data()
+        pin.framesForwardKinematics(self.pin_model, data, q)
+        return data.oMf[self.ee_frame_id].homogeneous.copy()
+
+    def ee_positions_world(self, qs: np.ndarray) -> np.ndarray:
+        """World positions of the end effector for each row of ``qs``."""
+        import pinocchio as pin
+
+        model, data, fid = self.pin_model, self.new_pin_data(), self.ee_frame_id
+        out = np.empty((len(qs), 3))
+        for i, q in enumerate(qs):
+            pin.framesForwardKinematics(model, data, q)
+            out[i] = data.oMf[fid].translation
+        return out @ self.base_pose[:3, :3].T + self.base_pose[:3, 3]
+
+    def __repr__(self) -> str:
+        return f"RobotModel({self.name!r}, dof={self.dof}, ee={self.ee_site!r})"
