@@ -31,6 +31,7 @@ class JointPD(Controller):
         self.kp = self._gains(config.kp, n, "kp")
         self.kd = self._gains(config.kd, n, "kd")
         self.mode = config.feedforward
+        self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
         self._model = model.pin_model
         self._data = self._model.createData()
         self._zero = np.zeros(n)
@@ -46,10 +47,10 @@ class JointPD(Controller):
 
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
         tau = self.kp * (q_ref - q) + self.kd * (qd_ref - qd)
-        if self.mode == "gravity":
-            tau += pin.rnea(self._model, self._data, q, self._zero, self._zero)
-        elif self.mode == "inverse-dynamics":
+        if self._inverse_dynamics:
             tau += pin.rnea(self._model, self._data, q, qd_ref, qdd_ref)
+        elif self._gravity:
+            tau += pin.rnea(self._model, self._data, q, self._zero, self._zero)
         return tau
 
 

@@ -230,6 +230,10 @@ class Backend(ABC):
         """World poses of the bodies that carry :meth:`visual_geoms`; default none."""
         return BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
 
+    def ee_position(self) -> np.ndarray | None:
+        """World position of the robot's end effector if the backend tracks it (else the runner uses FK)."""
+        return None
+
     def visual_geoms(self) -> list[GeomVisual]:
         """Shapes to draw, fixed to bodies; default none."""
         return []

@@ -1,9 +1,9 @@
 """The Rerun sink of a run.
 
 Row-by-row ``rr.log`` costs tens of microseconds a call, more than a whole
-control step, so time series and poses are buffered in memory at the log rate
-and sent as columns (``send_columns``) once per simulated second and at the
-end. The file is written as ``run.rrd.tmp`` and renamed when complete.
+control step, so poses are buffered at the log rate and, with the joint series
+the runner already records, sent as columns (``send_columns``) every few
+simulated seconds and at the end. The file is written as ``run.rrd.tmp`` and renamed when complete.
 """
 
 from __future__ import annotations
@@ -49,8 +49,7 @@ def _shape(g: GeomVisual):
 class RerunLog:
     """Buffers a run's data and writes it to ``path`` (optionally also to a spawned viewer)."""
 
-    def __init__(self, path: Path, application_id: str, joint_names: list[str], spawn: bool = False,
-                 flush_every: int = 100):
+    def __init__(self, path: Path, application_id: str, joint_names: list[str], spawn: bool = False):
         self.path = Path(path)
         self.tmp = self.path.with_name(self.path.name + ".tmp")
         self.rec = rr.RecordingStream(application_id)
@@ -60,7 +59,6 @@ class RerunLog:
         else:
             self.rec.save(self.tmp)
         self.joint_names = joint_names
-        self.flush_every = flush_every
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
         self._sensor_rows: dict[str, list[tuple[float, dict]]] = {}
@@ -99,12 +97,25 @@ class RerunLog:
 
     # -- time series --------------------------------------------------------
 
-    def record(self, t: float, bodies: BodyPoses, q, qd, tau, q_ref, ee_world: np.ndarray) -> None:
-        """One log-rate sample (copies what it keeps)."""
-        self._rows.append((t, bodies, np.array(q), np.array(qd), np.array(tau), np.array(q_ref)))
-        self._ee_path.append(np.array(ee_world))
-        if len(self._rows) >= self.flush_every:
-            self.flush()
+    def record(self, t: float, bodies: BodyPoses, ee_world: np.ndarray) -> None:
+        """One log-rate sample of the 3-D scene (keeps the arrays it is given: pass copies)."""
+        self._rows.append((t, bodies))
+        self._ee_path.append(ee_world)
+
+    @property
+    def pending(self) -> int:
+        """Samples buffered since the last flush."""
+        return len(self._rows)
+
+    def joint_series(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, q_ref: np.ndarray) -> None:
+        """Joint time series, sent as columns (rows at times ``t``)."""
+        if not len(t):
+            return
+        times = rr.TimeColumn(TIMELINE, duration=t)
+        deg = np.degrees
+        for series, values in (("position_deg", deg(q)), ("reference_deg", deg(q_ref)), ("velocity_deg_s", deg(qd)),
+                               ("torque_nm", tau), ("tracking_error_deg", deg(q_ref - q))):
+            self.rec.send_columns(f"joints/{series}", indexes=[times], columns=rr.Scalars.columns(scalars=values))
 
     def sensor(self, t: float, sensor: str, reading: dict) -> None:
         """A sensor reading: images are logged at once, numbers buffered."""
@@ -120,15 +131,10 @@ class RerunLog:
             self._sensor_rows.setdefault(sensor, []).append((t, numbers))
 
     def flush(self) -> None:
-        """Send buffered rows as columns."""
+        """Send buffered poses and sensor readings as columns."""
         rows, self._rows = self._rows, []
         if rows:
             times = rr.TimeColumn(TIMELINE, duration=np.array([r[0] for r in rows]))
-            deg = np.degrees
-            q, qd, tau, ref = (np.array([r[i] for r in rows]) for i in (2, 3, 4, 5))
-            for series, values in (("position_deg", deg(q)), ("reference_deg", deg(ref)), ("velocity_deg_s", deg(qd)),
-                                   ("torque_nm", tau), ("tracking_error_deg", deg(ref - q))):
-                self.rec.send_columns(f"joints/{series}", indexes=[times], columns=rr.Scalars.columns(scalars=values))
             names = rows[0][1].names
             pos = np.array([r[1].positions for r in rows])
             quat = _xyzw(np.array([r[1].quats_wxyz for r in rows]))

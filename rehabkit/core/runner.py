@@ -29,6 +29,7 @@ from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.targets import resolve_targets
 
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
+LOG_FLUSH_SAMPLES = 500  # log-rate samples buffered between column sends
 
 
 @dataclass
@@ -158,80 +159,127 @@ class Runner:
         self.build()
         sc, sch, robot = self.sc, self.schedule, self.robot
         n, dof = sch.steps, robot.model.dof
-        trace = Trace(np.arange(n) * sch.control_dt, *(np.zeros((n, dof)) for _ in range(5)))
-        log = self._open_log()
+        # q, qd, tau of a step sit side by side: the safety layer checks that row in place
+        packed = np.zeros((n, 3 * dof))
+        self.trace = trace = Trace(np.arange(n) * sch.control_dt, packed[:, :dof], packed[:, dof : 2 * dof],
+                                   packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)))
+        self.log = log = self._open_log()
         self.diag: dict[str, float] = {}
+        self.fired: list[dict] = []
 
         q0 = self.start_q()
         self.backend.reset(q0)
-        ref_q, ref_qd, ref_qdd = (np.tile(q0, (n + 1, 1)), np.zeros((n + 1, dof)), np.zeros((n + 1, dof)))
-        goal_q = q0.copy()
-        ticks = np.arange(n + 1) * sch.control_dt
+        self._ref = (np.tile(q0, (n + 1, 1)), np.zeros((n + 1, dof)), np.zeros((n + 1, dof)))
+        self.reference = tuple(r[:n] for r in self._ref)  # views: replans show up here
+        trace.q_ref, trace.qd_ref = self.reference[0], self.reference[1]
+        self.goal_q = q0.copy()
+        self._install(0, self._plan(0.0, q0, np.zeros(dof), sc.task.order()))
+        self._timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(sc.task.events)
+                             if e.at is not None)
+        self._waiting = [i for i, e in enumerate(sc.task.events) if e.reached is not None]
+        self._next_reach, self._stop_at = 0, n
+        self._sensor_due = [0] * len(self.sensors)
 
-        def install(k0: int, plan: Plan | None) -> None:
-            nonlocal goal_q
-            if plan is None:
-                return
-            q, qd, qdd = plan.trajectory.sample(ticks[k0:] - ticks[k0])
-            ref_q[k0:], ref_qd[k0:], ref_qdd[k0:] = q, qd, qdd
-            goal_q = q[-1].copy()
-            if log:
-                log.plan(ticks[k0], robot.model.ee_positions_world(q[:: max(1, sch.log_every)]),
-                         robot.model.ee_positions_world(plan.waypoints) if plan.waypoints is not None
-                         else np.zeros((0, 3)))
-
-        install(0, self._plan(0.0, q0, np.zeros(dof), sc.task.order()))
-        timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(sc.task.events) if e.at is not None)
-        waiting = [i for i, e in enumerate(sc.task.events) if e.reached is not None]
-        fired: list[dict] = []
-        contact_steps, stop_at = 0, n
-        sensors = list(self.sensors.items())
-        controller, safety, backend = self.controller, self.safety, self.backend
-
+        # the hot loop: one integer comparison a step decides whether anything besides control is due
+        ref_q, ref_qd, ref_qdd = self._ref
+        state, compute, check = self.backend.state, self.controller.compute, self.safety.check_row
+        command, step, contacts = self.backend.command, self.backend.step, self.backend.contacts
+        concat, dt, sub = np.concatenate, sch.control_dt, sch.substeps
+        log_every = sch.log_every
+        next_log = 0 if log else -1
         bar = tqdm(total=n, unit="step", delay=1.0, disable=not self.progress, leave=False)
+        safety, stop_after = self.safety, sc.safety.stop_after_s
+        contact_steps, due, k = 0, 0, 0
         t_loop = time.perf_counter()
-        k = 0
         for k in range(n):
-            t = k * sch.control_dt
-            _, q, qd = backend.state()
-            while timed and timed[0][0] <= k:
-                i = timed.pop(0)[1]
-                stop_at = self._fire(i, k, t, q, qd, install, fired, log, stop_at)
-            if waiting and k % sch.reach_every == 0:
-                ee = robot.model.ee_pose(q, self._pin_data)[:3, 3]  # base frame, as target poses are
-                for i in list(waiting):
-                    ev = sc.task.events[i]
-                    if np.linalg.norm(ee - self.targets[ev.reached].pose[:3, 3]) <= ev.tolerance_m:
-                        waiting.remove(i)
-                        stop_at = self._fire(i, k, t, q, qd, install, fired, log, stop_at)
-            if k >= stop_at:
-                break
-            for (name, sensor), every in zip(sensors, sch.sensor_every):
-                if k % every == 0:
-                    reading = sensor.read(t, q, qd, backend)
-                    self.observations[name] = reading
-                    if log:
-                        log.sensor(t, name, reading)
-            tau = controller.compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
-            tau = safety.filter(t, q, qd, tau)
-            trace.q[k], trace.qd[k], trace.tau[k], trace.q_ref[k], trace.qd_ref[k] = q, qd, tau, ref_q[k], ref_qd[k]
-            if log and k % sch.log_every == 0:
-                log.record(t, backend.body_poses(), q, qd, tau, ref_q[k], self._ee_world(q))
-            backend.command(tau)
-            backend.step(sch.substeps)
-            if backend.contacts():
+            t = k * dt
+            _, q, qd = state()
+            if k >= due:
+                due = self._due_work(k, t, q, qd)
+                if due < 0:
+                    break
+            row = packed[k]
+            try:
+                concat((q, qd, compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])), out=row)
+            except Exception as exc:  # a crashing controller must still leave the robot held
+                safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
+                concat((q, qd, np.zeros(dof)), out=row)
+            tau = check(t, row)
+            command(tau)
+            step(sub)
+            if contacts():
                 contact_steps += 1
-            if safety.tripped_at is not None and t - safety.tripped_at >= sc.safety.stop_after_s:
+            if k == next_log:
+                next_log += log_every
+                log.record(t, self.backend.body_poses(), self._ee_world(q))
+                if log.pending >= LOG_FLUSH_SAMPLES:
+                    self._flush_log(k + 1)
+            if k % 1000 == 999:
+                bar.update(1000)
+            if safety.tripped_at is not None and t - safety.tripped_at >= stop_after:
                 k += 1
                 break
-            if k % 250 == 249:
-                bar.update(250)
         else:
             k = n
         wall = time.perf_counter() - t_loop
         bar.close()
-        trace = trace.trimmed(k)
-        return self._finish(trace, goal_q, wall, t_loop - t_setup, contact_steps, fired, log)
+        if log:
+            self._flush_log(k)
+        return self._finish(trace.trimmed(k), wall, t_loop - t_setup, contact_steps)
+
+    def _flush_log(self, upto: int) -> None:
+        """Send the joint series recorded since the last flush, at the log rate, and the buffered poses."""
+        tr, every = self.trace, self.schedule.log_every
+        sel = slice(getattr(self, "_logged_upto", 0), upto, every)
+        self.log.joint_series(tr.t[sel], tr.q[sel], tr.qd[sel], tr.tau[sel], tr.q_ref[sel])
+        self.log.flush()
+        self._logged_upto = sel.start + len(tr.t[sel]) * every
+
+    def _due_work(self, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> int:
+        """Events, 'reached' checks and sensors due at step ``k``; the next step anything is due, -1 to stop."""
+        sc, sch = self.sc, self.schedule
+        try:
+            while self._timed and self._timed[0][0] <= k:
+                self._fire(self._timed.pop(0)[1], k, t, q, qd)
+            if self._waiting and k >= self._next_reach:
+                self._next_reach = k + sch.reach_every
+                ee = self.robot.model.ee_pose(q, self._pin_data)[:3, 3]  # base frame, as target poses are
+                for i in list(self._waiting):
+                    ev = sc.task.events[i]
+                    if np.linalg.norm(ee - self.targets[ev.reached].pose[:3, 3]) <= ev.tolerance_m:
+                        self._waiting.remove(i)
+                        self._fire(i, k, t, q, qd)
+            if k >= self._stop_at:
+                return -1
+            for j, ((name, sensor), every) in enumerate(zip(self.sensors.items(), sch.sensor_every)):
+                if k >= self._sensor_due[j]:
+                    self._sensor_due[j] = k + every
+                    reading = sensor.read(t, q, qd, self.backend)
+                    self.observations[name] = reading
+                    if self.log:
+                        self.log.sensor(t, name, reading)
+        except Exception as exc:
+            self.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
+        upcoming = [self._stop_at, *self._sensor_due]
+        if self._timed:
+            upcoming.append(self._timed[0][0])
+        if self._waiting:
+            upcoming.append(self._next_reach)
+        return max(k + 1, min(upcoming))
+
+    def _install(self, k0: int, plan: Plan | None) -> None:
+        """Write a plan's reference into the step arrays from step ``k0`` on."""
+        if plan is None:
+            return
+        ref_q, ref_qd, ref_qdd = self._ref
+        dt = self.schedule.control_dt
+        q, qd, qdd = plan.trajectory.sample(np.arange(len(ref_q) - k0) * dt)
+        ref_q[k0:], ref_qd[k0:], ref_qdd[k0:] = q, qd, qdd
+        self.goal_q = q[-1].copy()
+        if self.log:
+            model = self.robot.model
+            way = model.ee_positions_world(plan.waypoints) if plan.waypoints is not None else np.zeros((0, 3))
+            self.log.plan(k0 * dt, model.ee_positions_world(q[:: self.schedule.log_every]), way)
 
     @property
     def _pin_data(self):
@@ -240,19 +288,22 @@ class Runner:
         return self._pd
 
     def _ee_world(self, q: np.ndarray) -> np.ndarray:
+        ee = self.backend.ee_position()
+        if ee is not None:
+            return ee
         base = self.robot.model.base_pose
         return base[:3, :3] @ self.robot.model.ee_pose(q, self._pin_data)[:3, 3] + base[:3, 3]
 
-    def _fire(self, i, k, t, q, qd, install, fired, log, stop_at) -> int:
+    def _fire(self, i: int, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         ev = self.sc.task.events[i]
-        fired.append({"event": i, "t": round(t, 6), "action": ev.action,
-                      "trigger": f"at {ev.at}" if ev.at is not None else f"reached {ev.reached}"})
-        if log:
-            log.event(t, f"event {i}: {fired[-1]['trigger']} → {ev.action}", level="INFO")
+        trigger = f"at {ev.at}" if ev.at is not None else f"reached {ev.reached}"
+        self.fired.append({"event": i, "t": round(t, 6), "action": ev.action, "trigger": trigger})
+        if self.log:
+            self.log.event(t, f"event {i}: {trigger} -> {ev.action}", level="INFO")
         if ev.action == "stop":
-            return k
-        install(k, self._plan(t, q, qd, ev.sequence or self.sc.task.order()))
-        return stop_at
+            self._stop_at = k
+        else:
+            self._install(k, self._plan(t, q, qd, ev.sequence or self.sc.task.order()))
 
     def _open_log(self) -> RerunLog | None:
         if self.out_dir is None or not self.sc.logging.rrd:
@@ -267,8 +318,8 @@ class Runner:
         log.targets(0.0, [n for n, _ in named], pts)
         return log
 
-    def _finish(self, trace, goal_q, wall, setup, contact_steps, fired, log) -> RunResult:
-        sc = self.sc
+    def _finish(self, trace: Trace, wall: float, setup: float, contact_steps: int) -> RunResult:
+        sc, log, goal_q = self.sc, self.log, self.goal_q
         sim_time = len(trace.t) * self.schedule.control_dt
         metrics, per_joint = tracking_metrics(trace, self.robot.model, goal_q)
         metrics.update(self.diag)
@@ -290,7 +341,7 @@ class Runner:
             "sim_time_s": sim_time, "wall_time_s": wall, "real_time_factor": metrics["real_time_factor"],
             "metrics": metrics, "per_joint": per_joint, "expectations": verdicts,
             "safety": {"tripped": self.safety.tripped, "events": [e.as_dict() for e in self.safety.events]},
-            "events": fired,
+            "events": self.fired,
         }
         if self.out_dir is not None:
             if log:

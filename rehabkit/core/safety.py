@@ -68,6 +68,13 @@ class SafetyLayer:
         self._pin_model = robot.pin_model
         self._pin_data = self._pin_model.createData()
         self._zero = np.zeros(robot.dof)
+        # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
+        n = robot.dof
+        self._n = n
+        self._centre = np.concatenate([(self.lo + self.hi) / 2, np.zeros(2 * n)])
+        self._bound = np.concatenate([(self.hi - self.lo) / 2, self.vmax, self.effort])
+        self._buf = np.empty(3 * n)
+        self._ok = np.empty(3 * n, dtype=bool)
 
     @property
     def tripped(self) -> bool:
@@ -75,8 +82,22 @@ class SafetyLayer:
 
     def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
+        return self.check_row(t, np.concatenate((q, qd, tau)))
+
+    def check_row(self, t: float, row: np.ndarray) -> np.ndarray:
+        """Check a packed ``[q, qd, tau]`` row; its torque part is overwritten with what to send.
+
+        The runner records rows straight into its trace, so checking costs no copy.
+        """
+        n = self._n
         if self.tripped_at is None:
-            # one cheap test for the common case; the slow path finds out what went wrong
+            b = np.subtract(row, self._centre, out=self._buf)
+            np.abs(b, out=b)
+            if np.less_equal(b, self._bound, out=self._ok).all():
+                return row[2 * n :]
+        q, qd, tau = row[:n], row[n : 2 * n], row[2 * n :]
+        if self.tripped_at is None:
+            # slow path: find out what went wrong
             if (
                 math.isfinite(tau.sum() + q.sum() + qd.sum())
                 and not (q < self.lo).any()
@@ -88,12 +109,13 @@ class SafetyLayer:
                     return tau
                 if self.config.torque_policy == "clip":
                     self.saturated_steps += 1
-                    return np.clip(tau, -self.effort, self.effort)
+                    return np.clip(tau, -self.effort, self.effort, out=tau)
                 j = int(np.argmax(over))
                 self._trip(t, q, "torque", j, float(tau[j]), float(self.effort[j]), "commanded torque beyond effort limit")
             else:
                 self._diagnose(t, q, qd, tau)
-        return self._stop_torque(q, qd)
+        tau[:] = self._stop_torque(q, qd)
+        return tau
 
     def trip(self, t: float, q: np.ndarray, rule: str, message: str) -> None:
         """Trip from outside (a rejected plan, an external e-stop)."""

@@ -1,0 +1,98 @@
+"""Framework overhead: the full runner against a bare MuJoCo loop, measured side by side.
+
+Both run the HIT round-trip on the same compiled model with the same reference
+trajectory and the same control law (joint PD + Pinocchio RNEA feedforward) at
+1 kHz. The runner adds everything a scenario gets: event handling, sensors,
+the safety layer, the trace, contact checks and Rerun logging at 100 Hz (file
+finished and renamed). Repeats alternate the two so drift affects both alike;
+the best of each is compared.
+
+    python benchmarks/bench_runner.py [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from rehabkit.core.runner import Runner
+from rehabkit.core.scenario.loader import load_scenario
+
+SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "hit_roundtrip.yaml"
+
+
+def bare_loop(runner: Runner, ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
+    """Seconds for the plain loop: read state, PD + RNEA, write torque, mj_step."""
+    backend = runner.backend
+    m, d = backend.model, backend.data
+    cfg = runner.sc.controller
+    kp, kd = np.asarray(cfg.kp, float), np.asarray(cfg.kd, float)
+    pm = runner.robot.model.pin_model
+    pdata = pm.createData()
+    q_ref, qd_ref, qdd_ref = ref
+    qs, vs = backend._q, backend._v
+    backend.reset(q_ref[0])
+    t0 = time.perf_counter()
+    for k in range(len(q_ref)):
+        q, qd = d.qpos[qs], d.qvel[vs]
+        tau = kp * (q_ref[k] - q) + kd * (qd_ref[k] - qd) + pin.rnea(pm, pdata, q, qd_ref[k], qdd_ref[k])
+        d.qfrc_applied[vs] = tau
+        mujoco.mj_step(m, d)
+    elapsed = time.perf_counter() - t0
+    err = np.degrees(np.abs(q_ref[-1] - d.qpos[qs]).max())
+    assert err < 0.5, f"bare loop did not track (final error {err:.3f} deg)"
+    return elapsed
+
+
+def full_run(overrides: list[str]) -> tuple[float, float, Runner]:
+    """(loop seconds, loop + finishing the log and summary, runner) for one complete run."""
+    with tempfile.TemporaryDirectory() as out:
+        runner = Runner(load_scenario(SCENARIO, overrides), out_dir=Path(out))
+        t0 = time.perf_counter()
+        result = runner.run()
+        total = time.perf_counter() - t0 - result.metrics["setup_time_s"]
+        assert result.passed, result.failures
+        assert (Path(out) / "run.rrd").stat().st_size > 0
+        return result.metrics["wall_time_s"], total, runner
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    variants = {"runner (no sensors)": ["sensors={}"], "runner (scenario as written, 500 Hz encoder)": []}
+    best: dict[str, list[float]] = {"bare MuJoCo loop": []} | {k: [] for k in variants}
+    best_total: dict[str, list[float]] = {k: [] for k in variants}
+    sim_time = None
+    for _ in range(args.repeats):
+        for name, overrides in variants.items():
+            loop, total, runner = full_run(overrides)
+            best[name].append(loop)
+            best_total[name].append(total)
+            sim_time = runner.sc.duration
+        best["bare MuJoCo loop"].append(bare_loop(runner, runner.reference))
+    bare = min(best["bare MuJoCo loop"])
+    steps = int(round(sim_time * 1000))
+    print(f"HIT round-trip, {sim_time} s simulated, {steps} steps at 1 kHz; best of {args.repeats}")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
+          f"{platform.python_version()}, MuJoCo {mujoco.__version__}, Pinocchio {pin.__version__}")
+    print(f"{'':46} {'loop s':>8} {'us/step':>8} {'x real time':>12} {'ratio':>7}")
+    for name, times in best.items():
+        t = min(times)
+        print(f"{name:46} {t:8.3f} {t / steps * 1e6:8.1f} {sim_time / t:12.1f} {t / bare:7.2f}")
+    for name, times in best_total.items():
+        t = min(times)
+        print(f"{name + ' incl. log/summary close':46} {t:8.3f} {t / steps * 1e6:8.1f} {sim_time / t:12.1f} "
+              f"{t / bare:7.2f}")
+
+
+if __name__ == "__main__":
+    main()
