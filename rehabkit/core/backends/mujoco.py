@@ -12,10 +12,10 @@ from rehabkit.core.backends.scene import INTEGRATORS, build_scene
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, BodyPoses, Contact, Context, GeomVisual, StrictModel
 
-_GEOM_SHAPES = {
-    mujoco.mjtGeom.mjGEOM_BOX: "box", mujoco.mjtGeom.mjGEOM_SPHERE: "sphere",
-    mujoco.mjtGeom.mjGEOM_CAPSULE: "capsule", mujoco.mjtGeom.mjGEOM_CYLINDER: "cylinder",
-    mujoco.mjtGeom.mjGEOM_PLANE: "plane", mujoco.mjtGeom.mjGEOM_ELLIPSOID: "ellipsoid",
+_GEOM_SHAPES = {  # int keys: model arrays hold numpy ints, which don't hash-match the enum
+    int(mujoco.mjtGeom.mjGEOM_BOX): "box", int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule", int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
+    int(mujoco.mjtGeom.mjGEOM_PLANE): "plane", int(mujoco.mjtGeom.mjGEOM_ELLIPSOID): "ellipsoid",
 }
 
 
@@ -98,7 +98,7 @@ class MujocoBackend(Backend):
         m = self.model
         out = []
         for g in range(m.ngeom):
-            shape = _GEOM_SHAPES.get(m.geom_type[g])
+            shape = _GEOM_SHAPES.get(int(m.geom_type[g]))
             if shape is None:
                 continue
             size = m.geom_size[g]

@@ -1,0 +1,19 @@
+"""Robots from an MJCF file."""
+
+from __future__ import annotations
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, Robot
+from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
+
+
+class MjcfRobot(Robot):
+    """Robot from an MJCF file: joints, ranges and effort from the file, speeds from the scenario."""
+
+    def __init__(self, config: ModelFileConfig, context: Context):
+        self.model = robot_from_file(context.resolve(config.file), config)
+
+
+@hookimpl
+def rehabkit_register_robots(registry) -> None:
+    registry.add("mjcf", config=ModelFileConfig, factory=MjcfRobot)

@@ -1,0 +1,153 @@
+"""Robots from model files (MJCF or URDF) as :class:`RobotModel`.
+
+MuJoCo reads the file (it imports URDF too); the robot is re-rooted under one
+jointless ``base`` body at the origin, because Pinocchio's MJCF parser drops
+the root body's placement. Joint limits come from the file where it has them
+(range, ``actuatorfrcrange``, motor ``ctrlrange``·gear, URDF velocity/effort)
+and from the scenario's overrides otherwise; a joint left without a limit is
+an error naming the joint and the key to add.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from pydantic import Field
+
+from rehabkit.core.interfaces import StrictModel
+from rehabkit.models.dh import PoseSpec
+from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
+
+_MOVABLE = {int(mujoco.mjtJoint.mjJNT_HINGE): "revolute", int(mujoco.mjtJoint.mjJNT_SLIDE): "prismatic"}
+
+
+class LimitOverride(StrictModel):
+    """Limits for one joint, replacing (or supplying) the file's. Revolute: degrees; prismatic: metres."""
+
+    range_deg: tuple[float, float] | None = None
+    range_m: tuple[float, float] | None = None
+    velocity_deg_s: float | None = Field(None, gt=0)
+    velocity_m_s: float | None = Field(None, gt=0)
+    effort: float | None = Field(None, gt=0)
+
+
+class ModelFileConfig(StrictModel):
+    """A robot from a model file (path relative to the scenario)."""
+
+    file: str
+    ee_frame: str = Field(description="site or body that is the end effector")
+    base: PoseSpec = Field(PoseSpec(), description="robot base in the world")
+    limits: dict[str, LimitOverride] = Field({}, description="per-joint limits by joint name")
+    default_velocity_deg_s: float | None = Field(None, gt=0, description="for joints whose file has no speed limit")
+    default_effort: float | None = Field(None, gt=0, description="for joints whose file has no effort limit")
+    safe_stop: SafeStop = "hold"
+
+
+def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
+    for key in ("meshdir", "texturedir"):  # assets must still resolve from a temporary copy
+        current = getattr(spec, key) or ""
+        setattr(spec, key, str((model_dir / current).resolve()))
+    root = ET.fromstring(spec.to_xml())
+    world = root.find("worldbody")
+    if world is None:
+        raise ValueError("the model has no <worldbody>")
+    movable = [c for c in list(world) if c.tag in ("body", "geom", "site", "frame")]
+    base = ET.Element("body", {"name": "base"})
+    for child in movable:
+        if child.tag == "body" and child.find("freejoint") is not None:
+            raise ValueError(f"body '{child.get('name')}' is free-floating; rehabkit robots have a fixed base")
+        world.remove(child)
+        base.append(child)
+    world.insert(0, base)
+    sites = {s.get("name") for s in root.iter("site")}
+    if ee_frame not in sites:
+        body = next((b for b in root.iter("body") if b.get("name") == ee_frame), None)
+        if body is None:
+            names = sorted(n for n in sites | {b.get("name") for b in root.iter("body")} if n)
+            raise ValueError(f"ee_frame '{ee_frame}' is neither a site nor a body; choices: {', '.join(names)}")
+        ET.SubElement(body, "site", {"name": f"{ee_frame}_ee", "size": "0.01"})
+    return ET.tostring(root, encoding="unicode")
+
+
+def robot_from_file(
+    path: Path,
+    config: ModelFileConfig,
+    file_velocity: dict[str, float] | None = None,
+    file_effort: dict[str, float] | None = None,
+) -> RobotModel:
+    """Load ``path`` (MJCF or URDF) as a robot.
+
+    Args:
+        path: Model file.
+        config: The plugin's settings.
+        file_velocity: Speed limits the file format carries but MuJoCo drops (URDF), by joint.
+        file_effort: Effort limits the same way.
+    """
+    if not path.exists():
+        raise ValueError(f"model file not found: {path}")
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+        model = spec.compile()
+    except Exception as exc:  # MuJoCo's own message says what and where
+        raise ValueError(f"MuJoCo cannot load {path}: {exc}") from None
+    joints = [j for j in range(model.njnt) if int(model.jnt_type[j]) in _MOVABLE]
+    if len(joints) != model.njnt:
+        raise ValueError(f"{path.name}: only hinge and slide joints are supported for robots")
+    names = [model.joint(j).name for j in joints]
+    unknown = sorted(set(config.limits) - set(names))
+    if unknown:
+        raise ValueError(f"limits given for unknown joint(s) {unknown}; joints are {names}")
+    motor_effort: dict[int, float] = {}
+    for a in range(model.nu):
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and model.actuator_ctrllimited[a]:
+            motor_effort[int(model.actuator_trnid[a, 0])] = float(np.abs(model.actuator_ctrlrange[a]).max()
+                                                                  * abs(model.actuator_gear[a, 0]))
+    lower, upper, vel, eff = [], [], [], []
+    for j, name in zip(joints, names):
+        revolute = _MOVABLE[int(model.jnt_type[j])] == "revolute"
+        o = config.limits.get(name, LimitOverride())
+        rng = o.range_deg if revolute else o.range_m
+        if rng is not None:
+            lo, hi = np.radians(rng) if revolute else rng
+        elif model.jnt_limited[j]:
+            lo, hi = model.jnt_range[j]
+        else:
+            raise ValueError(f"joint '{name}' has no range in {path.name}; add limits.{name}.range_"
+                             f"{'deg' if revolute else 'm'}")
+        v = o.velocity_deg_s if revolute else o.velocity_m_s
+        if v is not None:
+            v = np.radians(v) if revolute else v
+        elif file_velocity and name in file_velocity and file_velocity[name] > 0:
+            v = file_velocity[name]
+        elif config.default_velocity_deg_s is not None:
+            v = np.radians(config.default_velocity_deg_s)
+        else:
+            raise ValueError(f"joint '{name}' has no speed limit; add limits.{name}.velocity_"
+                             f"{'deg_s' if revolute else 'm_s'} or default_velocity_deg_s")
+        e = o.effort
+        if e is None and model.jnt_actfrclimited[j]:
+            e = float(np.abs(model.jnt_actfrcrange[j]).max())
+        if e is None and file_effort and file_effort.get(name, 0) > 0:
+            e = file_effort[name]
+        if e is None:
+            e = motor_effort.get(j, config.default_effort)
+        if e is None:
+            raise ValueError(f"joint '{name}' has no effort limit; add limits.{name}.effort or default_effort")
+        lower.append(float(lo))
+        upper.append(float(hi))
+        vel.append(float(v))
+        eff.append(float(e))
+    xml = _rerooted_xml(spec, path.parent, config.ee_frame)
+    site = config.ee_frame if _has_site(xml, config.ee_frame) else f"{config.ee_frame}_ee"
+    return RobotModel(
+        name=spec.modelname or path.stem, mjcf=xml, joint_names=names,
+        limits=JointLimits(*(np.array(v) for v in (lower, upper, vel, eff))), ee_site=site,
+        base_pose=config.base.matrix(), safe_stop=config.safe_stop,
+    )
+
+
+def _has_site(xml: str, name: str) -> bool:
+    return any(s.get("name") == name for s in ET.fromstring(xml).iter("site"))
