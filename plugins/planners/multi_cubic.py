@@ -81,9 +81,10 @@ class MultiCubicTrajectory:
         self._d1, self._d2 = self._pp.derivative(1), self._pp.derivative(2)
 
     def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        raw = np.atleast_1d(np.asarray(t, dtype=float))
+        t = np.clip(raw, 0.0, self.duration)
         q, qd, qdd = self._pp(t), self._d1(t), self._d2(t)
-        after = np.atleast_1d(t) >= self.duration
+        after = raw > self.duration
         qd[after] = 0.0
         qdd[after] = 0.0
         return q, qd, qdd

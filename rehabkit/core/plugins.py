@@ -7,6 +7,7 @@ import os
 import re
 import sys
 import traceback
+import typing
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from importlib import metadata
@@ -57,6 +58,13 @@ class Provider:
     entry_point: str
 
 
+def _type_name(annotation: Any) -> str:
+    """``list[float]``, ``Literal['a', 'b']``, ``PoseSpec``: how a field's type reads in a listing."""
+    if typing.get_origin(annotation) is None and isinstance(annotation, type):
+        return annotation.__name__
+    return re.sub(r"\b(?:typing|[a-z_]+(?:\.[a-z_]+)*)\.([A-Za-z_]+)", r"\1", str(annotation))
+
+
 @dataclass(frozen=True)
 class PluginInfo:
     """One registered plugin.
@@ -83,7 +91,7 @@ class PluginInfo:
         for fname, f in self.config.model_fields.items():
             if fname == "type":
                 continue
-            ann = getattr(f.annotation, "__name__", None) or str(f.annotation).replace("typing.", "")
+            ann = _type_name(f.annotation)
             default = "required" if f.is_required() else repr(f.get_default(call_default_factory=True))
             out.append((fname, ann, default))
         return out

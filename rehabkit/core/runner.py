@@ -63,6 +63,11 @@ class SetupError(RuntimeError):
     """The scenario is valid but its plugins can't be put together (message says why)."""
 
 
+def _idle(dof: int):
+    zero = np.zeros(dof)
+    return lambda *args: zero
+
+
 @dataclass
 class _Schedule:
     control_dt: float
@@ -203,6 +208,7 @@ class Runner:
                 concat((q, qd, compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])), out=row)
             except Exception as exc:  # a crashing controller must still leave the robot held
                 safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
+                compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
                 concat((q, qd, np.zeros(dof)), out=row)
             tau = check(t, row)
             command(tau)
@@ -216,7 +222,7 @@ class Runner:
                     self._flush_log(k + 1)
             if k % 1000 == 999:
                 bar.update(1000)
-            if safety.tripped_at is not None and t - safety.tripped_at >= stop_after:
+            if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
                 k += 1
                 break
         else:

@@ -112,7 +112,8 @@ def deep_merge(base: Any, over: Any) -> Any:
     """``over`` on top of ``base``: mappings merge, everything else is replaced.
 
     A mapping whose ``type`` differs from the base's is a different plugin, so it
-    replaces the base section instead of inheriting its keys.
+    replaces the base section instead of inheriting its keys. A key set to
+    ``null`` in ``over`` removes the base's key.
     """
     if not (isinstance(base, dict) and isinstance(over, dict)):
         return copy.deepcopy(over)
@@ -120,7 +121,10 @@ def deep_merge(base: Any, over: Any) -> Any:
         return copy.deepcopy(over)
     out = copy.deepcopy(base)
     for key, value in over.items():
-        out[key] = deep_merge(out[key], value) if key in out else copy.deepcopy(value)
+        if value is None and key in out:
+            del out[key]
+        else:
+            out[key] = deep_merge(out[key], value) if key in out else copy.deepcopy(value)
     return out
 
 
@@ -205,11 +209,17 @@ def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -
 
 
 def _locate(src: Source, loc: Iterable[Any], key: bool) -> tuple[KeyPath, Mark]:
-    """Longest prefix of ``loc`` the YAML has (pydantic adds union tags the YAML lacks)."""
+    """Longest prefix of ``loc`` the YAML has (pydantic adds union tags the YAML lacks).
+
+    Errors about a whole section (its value is a mapping or list) point at its key.
+    """
     path: KeyPath = ()
+    node: Any = src.data
     for part in loc:
         if (*path, part) in src.value_marks:
             path = (*path, part)
+            node = node[part] if isinstance(node, (dict, list)) else None
+    key = key or isinstance(node, (dict, list))
     marks = src.key_marks if key and path in src.key_marks else src.value_marks
     return path, marks.get(path, src.value_marks[()])
 

@@ -1,0 +1,95 @@
+"""pytest plugin (entry point ``pytest11``): scenarios are tests.
+
+* ``pytest scenarios/`` collects every YAML file with top-level ``robot`` and
+  ``expect`` sections as one test item; it passes when the run meets all its
+  expectations without an unexpected safety stop.
+* The ``run_scenario`` fixture runs a scenario with overrides, for users' own
+  parametrised tests::
+
+      def test_faster_segments(run_scenario):
+          result = run_scenario("scenarios/hit_roundtrip.yaml", planner__segment_durations=[1.5] * 4)
+          assert result.metrics["tracking_rms_deg"] < 1.0
+
+  Keyword overrides use ``__`` for dots; ``overrides={"a.b": 1}`` works too.
+  Outputs go to the test's ``tmp_path``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+
+def _is_scenario(path: Path) -> bool:
+    try:
+        head = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError):
+        return False
+    return isinstance(head, dict) and "robot" in head and "expect" in head
+
+
+def pytest_collect_file(parent: pytest.Collector, file_path: Path):
+    if file_path.suffix in (".yaml", ".yml") and not file_path.name.startswith("_") and _is_scenario(file_path):
+        return ScenarioFile.from_parent(parent, path=file_path)
+    return None
+
+
+class ScenarioFile(pytest.File):
+    def collect(self):
+        yield ScenarioItem.from_parent(self, name=self.path.stem)
+
+
+class ScenarioFailed(Exception):
+    """A scenario's expectations were not met."""
+
+
+class ScenarioItem(pytest.Item):
+    """One scenario run; fails with the unmet expectations and safety events."""
+
+    def runtest(self) -> None:
+        from rehabkit.api import run_scenario
+
+        out = Path(self.config._tmp_path_factory.mktemp(self.path.stem))  # type: ignore[attr-defined]
+        result = run_scenario(self.path, out_dir=out)
+        self.user_properties.append(("real_time_factor", result.summary["real_time_factor"]))
+        if not result.passed:
+            raise ScenarioFailed(result)
+
+    def repr_failure(self, excinfo, style=None):
+        from rehabkit.core.scenario.errors import ScenarioError
+
+        if isinstance(excinfo.value, ScenarioFailed):
+            summary = excinfo.value.args[0].summary
+            lines = [f"scenario {self.path.name} failed:"]
+            for e in summary["expectations"]:
+                if not e["passed"]:
+                    lines.append(f"  {e['metric']} = {e['value']}  (expected {e['bound']})" +
+                                 (f" — {e['reason']}" if e.get("reason") else ""))
+            lines += [f"  safety: {ev['message']}" for ev in summary["safety"]["events"]]
+            return "\n".join(lines)
+        if isinstance(excinfo.value, ScenarioError):
+            return str(excinfo.value)
+        return super().repr_failure(excinfo, style)
+
+    def reportinfo(self):
+        return self.path, 0, f"scenario: {self.path.name}"
+
+
+@pytest.fixture
+def run_scenario(tmp_path: Path) -> Callable[..., Any]:
+    """Run a scenario file with overrides; returns a :class:`rehabkit.core.runner.RunResult`."""
+    from rehabkit.api import run_scenario as _run
+
+    counter = iter(range(1_000_000))
+
+    def run(path: str | Path, overrides: dict[str, Any] | None = None, write: bool = True, **kw: Any):
+        merged = dict(overrides or {})
+        merged.update({k.replace("__", "."): v for k, v in kw.items()})
+        out = tmp_path / f"run{next(counter)}" if write else None
+        return _run(path, merged, out_dir=out)
+
+    return run

@@ -1,0 +1,24 @@
+"""Shared fixtures: built-in robots and a registry with extra in-process plugins."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "scenarios"
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="session")
+def hit():
+    from rehabkit_plugins.robots.hit import HitConfig, HitRobot
+
+    return HitRobot(HitConfig())
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

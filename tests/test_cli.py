@@ -1,0 +1,60 @@
+"""The command line: exit codes, messages, outputs."""
+
+import json
+import subprocess
+import sys
+
+from tests.conftest import ROOT, SCENARIOS
+
+
+def cli(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "rehabkit.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def test_run_writes_rrd_and_summary_and_exits_0(tmp_path):
+    r = cli("run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["passed"] and (tmp_path / "run.rrd").stat().st_size > 100_000
+    assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*tmp"))
+    m = summary["metrics"]
+    for key in ("tracking_rms_deg", "tracking_max_deg", "continuity_B_position_deg", "continuity_C_velocity_deg_s",
+                "continuity_D_acceleration_deg_s2", "ik_roundtrip_position_error_m", "real_time_factor"):
+        assert key in m, key
+    assert summary["plugins"]["planner"] == {"type": "multi-cubic", "package": "rehabkit", "version": "0.1.0"}
+    assert "PASS  tracking_rms_deg" in r.stdout
+
+
+def test_failed_expectation_exits_1(tmp_path):
+    r = cli("run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path), "--set",
+            "expect.tracking_rms_deg.lt=1e-6")
+    assert r.returncode == 1
+    assert "FAIL  tracking_rms_deg" in r.stdout
+    assert json.loads((tmp_path / "summary.json").read_text())["passed"] is False
+
+
+def test_validate_reports_location_and_suggestion_and_exits_2(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nplanner:\n  type: multicubic\n"
+                   "  segment_durations: [2, 2, 2, 2]\ncontroller:\n  type: joint-pd\n  kpp: 3\n")
+    r = cli("validate", str(bad))
+    assert r.returncode == 2
+    assert f"{bad}:3:9: planner.type: unknown planner plugin 'multicubic'; did you mean 'multi-cubic'?" in r.stderr
+    assert f"{bad}:7:3: controller.kpp: unknown field 'kpp'; did you mean 'kp'?" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_missing_file_and_setup_errors_are_messages_not_tracebacks(tmp_path):
+    r = cli("run", str(tmp_path / "nope.yaml"))
+    assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr
+    r = cli("run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path), "--set", "rates.control_hz=300")
+    assert r.returncode == 2 and "not a whole multiple of the backend timestep" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_plugins_and_schema_commands():
+    r = cli("plugins")
+    assert r.returncode == 0
+    assert "planner    multi-cubic      rehabkit 0.1.0" in r.stdout and "segment_durations: list[float]" in r.stdout
+    schema = json.loads(cli("schema").stdout)
+    assert schema["title"] == "rehabkit scenario" and "planner" in schema["properties"]

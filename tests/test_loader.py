@@ -1,0 +1,144 @@
+"""The YAML DSL: positions of errors, suggestions, extends, overrides."""
+
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.core.scenario.loader import deep_merge, load_scenario
+from tests.conftest import SCENARIOS
+
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+
+
+def write(tmp_path: Path, text: str, name: str = "s.yaml") -> Path:
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(text))
+    return p
+
+
+def errors(path, overrides=()):
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(path, overrides)
+    return [str(d) for d in exc.value.diagnostics]
+
+
+def test_builtin_scenario_loads():
+    sc = load_scenario(HIT).model
+    assert sc.robot.type == "hit" and sc.planner.segment_durations == [2.0] * 4
+    assert sc.backend.type == "mujoco" and sc.task.order() == ["A", "B", "C", "D", "E"]
+
+
+def test_misspelt_plugin_and_field_are_located_with_suggestions(tmp_path):
+    p = write(tmp_path, f"""\
+        extends: {HIT}
+        planner:
+          type: multicubic
+          segment_durations: [2, 2, 2, 2]
+        controller:
+          type: joint-pd
+          kp: 10
+          feedfoward: gravity
+        """)
+    errs = errors(p)
+    assert f"{p}:3:9: planner.type: unknown planner plugin 'multicubic'; did you mean 'multi-cubic'?" in errs[0]
+    assert f"{p}:8:3: controller.feedfoward: unknown field 'feedfoward'; did you mean 'feedforward'?" in errs[1]
+    assert len(errs) == 2
+
+
+def test_value_errors_point_at_the_value_and_show_it(tmp_path):
+    p = write(tmp_path, f"""\
+        extends: {HIT}
+        duration: five
+        task:
+          targets:
+            - {{name: A, joints_deg: [0, 90, 90, 30, -90, 90]}}
+            - {{name: B, positon: [0.1, 0.2, 0.3]}}
+        """)
+    errs = errors(p)
+    assert any(e.startswith(f"{p}:2:11: duration:") and "(got 'five')" in e for e in errs)
+    assert any(e.startswith(f"{p}:6:17: task.targets.1.positon: unknown field") and "'position'" in e for e in errs)
+
+
+def test_errors_in_a_base_file_point_into_the_base(tmp_path):
+    base = write(tmp_path, HIT.read_text().replace("kp: [900", "kpp: [900"), "base.yaml")
+    child = write(tmp_path, "extends: base.yaml\nseed: 3\n", "child.yaml")
+    (err,) = errors(child)
+    line = next(i for i, l in enumerate(base.read_text().splitlines(), 1) if "kpp:" in l)
+    assert err.startswith(f"{base}:{line}:3: controller.kpp: unknown field")
+
+
+def test_missing_section_and_cross_references(tmp_path):
+    p = write(tmp_path, """\
+        robot: {type: hit}
+        planner: {type: multi-cubic, segment_durations: [1]}
+        controller: {type: joint-pd}
+        task:
+          targets: [{name: A, joints_deg: [0, 0, 0, 0, 0, 0]}]
+          sequence: [A, Z]
+        """)
+    errs = errors(p)
+    assert any("missing required field 'duration'" in e for e in errs)
+    assert any("unknown target name(s) ['Z']" in e and ":4:" in e for e in errs)
+
+
+def test_duplicate_keys_are_errors(tmp_path):
+    p = write(tmp_path, "robot: {type: hit}\nseed: 1\nseed: 2\n")
+    (err,) = errors(p)
+    assert err.startswith(f"{p}:3:1: seed: duplicate key")
+
+
+def test_yaml_syntax_error_is_located(tmp_path):
+    p = write(tmp_path, "robot:\n  type: hit\n  l1: [0.3\n")
+    (err,) = errors(p)
+    assert err.startswith(f"{p}:4:1: YAML syntax")
+
+
+def test_extends_merges_deeply_and_null_deletes(tmp_path):
+    p = write(tmp_path, f"""\
+        extends: {HIT}
+        controller: {{kp: 50}}
+        expect:
+          contact_steps: null
+        """)
+    sc = load_scenario(p).model
+    assert sc.controller.kp == 50 and sc.controller.kd == [45, 45, 8, 9, 0.8, 0.9]
+    assert "contact_steps" not in sc.expect and "tracking_rms_deg" in sc.expect
+
+
+def test_changing_a_plugin_type_replaces_its_section():
+    base = {"planner": {"type": "multi-cubic", "segment_durations": [1]}}
+    assert deep_merge(base, {"planner": {"type": "min-jerk", "segment_durations": [2]}}) == \
+        {"planner": {"type": "min-jerk", "segment_durations": [2]}}
+
+
+def test_circular_extends(tmp_path):
+    write(tmp_path, "extends: b.yaml\n", "a.yaml")
+    write(tmp_path, "extends: a.yaml\n", "b.yaml")
+    (err,) = errors(tmp_path / "a.yaml")
+    assert "circular extends" in err
+
+
+def test_set_overrides_parse_yaml_values_and_index_lists():
+    sc = load_scenario(HIT, ["planner.segment_durations=[1, 1.5, 1, 1.5]", "seed=7",
+                             "task.targets.1.position=[-0.4, -0.1, -0.3]", "controller.feedforward=gravity"]).model
+    assert sc.planner.segment_durations == [1, 1.5, 1, 1.5] and sc.seed == 7
+    assert sc.task.targets[1].position == (-0.4, -0.1, -0.3) and sc.controller.feedforward == "gravity"
+
+
+def test_bad_set_override_is_reported_as_such():
+    (err,) = errors(HIT, ["planner.segment_durations=fast"])
+    assert err.startswith("<--set planner.segment_durations>") and "valid list" in err
+    (err,) = errors(HIT, ["task.targets.9.name=X"])
+    assert "not an index" in err
+
+
+def test_scenario_model_json_schema_includes_plugins():
+    from rehabkit.core.plugins import default_registry
+    from rehabkit.core.scenario.models import scenario_model
+
+    schema = scenario_model(default_registry()).model_json_schema()
+    assert {"robot", "planner", "controller", "task", "expect"} <= set(schema["properties"])
+    defs = str(schema["$defs"])
+    assert "segment_durations" in defs and "counts_per_rev" in defs

@@ -1,0 +1,150 @@
+"""Whole runs: tracking, determinism, events, safety stops, contacts, outputs."""
+
+import json
+import shutil
+import subprocess
+import types
+
+import numpy as np
+import pytest
+
+from rehabkit import hookimpl
+from rehabkit.api import run_scenario
+from rehabkit.core.interfaces import Controller, StrictModel
+from rehabkit.core.plugins import Provider, load_plugins
+from tests.conftest import SCENARIOS
+
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+
+
+@pytest.fixture(scope="module")
+def hit_run(tmp_path_factory):
+    return run_scenario(HIT, out_dir=tmp_path_factory.mktemp("hit"))
+
+
+def test_hit_round_trip_tracks_and_reaches_every_via_point(hit_run, hit):
+    m = hit_run.metrics
+    assert hit_run.passed
+    assert m["tracking_rms_deg"] < 0.5 and m["tracking_max_deg"] < 1.5
+    assert m["final_position_error_m"] < 0.005
+    tr = hit_run.trace
+    qa = np.radians([0, 90, 90, 30, -90, 90])
+    b = hit.fk(qa)
+    b[:3, 3] = [-0.45, -0.1, -0.3]
+    for t_via, goal in ((2.0, b[:3, 3]), (4.0, hit.fk(qa)[:3, 3]), (6.0, b[:3, 3]), (8.0, hit.fk(qa)[:3, 3])):
+        k = int(round(t_via * 1000))
+        assert np.linalg.norm(hit.fk(tr.q[k])[:3, 3] - goal) < 0.005, t_via  # measured hand, not the reference
+    assert np.abs(tr.qd[-1]).max() < 0.01  # at rest at E
+
+
+def test_same_seed_same_run(hit_run):
+    again = run_scenario(HIT)
+    np.testing.assert_array_equal(again.trace.q, hit_run.trace.q)
+    np.testing.assert_array_equal(again.trace.tau, hit_run.trace.tau)
+
+
+def test_outputs_are_complete_and_nothing_half_written(hit_run):
+    out = hit_run.out_dir
+    assert sorted(p.name for p in out.iterdir()) == ["run.rrd", "summary.json"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["passed"] and summary["seed"] == 0 and summary["real_time_factor"] > 1
+
+
+def test_rrd_holds_geometry_poses_paths_and_series(hit_run):
+    rerun = shutil.which("rerun")
+    text = subprocess.run([rerun, "rrd", "print", str(hit_run.out_dir / "run.rrd")], capture_output=True,
+                          text=True, timeout=120).stdout
+    for entity in ("/world/bodies/elbow_2_link/elbow_2_g0", "/world/bodies/wrist_2_link - data columns: [Transform3D",
+                   "/world/plan/path", "/world/targets", "/world/end_effector_path", "/joints/tracking_error_deg",
+                   "/sensors/encoders/position_rad", "/world/scene/floor"):
+        assert entity in text, entity
+
+
+def test_replan_that_cannot_be_planned_holds_the_robot():
+    r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan", "sequence": ["B", "C"]}], "expect": {}})
+    (ev,) = r.summary["safety"]["events"]
+    assert ev["rule"] == "plan" and "need 1 segment durations" in ev["message"] and ev["t"] == 1.0
+    assert r.summary["sim_time_s"] == pytest.approx(1.5)  # held for stop_after_s, then ended
+
+
+def test_timed_replan_then_stop():
+    r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan"}, {"at": 3.5, "action": "stop"}],
+                           "planner.start_from_current": True, "planner.segment_durations": [2, 2, 2, 2, 2],
+                           "expect": {}})
+    assert [(e["action"], e["t"]) for e in r.summary["events"]] == [("replan", 1.0), ("stop", 3.5)]
+    assert not r.summary["safety"]["events"] and r.summary["sim_time_s"] == pytest.approx(3.5)
+    tr = r.trace
+    assert np.abs(tr.q_ref[1000] - tr.q[1000]).max() < np.radians(0.5)  # the new plan starts where the arm is
+
+
+def test_reached_event_fires_near_the_target():
+    r = run_scenario(HIT, {"task.events": [{"reached": "B", "tolerance_m": 0.01, "action": "stop"}], "expect": {}})
+    (ev,) = r.summary["events"]
+    assert ev["trigger"] == "reached B" and 1.0 < ev["t"] < 2.1
+    assert r.summary["sim_time_s"] == pytest.approx(ev["t"], abs=0.002)
+
+
+def test_too_fast_plan_is_rejected_before_the_robot_moves():
+    r = run_scenario(HIT, {"planner.segment_durations": [0.2, 0.2, 0.2, 0.2]})
+    (ev,) = r.summary["safety"]["events"]
+    assert ev["rule"] == "plan" and "velocity limit" in ev["message"]
+    assert not r.passed
+    assert np.abs(r.trace.q - r.trace.q[0]).max() < np.radians(1.0)  # held at A
+
+
+def test_obstacle_in_the_way_is_reported_as_contact():
+    box = {"name": "table", "shape": "box", "size": [0.1, 0.1, 0.02], "pose": {"position": [0.45, 0.1, 0.96]}}
+    r = run_scenario(HIT, {"world.objects": [box]})
+    assert r.metrics["contact_steps"] > 0 and not r.passed
+
+
+class _BadConfig(StrictModel):
+    fail_at: float = 0.5
+    mode: str = "nan"
+
+
+class _BadController(Controller):
+    """A good joint PD that returns NaN (or raises) after a while."""
+
+    def __init__(self, config, context):
+        from rehabkit_plugins.controllers.joint_pd import JointPD, JointPDConfig
+
+        self.config, self.n = config, context.robot.model.dof
+        self.good = JointPD(JointPDConfig(kp=[900, 900, 150, 180, 16, 18], kd=[45, 45, 8, 9, 0.8, 0.9]), context)
+
+    def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        if t < self.config.fail_at:
+            return self.good.compute(t, q, qd, q_ref, qd_ref, qdd_ref)
+        if self.config.mode == "raise":
+            raise ZeroDivisionError("gain schedule broke")
+        return np.full(self.n, np.nan)
+
+
+@pytest.fixture(scope="module")
+def bad_registry():
+    plugin = types.SimpleNamespace()
+
+    @hookimpl
+    def rehabkit_register_controllers(registry):
+        registry.add("bad", config=_BadConfig, factory=_BadController)
+
+    plugin.rehabkit_register_controllers = rehabkit_register_controllers
+    return load_plugins(extra=[(plugin, Provider("tests", "0", "bad"))])
+
+
+@pytest.mark.parametrize("mode, rule", [("nan", "non-finite"), ("raise", "plugin-error")])
+def test_broken_controller_stops_the_robot_and_the_logs_say_why(tmp_path, bad_registry, mode, rule):
+    r = run_scenario(HIT, {"controller": {"type": "bad", "mode": mode}}, out_dir=tmp_path, registry=bad_registry)
+    (ev,) = r.summary["safety"]["events"]
+    assert ev["rule"] == rule and ev["t"] == pytest.approx(0.5, abs=0.002)
+    assert not r.passed and r.summary["sim_time_s"] == pytest.approx(1.0, abs=0.01)  # stop_after_s = 0.5
+    assert np.all(np.isfinite(r.trace.tau))
+    after = r.trace.qd[int(0.9 * 1000):]
+    assert np.abs(after).max() < 0.5  # held, not flailing
+    saved = json.loads((tmp_path / "summary.json").read_text())
+    assert saved["safety"]["events"][0]["rule"] == rule and (tmp_path / "run.rrd").exists()
+
+
+def test_no_rrd_when_logging_is_off(tmp_path):
+    r = run_scenario(HIT, {"logging.rrd": False, "duration": 0.5, "expect": {}}, out_dir=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"] and r.passed
