@@ -43,7 +43,7 @@ class ScenarioFile(pytest.File):
         yield ScenarioItem.from_parent(self, name=self.path.stem)
 
 
-class ScenarioFailed(Exception):
+class ScenarioFailedError(Exception):
     """A scenario's expectations were not met."""
 
 
@@ -57,12 +57,12 @@ class ScenarioItem(pytest.Item):
         result = run_scenario(self.path, out_dir=out)
         self.user_properties.append(("real_time_factor", result.summary["real_time_factor"]))
         if not result.passed:
-            raise ScenarioFailed(result)
+            raise ScenarioFailedError(result)
 
     def repr_failure(self, excinfo, style=None):
         from rehabkit.core.scenario.errors import ScenarioError
 
-        if isinstance(excinfo.value, ScenarioFailed):
+        if isinstance(excinfo.value, ScenarioFailedError):
             summary = excinfo.value.args[0].summary
             lines = [f"scenario {self.path.name} failed:"]
             for e in summary["expectations"]:

@@ -2,7 +2,13 @@ import numpy as np
 import pytest
 
 from rehabkit.models.chain import (
-    DHRow, KinematicChain, inv_se3, matrix_to_quat_wxyz, mdh_transform, rpy_to_matrix, sdh_transform,
+    DHRow,
+    KinematicChain,
+    inv_se3,
+    matrix_to_quat_wxyz,
+    mdh_transform,
+    rpy_to_matrix,
+    sdh_transform,
 )
 
 ROWS = [DHRow(0.1, 0.3, 0.2, 0.1), DHRow(-0.2, -1.2, 0.05), DHRow(0.0, 1.5708, 0.3, -0.4), DHRow(0.15, 0.0, 0.0)]

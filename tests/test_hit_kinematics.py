@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-
 from rehabkit_plugins.robots.hit import fk, ik, ik_inverted, mdh_rows
+
 from rehabkit.models.chain import inv_se3, mdh_transform
 
 A_DEG = [0, 90, 90, 30, -90, 90]

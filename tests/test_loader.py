@@ -65,7 +65,7 @@ def test_errors_in_a_base_file_point_into_the_base(tmp_path):
     base = write(tmp_path, HIT.read_text().replace("kp: [900", "kpp: [900"), "base.yaml")
     child = write(tmp_path, "extends: base.yaml\nseed: 3\n", "child.yaml")
     (err,) = errors(child)
-    line = next(i for i, l in enumerate(base.read_text().splitlines(), 1) if "kpp:" in l)
+    line = next(i for i, text in enumerate(base.read_text().splitlines(), 1) if "kpp:" in text)
     assert err.startswith(f"{base}:{line}:3: controller.kpp: unknown field")
 
 

@@ -1,11 +1,14 @@
 import numpy as np
 import pytest
+from rehabkit_plugins.planners.multi_cubic import (
+    MultiCubicConfig,
+    MultiCubicPlanner,
+    MultiCubicTrajectory,
+    solve_multi_cubic,
+)
 from scipy.interpolate import CubicSpline
 
 from rehabkit.core.interfaces import PlanningError, PlanRequest, Target
-from rehabkit_plugins.planners.multi_cubic import (
-    MultiCubicConfig, MultiCubicPlanner, MultiCubicTrajectory, solve_multi_cubic,
-)
 
 
 @pytest.mark.parametrize("m", [1, 2, 4, 7])

@@ -85,10 +85,9 @@ def ik_inverted(T: np.ndarray, l1: float = L1, l2: float = L2, l3: float = L3, t
             t03 = mdh_transform(rows[0], th1) @ mdh_transform(rows[1], th2) @ mdh_transform(rows[2], th3)
             m = inv_se3(t03) @ T  # = T34 T45 T56: column 3 is (-c4 s5, ., s4 s5)
             for wrist in (1.0, -1.0):  # s5 > 0 and s5 < 0: the wrist flip
-                if np.hypot(m[2, 2], m[0, 2]) < 1e-12:
-                    th4 = 0.0  # s5 = 0: θ4 and θ6 share an axis; fix θ4, θ6 takes the rest
-                else:
-                    th4 = np.arctan2(wrist * m[2, 2], -wrist * m[0, 2])
+                # s5 = 0: θ4 and θ6 share an axis; fix θ4 and let θ6 take the rest
+                singular = np.hypot(m[2, 2], m[0, 2]) < 1e-12
+                th4 = 0.0 if singular else np.arctan2(wrist * m[2, 2], -wrist * m[0, 2])
                 n = inv_se3(mdh_transform(rows[3], th4)) @ m  # = T45 T56
                 th5 = np.arctan2(-n[0, 2], -n[2, 2])
                 th6 = np.arctan2(-n[1, 0], -n[1, 1])

@@ -238,5 +238,5 @@ class Backend(ABC):
         """Shapes to draw, fixed to bodies; default none."""
         return []
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

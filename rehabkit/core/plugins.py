@@ -198,7 +198,9 @@ def _provider(ep: metadata.EntryPoint) -> Provider:
     return Provider(dist.metadata["Name"], dist.version, ep.name)
 
 
-def load_plugins(extra: Iterable[tuple[ModuleType | object, Provider]] = (), trace: bool | None = None) -> PluginRegistry:
+def load_plugins(
+    extra: Iterable[tuple[ModuleType | object, Provider]] = (), trace: bool | None = None
+) -> PluginRegistry:
     """Discover and register all plugins.
 
     Args:

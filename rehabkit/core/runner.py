@@ -19,7 +19,7 @@ import numpy as np
 from tqdm import tqdm
 
 import rehabkit
-from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest, Target
+from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest
 from rehabkit.core.io import atomic_write_json
 from rehabkit.core.log import RerunLog
 from rehabkit.core.metrics import Trace, evaluate, tracking_metrics

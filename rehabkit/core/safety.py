@@ -111,7 +111,9 @@ class SafetyLayer:
                     self.saturated_steps += 1
                     return np.clip(tau, -self.effort, self.effort, out=tau)
                 j = int(np.argmax(over))
-                self._trip(t, q, "torque", j, float(tau[j]), float(self.effort[j]), "commanded torque beyond effort limit")
+                self._trip(
+                    t, q, "torque", j, float(tau[j]), float(self.effort[j]), "commanded torque beyond effort limit"
+                )
             else:
                 self._diagnose(t, q, qd, tau)
         tau[:] = self._stop_torque(q, qd)

@@ -12,8 +12,9 @@ time kinematics and dynamics go through Pinocchio.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, Sequence
+from typing import Literal
 
 import numpy as np
 
@@ -144,7 +145,7 @@ class KinematicChain:
         return rot_z(q) if kind == "revolute" else trans(z=q)
 
     @classmethod
-    def from_dh(cls, rows: Sequence[DHRow], convention: Literal["standard", "modified"]) -> "KinematicChain":
+    def from_dh(cls, rows: Sequence[DHRow], convention: Literal["standard", "modified"]) -> KinematicChain:
         """Split a DH table into fixed parts and joint motions."""
         fixed: list[np.ndarray] = []
         pending = np.eye(4)
@@ -161,7 +162,7 @@ class KinematicChain:
         fixed.append(pending)
         return cls(tuple(fixed), tuple(r.joint for r in rows))
 
-    def reversed(self) -> "KinematicChain":
+    def reversed(self) -> KinematicChain:
         """The same mechanism described from its tip to its base.
 
         Joint i of the reversed chain is joint n+1-i of this one, with its

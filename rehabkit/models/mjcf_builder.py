@@ -10,8 +10,8 @@ effort limits live in :class:`~rehabkit.models.robot_model.JointLimits`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import mujoco
 import numpy as np

@@ -45,7 +45,7 @@ class JointLimits:
             bad = [i for i in range(n) if self.lower[i] >= self.upper[i]]
             raise ValueError(f"joint limits: lower >= upper for joint index {bad}")
 
-    def override(self, index: int, **values: float | None) -> "JointLimits":
+    def override(self, index: int, **values: float | None) -> JointLimits:
         """A copy with some limits of joint ``index`` replaced (``None`` keeps the old one)."""
         arrays = {k: getattr(self, k).copy() for k in ("lower", "upper", "velocity", "effort")}
         for key, value in values.items():

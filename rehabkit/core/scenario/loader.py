@@ -88,7 +88,11 @@ def read_yaml(path: Path) -> Source:
                 key = k.value if isinstance(k, yaml.ScalarNode) else str(k.value)
                 sub = (*path, key)
                 if key in seen:
-                    problems.append(Diagnostic(_mark(name, k.start_mark), _dotted(sub), "duplicate key (the later one would silently win)"))
+                    problems.append(
+                        Diagnostic(
+                            _mark(name, k.start_mark), _dotted(sub), "duplicate key (the later one would silently win)"
+                        )
+                    )
                 seen.add(key)
                 key_marks[sub] = _mark(name, k.start_mark)
                 value_marks[sub] = _mark(name, v.start_mark)
@@ -140,7 +144,9 @@ def _with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
     if isinstance(parents, str):
         parents = [parents]
     if not (isinstance(parents, list) and all(isinstance(p, str) for p in parents)):
-        raise ScenarioError([Diagnostic(src.value_marks[("extends",)], "extends", "expected a file path or a list of them")])
+        raise ScenarioError(
+            [Diagnostic(src.value_marks[("extends",)], "extends", "expected a file path or a list of them")]
+        )
     merged_data: dict[str, Any] = {}
     keys: dict[KeyPath, Mark] = {}
     values: dict[KeyPath, Mark] = {}
@@ -188,14 +194,19 @@ def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -
             last = i == len(parts) - 1
             if isinstance(node, list):
                 if not (part.isdigit() and int(part) < len(node)):
-                    raise ScenarioError([Diagnostic(mark, _dotted(parts), f"'{part}' is not an index of a list of {len(node)}")])
+                    raise ScenarioError(
+                        [Diagnostic(mark, _dotted(parts), f"'{part}' is not an index of a list of {len(node)}")]
+                    )
                 part = int(part)
             elif not isinstance(node, dict):
                 raise ScenarioError([Diagnostic(mark, _dotted(parts), f"'{_dotted(path)}' is not a mapping")])
             path = (*path, part)
             if last:
-                node[part] = copy.deepcopy(value) if not isinstance(node, dict) or not isinstance(node.get(part), dict) \
+                node[part] = (
+                    copy.deepcopy(value)
+                    if not isinstance(node, dict) or not isinstance(node.get(part), dict)
                     else deep_merge(node[part], value)
+                )
             else:
                 if isinstance(node, dict) and part not in node:
                     node[part] = {}
@@ -279,16 +290,28 @@ def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnosti
         if node is None:
             continue
         if not isinstance(node, dict):
-            problems.append(Diagnostic(src.value_marks[path], _dotted(path), f"expected a mapping with a 'type' ({kind} plugin)"))
+            problems.append(
+                Diagnostic(src.value_marks[path], _dotted(path), f"expected a mapping with a 'type' ({kind} plugin)")
+            )
             continue
         names = registry.names(kind)
         if "type" not in node:
-            problems.append(Diagnostic(src.key_marks.get(path, src.value_marks[()]), _dotted(path),
-                                       f"missing 'type'; installed {kind} plugins: {', '.join(names)}"))
+            problems.append(
+                Diagnostic(
+                    src.key_marks.get(path, src.value_marks[()]),
+                    _dotted(path),
+                    f"missing 'type'; installed {kind} plugins: {', '.join(names)}",
+                )
+            )
         elif node["type"] not in names:
             tpath = (*path, "type")
-            problems.append(Diagnostic(src.value_marks.get(tpath, src.value_marks[()]), _dotted(tpath),
-                                       f"unknown {kind} plugin '{node['type']}'{suggest(str(node['type']), names)}"))
+            problems.append(
+                Diagnostic(
+                    src.value_marks.get(tpath, src.value_marks[()]),
+                    _dotted(tpath),
+                    f"unknown {kind} plugin '{node['type']}'{suggest(str(node['type']), names)}",
+                )
+            )
     return problems
 
 

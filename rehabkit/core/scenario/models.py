@@ -80,7 +80,8 @@ class TargetSpec(StrictModel):
         given = [k for k in ("joints_deg", "joints_rad", "position", "same_as") if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(
-                f"target '{self.name}' needs exactly one of joints_deg, joints_rad, position, same_as; got {given or 'none'}"
+                f"target '{self.name}' needs exactly one of joints_deg, joints_rad, position, same_as; "
+                f"got {given or 'none'}"
             )
         if self.position is None and (self.rpy_deg is not None or self.orientation_of is not None):
             raise ValueError(f"target '{self.name}': rpy_deg/orientation_of only go with position")
