@@ -106,6 +106,9 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    import warnings
+
+    warnings.formatwarning = lambda msg, category, *a, **k: f"warning: {msg}\n"
     args = parser().parse_args(argv)
     try:
         return args.func(args)

@@ -148,3 +148,30 @@ def test_broken_controller_stops_the_robot_and_the_logs_say_why(tmp_path, bad_re
 def test_no_rrd_when_logging_is_off(tmp_path):
     r = run_scenario(HIT, {"logging.rrd": False, "duration": 0.5, "expect": {}}, out_dir=tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"] and r.passed
+
+
+def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):
+    from rehabkit.core.log import RerunLog
+
+    def broken_flush(self):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(RerunLog, "flush", broken_flush)
+    with pytest.raises(OSError, match="disk full"):
+        run_scenario(HIT, {"duration": 0.2, "expect": {}}, out_dir=tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_spawn_without_a_display_still_writes_the_file(tmp_path, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.warns(UserWarning, match="no display"):
+        r = run_scenario(HIT, {"duration": 0.2, "expect": {}}, out_dir=tmp_path, spawn=True)
+    assert r.passed and (tmp_path / "run.rrd").stat().st_size > 0
+
+
+def test_summary_lists_each_plans_via_points(hit_run, hit):
+    (plan,) = hit_run.summary["plans"]
+    assert plan["t"] == 0.0 and plan["duration_s"] == 8.0
+    q_b = np.radians(plan["waypoints_deg"][1])
+    np.testing.assert_allclose(hit.fk(q_b)[:3, 3], [-0.45, -0.1, -0.3], atol=1e-6)

@@ -9,6 +9,8 @@ simulated seconds and at the end. The file is written as ``run.rrd.tmp`` and ren
 from __future__ import annotations
 
 import os
+import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -53,11 +55,17 @@ class RerunLog:
         self.path = Path(path)
         self.tmp = self.path.with_name(self.path.name + ".tmp")
         self.rec = rr.RecordingStream(application_id)
-        if spawn:
-            rr.spawn(connect=False)
-            self.rec.set_sinks(rr.FileSink(str(self.tmp)), rr.GrpcSink())
-        else:
-            self.rec.save(self.tmp)
+        self.rec.save(self.tmp)
+        if spawn and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                               or os.environ.get("WAYLAND_DISPLAY")):
+            warnings.warn(f"--spawn: no display here, so no viewer; writing {self.path} only", stacklevel=2)
+        elif spawn:
+            try:
+                self.rec.spawn(connect=False)
+                self.rec.set_sinks(rr.FileSink(str(self.tmp)), rr.GrpcSink())
+            except Exception as exc:  # no viewer binary: the file is what matters
+                warnings.warn(f"--spawn: could not start the Rerun viewer ({exc}); writing {self.path} only",
+                              stacklevel=2)
         self.joint_names = joint_names
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
@@ -151,6 +159,11 @@ class RerunLog:
                 self.rec.send_columns(f"sensors/{sensor}/{key}", indexes=[times],
                                       columns=rr.Scalars.columns(scalars=values))
         self._sensor_rows = {}
+
+    def discard(self) -> None:
+        """Drop an unfinished recording (a run that died outside plugin code)."""
+        self.rec.disconnect()
+        self.tmp.unlink(missing_ok=True)
 
     def close(self) -> Path:
         """Flush everything, finish the file and move it into place."""

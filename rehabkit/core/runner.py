@@ -160,6 +160,16 @@ class Runner:
     # -- the loop -----------------------------------------------------------
 
     def run(self) -> RunResult:
+        """Build, run and finish; outputs are complete files or none."""
+        self.log = None
+        try:
+            return self._run()
+        except BaseException:
+            if self.log is not None:
+                self.log.discard()
+            raise
+
+    def _run(self) -> RunResult:
         t_setup = time.perf_counter()
         self.build()
         sc, sch, robot = self.sc, self.schedule, self.robot
@@ -171,6 +181,7 @@ class Runner:
         self.log = log = self._open_log()
         self.diag: dict[str, float] = {}
         self.fired: list[dict] = []
+        self.plans: list[dict] = []
 
         q0 = self.start_q()
         self.backend.reset(q0)
@@ -277,6 +288,9 @@ class Runner:
         """Write a plan's reference into the step arrays from step ``k0`` on."""
         if plan is None:
             return
+        self.plans.append({"t": round(k0 * self.schedule.control_dt, 6), "duration_s": plan.trajectory.duration,
+                           "waypoints_deg": None if plan.waypoints is None
+                           else np.round(np.degrees(plan.waypoints), 6).tolist()})
         ref_q, ref_qd, ref_qdd = self._ref
         dt = self.schedule.control_dt
         q, qd, qdd = plan.trajectory.sample(np.arange(len(ref_q) - k0) * dt)
@@ -348,6 +362,7 @@ class Runner:
             "metrics": metrics, "per_joint": per_joint, "expectations": verdicts,
             "safety": {"tripped": self.safety.tripped, "events": [e.as_dict() for e in self.safety.events]},
             "events": self.fired,
+            "plans": self.plans,
         }
         if self.out_dir is not None:
             if log:

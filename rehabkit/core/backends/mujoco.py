@@ -55,6 +55,11 @@ class MujocoBackend(Backend):
             while a != 0 and a != root:
                 a = self.model.body_parentid[a]
             self._robot_body[b] = a == root or b in robot_bodies
+        # contiguous joints: views into MjData stay valid for the whole run, so state() allocates nothing
+        if isinstance(self._q, slice) and isinstance(self._v, slice):
+            self._views = (self.data.qpos[self._q], self.data.qvel[self._v])
+        else:
+            self._views = None
         self._ee_site = self.model.site(robot.ee_site).id
         self._drawn = np.arange(1, self.model.nbody)
         self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
@@ -66,6 +71,8 @@ class MujocoBackend(Backend):
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         d = self.data
+        if self._views is not None:
+            return d.time, self._views[0], self._views[1]
         return d.time, d.qpos[self._q], d.qvel[self._v]
 
     def command(self, tau: np.ndarray) -> None:
