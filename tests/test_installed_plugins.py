@@ -1,0 +1,52 @@
+"""Installed distributions (dist-info on sys.path): a broken one, a conflicting one."""
+
+import os
+import subprocess
+import sys
+
+from tests.conftest import SCENARIOS
+
+
+def fake_dist(site, name, entry_name, module, source):
+    info = site / f"{name.replace('-', '_')}-1.2.3.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 1.2.3\n")
+    (info / "entry_points.txt").write_text(f"[rehabkit]\n{entry_name} = {module}\n")
+    (site / f"{module}.py").write_text(source)
+
+
+def rehabkit(site, *args):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, "-m", "rehabkit.cli", *args], capture_output=True, text=True, env=env)
+
+
+def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path):
+    site = tmp_path / "site"
+    fake_dist(site, "rehabkit-exo-driver", "exo", "exo_driver", "import not_a_real_module_xyz\n")
+    listed = rehabkit(site, "plugins")
+    assert listed.returncode == 0
+    broken = [line for line in listed.stdout.splitlines() if line.startswith("BROKEN")]
+    assert broken and "rehabkit-exo-driver 1.2.3" in broken[0] and "not_a_real_module_xyz" in broken[0]
+    assert "multi-cubic" in listed.stdout
+    run = rehabkit(site, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path / "out"),
+                   "--set", "duration=0.5", "--set", "expect={}")
+    assert run.returncode == 0, run.stderr
+
+
+def test_conflicting_distribution_names_both_packages(tmp_path):
+    site = tmp_path / "site"
+    fake_dist(site, "fancy-planners", "cubic", "fancy_planners", """\
+from pydantic import BaseModel
+from rehabkit import hookimpl
+
+class Cfg(BaseModel):
+    pass
+
+@hookimpl
+def rehabkit_register_planners(registry):
+    registry.add("multi-cubic", config=Cfg, factory=lambda config, context: None)
+""")
+    r = rehabkit(site, "validate", str(SCENARIOS / "hit_roundtrip.yaml"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "planner 'multi-cubic' is registered twice" in r.stderr
+    assert "rehabkit 0.1.0" in r.stderr and "fancy-planners 1.2.3" in r.stderr
