@@ -184,3 +184,17 @@ class KinematicChain:
     def fk(self, q: Sequence[float]) -> np.ndarray:
         """Tip pose for joint values ``q``."""
         return self.frames(q)[-1]
+
+    def fk_batch(self, q: np.ndarray) -> np.ndarray:
+        """Tip poses (N, 4, 4) for many configurations (N, n) at once."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        t = np.broadcast_to(self.fixed[0], (len(q), 4, 4)).copy()
+        for i, kind in enumerate(self.joints):
+            m = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+            if kind == "revolute":
+                c, s = np.cos(q[:, i]), np.sin(q[:, i])
+                m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1] = c, -s, s, c
+            else:
+                m[:, 2, 3] = q[:, i]
+            t = t @ m @ self.fixed[i + 1]
+        return t

@@ -116,19 +116,20 @@ class DHRobotSpec(StrictModel):
         return KinematicChain((*chain.fixed[:-1], chain.fixed[-1] @ tool), chain.joints)
 
 
-def build_dh_robot(spec: DHRobotSpec, ee_site: str = "ee") -> RobotModel:
-    """MJCF + limits for a DH robot; Pinocchio reads the same MJCF."""
-    links = []
-    lower, upper, vel, eff = [], [], [], []
-    for j in spec.joints:
+def links_and_limits(joints: list[JointSpec]) -> tuple[list[LinkSpec], JointLimits]:
+    """The MJCF builder's link data and the joint limits, in SI units, from joint specs."""
+    links, rows = [], []
+    for j in joints:
         lo, hi, v = j.limits()
         links.append(LinkSpec(j.name, lo, hi, j.mass, j.radius, j.damping, j.armature))
-        lower.append(lo)
-        upper.append(hi)
-        vel.append(v)
-        eff.append(j.effort)
+        rows.append((lo, hi, v, j.effort))
+    return links, JointLimits(*(np.array(col) for col in zip(*rows)))
+
+
+def build_dh_robot(spec: DHRobotSpec, ee_site: str = "ee") -> RobotModel:
+    """MJCF + limits for a DH robot; Pinocchio reads the same MJCF."""
+    links, limits = links_and_limits(spec.joints)
     xml = build_chain_mjcf(spec.name, spec.chain(), links, base_radius=spec.base_radius, ee_site=ee_site)
-    limits = JointLimits(np.array(lower), np.array(upper), np.array(vel), np.array(eff))
     return RobotModel(
         name=spec.name, mjcf=xml, joint_names=[j.name for j in spec.joints], limits=limits,
         ee_site=ee_site, base_pose=spec.base.matrix(), safe_stop=spec.safe_stop,

@@ -1,0 +1,138 @@
+"""L-Exos workspace planners: the paper's Monte Carlo comparison, and the look-up table's costs.
+
+* 600 random start/goal pairs of inner voxels that a straight line cannot link;
+  A*, weighted A* (h x 1.5), hill and beam (k = 5 cm) on each; mean ± std of the
+  decimated (n = 3) path length and of planning time, over the pairs every planner
+  solved; failures counted. Table printed, plot saved (PNG).
+* Straight-segment test through the table vs sampling the segment at 100 points
+  with inverse kinematics (ratio, same run); proxy-point look-up counts.
+* Table build time (cache bypassed) and size.
+
+    python benchmarks/lexos_planners.py [--pairs 600] [--png out/lexos_planners.png]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+from rehabkit_plugins.robots.lexos import LexosConfig, LexosRobot
+
+from rehabkit.workspace.grid import BOUNDARY
+from rehabkit.workspace.search import SearchFailedError, astar, beam, decimate, hill, path_length
+
+PLANNERS = {
+    "A*": lambda ws, a, b: astar(ws, a, b),
+    "weighted A* (1.5h)": lambda ws, a, b: astar(ws, a, b, weight=1.5),
+    "hill": lambda ws, a, b: hill(ws, a, b),
+    "beam (k=5 cm)": lambda ws, a, b: beam(ws, a, b, k=0.05),
+}
+
+
+def random_pairs(ws, n: int, rng) -> list[tuple[np.ndarray, np.ndarray]]:
+    inner = ws.inner_points()
+    pairs = []
+    while len(pairs) < n:
+        a, b = inner[rng.integers(len(inner), size=2)]
+        if not ws.segment_inner(a, b):
+            pairs.append((a, b))
+    return pairs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--pairs", type=int, default=600)
+    ap.add_argument("--png", default="out/lexos_planners.png")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    robot = LexosRobot(LexosConfig())
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+
+    t0 = time.perf_counter()
+    ws = robot.workspace(progress=False, use_cache=False)
+    build = time.perf_counter() - t0
+    counts = np.bincount(ws.labels.ravel(), minlength=3)
+    print(f"look-up table: built in {build:.1f} s (cache bypassed), {ws.shape[0]}x{ws.shape[1]}x{ws.shape[2]} "
+          f"voxels of {ws.resolution * 100:.0f} cm, {ws.nbytes / 1e6:.2f} MB; "
+          f"inner {counts[2]}, boundary {counts[1]}, unreachable {counts[0]}")
+
+    rng = np.random.default_rng(args.seed)
+    pairs = random_pairs(ws, args.pairs, rng)
+    lengths = {k: np.full(len(pairs), np.nan) for k in PLANNERS}
+    times = {k: np.full(len(pairs), np.nan) for k in PLANNERS}
+    for i, (a, b) in enumerate(pairs):
+        for name, plan in PLANNERS.items():
+            t = time.perf_counter()
+            try:
+                path = plan(ws, a, b)
+            except SearchFailedError:
+                continue
+            times[name][i] = time.perf_counter() - t
+            lengths[name][i] = path_length(decimate(path, 3))
+    solved = np.all([~np.isnan(lengths[k]) for k in PLANNERS], axis=0)
+    print(f"\n{len(pairs)} start/goal pairs not linkable by a straight line; statistics over the "
+          f"{solved.sum()} every planner solved")
+    print(f"{'planner':20} {'failures':>8} {'decimated length [m]':>22} {'vs A*':>7} {'time [ms]':>18} {'A*/this':>8}")
+    ref_len, ref_t = np.mean(lengths["A*"][solved]), np.mean(times["A*"][solved])
+    rows = []
+    for name in PLANNERS:
+        L, T = lengths[name][solved], times[name][solved] * 1e3
+        fails = int(np.isnan(lengths[name]).sum())
+        rows.append((name, L.mean(), L.std(), T.mean(), T.std()))
+        print(f"{name:20} {fails:8d} {L.mean():12.4f} ± {L.std():.4f} {L.mean() / ref_len - 1:+7.1%} "
+              f"{T.mean():9.2f} ± {T.std():6.2f} {ref_t * 1e3 / T.mean():8.1f}")
+
+    # straight-segment test: table vs inverse kinematics at 100 samples
+    segs = [pairs[i] for i in range(min(200, len(pairs)))]
+
+    def best_of(fn, repeats=5):
+        times = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            for a, b in segs:
+                fn(a, b)
+            times.append((time.perf_counter() - t) / len(segs))
+        return min(times)
+
+    t_table = best_of(ws.segment_inner)
+    t_ik = best_of(lambda a, b: robot.reachable(a + np.linspace(0, 1, 100)[:, None] * (b - a)))
+    print(f"\nstraight-segment test: table {t_table * 1e6:.0f} us, IK at 100 points {t_ik * 1e6:.0f} us, "
+          f"ratio {t_ik / t_table:.0f}x")
+
+    used = []
+    inner = ws.inner_points()
+    for start in inner[rng.integers(len(inner), size=500)]:
+        d = rng.normal(size=3)
+        target = start + rng.uniform(0.3, 1.2) * d / np.linalg.norm(d)
+        if not ws.reachable(target):
+            used.append(ws.proxy_point(start, target, level=BOUNDARY)[1])
+    print(f"proxy point: {len(used)} targets outside the workspace, bisection look-ups max {max(used)}, "
+          f"mean {np.mean(used):.2f} (plus one to find the target unreachable)")
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    names = [r[0] for r in rows]
+    ax1.bar(names, [r[1] for r in rows], yerr=[r[2] for r in rows], capsize=4, color="#4a7fb5")
+    ax1.set_ylabel("decimated path length [m]")
+    ax2.bar(names, [r[3] for r in rows], yerr=[r[4] for r in rows], capsize=4, color="#d08a3c")
+    ax2.set_yscale("log")
+    ax2.set_ylabel("planning time [ms]")
+    for ax in (ax1, ax2):
+        ax.tick_params(axis="x", rotation=20)
+    fig.suptitle(f"L-Exos workspace planners, {solved.sum()} random non-straight pairs (mean ± std)")
+    fig.tight_layout()
+    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.png, dpi=120)
+    print(f"plot: {args.png}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+"""L-Exos arm exoskeleton (after Loconsole et al.): 4 actuated DoF, right arm.
+
+A 3R shoulder whose axes meet at the shoulder centre — q1 abduction (about the
+backward axis), q2 flexion (about the left axis), q3 internal/external rotation
+(about the upper arm) — then q4 elbow flexion. Base frame at the shoulder
+centre: x forward, y left, z up; at q = 0 the arm hangs straight down.
+q2 = -90° is the arm held forward, q4 = -90° a right-angle elbow, q3 > 0 turns
+the forearm outward. The measured-only pronation/supination q5 does not move
+the hand centre and is not simulated.
+
+The arm is redundant for hand *position*: the elbow can swing on a circle
+around the shoulder-hand line. :func:`position_ik` parametrises that swivel
+angle and solves the rest in closed form, vectorised over many points, which
+is what makes the workspace look-up table cheap to build.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+import yaml
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.models.chain import KinematicChain, rot_x, trans
+from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
+from rehabkit.models.mjcf_builder import build_chain_mjcf
+from rehabkit.models.robot_model import RobotModel, SafeStop
+from rehabkit.workspace.build import build_workspace
+from rehabkit.workspace.grid import VoxelWorkspace
+
+UPPER_ARM, FOREARM = 0.30, 0.35  # [m], adult anthropometry (no public L-Exos figures)
+
+
+def _rot_y(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
+
+
+def lexos_chain(l1: float = UPPER_ARM, l2: float = FOREARM) -> KinematicChain:
+    """Shoulder (3 axes through one point), upper arm ``l1``, elbow, forearm ``l2`` to the handle."""
+    base = np.eye(4)
+    base[:3, :3] = np.column_stack([[0, 0, -1], [0, -1, 0], [-1, 0, 0]])  # joint 1 axis: backward
+    fixed = (base, rot_x(np.pi / 2), _rot_y(np.pi / 2), trans(z=l1) @ _rot_y(-np.pi / 2), trans(x=l2))
+    return KinematicChain(fixed, ("revolute",) * 4)
+
+
+def position_ik(p: np.ndarray, swivel: np.ndarray, l1: float = UPPER_ARM, l2: float = FOREARM) -> np.ndarray:
+    """Joint values putting the hand at ``p`` for each swivel angle.
+
+    Args:
+        p: Hand positions (N, 3) in the base frame [m].
+        swivel: Elbow angles on its circle around the shoulder-hand line (M,) [rad].
+
+    Returns:
+        (N, M, 4) joint values [rad]; NaN where the distance is out of reach.
+    """
+    p = np.atleast_2d(np.asarray(p, dtype=float))
+    r = np.linalg.norm(p, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c4 = (r * r - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+        q4 = -np.arccos(np.where(np.abs(c4) <= 1.0, c4, np.nan))  # elbow flexion is negative
+        ph = p / r[:, None]
+        cos_a = np.clip((l1 * l1 + r * r - l2 * l2) / (2 * l1 * r), -1.0, 1.0)
+    sin_a = np.sqrt(1.0 - cos_a**2)
+    # an orthonormal pair around the shoulder-hand line (any will do: swivel samples the whole circle)
+    helper = np.where(np.abs(ph[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    n1 = np.cross(ph, helper)
+    n1 /= np.linalg.norm(n1, axis=1, keepdims=True)
+    n2 = np.cross(ph, n1)
+    cphi, sphi = np.cos(swivel)[None, :, None], np.sin(swivel)[None, :, None]
+    around = cphi * n1[:, None, :] + sphi * n2[:, None, :]
+    e = l1 * (cos_a[:, None, None] * ph[:, None, :] + sin_a[:, None, None] * around)  # elbow positions
+    u = e / l1  # upper-arm direction = (-sin q2, -cos q2 sin q1, -cos q2 cos q1)
+    q2 = -np.arcsin(np.clip(u[..., 0], -1.0, 1.0))
+    q1 = np.arctan2(-u[..., 1], -u[..., 2])
+    f = (p[:, None, :] - e) / l2  # forearm direction, expressed in the frame after q1, q2:
+    c1, s1, c2, s2 = np.cos(q1), np.sin(q1), np.cos(q2), np.sin(q2)
+    fx = c2 * f[..., 0] - s2 * s1 * f[..., 1] - s2 * c1 * f[..., 2]
+    fy = c1 * f[..., 1] - s1 * f[..., 2]
+    q3 = np.arctan2(-fy, fx)
+    return np.stack([q1, q2, q3, np.broadcast_to(q4[:, None], q1.shape)], axis=-1)
+
+
+@dataclass(frozen=True)
+class SwivelReachability:
+    """Picklable reachability test: some swivel sample satisfies every joint range."""
+
+    l1: float
+    l2: float
+    lower: np.ndarray
+    upper: np.ndarray
+    swivel: np.ndarray
+
+    def __call__(self, p: np.ndarray) -> np.ndarray:
+        q = position_ik(p, self.swivel, self.l1, self.l2)
+        with np.errstate(invalid="ignore"):
+            ok = np.all((q >= self.lower) & (q <= self.upper), axis=-1)
+        return ok.any(axis=1)
+
+
+class LexosConfig(StrictModel):
+    """L-Exos arm: segment lengths, placement, stop behaviour."""
+
+    upper_arm: float = Field(UPPER_ARM, gt=0, description="shoulder centre to elbow [m]")
+    forearm: float = Field(FOREARM, gt=0, description="elbow to handle [m]")
+    base: PoseSpec = Field(PoseSpec(position=(0.0, 0.0, 1.2)), description="shoulder centre in the world")
+    swivel_samples: int = Field(120, ge=8, description="elbow-circle samples in reachability tests")
+    safe_stop: SafeStop = "hold"
+
+
+def _joint_specs() -> list[JointSpec]:
+    text = resources.files(__package__).joinpath("lexos_joints.yaml").read_text()
+    return [JointSpec.model_validate(j) for j in yaml.safe_load(text)["joints"]]
+
+
+class LexosRobot(Robot):
+    """L-Exos 4-DoF arm exoskeleton: 3R shoulder + elbow, paper's joint ranges, concave workspace."""
+
+    def __init__(self, config: LexosConfig, context: Context | None = None):
+        self.config = config
+        self.lengths = (config.upper_arm, config.forearm)
+        joints = _joint_specs()
+        links, limits = links_and_limits(joints)
+        self.chain = lexos_chain(*self.lengths)
+        xml = build_chain_mjcf("lexos", self.chain, links, base_radius=0.06, ee_site="handle")
+        self.model = RobotModel("lexos", xml, [j.name for j in joints], limits, "handle",
+                                base_pose=config.base.matrix(), safe_stop=config.safe_stop)
+        self.swivel = np.linspace(-np.pi, np.pi, config.swivel_samples, endpoint=False)
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        return self.chain.fk(q)
+
+    def position_ik(self, p: np.ndarray) -> np.ndarray:
+        """(N, swivel_samples, 4) joint values for hand positions ``p`` (base frame)."""
+        return position_ik(p, self.swivel, *self.lengths)
+
+    def reachable(self, p: np.ndarray) -> np.ndarray:
+        """Whether some elbow swivel puts the hand at each ``p`` within every joint range."""
+        return self._reachability(p)
+
+    @property
+    def _reachability(self) -> SwivelReachability:
+        lim = self.model.limits
+        return SwivelReachability(*self.lengths, lim.lower, lim.upper, self.swivel)
+
+    def workspace(self, resolution: float = 0.01, progress: bool = True, use_cache: bool = True) -> VoxelWorkspace:
+        """The voxel look-up table of the hand's workspace (base frame), cached on disk."""
+        lim = self.model.limits
+        key = f"lexos|{self.lengths}|{lim.lower.round(9).tolist()}|{lim.upper.round(9).tolist()}|{len(self.swivel)}"
+        return build_workspace(key, self.chain.fk_batch, self._reachability, lim.lower, lim.upper, resolution,
+                               progress=progress, use_cache=use_cache)
+
+
+@hookimpl
+def rehabkit_register_robots(registry) -> None:
+    registry.add("lexos", config=LexosConfig, factory=LexosRobot)
