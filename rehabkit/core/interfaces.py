@@ -5,7 +5,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -124,16 +124,37 @@ class PlanningError(RuntimeError):
     """A planner could not produce a plan; the message says why."""
 
 
+ReferenceSpace = Literal["joint", "cartesian"]
+
+
 class Planner(ABC):
-    """Computes a joint trajectory at start and on task events."""
+    """Computes a trajectory at start and on task events.
+
+    ``space`` says what the trajectory holds: joint values (``dof`` wide) or
+    end-effector positions in the robot base frame (3 wide).
+    """
+
+    space: ClassVar[ReferenceSpace] = "joint"
 
     @abstractmethod
     def plan(self, request: PlanRequest) -> Plan:
         """Plan from ``request.q`` through ``request.targets``."""
 
+    def run_metrics(self, trace: Any) -> dict[str, float]:
+        """Figures about the executed run only this planner can judge (default none)."""
+        return {}
+
 
 class Controller(ABC):
-    """Turns a reference and the measured state into joint torques, at the control rate."""
+    """Turns a reference and the measured state into joint torques, at the control rate.
+
+    ``reference`` is the space of the references it takes (see :class:`Planner`).
+    A controller that builds its own joint reference (e.g. by closed-loop IK)
+    exposes it as ``joint_reference`` so runs can record and plot it.
+    """
+
+    reference: ClassVar[ReferenceSpace] = "joint"
+    joint_reference: np.ndarray | None = None
 
     @abstractmethod
     def compute(

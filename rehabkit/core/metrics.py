@@ -21,9 +21,12 @@ class Trace:
     tau: np.ndarray
     q_ref: np.ndarray
     qd_ref: np.ndarray
+    x: np.ndarray | None = None  # end effector, robot base frame (Cartesian runs)
+    x_ref: np.ndarray | None = None
 
     def trimmed(self, n: int) -> Trace:
-        return Trace(*(getattr(self, f)[:n] for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref")))
+        return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]
+                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref")))
 
 
 def tracking_metrics(trace: Trace, robot: RobotModel, goal_q: np.ndarray | None) -> tuple[dict, dict]:
@@ -43,12 +46,33 @@ def tracking_metrics(trace: Trace, robot: RobotModel, goal_q: np.ndarray | None)
         }
         for j, name in enumerate(robot.joint_names)
     } if err.size else {}
+    metrics["joint_limit_excess_deg"] = joint_limit_excess(trace, robot)
     if goal_q is not None and err.size:
         q_end = trace.q[-1]
         metrics["final_joint_error_deg"] = float(np.degrees(np.abs(goal_q - q_end)).max())
         ee = robot.ee_positions_world(np.vstack([goal_q, q_end]))
         metrics["final_position_error_m"] = float(np.linalg.norm(ee[0] - ee[1]))
     return metrics, per_joint
+
+
+def cartesian_metrics(trace: Trace) -> dict[str, float]:
+    """How the end effector followed a Cartesian reference."""
+    if trace.x is None or not len(trace.x):
+        return {}
+    err = np.linalg.norm(trace.x_ref - trace.x, axis=1)
+    return {
+        "cartesian_tracking_rms_mm": float(np.sqrt(np.mean(err**2)) * 1e3),
+        "cartesian_tracking_max_mm": float(err.max() * 1e3),
+        "final_position_error_m": float(err[-1]),
+    }
+
+
+def joint_limit_excess(trace: Trace, robot: RobotModel) -> float:
+    """Largest excursion of any joint beyond its range over the run [deg] (0 if none)."""
+    if not len(trace.q):
+        return 0.0
+    over = np.maximum(trace.q - robot.limits.upper, robot.limits.lower - trace.q)
+    return float(np.degrees(max(0.0, over.max())))
 
 
 def evaluate(expect: dict[str, Bound], metrics: dict[str, float]) -> list[dict]:

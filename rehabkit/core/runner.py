@@ -22,7 +22,7 @@ import rehabkit
 from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest
 from rehabkit.core.io import atomic_write_json
 from rehabkit.core.log import RerunLog
-from rehabkit.core.metrics import Trace, evaluate, tracking_metrics
+from rehabkit.core.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
 from rehabkit.core.plugins import PluginRegistry, default_registry
 from rehabkit.core.safety import SafetyLayer
 from rehabkit.core.scenario.loader import LoadedScenario
@@ -106,6 +106,10 @@ class Runner:
         self.planner = self._make("planner", sc.planner, ctx)
         self.controller = self._make("controller", sc.controller, ctx)
         self.sensors = {name: self._make("sensor", cfg, ctx) for name, cfg in sc.sensors.items()}
+        if self.planner.space != self.controller.reference:
+            raise SetupError(f"planner '{sc.planner.type}' plans in {self.planner.space} space but controller "
+                             f"'{sc.controller.type}' takes {self.controller.reference} references; "
+                             "pick a matching pair")
         self.safety = SafetyLayer(self.robot.model, sc.safety)
         try:
             self.targets = resolve_targets(sc.task, self.robot)
@@ -142,6 +146,9 @@ class Runner:
         except PlanningError as exc:
             self.safety.trip(t, q, "plan", f"planner failed: {exc}")
             return None
+        if self.planner.space == "cartesian":
+            # the planner checked it against the workspace; the controller maps it into the joint ranges
+            return self._accept(plan)
         lim = self.robot.model.limits
         ts = np.arange(0.0, plan.trajectory.duration + 1e-9, 0.005)
         qs, qds, _ = plan.trajectory.sample(ts)
@@ -153,6 +160,9 @@ class Runner:
             self.safety.trip(t, q, "plan", f"planned trajectory breaks the {what} limit of "
                              f"{self.robot.model.joint_names[j]} at t+{ts[k]:.3f}s; not executed")
             return None
+        return self._accept(plan)
+
+    def _accept(self, plan: Plan) -> Plan:
         for key, value in plan.diagnostics.items():  # residual-like figures: keep the worst over replans
             self.diag[key] = max(self.diag.get(key, -math.inf), value)
         return plan
@@ -185,10 +195,16 @@ class Runner:
 
         q0 = self.start_q()
         self.backend.reset(q0)
-        self._ref = (np.tile(q0, (n + 1, 1)), np.zeros((n + 1, dof)), np.zeros((n + 1, dof)))
+        cart = self.planner.space == "cartesian"
+        start = self.robot.fk(q0)[:3, 3] if cart else q0  # Cartesian references are in the robot base frame
+        self._ref = (np.tile(start, (n + 1, 1)), np.zeros((n + 1, len(start))), np.zeros((n + 1, len(start))))
         self.reference = tuple(r[:n] for r in self._ref)  # views: replans show up here
-        trace.q_ref, trace.qd_ref = self.reference[0], self.reference[1]
-        self.goal_q = q0.copy()
+        if cart:
+            trace.x, trace.x_ref = np.zeros((n, 3)), self.reference[0]
+            trace.q_ref[:] = q0  # filled from the controller's own joint reference, when it has one
+        else:
+            trace.q_ref, trace.qd_ref = self.reference[0], self.reference[1]
+        self.goal = start.copy()
         self._install(0, self._plan(0.0, q0, np.zeros(dof), sc.task.order()))
         self._timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(sc.task.events)
                              if e.at is not None)
@@ -205,6 +221,7 @@ class Runner:
         next_log = 0 if log else -1
         bar = tqdm(total=n, unit="step", delay=1.0, disable=not self.progress, leave=False)
         safety, stop_after = self.safety, sc.safety.stop_after_s
+        tx, tqr, controller, ee = trace.x, trace.q_ref, self.controller, self._ee_world
         contact_steps, due, k = 0, 0, 0
         t_loop = time.perf_counter()
         for k in range(n):
@@ -222,6 +239,10 @@ class Runner:
                 compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
                 concat((q, qd, np.zeros(dof)), out=row)
             tau = check(t, row)
+            if cart:
+                tx[k] = ee(q)  # world frame here; moved into the base frame once, at the end
+                if controller.joint_reference is not None:
+                    tqr[k] = controller.joint_reference
             command(tau)
             step(sub)
             if contacts():
@@ -240,6 +261,9 @@ class Runner:
             k = n
         wall = time.perf_counter() - t_loop
         bar.close()
+        if cart:
+            base = self.robot.model.base_pose
+            trace.x[:k] = (trace.x[:k] - base[:3, 3]) @ base[:3, :3]
         if log:
             self._flush_log(k)
         return self._finish(trace.trimmed(k), wall, t_loop - t_setup, contact_steps)
@@ -288,18 +312,27 @@ class Runner:
         """Write a plan's reference into the step arrays from step ``k0`` on."""
         if plan is None:
             return
-        self.plans.append({"t": round(k0 * self.schedule.control_dt, 6), "duration_s": plan.trajectory.duration,
-                           "waypoints_deg": None if plan.waypoints is None
-                           else np.round(np.degrees(plan.waypoints), 6).tolist()})
-        ref_q, ref_qd, ref_qdd = self._ref
+        cart = self.planner.space == "cartesian"
+        way = plan.waypoints
+        entry = {"t": round(k0 * self.schedule.control_dt, 6), "duration_s": plan.trajectory.duration}
+        if way is not None:
+            entry["waypoints_m" if cart else "waypoints_deg"] = np.round(way if cart else np.degrees(way), 6).tolist()
+        self.plans.append({**entry, **{k: v for k, v in plan.diagnostics.items() if isinstance(v, (int, float))}})
+        ref, ref_d, ref_dd = self._ref
         dt = self.schedule.control_dt
-        q, qd, qdd = plan.trajectory.sample(np.arange(len(ref_q) - k0) * dt)
-        ref_q[k0:], ref_qd[k0:], ref_qdd[k0:] = q, qd, qdd
-        self.goal_q = q[-1].copy()
+        x, xd, xdd = plan.trajectory.sample(np.arange(len(ref) - k0) * dt)
+        ref[k0:], ref_d[k0:], ref_dd[k0:] = x, xd, xdd
+        self.goal = x[-1].copy()
         if self.log:
             model = self.robot.model
-            way = model.ee_positions_world(plan.waypoints) if plan.waypoints is not None else np.zeros((0, 3))
-            self.log.plan(k0 * dt, model.ee_positions_world(q[:: self.schedule.log_every]), way)
+            if cart:
+                base = model.base_pose
+                to_world = lambda p: np.asarray(p).reshape(-1, 3) @ base[:3, :3].T + base[:3, 3]  # noqa: E731
+                path, way_w = to_world(x[:: self.schedule.log_every]), to_world(way if way is not None else [])
+            else:
+                path = model.ee_positions_world(x[:: self.schedule.log_every])
+                way_w = model.ee_positions_world(way) if way is not None else np.zeros((0, 3))
+            self.log.plan(k0 * dt, path, way_w)
 
     @property
     def _pin_data(self):
@@ -339,10 +372,14 @@ class Runner:
         return log
 
     def _finish(self, trace: Trace, wall: float, setup: float, contact_steps: int) -> RunResult:
-        sc, log, goal_q = self.sc, self.log, self.goal_q
+        sc, log = self.sc, self.log
         sim_time = len(trace.t) * self.schedule.control_dt
-        metrics, per_joint = tracking_metrics(trace, self.robot.model, goal_q)
+        cart = self.planner.space == "cartesian"
+        metrics, per_joint = tracking_metrics(trace, self.robot.model, None if cart else self.goal)
+        if cart:
+            metrics.update(cartesian_metrics(trace))
         metrics.update(self.diag)
+        metrics.update(self.planner.run_metrics(trace))
         metrics.update({
             "sim_time_s": sim_time, "wall_time_s": wall, "setup_time_s": setup,
             "real_time_factor": sim_time / wall if wall > 0 else float("inf"),
