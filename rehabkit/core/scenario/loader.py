@@ -335,7 +335,8 @@ def validate_source(src: Source, registry: PluginRegistry, file: Path) -> Scenar
                 msg = f"unknown field '{loc[-1]}'{suggest(str(loc[-1]), allowed)}"
             elif err["type"] == "missing":
                 msg = f"missing required field '{loc[-1]}'"
-            shown = _dotted(loc if err["type"] in ("missing", "extra_forbidden") else path) or _dotted(loc)
+            # the path as the YAML spells it: pydantic's union tags (plugin names) left out
+            shown = _dotted(path + (loc[-1],) if is_key and path[-1:] != (loc[-1],) else path) or _dotted(loc)
             problems.append(Diagnostic(mark, shown, msg))
         if not problems:
             problems.append(Diagnostic(Mark(str(file), 0, 0), "", str(exc)))
