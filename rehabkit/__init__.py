@@ -1,6 +1,13 @@
 """rehabkit: rehabilitation and assistive robotics scenarios, from YAML to MuJoCo and Rerun."""
 
-from rehabkit.core.hookspecs import hookimpl
+import os
+import sys
+
+# Offscreen rendering without a display: EGL works on CPU-only machines; MuJoCo reads this once, on first use.
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+from rehabkit.core.hookspecs import hookimpl  # noqa: E402
 
 __version__ = "0.1.0"
 

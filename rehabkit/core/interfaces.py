@@ -144,6 +144,10 @@ class Planner(ABC):
         """Figures about the executed run only this planner can judge (default none)."""
         return {}
 
+    def visuals(self) -> dict[str, np.ndarray]:
+        """Point sets worth drawing once (robot base frame), e.g. a workspace; default none."""
+        return {}
+
 
 class Controller(ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
@@ -176,7 +180,15 @@ class Sensor(ABC):
 
     @abstractmethod
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, Any]:
-        """One reading: name → value (arrays, scalars, or an image as ``HxWx3`` uint8)."""
+        """One reading: name → value (arrays, scalars, or an image as ``HxWx3`` uint8).
+
+        A sensor that locates a task target reports it as ``target_position``
+        (robot base frame, [m]); ``None`` when it sees nothing.
+        """
+
+    def run_metrics(self) -> dict[str, float]:
+        """Figures about the whole run (e.g. estimation error); default none."""
+        return {}
 
 
 @dataclass
@@ -258,6 +270,24 @@ class Backend(ABC):
     def visual_geoms(self) -> list[GeomVisual]:
         """Shapes to draw, fixed to bodies; default none."""
         return []
+
+    # -- scene access for simulated sensors and scripted worlds (simulators implement these) --
+
+    def move_object(self, name: str, position: np.ndarray) -> None:
+        """Put a kinematic (mocap) object at a world position."""
+        raise NotImplementedError(f"{type(self).__name__} cannot move scene objects")
+
+    def object_position(self, name: str) -> np.ndarray:
+        """Ground-truth world position of a scene object."""
+        raise NotImplementedError(f"{type(self).__name__} has no ground truth of scene objects")
+
+    def render(self, camera: str, width: int, height: int) -> np.ndarray:
+        """An RGB image (height, width, 3) uint8 from a scene camera."""
+        raise NotImplementedError(f"{type(self).__name__} has no cameras to render")
+
+    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
+        """World position, world rotation (OpenCV axes: x right, y down, z forward) and vertical FOV [rad]."""
+        raise NotImplementedError(f"{type(self).__name__} has no cameras")
 
     def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

@@ -99,6 +99,13 @@ class RerunLog:
         self.rec.log("world/plan/path", rr.LineStrips3D([ee_path_world], colors=[[60, 160, 255]], radii=0.003))
         self.rec.log("world/plan/waypoints", rr.Points3D(waypoints_world, colors=[[60, 160, 255]], radii=0.012))
 
+    def points(self, path: str, positions_world: np.ndarray, color: tuple[int, int, int], radius: float,
+               t: float | None = None) -> None:
+        """A point set: static when ``t`` is None, else at time ``t``."""
+        if t is not None:
+            self.rec.set_time(TIMELINE, duration=t)
+        self.rec.log(path, rr.Points3D(positions_world, colors=[color], radii=radius), static=t is None)
+
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)
         self.rec.log("events", rr.TextLog(text, level=level))
@@ -129,10 +136,12 @@ class RerunLog:
         """A sensor reading: images are logged at once, numbers buffered."""
         numbers = {}
         for key, value in reading.items():
+            if value is None:
+                continue
             arr = np.asarray(value)
             if arr.ndim == 3 and arr.dtype == np.uint8:
                 self.rec.set_time(TIMELINE, duration=t)
-                self.rec.log(f"sensors/{sensor}/{key}", rr.Image(arr))
+                self.rec.log(f"sensors/{sensor}/{key}", rr.Image(arr).compress(jpeg_quality=85))
             else:
                 numbers[key] = arr.astype(float).ravel()
         if numbers:
@@ -153,11 +162,11 @@ class RerunLog:
             self.rec.send_columns("world/end_effector", indexes=[times],
                                   columns=rr.Points3D.columns(positions=ee[:, None, :].reshape(-1, 3)))
         for sensor, srows in self._sensor_rows.items():
-            times = rr.TimeColumn(TIMELINE, duration=np.array([r[0] for r in srows]))
-            for key in srows[0][1]:
-                values = np.array([r[1][key] for r in srows])
+            for key in {k for _, numbers in srows for k in numbers}:  # readings may lack a key (no detection)
+                rows = [(t, numbers[key]) for t, numbers in srows if key in numbers]
+                times = rr.TimeColumn(TIMELINE, duration=np.array([t for t, _ in rows]))
                 self.rec.send_columns(f"sensors/{sensor}/{key}", indexes=[times],
-                                      columns=rr.Scalars.columns(scalars=values))
+                                      columns=rr.Scalars.columns(scalars=np.array([v for _, v in rows])))
         self._sensor_rows = {}
 
     def discard(self) -> None:

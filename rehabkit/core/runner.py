@@ -19,11 +19,11 @@ import numpy as np
 from tqdm import tqdm
 
 import rehabkit
-from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest
+from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest, Target
 from rehabkit.core.io import atomic_write_json
 from rehabkit.core.log import RerunLog
 from rehabkit.core.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
-from rehabkit.core.plugins import PluginRegistry, default_registry
+from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
 from rehabkit.core.safety import SafetyLayer
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.targets import resolve_targets
@@ -111,6 +111,11 @@ class Runner:
                              f"'{sc.controller.type}' takes {self.controller.reference} references; "
                              "pick a matching pair")
         self.safety = SafetyLayer(self.robot.model, sc.safety)
+        self._specs = {t.name: t for t in sc.task.targets}
+        for t in sc.task.targets:
+            if t.sensor and t.sensor not in self.sensors:
+                raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
+                                 f"{suggest(t.sensor, self.sensors)}")
         try:
             self.targets = resolve_targets(sc.task, self.robot)
         except PlanningError as exc:
@@ -139,7 +144,24 @@ class Runner:
 
     # -- planning -----------------------------------------------------------
 
+    def _sensed(self, name: str) -> np.ndarray | None:
+        """Where the sensor of a sensor-driven target last saw it (base frame), if it did."""
+        spec = self._specs[name]
+        reading = self.observations.get(spec.sensor, {})
+        pos = reading.get("target_position")
+        return None if pos is None else np.asarray(pos, float)
+
     def _plan(self, t: float, q: np.ndarray, qd: np.ndarray, names: list[str]) -> Plan | None:
+        for name in names:  # sensor-driven targets take their latest sensed position
+            if self._specs[name].sensor:
+                pos = self._sensed(name)
+                if pos is None:
+                    self.safety.trip(t, q, "plan", f"target '{name}': sensor '{self._specs[name].sensor}' "
+                                     "has not seen it")
+                    return None
+                pose = np.eye(4)
+                pose[:3, 3] = pos
+                self.targets[name] = Target(name, pose=pose, position_only=True)
         request = PlanRequest(t, q.copy(), qd.copy(), [self.targets[n] for n in names], self.robot)
         try:
             plan = self.planner.plan(request)
@@ -209,6 +231,8 @@ class Runner:
         self._timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(sc.task.events)
                              if e.at is not None)
         self._waiting = [i for i, e in enumerate(sc.task.events) if e.reached is not None]
+        # 'moved' events: [position last planned for, candidate new position, readings it has held]
+        self._watch = {i: [None, None, 0] for i, e in enumerate(sc.task.events) if e.moved is not None}
         self._next_reach, self._stop_at = 0, n
         self._sensor_due = [0] * len(self.sensors)
 
@@ -299,6 +323,10 @@ class Runner:
                     self.observations[name] = reading
                     if self.log:
                         self.log.sensor(t, name, reading)
+                        if reading.get("target_position") is not None:
+                            self.log.points(f"world/sensed/{name}", self._to_world(reading["target_position"]),
+                                            (40, 220, 40), 0.02, t)
+                    self._check_moved(name, k, t, q, qd)
         except Exception as exc:
             self.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
         upcoming = [self._stop_at, *self._sensor_due]
@@ -307,6 +335,25 @@ class Runner:
         if self._waiting:
             upcoming.append(self._next_reach)
         return max(k + 1, min(upcoming))
+
+    def _check_moved(self, sensor: str, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
+        """Fire 'moved' events whose target this sensor sees somewhere new, once it has settled there."""
+        for i, state in self._watch.items():
+            ev = self.sc.task.events[i]
+            if self._specs[ev.moved].sensor != sensor:
+                continue
+            pos = self._sensed(ev.moved)
+            planned, candidate, held = state
+            if pos is None or (planned is not None and np.linalg.norm(pos - planned) <= ev.tolerance_m):
+                state[1], state[2] = None, 0
+                continue
+            if candidate is not None and np.linalg.norm(pos - candidate) <= ev.tolerance_m:
+                state[2] = held + 1
+            else:
+                state[1], state[2] = pos, 1
+            if state[2] >= ev.settle:
+                state[0], state[1], state[2] = pos, None, 0
+                self._fire(i, k, t, q, qd)
 
     def _install(self, k0: int, plan: Plan | None) -> None:
         """Write a plan's reference into the step arrays from step ``k0`` on."""
@@ -349,12 +396,15 @@ class Runner:
 
     def _fire(self, i: int, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         ev = self.sc.task.events[i]
-        trigger = f"at {ev.at}" if ev.at is not None else f"reached {ev.reached}"
+        trigger = f"at {ev.at}" if ev.at is not None else (
+            f"reached {ev.reached}" if ev.reached is not None else f"{ev.moved} moved")
         self.fired.append({"event": i, "t": round(t, 6), "action": ev.action, "trigger": trigger})
         if self.log:
             self.log.event(t, f"event {i}: {trigger} -> {ev.action}", level="INFO")
         if ev.action == "stop":
             self._stop_at = k
+        elif ev.action == "move":
+            self.backend.move_object(ev.object, np.asarray(ev.position, float))
         else:
             self._install(k, self._plan(t, q, qd, ev.sequence or self.sc.task.order()))
 
@@ -369,7 +419,13 @@ class Runner:
         pts = np.array([self.robot.model.base_pose[:3, :3] @ t.pose[:3, 3] + self.robot.model.base_pose[:3, 3]
                         for _, t in named]).reshape(-1, 3)
         log.targets(0.0, [n for n, _ in named], pts)
+        for name, points in self.planner.visuals().items():
+            log.points(f"world/planner/{name}", self._to_world(points), (120, 120, 200), 0.003)
         return log
+
+    def _to_world(self, points: np.ndarray) -> np.ndarray:
+        base = self.robot.model.base_pose
+        return np.asarray(points, float).reshape(-1, 3) @ base[:3, :3].T + base[:3, 3]
 
     def _finish(self, trace: Trace, wall: float, setup: float, contact_steps: int) -> RunResult:
         sc, log = self.sc, self.log
@@ -380,6 +436,8 @@ class Runner:
             metrics.update(cartesian_metrics(trace))
         metrics.update(self.diag)
         metrics.update(self.planner.run_metrics(trace))
+        for sensor in self.sensors.values():
+            metrics.update(sensor.run_metrics())
         metrics.update({
             "sim_time_s": sim_time, "wall_time_s": wall, "setup_time_s": setup,
             "real_time_factor": sim_time / wall if wall > 0 else float("inf"),

@@ -22,7 +22,9 @@ def resolve_targets(task: TaskSpec, robot: Robot) -> dict[str, Target]:
         if name in stack:
             raise PlanningError(f"target '{name}' refers to itself through {' -> '.join((*stack, name))}")
         spec = specs[name]
-        if spec.same_as:
+        if spec.sensor:
+            tgt = Target(name, position_only=True)  # its position arrives with the sensor's readings
+        elif spec.same_as:
             ref = get(spec.same_as, (*stack, name))
             tgt = Target(name, q=None if ref.q is None else ref.q.copy(),
                          pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only)

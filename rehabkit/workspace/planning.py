@@ -185,6 +185,9 @@ class VoxelPlanner(Planner):
         diag["junction_s"] = 0.0
         return new
 
+    def visuals(self) -> dict[str, np.ndarray]:
+        return {"workspace_boundary": self.ws.boundary_points()}
+
     def run_metrics(self, trace) -> dict[str, float]:
         """Where the executed and the reference hand paths went relative to the workspace."""
         if trace.x is None or not len(trace.x):

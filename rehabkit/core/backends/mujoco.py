@@ -61,6 +61,7 @@ class MujocoBackend(Backend):
         else:
             self._views = None
         self._ee_site = self.model.site(robot.ee_site).id
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._drawn = np.arange(1, self.model.nbody)
         self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
 
@@ -97,6 +98,40 @@ class MujocoBackend(Backend):
         hits = np.flatnonzero(robot[:, 0] != robot[:, 1])
         return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
+
+    def move_object(self, name: str, position: np.ndarray) -> None:
+        body = self.model.body(name)
+        if body.mocapid[0] < 0:
+            raise ValueError(f"object '{name}' is not kinematic; set mocap: true on it to move it by events")
+        self.data.mocap_pos[body.mocapid[0]] = position
+
+    def object_position(self, name: str) -> np.ndarray:
+        return self.data.xpos[self.model.body(name).id].copy()
+
+    def render(self, camera: str, width: int, height: int) -> np.ndarray:
+        key = (width, height)
+        if self._renderers.get(key) is None:
+            try:
+                self._renderers[key] = mujoco.Renderer(self.model, height, width)
+            except mujoco.FatalError as exc:  # typically: MuJoCo chose GLFW and there is no display
+                raise RuntimeError(
+                    f"cannot render camera '{camera}' offscreen ({exc}); without a display set MUJOCO_GL=egl "
+                    "before MuJoCo is first imported (rehabkit does this itself when it is imported first)"
+                ) from None
+        renderer = self._renderers[key]
+        renderer.update_scene(self.data, camera=camera)
+        return renderer.render()
+
+    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
+        cid = self.model.camera(camera).id
+        mj_rot = self.data.cam_xmat[cid].reshape(3, 3)
+        # MuJoCo cameras look along -z with +y up; OpenCV's look along +z with +y down
+        return self.data.cam_xpos[cid].copy(), mj_rot @ np.diag([1.0, -1.0, -1.0]), np.radians(self.model.cam_fovy[cid])
+
+    def close(self) -> None:
+        for renderer in self._renderers.values():
+            renderer.close()
+        self._renderers.clear()
 
     def body_poses(self) -> BodyPoses:
         return BodyPoses(self._drawn_names, self.data.xpos[self._drawn], self.data.xquat[self._drawn])

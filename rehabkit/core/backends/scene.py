@@ -19,6 +19,17 @@ def _size3(size: list[float]) -> list[float]:
     return [*size, *([0.0] * (3 - len(size)))]
 
 
+def camera_axes(cam) -> np.ndarray:
+    """World rotation of a MuJoCo camera (it looks along its -z, +y up in the image) aimed at ``look_at``."""
+    back = np.asarray(cam.position, float) - np.asarray(cam.look_at, float)
+    z = back / np.linalg.norm(back)
+    x = np.cross(np.asarray(cam.up, float), z)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError(f"camera '{cam.name}': 'up' is parallel to the viewing direction")
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def build_scene(robot: RobotModel, world: World, timestep: float, integrator: str = "implicitfast") -> mujoco.MjSpec:
     """An MjSpec with the robot (torque-driven: its own actuators removed) and the world objects.
 
@@ -34,19 +45,29 @@ def build_scene(robot: RobotModel, world: World, timestep: float, integrator: st
     spec.option.timestep = timestep
     spec.option.integrator = INTEGRATORS[integrator]
     spec.option.gravity = robot.gravity
+    spec.visual.global_.offwidth, spec.visual.global_.offheight = 1920, 1440  # room for camera sensors
     spec.worldbody.add_light(name="key_light", pos=[0, -1.0, 3.0], dir=[0, 0.3, -1], diffuse=[0.8, 0.8, 0.8])
     if world.floor:
         spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.05],
                                 contype=0, conaffinity=1, rgba=[0.85, 0.85, 0.82, 1])
+    for cam in world.cameras:
+        spec.worldbody.add_camera(name=cam.name, pos=cam.position, quat=matrix_to_quat_wxyz(camera_axes(cam)),
+                                  fovy=cam.fovy_deg)
     for obj in world.objects:
+        # matte (no highlight washing out the colour), optionally self-lit like a fluorescent target
+        spec.add_material(name=f"{obj.name}_material", specular=0.0, shininess=0.0, reflectance=0.0,
+                          emission=obj.emission)
         quat = matrix_to_quat_wxyz(rpy_to_matrix(np.radians(obj.pose.rpy_deg)))
-        if obj.dynamic:
+        geom = dict(name=obj.name, type=_SHAPES[obj.shape], size=_size3(obj.size), rgba=list(obj.rgba),
+                    material=f"{obj.name}_material")
+        if obj.mocap:  # kinematic: moved by events, touches nothing
+            body = spec.worldbody.add_body(name=obj.name, pos=obj.pose.position, quat=quat, mocap=True)
+            body.add_geom(**geom, contype=0, conaffinity=0)
+        elif obj.dynamic:  # free: collides with the robot and the world
             body = spec.worldbody.add_body(name=obj.name, pos=obj.pose.position, quat=quat)
             body.add_freejoint(name=f"{obj.name}_free")
-            body.add_geom(name=obj.name, type=_SHAPES[obj.shape], size=_size3(obj.size), mass=obj.mass,
-                          contype=1, conaffinity=1, rgba=list(obj.rgba))
-        else:
-            spec.worldbody.add_geom(name=obj.name, type=_SHAPES[obj.shape], size=_size3(obj.size),
-                                    pos=obj.pose.position, quat=quat, contype=0, conaffinity=1, rgba=list(obj.rgba))
+            body.add_geom(**geom, mass=obj.mass, contype=1, conaffinity=1)
+        else:  # static obstacle
+            spec.worldbody.add_geom(**geom, pos=obj.pose.position, quat=quat, contype=0, conaffinity=1)
     return spec
 

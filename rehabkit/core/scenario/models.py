@@ -38,15 +38,29 @@ class WorldObject(StrictModel):
     size: list[Annotated[float, Field(gt=0)]] = Field(description="box: half-extents; cylinder: radius, half-length")
     pose: Pose = Pose()
     dynamic: bool = False
+    mocap: bool = Field(False, description="kinematic: moved by 'move' events, pushed by nothing")
     mass: float = Field(0.1, gt=0, description="[kg], dynamic objects only")
     rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.3, 0.6)
+    emission: float = Field(0.0, ge=0, le=1, description="self-lit fraction of its colour (a fluorescent target)")
 
     @model_validator(mode="after")
     def _size_matches_shape(self) -> WorldObject:
         what, n = _SIZES[self.shape]
         if len(self.size) != n:
             raise ValueError(f"a {self.shape} takes {n} size value(s) ({what}), got {len(self.size)}")
+        if self.dynamic and self.mocap:
+            raise ValueError(f"object '{self.name}': dynamic (free) and mocap (kinematic) exclude each other")
         return self
+
+
+class CameraSpec(StrictModel):
+    """A camera in the scene (world frame), pointed at a point."""
+
+    name: str
+    position: Vec3
+    look_at: Vec3
+    up: Vec3 = Field((0.0, 1.0, 0.0), description="world direction that appears upward in the image")
+    fovy_deg: float = Field(60.0, gt=1, lt=179, description="vertical field of view")
 
 
 class World(StrictModel):
@@ -54,10 +68,11 @@ class World(StrictModel):
 
     floor: bool = True
     objects: list[WorldObject] = []
+    cameras: list[CameraSpec] = []
 
     @model_validator(mode="after")
     def _unique_names(self) -> World:
-        names = [o.name for o in self.objects]
+        names = [o.name for o in self.objects] + [c.name for c in self.cameras]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ValueError(f"world object names must be unique; repeated: {dup}")
@@ -74,14 +89,15 @@ class TargetSpec(StrictModel):
     rpy_deg: Vec3 | None = Field(None, description="end-effector orientation; omit with orientation_of")
     orientation_of: str | None = Field(None, description="use the orientation of this (joint-space) target")
     same_as: str | None = None
+    sensor: str | None = Field(None, description="position seen by this sensor (its 'target_position' reading)")
 
     @model_validator(mode="after")
     def _one_kind(self) -> TargetSpec:
-        given = [k for k in ("joints_deg", "joints_rad", "position", "same_as") if getattr(self, k) is not None]
+        kinds = ("joints_deg", "joints_rad", "position", "same_as", "sensor")
+        given = [k for k in kinds if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(
-                f"target '{self.name}' needs exactly one of joints_deg, joints_rad, position, same_as; "
-                f"got {given or 'none'}"
+                f"target '{self.name}' needs exactly one of {', '.join(kinds)}; got {given or 'none'}"
             )
         if self.position is None and (self.rpy_deg is not None or self.orientation_of is not None):
             raise ValueError(f"target '{self.name}': rpy_deg/orientation_of only go with position")
@@ -91,18 +107,29 @@ class TargetSpec(StrictModel):
 
 
 class EventSpec(StrictModel):
-    """Something that happens during the run: at a time, or when a target is reached."""
+    """Something that happens during the run.
+
+    Triggers: ``at`` a time; when a target is ``reached``; or each time a sensed
+    target has ``moved`` (stable for ``settle`` readings, then fires again on the
+    next move). Actions: ``replan``, ``stop``, or ``move`` a mocap object.
+    """
 
     at: float | None = Field(None, ge=0, description="[s] from the start")
     reached: str | None = Field(None, description="fires when the end effector is within tolerance of this target")
-    tolerance_m: float = Field(0.005, gt=0, description="end-effector distance that counts as 'reached' [m]")
-    action: Literal["replan", "stop"] = "replan"
+    moved: str | None = Field(None, description="fires whenever this sensor-driven target moves (repeating)")
+    tolerance_m: float = Field(0.005, gt=0, description="distance for 'reached' / movement for 'moved' [m]")
+    settle: int = Field(3, ge=1, description="'moved': readings the new position must hold before firing")
+    action: Literal["replan", "stop", "move"] = "replan"
     sequence: list[str] | None = Field(None, description="replan through these targets (default: the task's)")
+    object: str | None = Field(None, description="'move': the mocap object")
+    position: Vec3 | None = Field(None, description="'move': its new world position [m]")
 
     @model_validator(mode="after")
     def _one_trigger(self) -> EventSpec:
-        if (self.at is None) == (self.reached is None):
-            raise ValueError("an event needs exactly one trigger: 'at' or 'reached'")
+        if sum(x is not None for x in (self.at, self.reached, self.moved)) != 1:
+            raise ValueError("an event needs exactly one trigger: 'at', 'reached' or 'moved'")
+        if (self.action == "move") != (self.object is not None and self.position is not None):
+            raise ValueError("a 'move' event needs 'object' and 'position' (and only a move takes them)")
         return self
 
 
@@ -124,7 +151,7 @@ class TaskSpec(StrictModel):
         for t in self.targets:
             refs += [r for r in (t.same_as, t.orientation_of) if r]
         for e in self.events:
-            refs += list(e.sequence or []) + ([e.reached] if e.reached else [])
+            refs += list(e.sequence or []) + [r for r in (e.reached, e.moved) if r]
         unknown = sorted(set(refs) - set(names))
         if unknown:
             raise ValueError(f"unknown target name(s) {unknown}; targets are {names}")
