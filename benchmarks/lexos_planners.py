@@ -7,6 +7,7 @@
 * Straight-segment test through the table vs sampling the segment at 100 points
   with inverse kinematics (ratio, same run); proxy-point look-up counts.
 * Table build time (cache bypassed) and size.
+* clik-pd controller: cost of one 1 kHz cycle (closed-loop IK + joint PD + gravity).
 
     python benchmarks/lexos_planners.py [--pairs 600] [--png out/lexos_planners.png]
 """
@@ -112,6 +113,22 @@ def main() -> None:
             used.append(ws.proxy_point(start, target, level=BOUNDARY)[1])
     print(f"proxy point: {len(used)} targets outside the workspace, bisection look-ups max {max(used)}, "
           f"mean {np.mean(used):.2f} (plus one to find the target unreachable)")
+
+    from rehabkit_plugins.controllers.clik_pd import ClikPD, ClikPDConfig
+
+    from rehabkit.core.interfaces import Context
+
+    ctrl = ClikPD(ClikPDConfig(), Context(Path("."), np.random.default_rng(0), 0.001, robot=robot))
+    q = np.radians([20.0, -45.0, 0.0, -70.0])
+    x = robot.fk(q)[:3, 3]
+    line = x + np.linspace(0, 0.1, 5000)[:, None] * np.array([1.0, 0.5, 0.2])
+    costs = []
+    for _ in range(5):
+        t = time.perf_counter()
+        for xr in line:
+            ctrl.compute(0.0, q, np.zeros(4), xr, np.zeros(3), np.zeros(3))
+        costs.append((time.perf_counter() - t) / len(line))
+    print(f"clik-pd controller: {min(costs) * 1e6:.1f} us per cycle (best of 5 x {len(line)} cycles)")
 
     import matplotlib
 

@@ -129,3 +129,22 @@ def test_decimation_keeps_ends():
     path = np.arange(10.0)[:, None] * np.ones(3)
     np.testing.assert_array_equal(decimate(path, 3)[[0, -1]], path[[0, -1]])
     np.testing.assert_array_equal(decimate(path, 3)[:, 0], [0, 3, 6, 9])
+
+
+def test_q5_is_simulated_and_measured_but_not_driven(lexos):
+    import mujoco
+
+    assert lexos.model.passive_joints == ["q5_pronation"]
+    assert lexos.model.pin_model.nq == 4  # locked in the control model
+    mj = mujoco.MjModel.from_xml_string(lexos.model.mjcf)
+    assert mj.njnt == 5 and mj.joint("q5_pronation").stiffness[0] > 0
+    # turning q5 does not move the handle centre
+    d = mujoco.MjData(mj)
+    site = mj.site("handle").id
+    positions = []
+    for q5 in (-1.0, 0.0, 1.0):
+        d.qpos[:] = [0.3, -0.8, 0.2, -1.0, q5]
+        mujoco.mj_forward(mj, d)
+        positions.append(d.site_xpos[site].copy())
+    np.testing.assert_allclose(positions[0], positions[2], atol=1e-12)
+    np.testing.assert_allclose(positions[1], lexos.fk([0.3, -0.8, 0.2, -1.0])[:3, 3], atol=1e-12)

@@ -5,8 +5,10 @@ backward axis), q2 flexion (about the left axis), q3 internal/external rotation
 (about the upper arm) — then q4 elbow flexion. Base frame at the shoulder
 centre: x forward, y left, z up; at q = 0 the arm hangs straight down.
 q2 = -90° is the arm held forward, q4 = -90° a right-angle elbow, q3 > 0 turns
-the forearm outward. The measured-only pronation/supination q5 does not move
-the hand centre and is not simulated.
+the forearm outward. The measured-only pronation/supination q5 is a passive
+joint about the forearm axis just before the handle (simulated, readable by a
+joint encoder, locked in the control model); the handle centre lies on its axis,
+so it does not move the hand position.
 
 The arm is redundant for hand *position*: the elbow can swing on a circle
 around the shoulder-hand line. :func:`position_ik` parametrises that swivel
@@ -40,12 +42,21 @@ def _rot_y(a: float) -> np.ndarray:
     return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
 
 
-def lexos_chain(l1: float = UPPER_ARM, l2: float = FOREARM) -> KinematicChain:
-    """Shoulder (3 axes through one point), upper arm ``l1``, elbow, forearm ``l2`` to the handle."""
+HANDLE = 0.05  # q5 axis to the handle centre, along the forearm [m]
+
+
+def lexos_chain(l1: float = UPPER_ARM, l2: float = FOREARM, with_q5: bool = False) -> KinematicChain:
+    """Shoulder (3 axes through one point), upper arm ``l1``, elbow, forearm ``l2`` to the handle.
+
+    The handle frame has z along the forearm. ``with_q5`` adds the passive
+    pronation/supination joint about that axis, ``HANDLE`` before the handle.
+    """
     base = np.eye(4)
     base[:3, :3] = np.column_stack([[0, 0, -1], [0, -1, 0], [-1, 0, 0]])  # joint 1 axis: backward
-    fixed = (base, rot_x(np.pi / 2), _rot_y(np.pi / 2), trans(z=l1) @ _rot_y(-np.pi / 2), trans(x=l2))
-    return KinematicChain(fixed, ("revolute",) * 4)
+    head = (base, rot_x(np.pi / 2), _rot_y(np.pi / 2), trans(z=l1) @ _rot_y(-np.pi / 2))
+    if with_q5:
+        return KinematicChain((*head, trans(x=l2 - HANDLE) @ _rot_y(np.pi / 2), trans(z=HANDLE)), ("revolute",) * 5)
+    return KinematicChain((*head, trans(x=l2) @ _rot_y(np.pi / 2)), ("revolute",) * 4)
 
 
 def position_ik(p: np.ndarray, swivel: np.ndarray, l1: float = UPPER_ARM, l2: float = FOREARM) -> np.ndarray:
@@ -112,9 +123,10 @@ class LexosConfig(StrictModel):
     safe_stop: SafeStop = "hold"
 
 
-def _joint_specs() -> list[JointSpec]:
-    text = resources.files(__package__).joinpath("lexos_joints.yaml").read_text()
-    return [JointSpec.model_validate(j) for j in yaml.safe_load(text)["joints"]]
+def _joint_specs() -> tuple[list[JointSpec], list[JointSpec]]:
+    data = yaml.safe_load(resources.files(__package__).joinpath("lexos_joints.yaml").read_text())
+    return ([JointSpec.model_validate(j) for j in data["joints"]],
+            [JointSpec.model_validate(j) for j in data.get("passive", [])])
 
 
 class LexosRobot(Robot):
@@ -123,12 +135,15 @@ class LexosRobot(Robot):
     def __init__(self, config: LexosConfig, context: Context | None = None):
         self.config = config
         self.lengths = (config.upper_arm, config.forearm)
-        joints = _joint_specs()
+        joints, passive = _joint_specs()
         links, limits = links_and_limits(joints)
-        self.chain = lexos_chain(*self.lengths)
-        xml = build_chain_mjcf("lexos", self.chain, links, base_radius=0.06, ee_site="handle")
+        passive_links, _ = links_and_limits(passive)
+        self.chain = lexos_chain(*self.lengths)  # the four driven joints: all the hand position depends on
+        xml = build_chain_mjcf("lexos", lexos_chain(*self.lengths, with_q5=True), links + passive_links,
+                               base_radius=0.06, ee_site="handle")
         self.model = RobotModel("lexos", xml, [j.name for j in joints], limits, "handle",
-                                base_pose=config.base.matrix(), safe_stop=config.safe_stop)
+                                base_pose=config.base.matrix(), safe_stop=config.safe_stop,
+                                passive_joints=[j.name for j in passive])
         self.swivel = np.linspace(-np.pi, np.pi, config.swivel_samples, endpoint=False)
 
     def fk(self, q: np.ndarray) -> np.ndarray:

@@ -14,6 +14,7 @@ class JointEncoderConfig(SensorConfig):
 
     counts_per_rev: int = Field(4096, gt=0, description="counts per joint revolution (after gearing)")
     noise_counts: float = Field(0.0, ge=0, description="standard deviation of additive noise [counts]")
+    joints: list[str] | None = Field(None, description="joints to read, passive ones included (default: the driven)")
 
 
 class JointEncoder(Sensor):
@@ -24,8 +25,17 @@ class JointEncoder(Sensor):
         self.step = 2 * np.pi / config.counts_per_rev
         self.noise = config.noise_counts
         self.rng = context.rng
+        self.joints = config.joints
+        if self.joints:
+            model = context.robot.model
+            known = model.joint_names + model.passive_joints
+            unknown = [j for j in self.joints if j not in known]
+            if unknown:
+                raise ValueError(f"joint-encoder: unknown joint(s) {unknown}; the robot has {known}")
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
+        if self.joints:
+            q = backend.joint_positions(self.joints)
         counts = np.round(q / self.step)
         if self.noise:
             counts = counts + np.round(self.rng.normal(0.0, self.noise, size=q.shape))

@@ -273,6 +273,10 @@ class Backend(ABC):
 
     # -- scene access for simulated sensors and scripted worlds (simulators implement these) --
 
+    def joint_positions(self, names: list[str]) -> np.ndarray:
+        """Positions of named joints, passive ones included."""
+        raise NotImplementedError(f"{type(self).__name__} cannot read joints by name")
+
     def move_object(self, name: str, position: np.ndarray) -> None:
         """Put a kinematic (mocap) object at a world position."""
         raise NotImplementedError(f"{type(self).__name__} cannot move scene objects")

@@ -59,6 +59,7 @@ class JointSpec(StrictModel):
     radius: float = Field(0.03, gt=0, description="capsule radius [m]")
     damping: float = Field(0.0, ge=0, description="viscous damping [N·m·s/rad]")
     armature: float = Field(0.0, ge=0, description="reflected rotor inertia of the drive [kg·m²]")
+    stiffness: float = Field(0.0, ge=0, description="spring toward zero [N·m/rad] (passive joints)")
 
     @model_validator(mode="after")
     def _one_unit(self) -> JointSpec:
@@ -121,7 +122,7 @@ def links_and_limits(joints: list[JointSpec]) -> tuple[list[LinkSpec], JointLimi
     links, rows = [], []
     for j in joints:
         lo, hi, v = j.limits()
-        links.append(LinkSpec(j.name, lo, hi, j.mass, j.radius, j.damping, j.armature))
+        links.append(LinkSpec(j.name, lo, hi, j.mass, j.radius, j.damping, j.armature, j.stiffness))
         rows.append((lo, hi, v, j.effort))
     return links, JointLimits(*(np.array(col) for col in zip(*rows)))
 

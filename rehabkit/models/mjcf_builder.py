@@ -34,6 +34,7 @@ class LinkSpec:
         radius: Capsule radius [m].
         damping: Viscous joint damping [N·m·s/rad].
         armature: Reflected rotor inertia of the drive [kg·m²] (both MuJoCo and Pinocchio use it).
+        stiffness: Spring to zero [N·m/rad], for passive joints.
     """
 
     name: str
@@ -43,6 +44,7 @@ class LinkSpec:
     radius: float
     damping: float = 0.0
     armature: float = 0.0
+    stiffness: float = 0.0
 
 
 def _segment_inertia(p0: np.ndarray, p1: np.ndarray, mass: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -123,7 +125,7 @@ def build_chain_mjcf(
         body.add_joint(
             name=link.name, type=kind, axis=[0, 0, 1], range=[link.lower, link.upper],
             limited=mujoco.mjtLimited.mjLIMITED_TRUE, damping=link.damping,
-            armature=link.armature,
+            armature=link.armature, stiffness=link.stiffness,
         )
         tip = chain.fixed[i + 1][:3, 3]
         points = _polyline(tip)

@@ -67,6 +67,8 @@ class RobotModel:
         base_pose: 4x4 pose of the base frame in the world.
         safe_stop: What the safety layer does to this robot when it trips.
         gravity: World gravity [m/s^2].
+        passive_joints: Joints in the MJCF that are simulated and can be measured but
+            not driven (e.g. a free wrist rotation); Pinocchio's model locks them at zero.
     """
 
     name: str
@@ -78,6 +80,7 @@ class RobotModel:
     safe_stop: SafeStop = "hold"
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
     asset_dir: Path | None = None
+    passive_joints: list[str] = field(default_factory=list)
 
     @property
     def dof(self) -> int:
@@ -105,6 +108,12 @@ class RobotModel:
         import pinocchio as pin
 
         model = pin.buildModelFromMJCF(str(self.mjcf_path))
+        if self.passive_joints:
+            missing = [j for j in self.passive_joints if not model.existJointName(j)]
+            if missing:
+                raise ValueError(f"{self.name}: passive joint(s) {missing} are not in the model")
+            locked = [model.getJointId(j) for j in self.passive_joints]
+            model = pin.buildReducedModel(model, locked, pin.neutral(model))
         names = [model.names[i] for i in range(1, model.njoints)]
         if names != self.joint_names:
             raise ValueError(f"{self.name}: Pinocchio joint order {names} differs from {self.joint_names}")

@@ -99,6 +99,10 @@ class MujocoBackend(Backend):
         return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
 
+    def joint_positions(self, names: list[str]) -> np.ndarray:
+        adr = [self.model.jnt_qposadr[self.model.joint(n).id] for n in names]
+        return self.data.qpos[adr].copy()
+
     def move_object(self, name: str, position: np.ndarray) -> None:
         body = self.model.body(name)
         if body.mocapid[0] < 0:
