@@ -39,6 +39,7 @@ class Context:
     control_dt: float
     robot: Robot | None = None
     world: World | None = None
+    instruments: list[Instrument] = field(default_factory=list)
 
     def resolve(self, path: str | Path) -> Path:
         """A path from the scenario, made absolute relative to the scenario file."""
@@ -167,6 +168,23 @@ class Controller(ABC):
         """Joint torques [N·m]; called in the hot loop, so keep it allocation-light."""
 
 
+@dataclass(frozen=True)
+class Instrument:
+    """A physical sensing element a sensor plugin needs in the simulated scene.
+
+    Attributes:
+        name: Unique name (the backend reads it back by this name).
+        kind: ``accelerometer`` (specific force, site frame [m/s²]) or ``gyro`` (angular velocity [rad/s]).
+        body: Body it is fixed to.
+        position: Where on that body (body frame) [m]; axes aligned with the body's.
+    """
+
+    name: str
+    kind: Literal["accelerometer", "gyro"]
+    body: str
+    position: tuple[float, float, float]
+
+
 class SensorConfig(StrictModel):
     """Base of every sensor plugin's config: each sensor runs at its own rate."""
 
@@ -189,6 +207,10 @@ class Sensor(ABC):
     def run_metrics(self) -> dict[str, float]:
         """Figures about the whole run (e.g. estimation error); default none."""
         return {}
+
+    def instruments(self) -> list[Instrument]:
+        """Sensing elements to put in the simulated scene (read with ``backend.read_instrument``)."""
+        return []
 
 
 @dataclass
@@ -272,6 +294,10 @@ class Backend(ABC):
         return []
 
     # -- scene access for simulated sensors and scripted worlds (simulators implement these) --
+
+    def read_instrument(self, name: str) -> np.ndarray:
+        """The current value of an instrument a sensor asked for."""
+        raise NotImplementedError(f"{type(self).__name__} has no simulated instruments")
 
     def joint_positions(self, names: list[str]) -> np.ndarray:
         """Positions of named joints, passive ones included."""

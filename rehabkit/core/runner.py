@@ -102,10 +102,12 @@ class Runner:
         ctx = Context(self.loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world)
         self.robot = self._make("robot", sc.robot, ctx)
         ctx.robot = self.robot
+        # sensors before the backend: their instruments go into the scene it builds
+        self.sensors = {name: self._make("sensor", cfg, ctx) for name, cfg in sc.sensors.items()}
+        ctx.instruments = [i for s in self.sensors.values() for i in s.instruments()]
         self.backend = self._make("backend", sc.backend, ctx)
         self.planner = self._make("planner", sc.planner, ctx)
         self.controller = self._make("controller", sc.controller, ctx)
-        self.sensors = {name: self._make("sensor", cfg, ctx) for name, cfg in sc.sensors.items()}
         if self.planner.space != self.controller.reference:
             raise SetupError(f"planner '{sc.planner.type}' plans in {self.planner.space} space but controller "
                              f"'{sc.controller.type}' takes {self.controller.reference} references; "

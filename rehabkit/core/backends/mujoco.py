@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
-from rehabkit.core.backends.scene import INTEGRATORS, build_scene
+from rehabkit.core.backends.scene import INTEGRATORS, add_instruments, build_scene
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, BodyPoses, Contact, Context, GeomVisual, StrictModel
 
@@ -41,6 +41,7 @@ class MujocoBackend(Backend):
         self.robot = robot
         self.timestep = config.timestep
         self.spec = build_scene(robot, context.world, config.timestep, config.integrator)
+        add_instruments(self.spec, context.instruments)
         self.model = self.spec.compile()
         self.data = mujoco.MjData(self.model)
         jids = [self.model.joint(name).id for name in robot.joint_names]
@@ -98,6 +99,10 @@ class MujocoBackend(Backend):
         hits = np.flatnonzero(robot[:, 0] != robot[:, 1])
         return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
+
+    def read_instrument(self, name: str) -> np.ndarray:
+        s = self.model.sensor(name)
+        return self.data.sensordata[s.adr[0] : s.adr[0] + s.dim[0]].copy()
 
     def joint_positions(self, names: list[str]) -> np.ndarray:
         adr = [self.model.jnt_qposadr[self.model.joint(n).id] for n in names]

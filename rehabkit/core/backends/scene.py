@@ -30,6 +30,21 @@ def camera_axes(cam) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
+_INSTRUMENTS = {"accelerometer": mujoco.mjtSensor.mjSENS_ACCELEROMETER, "gyro": mujoco.mjtSensor.mjSENS_GYRO}
+
+
+def add_instruments(spec: mujoco.MjSpec, instruments) -> None:
+    """A site (axes of its body) and a MuJoCo sensor on it for each instrument."""
+    for ins in instruments:
+        body = spec.body(ins.body)
+        if body is None:
+            names = sorted(b.name for b in spec.bodies if b.name)
+            raise ValueError(f"instrument '{ins.name}': no body '{ins.body}' in the scene; bodies: {', '.join(names)}")
+        body.add_site(name=f"{ins.name}_site", pos=ins.position, size=[0.006, 0, 0], rgba=[0.1, 0.8, 0.1, 1])
+        spec.add_sensor(name=ins.name, type=_INSTRUMENTS[ins.kind], objtype=mujoco.mjtObj.mjOBJ_SITE,
+                        objname=f"{ins.name}_site")
+
+
 def build_scene(robot: RobotModel, world: World, timestep: float, integrator: str = "implicitfast") -> mujoco.MjSpec:
     """An MjSpec with the robot (torque-driven: its own actuators removed) and the world objects.
 

@@ -1,0 +1,1 @@
+"""State estimation: Kalman filtering of sensor signals, rigid-body motion from accelerometers."""

@@ -1,0 +1,87 @@
+"""Acceleration and angular velocity of a rigid body from triaxial accelerometers.
+
+An accelerometer at r (body frame) with sensing axes s reads
+s·(a_B + α × r + ω × (ω × r)) + a₀. Stacking the axes of several sensors gives
+y = M z + a₀ with z = [a_B, α, ω_x², ω_y², ω_z², ω_xω_y, ω_yω_z, ω_xω_z], linear
+in z. Four sensors (12 axes) determine z when they are *not coplanar*: with
+all of them in one plane, α and the ω products share their coefficients and M
+has rank 9. z is solved by least squares; ω comes from the products, its
+overall sign (which they cannot tell) from continuity with the previous
+estimate advanced by α dt.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def design_row(axis: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Coefficients of z in one axis reading."""
+    s = np.asarray(axis, float)
+    r = np.asarray(r, float)
+    sr = s @ r
+    quad = [s[0] * r[0] - sr, s[1] * r[1] - sr, s[2] * r[2] - sr,
+            s[0] * r[1] + s[1] * r[0], s[1] * r[2] + s[2] * r[1], s[0] * r[2] + s[2] * r[0]]
+    return np.concatenate([s, np.cross(r, s), quad])  # s·(α × r) = α·(r × s)
+
+
+class AccelerometerArray:
+    """A rigid set of triaxial accelerometers (positions and axes in the body frame)."""
+
+    def __init__(self, positions: np.ndarray, axes: np.ndarray | None = None):
+        self.positions = np.asarray(positions, float).reshape(-1, 3)
+        n = len(self.positions)
+        self.axes = np.tile(np.eye(3), (n, 1, 1)) if axes is None else np.asarray(axes, float).reshape(n, 3, 3)
+        self.M = np.array([design_row(self.axes[i, k], self.positions[i]) for i in range(n) for k in range(3)])
+        rank = np.linalg.matrix_rank(self.M)
+        if rank < 12:
+            raise ValueError(f"these {n} accelerometers determine only {rank} of the 12 motion terms; "
+                             "mount at least four, not all in one plane")
+        self.M_pinv = np.linalg.pinv(self.M)
+        self._omega: np.ndarray | None = None
+
+    def solve(self, readings: np.ndarray, offsets: np.ndarray | float = 0.0) -> np.ndarray:
+        """z (12,) from the stacked readings (n*3,) minus the calibrated offsets."""
+        return self.M_pinv @ (np.asarray(readings, float).ravel() - np.asarray(offsets, float).ravel())
+
+    def omega(self, z: np.ndarray, dt: float) -> np.ndarray:
+        """Angular velocity from z's quadratic terms, its sign kept continuous over calls."""
+        sq = np.sqrt(np.maximum(z[6:9], 0.0))
+        xy, yz, xz = z[9:12]
+        # choose signs of (ω_y, ω_z) relative to ω_x to match the products, using the largest component
+        signs = np.array([1.0, np.sign(xy) or 1.0, np.sign(xz) or 1.0])
+        if sq[0] < 1e-9:
+            signs = np.array([1.0, 1.0, np.sign(yz) or 1.0])
+        w = sq * signs
+        expected = None if self._omega is None else self._omega + z[3:6] * dt
+        if expected is not None and w @ expected < 0:
+            w = -w
+        self._omega = w
+        return w
+
+
+class AngularVelocityEKF:
+    """ω from accelerometer-array estimates: predicted with α, corrected with the quadratic terms.
+
+    State ω (3). Prediction ω ← ω + α dt, with α's covariance × dt² as process
+    noise. Measurement: the six products h(ω) = [ω_x², ω_y², ω_z², ω_xω_y,
+    ω_yω_z, ω_xω_z] solved from the readings, linearised at the prediction.
+    Starting from a known ω (at rest) settles the sign the products cannot.
+    """
+
+    def __init__(self, omega0: np.ndarray | None = None, initial_var: float = 1e-4):
+        self.w = np.zeros(3) if omega0 is None else np.asarray(omega0, float).copy()
+        self.P = np.eye(3) * initial_var
+
+    def step(self, z: np.ndarray, z_cov: np.ndarray, dt: float) -> np.ndarray:
+        """Advance with one estimate ``z`` (12,) of covariance ``z_cov`` (12, 12); returns ω."""
+        w = self.w + z[3:6] * dt
+        P = self.P + z_cov[3:6, 3:6] * dt * dt
+        x, y, zz = w
+        h = np.array([x * x, y * y, zz * zz, x * y, y * zz, x * zz])
+        H = np.array([[2 * x, 0, 0], [0, 2 * y, 0], [0, 0, 2 * zz], [y, x, 0], [0, zz, y], [zz, 0, x]])
+        S = H @ P @ H.T + z_cov[6:12, 6:12]
+        K = P @ H.T @ np.linalg.inv(S)
+        self.w = w + K @ (z[6:12] - h)
+        self.P = (np.eye(3) - K @ H) @ P
+        return self.w.copy()
