@@ -9,7 +9,7 @@ from rehabkit.core.safety import SafetyConfig, SafetyLayer
 
 @pytest.fixture
 def layer(hit):
-    return SafetyLayer(hit.model, SafetyConfig())
+    return SafetyLayer(hit.model, SafetyConfig(), gravity=hit.gravity_torque)
 
 
 def _q_mid(hit):

@@ -32,9 +32,10 @@ class JointPD(Controller):
         self.kd = self._gains(config.kd, n, "kd")
         self.mode = config.feedforward
         self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
-        self._model = model.pin_model
-        self._data = self._model.createData()
-        self._zero = np.zeros(n)
+        self._gravity_torque = context.robot.gravity_torque  # the robot's own model (Pinocchio for serial arms)
+        if self._inverse_dynamics:
+            self._model = model.pin_model
+            self._data = self._model.createData()
 
     @staticmethod
     def _gains(value: float | list[float], n: int, name: str) -> np.ndarray:
@@ -50,7 +51,7 @@ class JointPD(Controller):
         if self._inverse_dynamics:
             tau += pin.rnea(self._model, self._data, q, qd_ref, qdd_ref)
         elif self._gravity:
-            tau += pin.rnea(self._model, self._data, q, self._zero, self._zero)
+            tau += self._gravity_torque(q)
         return tau
 
 

@@ -58,7 +58,28 @@ class Robot(ABC):
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """End-effector pose (4x4) in the robot base frame. Default: Pinocchio."""
-        return self.model.ee_pose(np.asarray(q, dtype=float))
+        return self.model.ee_pose(np.asarray(q, dtype=float), self._data())
+
+    def fk_batch(self, qs: np.ndarray) -> np.ndarray:
+        """End-effector poses (N, 4, 4) for many configurations."""
+        return np.array([self.fk(q) for q in np.atleast_2d(qs)])
+
+    def ee_world(self, qs: np.ndarray) -> np.ndarray:
+        """End-effector positions (N, 3) in the world for many configurations."""
+        base = self.model.base_pose
+        return self.fk_batch(qs)[:, :3, 3] @ base[:3, :3].T + base[:3, 3]
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio RNEA."""
+        import pinocchio as pin
+
+        zero = np.zeros(self.model.dof)
+        return pin.rnea(self.model.pin_model, self._data(), np.asarray(q, float), zero, zero)
+
+    def _data(self):
+        if getattr(self, "_pin_data", None) is None:
+            self._pin_data = self.model.new_pin_data()
+        return self._pin_data
 
     def ik(self, pose: np.ndarray) -> list[np.ndarray]:
         """Every joint solution reaching ``pose`` (4x4, base frame). Robots without IK raise."""

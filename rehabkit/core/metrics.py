@@ -29,8 +29,9 @@ class Trace:
                        for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref")))
 
 
-def tracking_metrics(trace: Trace, robot: RobotModel, goal_q: np.ndarray | None) -> tuple[dict, dict]:
+def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:
     """Scalar metrics and per-joint figures of how the robot followed its reference."""
+    robot: RobotModel = robot_plugin.model
     err = np.degrees(trace.q_ref - trace.q)
     metrics = {
         "tracking_rms_deg": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
@@ -50,7 +51,7 @@ def tracking_metrics(trace: Trace, robot: RobotModel, goal_q: np.ndarray | None)
     if goal_q is not None and err.size:
         q_end = trace.q[-1]
         metrics["final_joint_error_deg"] = float(np.degrees(np.abs(goal_q - q_end)).max())
-        ee = robot.ee_positions_world(np.vstack([goal_q, q_end]))
+        ee = robot_plugin.ee_world(np.vstack([goal_q, q_end]))
         metrics["final_position_error_m"] = float(np.linalg.norm(ee[0] - ee[1]))
     return metrics, per_joint
 

@@ -112,7 +112,7 @@ class Runner:
             raise SetupError(f"planner '{sc.planner.type}' plans in {self.planner.space} space but controller "
                              f"'{sc.controller.type}' takes {self.controller.reference} references; "
                              "pick a matching pair")
-        self.safety = SafetyLayer(self.robot.model, sc.safety)
+        self.safety = SafetyLayer(self.robot.model, sc.safety, gravity=self.robot.gravity_torque)
         self._specs = {t.name: t for t in sc.task.targets}
         for t in sc.task.targets:
             if t.sensor and t.sensor not in self.sensors:
@@ -310,7 +310,7 @@ class Runner:
                 self._fire(self._timed.pop(0)[1], k, t, q, qd)
             if self._waiting and k >= self._next_reach:
                 self._next_reach = k + sch.reach_every
-                ee = self.robot.model.ee_pose(q, self._pin_data)[:3, 3]  # base frame, as target poses are
+                ee = self.robot.fk(q)[:3, 3]  # base frame, as target poses are
                 for i in list(self._waiting):
                     ev = sc.task.events[i]
                     if np.linalg.norm(ee - self.targets[ev.reached].pose[:3, 3]) <= ev.tolerance_m:
@@ -379,22 +379,15 @@ class Runner:
                 to_world = lambda p: np.asarray(p).reshape(-1, 3) @ base[:3, :3].T + base[:3, 3]  # noqa: E731
                 path, way_w = to_world(x[:: self.schedule.log_every]), to_world(way if way is not None else [])
             else:
-                path = model.ee_positions_world(x[:: self.schedule.log_every])
-                way_w = model.ee_positions_world(way) if way is not None else np.zeros((0, 3))
+                path = self.robot.ee_world(x[:: self.schedule.log_every])
+                way_w = self.robot.ee_world(way) if way is not None else np.zeros((0, 3))
             self.log.plan(k0 * dt, path, way_w)
-
-    @property
-    def _pin_data(self):
-        if not hasattr(self, "_pd"):
-            self._pd = self.robot.model.new_pin_data()
-        return self._pd
 
     def _ee_world(self, q: np.ndarray) -> np.ndarray:
         ee = self.backend.ee_position()
         if ee is not None:
             return ee
-        base = self.robot.model.base_pose
-        return base[:3, :3] @ self.robot.model.ee_pose(q, self._pin_data)[:3, 3] + base[:3, 3]
+        return self.robot.ee_world(q[None])[0]
 
     def _fire(self, i: int, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         ev = self.sc.task.events[i]
@@ -433,7 +426,7 @@ class Runner:
         sc, log = self.sc, self.log
         sim_time = len(trace.t) * self.schedule.control_dt
         cart = self.planner.space == "cartesian"
-        metrics, per_joint = tracking_metrics(trace, self.robot.model, None if cart else self.goal)
+        metrics, per_joint = tracking_metrics(trace, self.robot, None if cart else self.goal)
         if cart:
             metrics.update(cartesian_metrics(trace))
         metrics.update(self.diag)

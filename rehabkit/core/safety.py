@@ -16,7 +16,6 @@ from dataclasses import asdict, dataclass
 from typing import Literal
 
 import numpy as np
-import pinocchio as pin
 from pydantic import Field
 
 from rehabkit.core.interfaces import StrictModel
@@ -52,7 +51,8 @@ class SafetyEvent:
 class SafetyLayer:
     """Checks every command; see the module docstring for the rules."""
 
-    def __init__(self, robot: RobotModel, config: SafetyConfig):
+    def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None):
+        """``gravity(q)`` gives the holding torques of a trip (``None``: PD only)."""
         lim = robot.limits
         margin = math.radians(config.position_margin_deg)
         self.names = robot.joint_names
@@ -65,8 +65,7 @@ class SafetyLayer:
         self.tripped_at: float | None = None
         self.saturated_steps = 0
         self._hold_q: np.ndarray | None = None
-        self._pin_model = robot.pin_model
-        self._pin_data = self._pin_model.createData()
+        self._gravity = gravity
         self._zero = np.zeros(robot.dof)
         # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
         n = robot.dof
@@ -153,5 +152,6 @@ class SafetyLayer:
         q = np.where(np.isfinite(q), q, self._hold_q)
         qd = np.where(np.isfinite(qd), qd, 0.0)
         tau = self.config.hold_kp * (self._hold_q - q) - self.config.hold_kd * qd
-        tau += pin.rnea(self._pin_model, self._pin_data, q, self._zero, self._zero)
+        if self._gravity is not None:
+            tau += self._gravity(q)
         return np.clip(tau, -self.effort, self.effort)
