@@ -316,6 +316,10 @@ class Backend(ABC):
 
     # -- scene access for simulated sensors and scripted worlds (simulators implement these) --
 
+    def set_joints(self, values: dict[str, np.ndarray]) -> None:
+        """Set named joints (passive ones: closing a parallel mechanism consistently)."""
+        raise NotImplementedError(f"{type(self).__name__} cannot set joints by name")
+
     def read_instrument(self, name: str) -> np.ndarray:
         """The current value of an instrument a sensor asked for."""
         raise NotImplementedError(f"{type(self).__name__} has no simulated instruments")

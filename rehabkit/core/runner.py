@@ -219,6 +219,8 @@ class Runner:
 
         q0 = self.start_q()
         self.backend.reset(q0)
+        if hasattr(self.robot, "passive_state"):  # parallel mechanisms: assemble the passive joints too
+            self.backend.set_joints(self.robot.passive_state(q0))
         cart = self.planner.space == "cartesian"
         start = self.robot.fk(q0)[:3, 3] if cart else q0  # Cartesian references are in the robot base frame
         self._ref = (np.tile(start, (n + 1, 1)), np.zeros((n + 1, len(start))), np.zeros((n + 1, len(start))))

@@ -100,6 +100,13 @@ class MujocoBackend(Backend):
         return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
 
+    def set_joints(self, values: dict[str, np.ndarray]) -> None:
+        for name, value in values.items():
+            adr = self.model.jnt_qposadr[self.model.joint(name).id]
+            value = np.atleast_1d(value)
+            self.data.qpos[adr : adr + len(value)] = value
+        mujoco.mj_forward(self.model, self.data)
+
     def read_instrument(self, name: str) -> np.ndarray:
         s = self.model.sensor(name)
         return self.data.sensordata[s.adr[0] : s.adr[0] + s.dim[0]].copy()

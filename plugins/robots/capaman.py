@@ -1,0 +1,289 @@
+"""CaPaMan, the Cassino Parallel Manipulator: 3 cranks move a plate carrying a tool (after Carbone et al.).
+
+The MJCF keeps the whole mechanism in one tree under ``base``: per leg a crank
+(actuated hinge ``alpha_k``), a coupler hinged to it, a slider on the
+coupler's bar, and a follower hinged to the base; the plate hangs from leg 1's
+slider by a ball joint at H_1. Site-to-site ``connect`` equalities close the
+loops: coupler end = follower tip (each parallelogram), slider_k = plate joint
+H_k (legs 2 and 3). Kinematics are in :mod:`capaman_kinematics`; the passive
+joints' values that assemble the mechanism for given cranks come from its
+forward kinematics.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from pydantic import Field
+from scipy.optimize import least_squares
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.models.chain import matrix_to_quat_wxyz
+from rehabkit.models.dh import PoseSpec
+from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
+from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
+
+from .capaman_kinematics import CapamanGeometry, forward, inverse
+
+GREY, BLUE, ORANGE = [0.35, 0.35, 0.38, 1], [0.3, 0.5, 0.85, 1], [0.9, 0.55, 0.2, 1]
+# link masses [kg] (plausible for the aluminium prototype), shared by the MJCF and the gravity model
+MASS = {"crank": 0.08, "coupler": 0.12, "bar": 0.05, "slider": 0.03, "follower": 0.08, "tool": 0.05}
+
+
+class CapamanConfig(StrictModel):
+    """Dimensions (commonly cited CaPaMan values), crank range, tool and placement."""
+
+    a: float = Field(0.200, gt=0, description="frame link = coupler [m]")
+    b: float = Field(0.080, gt=0, description="crank = follower [m]")
+    h: float = Field(0.100, gt=0, description="bar from the coupler's middle to the slider [m]")
+    r_base: float = Field(0.110, gt=0, description="leg planes' distance from the fixed plate's centre [m]")
+    r_plate: float = Field(0.110, gt=0, description="radius of the plate's spherical joints [m]")
+    crank_range_deg: tuple[float, float] = (45.0, 135.0)
+    crank_speed_deg_s: float = Field(120.0, gt=0)
+    crank_torque: float = Field(10.0, gt=0, description="[N·m]")
+    tool: tuple[float, float, float] = Field((0.0, 0.0, 0.12), description="tool tip in the plate frame [m]")
+    tool_radius: float = Field(0.006, gt=0)
+    plate_mass: float = Field(0.6, gt=0, description="[kg]")
+    base: PoseSpec = Field(PoseSpec(position=(0.0, 0.0, 0.75)), description="fixed plate on a table")
+    safe_stop: SafeStop = "hold"
+
+
+def _frame(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
+    spec = mujoco.MjSpec()
+    spec.modelname = "capaman"
+    spec.compiler.degree = False
+    geom = dict(contype=ROBOT_CONTYPE, conaffinity=ROBOT_CONAFFINITY)
+    base = spec.worldbody.add_body(name="base")
+    base.add_geom(
+        name="fixed_plate",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        size=[geo.r_base + 0.05, geo.base_height / 2, 0],
+        pos=[0, 0, geo.base_height / 2],
+        rgba=GREY,
+        **geom,
+    )
+    z = np.array([0.0, 0.0, 1.0])
+    links = {}
+    for k in range(3):
+        t, o = geo.tangent[k], geo.centres[k]
+        leg = matrix_to_quat_wxyz(_frame(t, z))  # x along the frame link, y up, z = e (normal to the leg plane)
+        p1, p2 = o - 0.5 * geo.a * t, o + 0.5 * geo.a * t
+        base.add_geom(
+            name=f"frame_{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[*p1, *p2],
+            size=[0.008, 0, 0],
+            rgba=GREY,
+            **geom,
+        )
+        crank = base.add_body(name=f"crank_{k + 1}", pos=p1, quat=leg)
+        crank.add_joint(
+            name=f"alpha_{k + 1}",
+            axis=[0, 0, 1],
+            range=np.radians(cfg.crank_range_deg),
+            limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            armature=0.02,
+            damping=0.05,
+        )
+        crank.add_geom(
+            name=f"crank_{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[0, 0, 0, geo.b, 0, 0],
+            size=[0.007, 0, 0],
+            mass=MASS["crank"],
+            rgba=ORANGE,
+            **geom,
+        )
+        coupler = crank.add_body(name=f"coupler_{k + 1}", pos=[geo.b, 0, 0])
+        coupler.add_joint(name=f"coupler_{k + 1}", axis=[0, 0, 1])
+        coupler.add_geom(
+            name=f"coupler_{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[0, 0, 0, geo.a, 0, 0],
+            size=[0.007, 0, 0],
+            mass=MASS["coupler"],
+            rgba=BLUE,
+            **geom,
+        )
+        coupler.add_geom(
+            name=f"bar_{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[geo.a / 2, 0, 0, geo.a / 2, geo.h, 0],
+            size=[0.007, 0, 0],
+            mass=MASS["bar"],
+            rgba=BLUE,
+            **geom,
+        )
+        coupler.add_site(name=f"coupler_end_{k + 1}", pos=[geo.a, 0, 0], size=[0.004, 0, 0])
+        slider = coupler.add_body(name=f"slider_{k + 1}", pos=[geo.a / 2, geo.h, 0])
+        slider.add_joint(name=f"slide_{k + 1}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+        slider.add_geom(
+            name=f"slider_{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=[0.01, 0.01, 0.015],
+            mass=MASS["slider"],
+            rgba=ORANGE,
+            contype=0,
+            conaffinity=0,
+        )
+        slider.add_site(name=f"slider_{k + 1}", size=[0.004, 0, 0])
+        follower = base.add_body(name=f"follower_{k + 1}", pos=p2, quat=leg)
+        follower.add_joint(name=f"follower_{k + 1}", axis=[0, 0, 1])
+        follower.add_geom(
+            name=f"follower_{k + 1}",
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[0, 0, 0, geo.b, 0, 0],
+            size=[0.007, 0, 0],
+            mass=MASS["follower"],
+            rgba=ORANGE,
+            **geom,
+        )
+        follower.add_site(name=f"follower_tip_{k + 1}", pos=[geo.b, 0, 0], size=[0.004, 0, 0])
+        links[k] = (slider, leg)
+    # the plate: origin at its centre, hanging from slider 1 by a ball joint at H_1; level at identity
+    slider1, leg1 = links[0]
+    c = geo.plate_points
+    plate = slider1.add_body(
+        name="plate", pos=_frame(geo.tangent[0], z).T @ (-c[0]), quat=matrix_to_quat_wxyz(_frame(geo.tangent[0], z).T)
+    )
+    plate.add_joint(name="plate_ball", type=mujoco.mjtJoint.mjJNT_BALL, pos=c[0])
+    plate.add_geom(
+        name="movable_plate",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        size=[geo.r_plate + 0.015, 0.006, 0],
+        mass=cfg.plate_mass,
+        rgba=GREY,
+        **geom,
+    )
+    tip = np.asarray(cfg.tool)
+    plate.add_geom(
+        name="tool",
+        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+        fromto=[0, 0, 0.006, *tip],
+        size=[cfg.tool_radius, 0, 0],
+        mass=MASS["tool"],
+        rgba=[0.2, 0.8, 0.3, 1],
+        **geom,
+    )
+    plate.add_site(name="tool_tip", pos=tip, size=[0.006, 0, 0])
+    for k in (1, 2):
+        plate.add_site(name=f"plate_joint_{k + 1}", pos=c[k], size=[0.004, 0, 0])
+    connect = dict(type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE, solref=[0.002, 1.0])
+    for k in range(3):
+        spec.add_equality(
+            name=f"parallelogram_{k + 1}", name1=f"coupler_end_{k + 1}", name2=f"follower_tip_{k + 1}", **connect
+        )
+    for k in (1, 2):
+        spec.add_equality(name=f"spherical_{k + 1}", name1=f"slider_{k + 1}", name2=f"plate_joint_{k + 1}", **connect)
+    spec.compile()
+    return spec.to_xml()
+
+
+class CapamanRobot(Robot):
+    """CaPaMan 3-DoF parallel manipulator: parallelogram legs, sliders, spherical joints, a tool on the plate."""
+
+    def __init__(self, config: CapamanConfig, context: Context | None = None):
+        self.config = config
+        self.geo = CapamanGeometry(config.a, config.b, config.h, config.r_base, config.r_plate)
+        lo, hi = np.radians(config.crank_range_deg)
+        limits = JointLimits(
+            np.full(3, lo),
+            np.full(3, hi),
+            np.full(3, np.radians(config.crank_speed_deg_s)),
+            np.full(3, config.crank_torque),
+        )
+        passive = [f"{n}_{k}" for k in (1, 2, 3) for n in ("coupler", "slide", "follower")] + ["plate_ball"]
+        self.model = RobotModel(
+            "capaman",
+            build_capaman_mjcf(config, self.geo),
+            [f"alpha_{k}" for k in (1, 2, 3)],
+            limits,
+            "tool_tip",
+            base_pose=config.base.matrix(),
+            safe_stop=config.safe_stop,
+            passive_joints=passive,
+        )
+        self.tool = np.asarray(config.tool, float)
+
+    def plate_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p, R, res = forward(self.geo, np.atleast_2d(q))
+        if res.max() > 1e-9:
+            raise ValueError(f"capaman: no assembly for cranks {np.degrees(q).round(2).tolist()} deg")
+        return p[0], R[0]
+
+    def fk_batch(self, qs: np.ndarray) -> np.ndarray:
+        p, R, _ = forward(self.geo, np.atleast_2d(qs))
+        out = np.tile(np.eye(4), (len(p), 1, 1))
+        out[:, :3, :3] = R
+        out[:, :3, 3] = p + R @ self.tool
+        return out
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """Tool-tip pose in the base frame (numerical forward kinematics)."""
+        return self.fk_batch(np.asarray(q, float)[None])[0]
+
+    def ik_plate(self, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Crank angles for a plate pose (closed form); raises if the mechanism cannot take that pose."""
+        alpha, _, residual = inverse(self.geo, p, R)
+        if np.abs(residual).max() > 1e-6:
+            raise ValueError(f"capaman: plate pose off the mechanism's 3-DoF set by {np.abs(residual).max():.2e} m")
+        return alpha
+
+    def ik(self, pose: np.ndarray) -> list[np.ndarray]:
+        """Cranks within their range putting the tool tip at ``pose``'s position (orientation follows).
+
+        Bounded least squares from a few starts: the all-vertical home pose is a
+        singularity of the tool-tip map, so a plain Newton start there fails.
+        """
+        goal = np.asarray(pose, float)[:3, 3]
+        lim = self.model.limits
+        found: list[np.ndarray] = []
+        for start in (np.full(3, 1.4), np.full(3, 1.75), np.array([1.3, 1.6, 1.9]), np.array([1.9, 1.6, 1.3])):
+            sol = least_squares(lambda a: self.fk(a)[:3, 3] - goal, start, bounds=(lim.lower, lim.upper),
+                                xtol=1e-15, ftol=1e-15, gtol=1e-15)
+            if np.linalg.norm(sol.fun) < 1e-9 and all(np.abs(sol.x - f).max() > 1e-6 for f in found):
+                found.append(sol.x)
+        return found
+
+    def passive_state(self, q: np.ndarray) -> dict[str, np.ndarray]:
+        """Passive joint values assembling the mechanism at cranks ``q``."""
+        p, R = self.plate_pose(q)
+        _, slide, _ = inverse(self.geo, p[None], R[None])
+        state = {"plate_ball": matrix_to_quat_wxyz(R)}
+        for k in range(3):
+            state[f"coupler_{k + 1}"] = np.array([-q[k]])
+            state[f"follower_{k + 1}"] = np.array([q[k]])
+            state[f"slide_{k + 1}"] = np.array([slide[0, k]])
+        return state
+
+    def potential(self, q: np.ndarray) -> np.ndarray:
+        """Gravitational potential energy [J] (base frame, z up) for rows of crank angles."""
+        q = np.atleast_2d(q)
+        b, h, g = self.geo.b, self.geo.h, 9.81
+        s = np.sin(q)
+        legs = (
+            (MASS["crank"] / 2 + MASS["follower"] / 2) * b * s
+            + MASS["coupler"] * b * s
+            + MASS["bar"] * (b * s + h / 2)
+            + MASS["slider"] * (b * s + h)
+        )
+        p, R, _ = forward(self.geo, q)
+        tool_com = p + R @ (self.tool / 2)
+        return g * (legs.sum(axis=1) + self.config.plate_mass * p[:, 2] + MASS["tool"] * tool_com[:, 2])
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """Crank torques holding the mechanism against gravity: ∂U/∂α by central differences."""
+        eps = 1e-6
+        steps = np.vstack([np.eye(3) * eps, -np.eye(3) * eps]) + np.asarray(q, float)
+        u = self.potential(steps)
+        return (u[:3] - u[3:]) / (2 * eps)
+
+
+@hookimpl
+def rehabkit_register_robots(registry) -> None:
+    registry.add("capaman", config=CapamanConfig, factory=CapamanRobot)
