@@ -187,6 +187,8 @@ def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
 class CapamanRobot(Robot):
     """CaPaMan 3-DoF parallel manipulator: parallelogram legs, sliders, spherical joints, a tool on the plate."""
 
+    ik_kind = "position"
+
     def __init__(self, config: CapamanConfig, context: Context | None = None):
         self.config = config
         self.geo = CapamanGeometry(config.a, config.b, config.h, config.r_base, config.r_plate)
@@ -244,11 +246,55 @@ class CapamanRobot(Robot):
         lim = self.model.limits
         found: list[np.ndarray] = []
         for start in (np.full(3, 1.4), np.full(3, 1.75), np.array([1.3, 1.6, 1.9]), np.array([1.9, 1.6, 1.3])):
-            sol = least_squares(lambda a: self.fk(a)[:3, 3] - goal, start, bounds=(lim.lower, lim.upper),
-                                xtol=1e-15, ftol=1e-15, gtol=1e-15)
+            sol = least_squares(
+                lambda a: self.fk(a)[:3, 3] - goal,
+                start,
+                bounds=(lim.lower, lim.upper),
+                xtol=1e-15,
+                ftol=1e-15,
+                gtol=1e-15,
+            )
             if np.linalg.norm(sol.fun) < 1e-9 and all(np.abs(sol.x - f).max() > 1e-6 for f in found):
                 found.append(sol.x)
         return found
+
+    link_radius = 0.008  # thickest leg link; obstacles are grown by this for axis points
+
+    def cluster_points(self, qs: np.ndarray) -> np.ndarray:
+        """Points representing the whole moving mechanism, (N, P, 3) in the base frame, for N crank triples.
+
+        Legs (cranks, followers, couplers, bars, sliders) and the tool by points
+        along their axes every centimetre or less (test them against obstacles
+        grown by ``link_radius``); the movable plate by points on its two faces and rim.
+        """
+        qs = np.atleast_2d(np.asarray(qs, float))
+        g = self.geo
+        p, R, _ = forward(g, qs)
+        _, slide, _ = inverse(g, p, R)
+        t, e, o = g.tangent, g.radial, g.centres  # (3, 3) each, one row per leg
+        z = np.array([0.0, 0.0, 1.0])
+        d = np.cos(qs)[..., None] * t + np.sin(qs)[..., None] * z  # crank directions (N, 3, 3)
+        p1, p2 = o - 0.5 * g.a * t, o + 0.5 * g.a * t
+        mid = o + g.b * d
+        u = lambda n: np.linspace(0.0, 1.0, n)[:, None]  # noqa: E731
+        parts = [
+            p1[None, :, None] + g.b * d[:, :, None] * u(9),  # cranks
+            p2[None, :, None] + g.b * d[:, :, None] * u(9),  # followers
+            (p1 + 0.0)[None, :, None] + g.b * d[:, :, None] + g.a * t[None, :, None] * u(21),  # couplers
+            mid[:, :, None] + g.h * z * u(11),  # bars
+            (mid + g.h * z)[:, :, None] + slide[..., None, None] * e[None, :, None] * u(5),  # sliders' travel
+        ]
+        legs = np.concatenate(parts, axis=2).reshape(len(qs), -1, 3)
+        rings = [(0.0, 1)] + [(r, int(np.ceil(2 * np.pi * r / 0.02))) for r in np.linspace(0.03, g.r_plate + 0.015, 4)]
+        local = [
+            (r * np.cos(a), r * np.sin(a), h)
+            for r, n in rings
+            for a in np.linspace(0, 2 * np.pi, n, endpoint=False)
+            for h in (-0.006, 0.006)
+        ]
+        local += [tuple(self.tool * s) for s in np.linspace(0.05, 1.0, 24)]
+        plate = p[:, None, :] + np.einsum("nij,pj->npi", R, np.array(local))
+        return np.concatenate([legs, plate], axis=1)
 
     def passive_state(self, q: np.ndarray) -> dict[str, np.ndarray]:
         """Passive joint values assembling the mechanism at cranks ``q``."""
@@ -276,12 +322,32 @@ class CapamanRobot(Robot):
         tool_com = p + R @ (self.tool / 2)
         return g * (legs.sum(axis=1) + self.config.plate_mass * p[:, 2] + MASS["tool"] * tool_com[:, 2])
 
-    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
-        """Crank torques holding the mechanism against gravity: ∂U/∂α by central differences."""
+    def gravity_torque_exact(self, qs: np.ndarray) -> np.ndarray:
+        """Crank torques holding the mechanism against gravity, ∂U/∂α by central differences, rows of ``qs``."""
+        qs = np.atleast_2d(np.asarray(qs, float))
         eps = 1e-6
-        steps = np.vstack([np.eye(3) * eps, -np.eye(3) * eps]) + np.asarray(q, float)
-        u = self.potential(steps)
-        return (u[:3] - u[3:]) / (2 * eps)
+        steps = np.concatenate([qs[:, None, :] + np.eye(3) * eps, qs[:, None, :] - np.eye(3) * eps], axis=1)
+        u = self.potential(steps.reshape(-1, 3)).reshape(len(qs), 6)
+        return (u[:, :3] - u[:, 3:]) / (2 * eps)
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """Gravity torques, trilinear in a 5° table over the crank range (the exact version takes 0.5 ms)."""
+        if getattr(self, "_gravity", None) is None:
+            lim = self.model.limits
+            n = [int(round(np.degrees(hi - lo) / 5)) + 1 for lo, hi in zip(lim.lower, lim.upper)]
+            axes = [np.linspace(lo, hi, k) for lo, hi, k in zip(lim.lower, lim.upper, n)]
+            grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
+            table = self.gravity_torque_exact(grid.reshape(-1, 3)).reshape(*grid.shape)
+            step = np.array([a[1] - a[0] for a in axes])
+            corners = np.array([(i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+            self._gravity = (table, lim.lower, step, np.array(n) - 2, corners)
+        table, lower, step, last, corners = self._gravity
+        x = (np.asarray(q, float) - lower) / step
+        i = np.clip(np.floor(x).astype(int), 0, last)
+        f = x - i
+        idx = i + corners
+        weights = np.prod(np.where(corners, f, 1.0 - f), axis=1)
+        return weights @ table[idx[:, 0], idx[:, 1], idx[:, 2]]
 
 
 @hookimpl

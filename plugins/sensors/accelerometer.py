@@ -21,6 +21,7 @@ from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank
 from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
 
 Vec3 = tuple[float, float, float]
+MOVING_RAD_S = 0.02  # the plate counts as moving above this true angular speed
 TETRAHEDRON: list[Vec3] = [(0.08, 0.0, 0.0), (-0.04, 0.0693, 0.0), (-0.04, -0.0693, 0.0), (0.0, 0.0, -0.05)]
 
 
@@ -35,6 +36,7 @@ class AccelerometerArrayConfig(SensorConfig):
     offset_std: float = Field(0.1, ge=0, description="spread of the constant offsets, known by calibration [m/s²]")
     mu_value: float = Field(0.01, gt=0, description="μ_m1 of the filter model [m/s²]")
     mu_rate: float = Field(0.05, gt=0, description="μ_m2 of the filter model [m/s³]")
+    adaptive: bool = Field(False, description="scale the process noise up by the innovations (fast motions)")
 
 
 class AccelerometerArraySensor(Sensor):
@@ -49,12 +51,13 @@ class AccelerometerArraySensor(Sensor):
         dt = 1.0 / config.rate_hz
         self.dt = dt
         self.bank = KalmanBank(ConstantRateModel(dt, config.mu_value, config.mu_rate, tuple(config.noise_std)),
-                               len(config.points))
+                               len(config.points), adaptive=config.adaptive)
         self.raw_cov = self.array.M_pinv @ np.diag(np.tile(np.square(config.noise_std), len(config.points))) \
             @ self.array.M_pinv.T
         self.ekf = AngularVelocityEKF()
         self.prefix = f"acc_{config.body}"
         self.errors: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered")}
+        self.moving: list[bool] = []
 
     def instruments(self) -> list[Instrument]:
         body = self.config.body
@@ -79,6 +82,7 @@ class AccelerometerArraySensor(Sensor):
         for key, est, truth in (("a_raw", z_raw[:3], a_true), ("a_filtered", z_f[:3], a_true),
                                 ("w_raw", w_raw, w_true), ("w_filtered", w_f, w_true)):
             self.errors[key].append(est - truth)
+        self.moving.append(bool(np.linalg.norm(w_true) > MOVING_RAD_S))
         return {"raw_readings": raw.ravel(), "filtered_readings": filtered.ravel(),
                 "acc_raw": z_raw[:3], "acc_filtered": z_f[:3], "acc_true": a_true,
                 "omega_raw": w_raw, "omega_filtered": w_f, "omega_true": w_true}
@@ -87,13 +91,20 @@ class AccelerometerArraySensor(Sensor):
         if not self.errors["a_raw"]:
             return {}
         skip = min(len(self.errors["a_raw"]) // 10, int(self.rate_hz * 0.2))  # filters settling
-        rms = {k: float(np.sqrt(np.mean(np.square(v[skip:])))) for k, v in self.errors.items()}
-        return {
-            "accel_rms_raw_m_s2": rms["a_raw"], "accel_rms_filtered_m_s2": rms["a_filtered"],
-            "accel_filter_gain": rms["a_raw"] / max(rms["a_filtered"], 1e-12),
-            "omega_rms_raw_rad_s": rms["w_raw"], "omega_rms_filtered_rad_s": rms["w_filtered"],
-            "omega_filter_gain": rms["w_raw"] / max(rms["w_filtered"], 1e-12),
-        }
+        out: dict[str, float] = {}
+        moving = np.array(self.moving)
+        moving[:skip] = False
+        for suffix, keep in (("", slice(skip, None)), ("_moving", moving)):
+            if not np.any(np.ones(len(moving), bool)[keep]):
+                continue
+            rms = {k: float(np.sqrt(np.mean(np.square(np.array(v)[keep])))) for k, v in self.errors.items()}
+            out |= {
+                f"accel_rms_raw{suffix}_m_s2": rms["a_raw"], f"accel_rms_filtered{suffix}_m_s2": rms["a_filtered"],
+                f"accel_filter_gain{suffix}": rms["a_raw"] / max(rms["a_filtered"], 1e-12),
+                f"omega_rms_raw{suffix}_rad_s": rms["w_raw"], f"omega_rms_filtered{suffix}_rad_s": rms["w_filtered"],
+                f"omega_filter_gain{suffix}": rms["w_raw"] / max(rms["w_filtered"], 1e-12),
+            }
+        return out
 
 
 @hookimpl

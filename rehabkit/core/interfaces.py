@@ -52,9 +52,14 @@ class IKUnavailableError(NotImplementedError):
 
 
 class Robot(ABC):
-    """A robot plugin: its :class:`RobotModel` plus optional closed-form kinematics."""
+    """A robot plugin: its :class:`RobotModel` plus optional closed-form kinematics.
+
+    ``ik_kind`` says what :meth:`ik` matches: a full ``pose``, or the ``position``
+    alone (robots with three DoF, whose orientation follows).
+    """
 
     model: RobotModel
+    ik_kind: ClassVar[Literal["pose", "position"]] = "pose"
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """End-effector pose (4x4) in the robot base frame. Default: Pinocchio."""
@@ -114,6 +119,7 @@ class Target:
     q: np.ndarray | None = None
     pose: np.ndarray | None = None
     position_only: bool = False
+    same_as: str | None = None  # resolved alias: reuse that target's joint solution
 
 
 @dataclass
@@ -135,11 +141,13 @@ class Plan:
         trajectory: Joint reference starting at the request time.
         diagnostics: Scalar figures merged into the run's metrics (e.g. continuity residuals).
         waypoints: Joint values of the via points actually used, for logging.
+        details: Non-scalar results for the summary (e.g. an optimiser's history).
     """
 
     trajectory: Trajectory
     diagnostics: dict[str, float] = field(default_factory=dict)
     waypoints: np.ndarray | None = None
+    details: dict[str, Any] = field(default_factory=dict)
 
 
 class PlanningError(RuntimeError):

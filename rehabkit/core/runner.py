@@ -139,10 +139,19 @@ class Runner:
     def start_q(self) -> np.ndarray:
         task = self.sc.task
         name = task.start or task.order()[0]
-        q = self.targets[name].q
-        if q is None:
-            raise SetupError(f"task.start: target '{name}' is Cartesian; the start must be a joint-space target")
-        return q.copy()
+        target = self.targets[name]
+        if target.q is not None:
+            return target.q.copy()
+        try:  # a Cartesian start: the robot's IK, first solution within the joint ranges
+            solutions = self.robot.ik(target.pose) if target.pose is not None else []
+        except NotImplementedError:
+            solutions = []
+        lim = self.robot.model.limits
+        inside = [s for s in solutions if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
+        if not inside:
+            raise SetupError(f"task.start: target '{name}' is Cartesian and the robot's IK gives no configuration "
+                             "for it within the joint ranges; start from a joint-space target")
+        return inside[0]
 
     # -- planning -----------------------------------------------------------
 
@@ -368,7 +377,8 @@ class Runner:
         entry = {"t": round(k0 * self.schedule.control_dt, 6), "duration_s": plan.trajectory.duration}
         if way is not None:
             entry["waypoints_m" if cart else "waypoints_deg"] = np.round(way if cart else np.degrees(way), 6).tolist()
-        self.plans.append({**entry, **{k: v for k, v in plan.diagnostics.items() if isinstance(v, (int, float))}})
+        self.plans.append({**entry, **{k: v for k, v in plan.diagnostics.items() if isinstance(v, (int, float))},
+                           **plan.details})
         ref, ref_d, ref_dd = self._ref
         dt = self.schedule.control_dt
         x, xd, xdd = plan.trajectory.sample(np.arange(len(ref) - k0) * dt)

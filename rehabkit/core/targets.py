@@ -27,7 +27,8 @@ def resolve_targets(task: TaskSpec, robot: Robot) -> dict[str, Target]:
         elif spec.same_as:
             ref = get(spec.same_as, (*stack, name))
             tgt = Target(name, q=None if ref.q is None else ref.q.copy(),
-                         pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only)
+                         pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only,
+                         same_as=ref.same_as or ref.name)
         elif spec.joints_deg is not None or spec.joints_rad is not None:
             q = np.radians(spec.joints_deg) if spec.joints_deg is not None else np.asarray(spec.joints_rad, float)
             if len(q) != robot.model.dof:
@@ -79,11 +80,14 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) ->
     lim = robot.model.limits
     prev = np.asarray(q_start, dtype=float)
     rows, pos_err, rot_err, branches = [], 0.0, 0.0, {}
+    solved: dict[str, np.ndarray] = {}  # a target visited again keeps its configuration
     for tgt in targets:
         if tgt.q is not None:
             q = tgt.q
+        elif (tgt.same_as or tgt.name) in solved:
+            q = solved[tgt.same_as or tgt.name]
         else:
-            if tgt.position_only:
+            if tgt.position_only and robot.ik_kind != "position":
                 raise PlanningError(
                     f"target '{tgt.name}' is a position only; give rpy_deg or orientation_of for a 6-DoF IK"
                 )
@@ -101,5 +105,6 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) ->
             cos = (np.trace(reached[:3, :3].T @ tgt.pose[:3, :3]) - 1) / 2
             rot_err = max(rot_err, float(np.degrees(np.arccos(np.clip(cos, -1, 1)))))
         rows.append(np.asarray(q, dtype=float))
+        solved.setdefault(tgt.same_as or tgt.name, rows[-1])
         prev = rows[-1]
     return JointWaypoints(np.array(rows), pos_err, rot_err, branches)

@@ -5,6 +5,13 @@ Each measured axis has a value and its rate of change: state [a_x, ȧ_x, a_y,
 Q = blocks of [[μ1², μ1μ2], [μ1μ2, μ2²]], observation C picking the values,
 R = diag(σ²). The filter here runs many such sensors at once (one state row
 each); the model matrices are shared.
+
+With ``adaptive`` each sensor's process noise is scaled to keep the filter
+consistent: the normalised innovation squared (NIS) has mean 3 (three axes)
+when the model fits, so log(scale) moves by ``gain`` · (NIS/3 − 1) every
+sample, between 0 (Table 1's Q, the floor) and ``max_scale``. The filter then
+smooths as the paper's while the signal changes slowly and follows quick
+motions instead of lagging behind them.
 """
 
 from __future__ import annotations
@@ -48,13 +55,16 @@ class ConstantRateModel:
 class KalmanBank:
     """``count`` independent filters of one model, stepped together."""
 
-    def __init__(self, model: ConstantRateModel, count: int):
+    def __init__(self, model: ConstantRateModel, count: int, adaptive: bool = False, gain: float = 0.05,
+                 max_scale: float = 1e6):
         self.model = model
         self.A, self.Q, self.C, self.R = model.matrices()
         n = self.A.shape[0]
         self.x = np.zeros((count, n))
         self.P = np.tile(np.eye(n) * 10.0, (count, 1, 1))  # vague prior: the first samples dominate
         self.started = False
+        self.adaptive, self.gain, self.max_log = adaptive, gain, float(np.log(max_scale))
+        self.log_scale = np.zeros(count)
 
     def step(self, z: np.ndarray) -> np.ndarray:
         """Predict, then correct with measurements ``z`` (count, axes); returns the filtered values."""
@@ -64,10 +74,16 @@ class KalmanBank:
             self.started = True
             return z.copy()
         x = self.x @ A.T  # prediction (9)
-        P = A @ self.P @ A.T + Q
+        scale = np.exp(self.log_scale)[:, None, None] if self.adaptive else 1.0
+        P = A @ self.P @ A.T + scale * Q
         S = C @ P @ C.T + R  # correction (10)
-        K = P @ C.T @ np.linalg.inv(S)
-        x = x + np.einsum("kij,kj->ki", K, z - x @ C.T)
+        S_inv = np.linalg.inv(S)
+        K = P @ C.T @ S_inv
+        innovation = z - x @ C.T
+        if self.adaptive:
+            nis = np.einsum("ki,kij,kj->k", innovation, S_inv, innovation)
+            self.log_scale = np.clip(self.log_scale + self.gain * (nis / self.model.axes - 1.0), 0.0, self.max_log)
+        x = x + np.einsum("kij,kj->ki", K, innovation)
         self.P = P - K @ C @ P
         self.x = x
         return x @ C.T

@@ -1,0 +1,1 @@
+"""Configuration-space planning helpers: occupancy grids, joint matrices, clearance, path optimisation."""

@@ -1,0 +1,75 @@
+"""The Cartesian occupancy grid Ψ of a scene's obstacles (after Carbone et al., eq. 1).
+
+Ψ_ijk = 1 when the cell's centre lies inside an obstacle grown by ``inflate``
+(the radius of the robot's thin links, whose axes are what is tested), else 0.
+Points outside the grid are free. Coordinates are in the robot base frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from rehabkit.core.scenario.models import WorldObject
+from rehabkit.models.chain import inv_se3, rpy_to_matrix
+
+
+@dataclass
+class OccupancyGrid:
+    """Ψ and the metric distance from each free cell to the nearest occupied one."""
+
+    origin: np.ndarray  # centre of cell (0, 0, 0)
+    resolution: float
+    occupied: np.ndarray  # bool (nx, ny, nz)
+
+    def __post_init__(self) -> None:
+        free = ~self.occupied
+        self.distance = ndimage.distance_transform_edt(free) * self.resolution if self.occupied.any() \
+            else np.full(self.occupied.shape, np.inf)
+
+    def _index(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        idx = np.floor((points - self.origin) / self.resolution + 0.5).astype(np.intp)
+        inside = np.all((idx >= 0) & (idx < np.array(self.occupied.shape)), axis=-1)
+        return np.clip(idx, 0, np.array(self.occupied.shape) - 1), inside
+
+    def hits(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point (..., 3) is in an occupied cell."""
+        idx, inside = self._index(points)
+        return inside & self.occupied[idx[..., 0], idx[..., 1], idx[..., 2]]
+
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """Distance [m] from each point (..., 3) to the nearest occupied cell (inf off the grid, 0 inside)."""
+        idx, inside = self._index(points)
+        d = self.distance[idx[..., 0], idx[..., 1], idx[..., 2]]
+        return np.where(inside, d, np.inf)
+
+
+def _inside(obj: WorldObject, local: np.ndarray, grow: float) -> np.ndarray:
+    if obj.shape == "box":
+        return np.all(np.abs(local) <= np.asarray(obj.size) + grow, axis=-1)
+    if obj.shape == "sphere":
+        return np.linalg.norm(local, axis=-1) <= obj.size[0] + grow
+    radius, half = obj.size
+    return (np.hypot(local[..., 0], local[..., 1]) <= radius + grow) & (np.abs(local[..., 2]) <= half + grow)
+
+
+def rasterise(objects: list[WorldObject], base_pose: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              resolution: float = 0.005, inflate: float = 0.0) -> OccupancyGrid:
+    """Ψ over the box [lower, upper] (robot base frame) for the static obstacles among ``objects``."""
+    origin = np.asarray(lower, float)
+    shape = tuple(int(n) for n in np.ceil((np.asarray(upper) - origin) / resolution).astype(int) + 1)
+    centres = origin + np.indices(shape).reshape(3, -1).T * resolution
+    to_base = inv_se3(base_pose)
+    occupied = np.zeros(len(centres), bool)
+    for obj in objects:
+        if obj.dynamic or obj.mocap:
+            continue  # moving objects are not part of the static map
+        pose = np.eye(4)
+        pose[:3, :3] = rpy_to_matrix(np.radians(obj.pose.rpy_deg))
+        pose[:3, 3] = obj.pose.position
+        in_obj = inv_se3(to_base @ pose)  # base frame → object frame
+        local = centres @ in_obj[:3, :3].T + in_obj[:3, 3]
+        occupied |= _inside(obj, local, inflate)
+    return OccupancyGrid(origin, resolution, occupied.reshape(shape))
