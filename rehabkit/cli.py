@@ -38,6 +38,8 @@ def cmd_run(args: argparse.Namespace) -> int:
               + (f"  — {e['reason']}" if e.get("reason") else ""))
     for ev in s["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
+    for name, text in s.get("reports", {}).items():
+        print(f"{name}:\n{text}")
     print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))
     return EXIT_OK if result.passed else EXIT_FAILED
 

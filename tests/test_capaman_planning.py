@@ -101,6 +101,28 @@ def test_obstacle_run_is_collision_free_both_ways_and_the_ga_improves(capaman_ru
     assert m["accel_filter_gain"] >= 3 and m["omega_filter_gain"] >= 3
 
 
+def test_validation_report_compares_with_truth_and_plan(capaman_run):
+    proc, summary = capaman_run
+    m = summary["metrics"]
+    assert "vs planned motion" in proc.stdout and "vs MuJoCo truth" in proc.stdout
+    assert summary["reports"]["imu"].count("\n") >= 6
+    # the planned motion is what MuJoCo executed, closely: the comparison measures the sensors, not the tracking
+    assert m["accel_rms_true_vs_planned_m_s2"] < 0.02 and m["omega_rms_true_vs_planned_rad_s"] < 0.005
+    assert m["accel_rms_raw_vs_planned_m_s2"] > 3 * m["accel_rms_filtered_vs_planned_m_s2"]
+
+
+def test_joint_space_is_in_the_log(capaman_run, tmp_path):
+    import shutil
+
+    proc, _ = capaman_run
+    rrd = [line.split(" and ")[-1] for line in proc.stdout.splitlines() if line.startswith("wrote ")][0]
+    text = subprocess.run([shutil.which("rerun"), "rrd", "print", rrd], capture_output=True, text=True,
+                          timeout=120).stdout
+    for entity in ("/joint_space/colliding_region", "/joint_space/plan", "/joint_space/executed",
+                   "/sensors/imu/acc_filtered", "/sensors/imu/acc_true", "/world/scene/obstacle"):
+        assert entity in text, entity
+
+
 def test_planning_is_deterministic_across_processes(capaman_run, tmp_path):
     _, first = capaman_run
     r = subprocess.run([sys.executable, "-m", "rehabkit.cli", "run", str(CAPAMAN), "--out", str(tmp_path),

@@ -20,6 +20,7 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 from pydantic import Field
+from scipy import ndimage
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
@@ -220,6 +221,12 @@ class RrtGaPlanner(Planner):
             at = np.linspace(0.0, s[-1], n + 1)[1:]
             out += [np.array([np.interp(x, s, dense[:, j]) for j in range(dense.shape[1])]) for x in at]
         return np.array(out)
+
+    def joint_space_visuals(self) -> dict[str, np.ndarray]:
+        """The colliding region of Θ, by its boundary cells (joint values)."""
+        blocked = ~self.theta.free
+        inner = ndimage.binary_erosion(blocked, border_value=1)
+        return {"colliding_region": self.theta.lower + np.argwhere(blocked & ~inner) * self.theta.step}
 
     def run_metrics(self, trace) -> dict[str, float]:
         """Clearances of the executed motion: joint space (ρ) and the tool's, in metres, to the true obstacles."""

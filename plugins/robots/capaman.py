@@ -218,6 +218,13 @@ class CapamanRobot(Robot):
             raise ValueError(f"capaman: no assembly for cranks {np.degrees(q).round(2).tolist()} deg")
         return p[0], R[0]
 
+    def body_poses(self, body: str, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The movable plate's pose (its centre) for crank triples; other bodies are not predicted."""
+        if body != "plate":
+            return super().body_poses(body, qs)
+        p, R, _ = forward(self.geo, np.atleast_2d(qs))
+        return p, R
+
     def fk_batch(self, qs: np.ndarray) -> np.ndarray:
         p, R, _ = forward(self.geo, np.atleast_2d(qs))
         out = np.tile(np.eye(4), (len(p), 1, 1))

@@ -58,6 +58,10 @@ class AccelerometerArraySensor(Sensor):
         self.prefix = f"acc_{config.body}"
         self.errors: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered")}
         self.moving: list[bool] = []
+        self.times: list[float] = []
+        self.estimates: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered",
+                                                                       "a_true", "w_true")}
+        self.robot = context.robot
 
     def instruments(self) -> list[Instrument]:
         body = self.config.body
@@ -83,11 +87,53 @@ class AccelerometerArraySensor(Sensor):
                                 ("w_raw", w_raw, w_true), ("w_filtered", w_f, w_true)):
             self.errors[key].append(est - truth)
         self.moving.append(bool(np.linalg.norm(w_true) > MOVING_RAD_S))
+        self.times.append(t)
+        for key, est in (("a_raw", z_raw[:3]), ("a_filtered", z_f[:3]), ("w_raw", w_raw), ("w_filtered", w_f),
+                         ("a_true", a_true), ("w_true", w_true)):
+            self.estimates[key].append(est)
         return {"raw_readings": raw.ravel(), "filtered_readings": filtered.ravel(),
                 "acc_raw": z_raw[:3], "acc_filtered": z_f[:3], "acc_true": a_true,
                 "omega_raw": w_raw, "omega_filtered": w_f, "omega_true": w_true}
 
-    def run_metrics(self) -> dict[str, float]:
+    def report(self, metrics: dict[str, float]) -> str | None:
+        """The validation table: RMS errors of raw and filtered estimates against truth and the plan."""
+        if "accel_rms_raw_m_s2" not in metrics:
+            return None
+        rows = [("plate acceleration [m/s²]", "accel", "m_s2"), ("angular velocity [rad/s]", "omega", "rad_s")]
+        lines = [f"  {'RMS error of':28}{'raw':>9}{'filtered':>10}{'gain':>7}   against"]
+        for label, key, unit in rows:
+            first = True
+            for ref, suffix in (("vs MuJoCo truth", ""), ("  while moving", "_moving"), ("vs planned motion", None)):
+                if suffix is None:
+                    raw = metrics.get(f"{key}_rms_raw_vs_planned_{unit}")
+                    filt = metrics.get(f"{key}_rms_filtered_vs_planned_{unit}")
+                else:
+                    raw = metrics.get(f"{key}_rms_raw{suffix}_{unit}")
+                    filt = metrics.get(f"{key}_rms_filtered{suffix}_{unit}")
+                if raw is None or filt is None:
+                    continue
+                lines.append(f"  {label if first else '':28}{raw:9.4f}{filt:10.4f}{raw / filt:7.1f}   {ref}")
+                first = False
+        return "\n".join(lines)
+
+    def theory(self, trace) -> tuple[np.ndarray, np.ndarray] | None:
+        """Specific force and angular velocity (body frame) the *planned* motion implies at the sample times."""
+        try:
+            t = np.asarray(self.times)
+            k = np.clip(np.rint(t / (trace.t[1] - trace.t[0])).astype(int), 0, len(trace.t) - 1)
+            p, R = self.robot.body_poses(self.config.body, trace.q_ref[k])
+        except (NotImplementedError, IndexError):
+            return None
+        dt = 1.0 / self.rate_hz
+        acc = np.gradient(np.gradient(p, dt, axis=0), dt, axis=0)
+        gravity = self.robot.model.base_pose[:3, :3].T @ self.robot.model.gravity
+        force = np.einsum("nji,nj->ni", R, acc - gravity)  # Rᵀ (a − g): what a still accelerometer reads
+        dR = np.gradient(R, dt, axis=0)
+        W = np.einsum("nji,njk->nik", R, dR)  # Rᵀ Ṙ = [ω]×, body frame
+        omega = np.stack([W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], 1) / 2
+        return force, omega
+
+    def run_metrics(self, trace=None) -> dict[str, float]:
         if not self.errors["a_raw"]:
             return {}
         skip = min(len(self.errors["a_raw"]) // 10, int(self.rate_hz * 0.2))  # filters settling
@@ -104,6 +150,14 @@ class AccelerometerArraySensor(Sensor):
                 f"omega_rms_raw{suffix}_rad_s": rms["w_raw"], f"omega_rms_filtered{suffix}_rad_s": rms["w_filtered"],
                 f"omega_filter_gain{suffix}": rms["w_raw"] / max(rms["w_filtered"], 1e-12),
             }
+        planned = self.theory(trace) if trace is not None else None
+        if planned is not None:  # the paper's comparison: measured (raw, filtered) against the planned motion
+            keep = slice(skip, None)
+            for name, key, ref in (("accel", "a", planned[0]), ("omega", "w", planned[1])):
+                unit = "m_s2" if name == "accel" else "rad_s"
+                for kind in ("raw", "filtered", "true"):  # 'true': how far the executed motion was from the plan
+                    err = np.array(self.estimates[f"{key}_{kind}"])[keep] - ref[keep]
+                    out[f"{name}_rms_{kind}_vs_planned_{unit}"] = float(np.sqrt(np.mean(np.square(err))))
         return out
 
 

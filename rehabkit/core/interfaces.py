@@ -74,6 +74,14 @@ class Robot(ABC):
         base = self.model.base_pose
         return self.fk_batch(qs)[:, :3, 3] @ base[:3, :3].T + base[:3, 3]
 
+    def body_poses(self, body: str, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (N, 3) and rotations (N, 3, 3) of a body in the base frame for configurations ``qs``.
+
+        Robots that can predict where a body is (e.g. for comparing sensors with the
+        planned motion) implement this; the default cannot.
+        """
+        raise NotImplementedError(f"robot '{self.model.name}' does not predict the pose of '{body}'")
+
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio RNEA."""
         import pinocchio as pin
@@ -178,6 +186,10 @@ class Planner(ABC):
         """Point sets worth drawing once (robot base frame), e.g. a workspace; default none."""
         return {}
 
+    def joint_space_visuals(self) -> dict[str, np.ndarray]:
+        """Point sets in joint space [rad] worth drawing once (3-DoF robots), e.g. obstacles; default none."""
+        return {}
+
 
 class Controller(ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
@@ -233,9 +245,13 @@ class Sensor(ABC):
         (robot base frame, [m]); ``None`` when it sees nothing.
         """
 
-    def run_metrics(self) -> dict[str, float]:
-        """Figures about the whole run (e.g. estimation error); default none."""
+    def run_metrics(self, trace: Any = None) -> dict[str, float]:
+        """Figures about the whole run (e.g. estimation error), given the run's trace; default none."""
         return {}
+
+    def report(self, metrics: dict[str, float]) -> str | None:
+        """A short text report for people (printed by ``rehabkit run``, kept in summary.json); default none."""
+        return None
 
     def instruments(self) -> list[Instrument]:
         """Sensing elements to put in the simulated scene (read with ``backend.read_instrument``)."""

@@ -106,6 +106,13 @@ class RerunLog:
             self.rec.set_time(TIMELINE, duration=t)
         self.rec.log(path, rr.Points3D(positions_world, colors=[color], radii=radius), static=t is None)
 
+    def line(self, path: str, points: np.ndarray, color: tuple[int, int, int], radius: float,
+             t: float | None = None) -> None:
+        """A polyline: static when ``t`` is None, else at time ``t``."""
+        if t is not None:
+            self.rec.set_time(TIMELINE, duration=t)
+        self.rec.log(path, rr.LineStrips3D([points], colors=[color], radii=radius), static=t is None)
+
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)
         self.rec.log("events", rr.TextLog(text, level=level))

@@ -303,6 +303,8 @@ class Runner:
             trace.x[:k] = (trace.x[:k] - base[:3, 3]) @ base[:3, :3]
         if log:
             self._flush_log(k)
+            if self.robot.model.dof == 3 and k:
+                log.line("joint_space/executed", np.degrees(trace.q[:k:10]), (250, 180, 40), 0.3)
         return self._finish(trace.trimmed(k), wall, t_loop - t_setup, contact_steps)
 
     def _flush_log(self, upto: int) -> None:
@@ -393,6 +395,11 @@ class Runner:
             else:
                 path = self.robot.ee_world(x[:: self.schedule.log_every])
                 way_w = self.robot.ee_world(way) if way is not None else np.zeros((0, 3))
+                if model.dof == 3:
+                    self.log.line("joint_space/plan", np.degrees(x[:: self.schedule.log_every]), (60, 160, 255), 0.3,
+                                  k0 * dt)
+                    if way is not None:
+                        self.log.points("joint_space/task_points", np.degrees(way), (60, 160, 255), 1.0, k0 * dt)
             self.log.plan(k0 * dt, path, way_w)
 
     def _ee_world(self, q: np.ndarray) -> np.ndarray:
@@ -428,6 +435,9 @@ class Runner:
         log.targets(0.0, [n for n, _ in named], pts)
         for name, points in self.planner.visuals().items():
             log.points(f"world/planner/{name}", self._to_world(points), (120, 120, 200), 0.003)
+        if self.robot.model.dof == 3:  # a joint space one can look at: degrees on three axes
+            for name, points in self.planner.joint_space_visuals().items():
+                log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
         return log
 
     def _to_world(self, points: np.ndarray) -> np.ndarray:
@@ -444,7 +454,7 @@ class Runner:
         metrics.update(self.diag)
         metrics.update(self.planner.run_metrics(trace))
         for sensor in self.sensors.values():
-            metrics.update(sensor.run_metrics())
+            metrics.update(sensor.run_metrics(trace))
         metrics.update({
             "sim_time_s": sim_time, "wall_time_s": wall, "setup_time_s": setup,
             "real_time_factor": sim_time / wall if wall > 0 else float("inf"),
@@ -465,6 +475,7 @@ class Runner:
             "safety": {"tripped": self.safety.tripped, "events": [e.as_dict() for e in self.safety.events]},
             "events": self.fired,
             "plans": self.plans,
+            "reports": {name: text for name, s in self.sensors.items() if (text := s.report(metrics))},
         }
         if self.out_dir is not None:
             if log:
