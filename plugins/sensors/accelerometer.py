@@ -17,7 +17,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Backend, Context, Instrument, Sensor, SensorConfig
-from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank
+from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank, rts_smooth
 from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
 
 Vec3 = tuple[float, float, float]
@@ -30,8 +30,12 @@ class AccelerometerArrayConfig(SensorConfig):
 
     rate_hz: float = Field(500.0, gt=0)
     body: str = Field(description="robot or scene body the array is fixed to")
-    points: list[Vec3] = Field(TETRAHEDRON, min_length=4, description="mounting points, body frame [m]; "
-                               "not all in one plane (three under a plate and one on a short post)")
+    points: list[Vec3] = Field(
+        TETRAHEDRON,
+        min_length=4,
+        description="mounting points, body frame [m]; "
+        "not all in one plane (three under a plate and one on a short post)",
+    )
     noise_std: Vec3 = Field((0.5, 0.5, 0.5), description="σ_px, σ_py, σ_pz of each accelerometer [m/s²]")
     offset_std: float = Field(0.1, ge=0, description="spread of the constant offsets, known by calibration [m/s²]")
     mu_value: float = Field(0.01, gt=0, description="μ_m1 of the filter model [m/s²]")
@@ -50,69 +54,106 @@ class AccelerometerArraySensor(Sensor):
         self.offsets = self.rng.normal(0.0, config.offset_std, (len(config.points), 3))
         dt = 1.0 / config.rate_hz
         self.dt = dt
-        self.bank = KalmanBank(ConstantRateModel(dt, config.mu_value, config.mu_rate, tuple(config.noise_std)),
-                               len(config.points), adaptive=config.adaptive)
-        self.raw_cov = self.array.M_pinv @ np.diag(np.tile(np.square(config.noise_std), len(config.points))) \
-            @ self.array.M_pinv.T
+        self.bank = KalmanBank(
+            ConstantRateModel(dt, config.mu_value, config.mu_rate, tuple(config.noise_std)),
+            len(config.points),
+            adaptive=config.adaptive,
+        )
+        self.raw_cov = (
+            self.array.M_pinv @ np.diag(np.tile(np.square(config.noise_std), len(config.points))) @ self.array.M_pinv.T
+        )
         self.ekf = AngularVelocityEKF()
         self.prefix = f"acc_{config.body}"
         self.errors: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered")}
         self.moving: list[bool] = []
         self.times: list[float] = []
-        self.estimates: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered",
-                                                                       "a_true", "w_true")}
+        self.estimates: dict[str, list[np.ndarray]] = {
+            k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered", "a_true", "w_true")
+        }
         self.robot = context.robot
+        self.model = ConstantRateModel(dt, config.mu_value, config.mu_rate, tuple(config.noise_std))
+        self.recording: list[np.ndarray] = []  # raw readings, for the offline (smoothed) validation
+        self.variances: list[np.ndarray] = []
 
     def instruments(self) -> list[Instrument]:
         body = self.config.body
         items = [Instrument(f"{self.prefix}_{i}", "accelerometer", body, p) for i, p in enumerate(self.config.points)]
-        return items + [Instrument(f"{self.prefix}_true_acc", "accelerometer", body, (0.0, 0.0, 0.0)),
-                        Instrument(f"{self.prefix}_true_gyro", "gyro", body, (0.0, 0.0, 0.0))]
+        return items + [
+            Instrument(f"{self.prefix}_true_acc", "accelerometer", body, (0.0, 0.0, 0.0)),
+            Instrument(f"{self.prefix}_true_gyro", "gyro", body, (0.0, 0.0, 0.0)),
+        ]
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
         n = len(self.config.points)
         true = np.array([backend.read_instrument(f"{self.prefix}_{i}") for i in range(n)])
         raw = true + self.offsets + self.rng.normal(0.0, 1.0, true.shape) * np.asarray(self.config.noise_std)
         filtered = self.bank.step(raw)
-        var = self.bank.P[:, 0::2, 0::2].diagonal(axis1=1, axis2=2) if self.bank.started else \
-            np.tile(np.square(self.config.noise_std), (n, 1))
+        var = (
+            self.bank.P[:, 0::2, 0::2].diagonal(axis1=1, axis2=2)
+            if self.bank.started
+            else np.tile(np.square(self.config.noise_std), (n, 1))
+        )
         z_raw = self.raw_array.solve(raw, self.offsets)
         z_f = self.array.solve(filtered, self.offsets)
         cov_f = self.array.M_pinv @ np.diag(var.ravel()) @ self.array.M_pinv.T
+        self.recording.append(raw)
+        self.variances.append(var.ravel())
         w_raw = self.raw_array.omega(z_raw, self.dt)
         w_f = self.ekf.step(z_f, cov_f, self.dt)
         a_true = backend.read_instrument(f"{self.prefix}_true_acc")
         w_true = backend.read_instrument(f"{self.prefix}_true_gyro")
-        for key, est, truth in (("a_raw", z_raw[:3], a_true), ("a_filtered", z_f[:3], a_true),
-                                ("w_raw", w_raw, w_true), ("w_filtered", w_f, w_true)):
+        for key, est, truth in (
+            ("a_raw", z_raw[:3], a_true),
+            ("a_filtered", z_f[:3], a_true),
+            ("w_raw", w_raw, w_true),
+            ("w_filtered", w_f, w_true),
+        ):
             self.errors[key].append(est - truth)
         self.moving.append(bool(np.linalg.norm(w_true) > MOVING_RAD_S))
         self.times.append(t)
-        for key, est in (("a_raw", z_raw[:3]), ("a_filtered", z_f[:3]), ("w_raw", w_raw), ("w_filtered", w_f),
-                         ("a_true", a_true), ("w_true", w_true)):
+        for key, est in (
+            ("a_raw", z_raw[:3]),
+            ("a_filtered", z_f[:3]),
+            ("w_raw", w_raw),
+            ("w_filtered", w_f),
+            ("a_true", a_true),
+            ("w_true", w_true),
+        ):
             self.estimates[key].append(est)
-        return {"raw_readings": raw.ravel(), "filtered_readings": filtered.ravel(),
-                "acc_raw": z_raw[:3], "acc_filtered": z_f[:3], "acc_true": a_true,
-                "omega_raw": w_raw, "omega_filtered": w_f, "omega_true": w_true}
+        return {
+            "raw_readings": raw.ravel(),
+            "filtered_readings": filtered.ravel(),
+            "acc_raw": z_raw[:3],
+            "acc_filtered": z_f[:3],
+            "acc_true": a_true,
+            "omega_raw": w_raw,
+            "omega_filtered": w_f,
+            "omega_true": w_true,
+        }
 
     def report(self, metrics: dict[str, float]) -> str | None:
         """The validation table: RMS errors of raw and filtered estimates against truth and the plan."""
         if "accel_rms_raw_m_s2" not in metrics:
             return None
         rows = [("plate acceleration [m/s²]", "accel", "m_s2"), ("angular velocity [rad/s]", "omega", "rad_s")]
-        lines = [f"  {'RMS error of':28}{'raw':>9}{'filtered':>10}{'gain':>7}   against"]
+        lines = [f"  {'RMS error of':28}{'raw':>9}{'filtered':>10}{'gain':>7}{'smoothed':>10}{'gain':>7}   against"]
         for label, key, unit in rows:
             first = True
             for ref, suffix in (("vs MuJoCo truth", ""), ("  while moving", "_moving"), ("vs planned motion", None)):
                 if suffix is None:
-                    raw = metrics.get(f"{key}_rms_raw_vs_planned_{unit}")
-                    filt = metrics.get(f"{key}_rms_filtered_vs_planned_{unit}")
+                    raw, filt, smooth = (
+                        metrics.get(f"{key}_rms_{k}_vs_planned_{unit}") for k in ("raw", "filtered", "smoothed")
+                    )
                 else:
-                    raw = metrics.get(f"{key}_rms_raw{suffix}_{unit}")
-                    filt = metrics.get(f"{key}_rms_filtered{suffix}_{unit}")
-                if raw is None or filt is None:
+                    raw, filt, smooth = (
+                        metrics.get(f"{key}_rms_{k}{suffix}_{unit}") for k in ("raw", "filtered", "smoothed")
+                    )
+                if raw is None or filt is None or smooth is None:
                     continue
-                lines.append(f"  {label if first else '':28}{raw:9.4f}{filt:10.4f}{raw / filt:7.1f}   {ref}")
+                lines.append(
+                    f"  {label if first else '':28}{raw:9.4f}{filt:10.4f}{raw / filt:7.1f}"
+                    f"{smooth:10.4f}{raw / smooth:7.1f}   {ref}"
+                )
                 first = False
         return "\n".join(lines)
 
@@ -133,9 +174,22 @@ class AccelerometerArraySensor(Sensor):
         omega = np.stack([W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], 1) / 2
         return force, omega
 
+    def smoothed(self) -> tuple[np.ndarray, np.ndarray]:
+        """Offline estimates (RTS-smoothed readings → a, and ω by the EKF) for every sample."""
+        readings = rts_smooth(self.model, np.array(self.recording), self.config.adaptive)
+        z = (readings.reshape(len(readings), -1) - self.offsets.ravel()) @ self.array.M_pinv.T
+        ekf, omega = AngularVelocityEKF(), []
+        for zk, var in zip(z, self.variances):
+            omega.append(ekf.step(zk, self.array.M_pinv @ np.diag(var) @ self.array.M_pinv.T, self.dt))
+        return z[:, :3], np.array(omega)
+
     def run_metrics(self, trace=None) -> dict[str, float]:
         if not self.errors["a_raw"]:
             return {}
+        a_s, w_s = self.smoothed()
+        self.estimates["a_smoothed"], self.estimates["w_smoothed"] = list(a_s), list(w_s)
+        self.errors["a_smoothed"] = list(a_s - np.array(self.estimates["a_true"]))
+        self.errors["w_smoothed"] = list(w_s - np.array(self.estimates["w_true"]))
         skip = min(len(self.errors["a_raw"]) // 10, int(self.rate_hz * 0.2))  # filters settling
         out: dict[str, float] = {}
         moving = np.array(self.moving)
@@ -145,19 +199,30 @@ class AccelerometerArraySensor(Sensor):
                 continue
             rms = {k: float(np.sqrt(np.mean(np.square(np.array(v)[keep])))) for k, v in self.errors.items()}
             out |= {
-                f"accel_rms_raw{suffix}_m_s2": rms["a_raw"], f"accel_rms_filtered{suffix}_m_s2": rms["a_filtered"],
+                f"accel_rms_raw{suffix}_m_s2": rms["a_raw"],
+                f"accel_rms_filtered{suffix}_m_s2": rms["a_filtered"],
                 f"accel_filter_gain{suffix}": rms["a_raw"] / max(rms["a_filtered"], 1e-12),
-                f"omega_rms_raw{suffix}_rad_s": rms["w_raw"], f"omega_rms_filtered{suffix}_rad_s": rms["w_filtered"],
+                f"omega_rms_raw{suffix}_rad_s": rms["w_raw"],
+                f"omega_rms_filtered{suffix}_rad_s": rms["w_filtered"],
                 f"omega_filter_gain{suffix}": rms["w_raw"] / max(rms["w_filtered"], 1e-12),
+                f"accel_rms_smoothed{suffix}_m_s2": rms["a_smoothed"],
+                f"omega_rms_smoothed{suffix}_rad_s": rms["w_smoothed"],
+                f"accel_smoother_gain{suffix}": rms["a_raw"] / max(rms["a_smoothed"], 1e-12),
+                f"omega_smoother_gain{suffix}": rms["w_raw"] / max(rms["w_smoothed"], 1e-12),
             }
         planned = self.theory(trace) if trace is not None else None
         if planned is not None:  # the paper's comparison: measured (raw, filtered) against the planned motion
             keep = slice(skip, None)
             for name, key, ref in (("accel", "a", planned[0]), ("omega", "w", planned[1])):
                 unit = "m_s2" if name == "accel" else "rad_s"
-                for kind in ("raw", "filtered", "true"):  # 'true': how far the executed motion was from the plan
+                for kind in ("raw", "filtered", "smoothed", "true"):  # 'true': how far the run was from the plan
                     err = np.array(self.estimates[f"{key}_{kind}"])[keep] - ref[keep]
                     out[f"{name}_rms_{kind}_vs_planned_{unit}"] = float(np.sqrt(np.mean(np.square(err))))
+                raw = out[f"{name}_rms_raw_vs_planned_{unit}"]
+                out[f"{name}_filter_gain_vs_planned"] = raw / max(out[f"{name}_rms_filtered_vs_planned_{unit}"], 1e-12)
+                out[f"{name}_smoother_gain_vs_planned"] = raw / max(
+                    out[f"{name}_rms_smoothed_vs_planned_{unit}"], 1e-12
+                )
         return out
 
 

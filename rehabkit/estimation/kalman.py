@@ -87,3 +87,30 @@ class KalmanBank:
         self.P = P - K @ C @ P
         self.x = x
         return x @ C.T
+
+
+def rts_smooth(model: ConstantRateModel, z: np.ndarray, adaptive: bool = False) -> np.ndarray:
+    """Offline Rauch–Tung–Striebel smoothing of a recording (T, count, axes) with the same model.
+
+    The forward pass is the filter above; the backward pass corrects each
+    estimate with everything measured after it, x_s(k) = x(k) + G (x_s(k+1) − x⁻(k+1)),
+    G = P(k) Aᵀ P⁻(k+1)⁻¹. For validating recorded runs, as the paper does, not for control.
+    """
+    bank = KalmanBank(model, z.shape[1], adaptive=adaptive)
+    A = bank.A
+    xs, Ps, xp, Pp = [], [], [], []
+    for k, zk in enumerate(z):
+        if k:
+            scale = np.exp(bank.log_scale)[:, None, None] if adaptive else 1.0
+            xp.append(bank.x @ A.T)
+            Pp.append(A @ bank.P @ A.T + scale * bank.Q)
+        bank.step(zk)
+        xs.append(bank.x.copy())
+        Ps.append(bank.P.copy())
+    x_s = xs[-1]
+    out = [x_s @ bank.C.T]
+    for k in range(len(z) - 2, -1, -1):
+        G = Ps[k] @ A.T @ np.linalg.inv(Pp[k])
+        x_s = xs[k] + np.einsum("nij,nj->ni", G, x_s - xp[k])
+        out.append(x_s @ bank.C.T)
+    return np.array(out[::-1])
