@@ -58,6 +58,18 @@ def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
     spec.modelname = "capaman"
     spec.compiler.degree = False
     geom = dict(contype=ROBOT_CONTYPE, conaffinity=ROBOT_CONAFFINITY)
+
+    def rod(body, name: str, start, end, mass: float, rgba, radius: float = 0.007) -> None:
+        body.add_geom(
+            name=name,
+            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+            fromto=[*start, *end],
+            size=[radius, 0, 0],
+            mass=mass,
+            rgba=rgba,
+            **geom,
+        )
+
     base = spec.worldbody.add_body(name="base")
     base.add_geom(
         name="fixed_plate",
@@ -68,62 +80,33 @@ def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
         **geom,
     )
     z = np.array([0.0, 0.0, 1.0])
-    links = {}
+    along, up = [0.0, 0.0, 0.0], [geo.b, 0.0, 0.0]
+    sliders = []
     for k in range(3):
+        n = k + 1
         t, o = geo.tangent[k], geo.centres[k]
         leg = matrix_to_quat_wxyz(_frame(t, z))  # x along the frame link, y up, z = e (normal to the leg plane)
         p1, p2 = o - 0.5 * geo.a * t, o + 0.5 * geo.a * t
-        base.add_geom(
-            name=f"frame_{k + 1}",
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[*p1, *p2],
-            size=[0.008, 0, 0],
-            rgba=GREY,
-            **geom,
-        )
-        crank = base.add_body(name=f"crank_{k + 1}", pos=p1, quat=leg)
+        rod(base, f"frame_{n}", p1, p2, 0.0, GREY, radius=0.008)
+        crank = base.add_body(name=f"crank_{n}", pos=p1, quat=leg)
         crank.add_joint(
-            name=f"alpha_{k + 1}",
+            name=f"alpha_{n}",
             axis=[0, 0, 1],
             range=np.radians(cfg.crank_range_deg),
             limited=mujoco.mjtLimited.mjLIMITED_TRUE,
             armature=0.02,
             damping=0.05,
         )
-        crank.add_geom(
-            name=f"crank_{k + 1}",
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[0, 0, 0, geo.b, 0, 0],
-            size=[0.007, 0, 0],
-            mass=MASS["crank"],
-            rgba=ORANGE,
-            **geom,
-        )
-        coupler = crank.add_body(name=f"coupler_{k + 1}", pos=[geo.b, 0, 0])
-        coupler.add_joint(name=f"coupler_{k + 1}", axis=[0, 0, 1])
-        coupler.add_geom(
-            name=f"coupler_{k + 1}",
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[0, 0, 0, geo.a, 0, 0],
-            size=[0.007, 0, 0],
-            mass=MASS["coupler"],
-            rgba=BLUE,
-            **geom,
-        )
-        coupler.add_geom(
-            name=f"bar_{k + 1}",
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[geo.a / 2, 0, 0, geo.a / 2, geo.h, 0],
-            size=[0.007, 0, 0],
-            mass=MASS["bar"],
-            rgba=BLUE,
-            **geom,
-        )
-        coupler.add_site(name=f"coupler_end_{k + 1}", pos=[geo.a, 0, 0], size=[0.004, 0, 0])
-        slider = coupler.add_body(name=f"slider_{k + 1}", pos=[geo.a / 2, geo.h, 0])
-        slider.add_joint(name=f"slide_{k + 1}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+        rod(crank, f"crank_{n}", along, up, MASS["crank"], ORANGE)
+        coupler = crank.add_body(name=f"coupler_{n}", pos=[geo.b, 0, 0])
+        coupler.add_joint(name=f"coupler_{n}", axis=[0, 0, 1])
+        rod(coupler, f"coupler_{n}", along, [geo.a, 0, 0], MASS["coupler"], BLUE)
+        rod(coupler, f"bar_{n}", [geo.a / 2, 0, 0], [geo.a / 2, geo.h, 0], MASS["bar"], BLUE)
+        coupler.add_site(name=f"coupler_end_{n}", pos=[geo.a, 0, 0], size=[0.004, 0, 0])
+        slider = coupler.add_body(name=f"slider_{n}", pos=[geo.a / 2, geo.h, 0])
+        slider.add_joint(name=f"slide_{n}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
         slider.add_geom(
-            name=f"slider_{k + 1}",
+            name=f"slider_{n}",
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=[0.01, 0.01, 0.015],
             mass=MASS["slider"],
@@ -131,26 +114,16 @@ def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
             contype=0,
             conaffinity=0,
         )
-        slider.add_site(name=f"slider_{k + 1}", size=[0.004, 0, 0])
-        follower = base.add_body(name=f"follower_{k + 1}", pos=p2, quat=leg)
-        follower.add_joint(name=f"follower_{k + 1}", axis=[0, 0, 1])
-        follower.add_geom(
-            name=f"follower_{k + 1}",
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-            fromto=[0, 0, 0, geo.b, 0, 0],
-            size=[0.007, 0, 0],
-            mass=MASS["follower"],
-            rgba=ORANGE,
-            **geom,
-        )
-        follower.add_site(name=f"follower_tip_{k + 1}", pos=[geo.b, 0, 0], size=[0.004, 0, 0])
-        links[k] = (slider, leg)
+        slider.add_site(name=f"slider_{n}", size=[0.004, 0, 0])
+        follower = base.add_body(name=f"follower_{n}", pos=p2, quat=leg)
+        follower.add_joint(name=f"follower_{n}", axis=[0, 0, 1])
+        rod(follower, f"follower_{n}", along, up, MASS["follower"], ORANGE)
+        follower.add_site(name=f"follower_tip_{n}", pos=up, size=[0.004, 0, 0])
+        sliders.append(slider)
     # the plate: origin at its centre, hanging from slider 1 by a ball joint at H_1; level at identity
-    slider1, leg1 = links[0]
     c = geo.plate_points
-    plate = slider1.add_body(
-        name="plate", pos=_frame(geo.tangent[0], z).T @ (-c[0]), quat=matrix_to_quat_wxyz(_frame(geo.tangent[0], z).T)
-    )
+    in_leg1 = _frame(geo.tangent[0], z).T
+    plate = sliders[0].add_body(name="plate", pos=in_leg1 @ (-c[0]), quat=matrix_to_quat_wxyz(in_leg1))
     plate.add_joint(name="plate_ball", type=mujoco.mjtJoint.mjJNT_BALL, pos=c[0])
     plate.add_geom(
         name="movable_plate",
@@ -161,15 +134,7 @@ def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
         **geom,
     )
     tip = np.asarray(cfg.tool)
-    plate.add_geom(
-        name="tool",
-        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-        fromto=[0, 0, 0.006, *tip],
-        size=[cfg.tool_radius, 0, 0],
-        mass=MASS["tool"],
-        rgba=[0.2, 0.8, 0.3, 1],
-        **geom,
-    )
+    rod(plate, "tool", [0, 0, 0.006], tip, MASS["tool"], [0.2, 0.8, 0.3, 1], radius=cfg.tool_radius)
     plate.add_site(name="tool_tip", pos=tip, size=[0.006, 0, 0])
     for k in (1, 2):
         plate.add_site(name=f"plate_joint_{k + 1}", pos=c[k], size=[0.004, 0, 0])
