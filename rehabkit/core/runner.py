@@ -18,45 +18,18 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-import rehabkit
 from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest, Target
 from rehabkit.core.io import atomic_write_json
 from rehabkit.core.log import RerunLog
-from rehabkit.core.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
+from rehabkit.core.metrics import Trace
 from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
+from rehabkit.core.results import RunResult, build_summary, collect_metrics
 from rehabkit.core.safety import SafetyLayer
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.targets import resolve_targets
 
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
 LOG_FLUSH_SAMPLES = 500  # log-rate samples buffered between column sends
-
-
-@dataclass
-class RunResult:
-    """What a run produced.
-
-    Attributes:
-        summary: The content of ``summary.json``.
-        trace: Control-rate arrays of the run.
-        out_dir: Where files were written (``None`` when nothing was written).
-    """
-
-    summary: dict[str, Any]
-    trace: Trace
-    out_dir: Path | None
-
-    @property
-    def passed(self) -> bool:
-        return bool(self.summary["passed"])
-
-    @property
-    def metrics(self) -> dict[str, float]:
-        return self.summary["metrics"]
-
-    @property
-    def failures(self) -> list[dict]:
-        return [e for e in self.summary["expectations"] if not e["passed"]]
 
 
 class SetupError(RuntimeError):
@@ -445,57 +418,16 @@ class Runner:
         return np.asarray(points, float).reshape(-1, 3) @ base[:3, :3].T + base[:3, 3]
 
     def _finish(self, trace: Trace, wall: float, setup: float, contact_steps: int) -> RunResult:
-        sc, log = self.sc, self.log
-        sim_time = len(trace.t) * self.schedule.control_dt
-        cart = self.planner.space == "cartesian"
-        metrics, per_joint = tracking_metrics(trace, self.robot, None if cart else self.goal)
-        if cart:
-            metrics.update(cartesian_metrics(trace))
-        metrics.update(self.diag)
-        metrics.update(self.planner.run_metrics(trace))
-        for sensor in self.sensors.values():
-            metrics.update(sensor.run_metrics(trace))
-        metrics.update({
-            "sim_time_s": sim_time, "wall_time_s": wall, "setup_time_s": setup,
-            "real_time_factor": sim_time / wall if wall > 0 else float("inf"),
-            "contact_steps": contact_steps, "safety_events": len(self.safety.events),
-            "torque_saturation_steps": self.safety.saturated_steps,
-        })
-        for ev in self.safety.events:
-            if log:
-                log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level="ERROR")
-        verdicts = evaluate(sc.expect, metrics)
-        summary = {
-            "scenario": str(self.loaded.path), "name": sc.name or self.loaded.path.stem,
-            "rehabkit_version": rehabkit.__version__, "seed": sc.seed,
-            "plugins": self._plugin_versions(),
-            "passed": all(v["passed"] for v in verdicts) and not self._unexpected_trip(),
-            "sim_time_s": sim_time, "wall_time_s": wall, "real_time_factor": metrics["real_time_factor"],
-            "metrics": metrics, "per_joint": per_joint, "expectations": verdicts,
-            "safety": {"tripped": self.safety.tripped, "events": [e.as_dict() for e in self.safety.events]},
-            "events": self.fired,
-            "plans": self.plans,
-            "reports": {name: text for name, s in self.sensors.items() if (text := s.report(metrics))},
-        }
+        """Metrics, verdicts, the summary; the log and summary written whole."""
+        metrics, per_joint = collect_metrics(self, trace, wall, setup, contact_steps)
+        if self.log:
+            for ev in self.safety.events:
+                self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level="ERROR")
+        summary = build_summary(self, metrics, per_joint)
         if self.out_dir is not None:
-            if log:
-                log.close()
+            if self.log:
+                self.log.close()
                 summary["outputs"] = {"rrd": "run.rrd"}
             atomic_write_json(self.out_dir / "summary.json", summary)
         self.backend.close()
         return RunResult(summary, trace, self.out_dir)
-
-    def _unexpected_trip(self) -> bool:
-        """A safety stop fails the run unless the scenario's expectations are about safety events."""
-        return self.safety.tripped and "safety_events" not in self.sc.expect
-
-    def _plugin_versions(self) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        sc = self.sc
-        for kind, cfg in (("robot", sc.robot), ("backend", sc.backend), ("planner", sc.planner),
-                          ("controller", sc.controller)):
-            p = self.registry.get(kind, cfg.type).provider
-            out[kind] = {"type": cfg.type, "package": p.package, "version": p.version}
-        out["sensors"] = {n: {"type": c.type, **vars(self.registry.get("sensor", c.type).provider)}
-                          for n, c in sc.sensors.items()}
-        return out
