@@ -1,0 +1,1 @@
+"""Solid primitives with exact segment tests, and the deterministic box-avoid path planner."""

@@ -1,0 +1,219 @@
+"""Deterministic end-effector path around obstacles, over their box faces.
+
+The method of the ARM record-and-replay planner: for the first obstacle the straight
+segment enters, work in the box frame, take the entry and exit points, project each on
+the four edges of its face, and keep the shortest path entry → edge point(s) → exit whose
+consecutive points share a face; transform back. Every new segment is planned the same
+way, so the cost grows with the number of obstacles actually met.
+
+Cylinders and spheres are planned over their oriented bounding boxes (the paper's
+suggested extension); the returned path is still checked against the true solids.
+
+The paper reports wrong paths around overlapping obstacles: a detour over one box can run
+into its neighbour, and the neighbour's detour back into the first. Here, when a box's
+detours cannot be completed, it is merged with every box it overlaps into one enclosing
+box and planning restarts; there are at most n − 1 merges. A path is returned only after
+an exact segment-versus-solid check of every segment against every (margin-inflated)
+obstacle; otherwise :class:`NoPathError` says why.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.geometry.solids import Box, Solid, _slab_interval, path_hits
+
+
+class NoPathError(RuntimeError):
+    """No collision-free path exists, or none is found by the deterministic method."""
+
+
+@dataclass(frozen=True)
+class AvoidResult:
+    path: np.ndarray  # (N, 3) polyline from start to goal
+    merges: int  # how many times overlapping boxes were merged
+    boxes: list[Box]  # the boxes the final path was planned over (after merges)
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(np.diff(self.path, axis=0), axis=1).sum())
+
+
+class _BlockedError(Exception):
+    def __init__(self, index: int) -> None:
+        self.index = index
+
+
+def _face_of(local: np.ndarray, half: np.ndarray) -> tuple[int, float]:
+    k = int(np.argmax(np.abs(local) / half))
+    return k, float(np.sign(local[k]) or 1.0)
+
+
+Face = tuple[int, float]  # (axis, sign) in the box frame
+
+
+def _edge_points(p: np.ndarray, face: Face, half: np.ndarray) -> list[tuple[np.ndarray, Face]]:
+    """Projections of a face point on the four edges of its face, with the other face of each edge."""
+    out = []
+    for j in range(3):
+        if j == face[0]:
+            continue
+        for s in (-1.0, 1.0):
+            q = p.copy()
+            q[j] = s * half[j]
+            out.append((q, (j, s)))
+    return out
+
+
+def _on_faces(p: np.ndarray, half: np.ndarray) -> set[tuple[int, float]]:
+    tol = 1e-9 * max(1.0, float(half.max()))
+    return {(k, s) for k in range(3) for s in (-1.0, 1.0) if abs(p[k] - s * half[k]) <= tol}
+
+
+def surface_candidates(box: Box, a: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
+    """Detours over the faces of ``box`` for segment a→b, shortest first, in world frame.
+
+    Each candidate is the list of surface points [p_in, ..., p_out] (without a and b).
+    Empty when the segment misses the box.
+    """
+    la, lb = box.to_local(a), box.to_local(b)
+    interval = _slab_interval(la, lb, box.half)
+    if interval is None:
+        return []
+    t_in, t_out = interval
+    d = lb - la
+    ends = []
+    for t in (t_in, t_out):
+        p = la + t * d
+        face = _face_of(p, box.half)
+        p[face[0]] = face[1] * box.half[face[0]]  # an endpoint inside the box is pushed to its nearest face
+        ends.append((p, face))
+    (p_in, f_in), (p_out, f_out) = ends
+    paths: list[list[np.ndarray]] = []
+    if f_in == f_out:
+        paths.append([p_in, p_out])
+    a_pts, b_pts = _edge_points(p_in, f_in, box.half), _edge_points(p_out, f_out, box.half)
+    for q, _ in a_pts:
+        if f_out in _on_faces(q, box.half):
+            paths.append([p_in, q, p_out])
+    for (qa, _), (qb, _) in itertools.product(a_pts, b_pts):
+        if _on_faces(qa, box.half) & _on_faces(qb, box.half):
+            paths.append([p_in, qa, qb, p_out])
+    paths.sort(key=lambda pts: sum(float(np.linalg.norm(pts[i + 1] - pts[i])) for i in range(len(pts) - 1)))
+    return [box.to_world(np.array(pts)) for pts in paths]
+
+
+def _corners_overlap(a: Box, b: Box) -> bool:
+    """Separating-axis test for two oriented boxes (closed)."""
+    axes = [a.rotation[:, i] for i in range(3)] + [b.rotation[:, i] for i in range(3)]
+    axes += [np.cross(a.rotation[:, i], b.rotation[:, j]) for i in range(3) for j in range(3)]
+    ca, cb = a.corners(), b.corners()
+    for ax in axes:
+        n = np.linalg.norm(ax)
+        if n < 1e-12:
+            continue
+        pa, pb = ca @ ax, cb @ ax
+        if pa.max() < pb.min() or pb.max() < pa.min():
+            return False
+    return True
+
+
+def _enclosing(boxes: list[Box], frame: Box, name: str) -> Box:
+    pts = np.vstack([frame.to_local(b.corners()) for b in boxes])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    return Box(frame.to_world((lo + hi) / 2), (hi - lo) / 2, frame.rotation, name)
+
+
+class _Router:
+    def __init__(self, plan_boxes: list[Box], clearance: float) -> None:
+        self.plan = plan_boxes
+        # segments lying on a plan box's faces must not count as entering it
+        self.hit = [Box(b.center, b.half - clearance / 2, b.rotation, b.name) for b in plan_boxes]
+        self.budget = 40 * len(plan_boxes) + 40
+
+    def first_hit(self, a: np.ndarray, b: np.ndarray) -> int | None:
+        best, best_t = None, np.inf
+        for i, box in enumerate(self.hit):
+            iv = box.segment_interval(a, b)
+            if iv is not None and iv[0] < best_t:
+                best, best_t = i, iv[0]
+        return best
+
+    def route(self, a: np.ndarray, b: np.ndarray, depth: int) -> list[np.ndarray]:
+        i = self.first_hit(a, b)
+        if i is None:
+            return [a, b]
+        self.budget -= 1
+        if self.budget < 0 or depth > len(self.plan) + 2:
+            raise _BlockedError(i)
+        blamed = i
+        for cand in surface_candidates(self.plan[i], a, b):
+            if any(h.contains(p) for h in self.hit for p in cand):
+                continue
+            pts = [a, *cand, b]
+            try:
+                out = [a]
+                for p, q in zip(pts[:-1], pts[1:], strict=True):
+                    out.extend(self.route(p, q, depth + 1)[1:])
+                return out
+            except _BlockedError as err:
+                blamed = err.index if err.index != i else blamed
+                if self.budget < 0:
+                    break
+        raise _BlockedError(i if blamed == i else blamed)
+
+
+def plan_path(
+    start: np.ndarray,
+    goal: np.ndarray,
+    obstacles: list[Solid],
+    margin: float = 0.0,
+    clearance: float = 0.005,
+) -> AvoidResult:
+    """Collision-free polyline from ``start`` to ``goal`` around ``obstacles``.
+
+    ``margin`` inflates every obstacle (gripper size); ``clearance`` (m) is the extra gap
+    the faces are planned at, so the path never grazes an inflated obstacle.
+    Raises :class:`NoPathError` when start or goal lies inside an inflated obstacle or no
+    path is found.
+    """
+    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    check = [o.inflated(margin) for o in obstacles]
+    for label, p in (("start", start), ("goal", goal)):
+        for o in check:
+            if o.contains(p):
+                raise NoPathError(
+                    f"{label} {np.round(p, 4).tolist()} lies inside obstacle {o.name!r} (margin {margin} m)"
+                )
+    boxes = [o.inflated(margin + clearance).bounding_box() for o in obstacles]
+    merges = 0
+    while True:
+        router = _Router(boxes, clearance)
+        try:
+            path = np.array(router.route(start, goal, 0))
+            break
+        except _BlockedError as err:
+            i = err.index
+            group = [j for j in range(len(boxes)) if j != i and _corners_overlap(boxes[i], boxes[j])]
+            if not group:
+                raise NoPathError(
+                    f"no path around obstacle {boxes[i].name!r}: its face detours are blocked "
+                    "and it overlaps nothing to merge with"
+                ) from None
+            members = [boxes[i]] + [boxes[j] for j in group]
+            merged = _enclosing(members, boxes[i], "+".join(b.name for b in members))
+            inner = Box(merged.center, merged.half - clearance / 2, merged.rotation)
+            for label, p in (("start", start), ("goal", goal)):
+                if inner.contains(p):
+                    raise NoPathError(
+                        f"{label} lies inside the merged hull of overlapping obstacles {merged.name!r}"
+                    ) from None
+            boxes = [b for j, b in enumerate(boxes) if j != i and j not in group] + [merged]
+            merges += 1
+    for o in check:
+        if path_hits(path, o):
+            raise NoPathError(f"internal check: planned path touches obstacle {o.name!r}; refusing to return it")
+    return AvoidResult(path=path, merges=merges, boxes=boxes)
