@@ -133,14 +133,33 @@ class _Router:
         # segments lying on a plan box's faces must not count as entering it
         self.hit = [Box(b.center, b.half - clearance / 2, b.rotation, b.name) for b in plan_boxes]
         self.budget = 40 * len(plan_boxes) + 40
+        self._pack()
+
+    def _pack(self) -> None:
+        self._c = np.array([b.center for b in self.hit])
+        self._r = np.array([b.rotation for b in self.hit])
+        self._h = np.array([b.half for b in self.hit])
 
     def first_hit(self, a: np.ndarray, b: np.ndarray) -> int | None:
-        best, best_t = None, np.inf
-        for i, box in enumerate(self.hit):
-            iv = box.segment_interval(a, b)
-            if iv is not None and iv[0] < best_t:
-                best, best_t = i, iv[0]
-        return best
+        """Index of the hit box the segment a→b enters first (all boxes' slab tests at once)."""
+        la = np.einsum("nij,ni->nj", self._r, a - self._c)
+        d = np.einsum("nij,i->nj", self._r, b - a)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (-self._h - la) / d
+            t2 = (self._h - la) / d
+        parallel = np.abs(d) < 1e-15
+        lo = np.where(parallel, np.where(np.abs(la) <= self._h, -np.inf, np.inf), np.minimum(t1, t2))
+        hi = np.where(parallel, np.where(np.abs(la) <= self._h, np.inf, -np.inf), np.maximum(t1, t2))
+        t_in = np.maximum(lo.max(axis=1), 0.0)
+        t_out = np.minimum(hi.min(axis=1), 1.0)
+        hits = np.flatnonzero(t_in <= t_out)
+        if hits.size == 0:
+            return None
+        return int(hits[np.argmin(t_in[hits])])
+
+    def inside_any(self, pts: np.ndarray) -> bool:
+        local = np.einsum("nij,kni->knj", self._r, pts[:, None, :] - self._c[None])
+        return bool(np.any(np.all(np.abs(local) <= self._h[None], axis=2)))
 
     def route(self, a: np.ndarray, b: np.ndarray, depth: int) -> list[np.ndarray]:
         i = self.first_hit(a, b)
@@ -151,7 +170,7 @@ class _Router:
             raise _BlockedError(i)
         blamed = i
         for cand in surface_candidates(self.plan[i], a, b):
-            if any(h.contains(p) for h in self.hit for p in cand):
+            if self.inside_any(cand):
                 continue
             pts = [a, *cand, b]
             try:

@@ -15,7 +15,7 @@ def _rotation(axes: np.ndarray | None) -> np.ndarray:
     if axes is None:
         return np.eye(3)
     rot = np.asarray(axes, dtype=float).reshape(3, 3)
-    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-9):
+    if float(np.abs(rot.T @ rot - np.eye(3)).max()) > 1e-9:
         raise ValueError("obstacle axes must form an orthonormal rotation matrix (columns = box axes)")
     return rot
 
@@ -33,7 +33,7 @@ class Box:
         object.__setattr__(self, "center", np.asarray(self.center, dtype=float).reshape(3))
         object.__setattr__(self, "half", np.asarray(self.half, dtype=float).reshape(3))
         object.__setattr__(self, "rotation", _rotation(self.rotation))
-        if np.any(self.half <= 0):
+        if self.half.min() <= 0:
             raise ValueError(f"box {self.name!r}: half extents must be positive, got {self.half.tolist()}")
 
     def to_local(self, p: np.ndarray) -> np.ndarray:
