@@ -49,6 +49,16 @@ def test_start_inside_an_obstacle_is_an_explicit_failure():
         plan_path([0, 0, 0], [1, 0, 0], [Box([0, 0, 0], [0.2, 0.2, 0.2], name="tray")], margin=0.0)
 
 
+def test_start_in_the_clearance_shell_or_a_bounding_box_corner_still_plans():
+    box = Box([0, 0, 0], [0.1, 0.1, 0.1])
+    res = plan_path([-0.102, 0.0, 0.0], [0.5, 0.0, 0.0], [box])  # 2 mm off the face, clearance is 5 mm
+    assert not path_hits(res.path, box)
+    sphere = Sphere([0, 0, 0], 0.1)
+    corner = np.array([0.075, 0.075, 0.0])  # outside the sphere (r = 0.106) but inside its box
+    res = plan_path(corner, [-0.5, -0.1, 0.0], [sphere])
+    assert not path_hits(res.path, sphere) and np.allclose(res.path[0], corner)
+
+
 def _random_obstacles(rng, n):
     out = []
     for k in range(n):
@@ -86,5 +96,6 @@ def test_crowded_overlapping_environments_never_yield_a_colliding_path():
         assert np.allclose(res.path[0], s) and np.allclose(res.path[-1], g)
         assert not any(path_hits(res.path, o.inflated(0.03)) for o in obs)
     assert merged > 0  # the overlap handling was exercised
-    assert failed <= 0.10 * 300  # measured: 21 of 300 in these dense scenes (explicit NoPathError)
+    # measured: 7 of 300, all a start or goal swallowed by the merged hull of a dense cluster
+    assert failed <= 0.05 * 300
     assert returned + failed == 300

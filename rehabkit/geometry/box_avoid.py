@@ -185,6 +185,27 @@ class _Router:
         raise _BlockedError(i if blamed == i else blamed)
 
 
+def _escape(p: np.ndarray, boxes: list[Box], clearance: float, label: str) -> list[np.ndarray]:
+    """Points leading from ``p`` out of every planning box it lies in (within the clearance gap).
+
+    A point outside an inflated obstacle can still lie inside its planning box (the
+    clearance shell, or the corners of a sphere's or cylinder's bounding box). Moving it
+    outward along one box axis only increases its distance from the solid, so the step
+    stays clear of that obstacle.
+    """
+    pts = [p]
+    for _ in range(len(boxes) + 1):
+        inside = [b for b in boxes if Box(b.center, b.half - clearance / 2, b.rotation).contains(pts[-1])]
+        if not inside:
+            return pts
+        box = inside[0]
+        local = box.to_local(pts[-1])
+        k, sign = _face_of(local, box.half)
+        local[k] = sign * box.half[k]
+        pts.append(box.to_world(local))
+    raise NoPathError(f"{label} is boxed in by overlapping obstacles near it")
+
+
 def plan_path(
     start: np.ndarray,
     goal: np.ndarray,
@@ -212,7 +233,10 @@ def plan_path(
     while True:
         router = _Router(boxes, clearance)
         try:
-            path = np.array(router.route(start, goal, 0))
+            head = _escape(start, boxes, clearance, "start")
+            tail = _escape(goal, boxes, clearance, "goal")[::-1]
+            middle = router.route(head[-1], tail[0], 0)
+            path = np.array(head[:-1] + middle + tail[1:])
             break
         except _BlockedError as err:
             i = err.index
