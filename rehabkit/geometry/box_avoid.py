@@ -157,6 +157,12 @@ class _Router:
             return None
         return int(hits[np.argmin(t_in[hits])])
 
+    def containing(self, p: np.ndarray) -> int | None:
+        """Index of a hit box containing point ``p``, or None."""
+        local = np.einsum("nij,ni->nj", self._r, p - self._c)
+        inside = np.flatnonzero(np.all(np.abs(local) <= self._h, axis=1))
+        return int(inside[0]) if inside.size else None
+
     def inside_any(self, pts: np.ndarray) -> bool:
         local = np.einsum("nij,kni->knj", self._r, pts[:, None, :] - self._c[None])
         return bool(np.any(np.all(np.abs(local) <= self._h[None], axis=2)))
@@ -185,7 +191,7 @@ class _Router:
         raise _BlockedError(i if blamed == i else blamed)
 
 
-def _escape(p: np.ndarray, boxes: list[Box], clearance: float, label: str) -> list[np.ndarray]:
+def _escape(p: np.ndarray, router: _Router, label: str) -> list[np.ndarray]:
     """Points leading from ``p`` out of every planning box it lies in (within the clearance gap).
 
     A point outside an inflated obstacle can still lie inside its planning box (the
@@ -194,11 +200,11 @@ def _escape(p: np.ndarray, boxes: list[Box], clearance: float, label: str) -> li
     stays clear of that obstacle.
     """
     pts = [p]
-    for _ in range(len(boxes) + 1):
-        inside = [b for b in boxes if Box(b.center, b.half - clearance / 2, b.rotation).contains(pts[-1])]
-        if not inside:
+    for _ in range(len(router.plan) + 1):
+        inside = router.containing(pts[-1])
+        if inside is None:
             return pts
-        box = inside[0]
+        box = router.plan[inside]
         local = box.to_local(pts[-1])
         k, sign = _face_of(local, box.half)
         local[k] = sign * box.half[k]
@@ -233,8 +239,8 @@ def plan_path(
     while True:
         router = _Router(boxes, clearance)
         try:
-            head = _escape(start, boxes, clearance, "start")
-            tail = _escape(goal, boxes, clearance, "goal")[::-1]
+            head = _escape(start, router, "start")
+            tail = _escape(goal, router, "goal")[::-1]
             middle = router.route(head[-1], tail[0], 0)
             path = np.array(head[:-1] + middle + tail[1:])
             break
