@@ -55,8 +55,8 @@ def _face_of(local: np.ndarray, half: np.ndarray) -> tuple[int, float]:
 Face = tuple[int, float]  # (axis, sign) in the box frame
 
 
-def _edge_points(p: np.ndarray, face: Face, half: np.ndarray) -> list[tuple[np.ndarray, Face]]:
-    """Projections of a face point on the four edges of its face, with the other face of each edge."""
+def _edge_points(p: np.ndarray, face: Face, half: np.ndarray) -> list[np.ndarray]:
+    """Projections of a face point on the four edges of its face."""
     out = []
     for j in range(3):
         if j == face[0]:
@@ -64,7 +64,7 @@ def _edge_points(p: np.ndarray, face: Face, half: np.ndarray) -> list[tuple[np.n
         for s in (-1.0, 1.0):
             q = p.copy()
             q[j] = s * half[j]
-            out.append((q, (j, s)))
+            out.append(q)
     return out
 
 
@@ -96,17 +96,17 @@ def surface_candidates(box: Box, a: np.ndarray, b: np.ndarray) -> list[np.ndarra
     if f_in == f_out:
         paths.append([p_in, p_out])
     a_pts, b_pts = _edge_points(p_in, f_in, box.half), _edge_points(p_out, f_out, box.half)
-    for q, _ in a_pts:
+    for q in a_pts:
         if f_out in _on_faces(q, box.half):
             paths.append([p_in, q, p_out])
-    for (qa, _), (qb, _) in itertools.product(a_pts, b_pts):
+    for qa, qb in itertools.product(a_pts, b_pts):
         if _on_faces(qa, box.half) & _on_faces(qb, box.half):
             paths.append([p_in, qa, qb, p_out])
     paths.sort(key=lambda pts: sum(float(np.linalg.norm(pts[i + 1] - pts[i])) for i in range(len(pts) - 1)))
     return [box.to_world(np.array(pts)) for pts in paths]
 
 
-def _corners_overlap(a: Box, b: Box) -> bool:
+def _boxes_overlap(a: Box, b: Box) -> bool:
     """Separating-axis test for two oriented boxes (closed)."""
     axes = [a.rotation[:, i] for i in range(3)] + [b.rotation[:, i] for i in range(3)]
     axes += [np.cross(a.rotation[:, i], b.rotation[:, j]) for i in range(3) for j in range(3)]
@@ -246,7 +246,7 @@ def plan_path(
             break
         except _BlockedError as err:
             i = err.index
-            group = [j for j in range(len(boxes)) if j != i and _corners_overlap(boxes[i], boxes[j])]
+            group = [j for j in range(len(boxes)) if j != i and _boxes_overlap(boxes[i], boxes[j])]
             if not group:
                 raise NoPathError(
                     f"no path around obstacle {boxes[i].name!r}: its face detours are blocked "
