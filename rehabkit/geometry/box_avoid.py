@@ -130,15 +130,12 @@ def _enclosing(boxes: list[Box], frame: Box, name: str) -> Box:
 class _Router:
     def __init__(self, plan_boxes: list[Box], clearance: float) -> None:
         self.plan = plan_boxes
-        # segments lying on a plan box's faces must not count as entering it
-        self.hit = [Box(b.center, b.half - clearance / 2, b.rotation, b.name) for b in plan_boxes]
         self.budget = 40 * len(plan_boxes) + 40
-        self._pack()
-
-    def _pack(self) -> None:
-        self._c = np.array([b.center for b in self.hit])
-        self._r = np.array([b.rotation for b in self.hit])
-        self._h = np.array([b.half for b in self.hit])
+        # "hit" boxes, stacked for vectorised tests: the plan boxes shrunk by half the clearance,
+        # so segments lying on a plan box's faces do not count as entering it
+        self._c = np.array([b.center for b in plan_boxes])
+        self._r = np.array([b.rotation for b in plan_boxes])
+        self._h = np.array([b.half for b in plan_boxes]) - clearance / 2
 
     def first_hit(self, a: np.ndarray, b: np.ndarray) -> int | None:
         """Index of the hit box the segment a→b enters first (all boxes' slab tests at once)."""
