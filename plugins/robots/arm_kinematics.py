@@ -1,0 +1,93 @@
+"""Closed-form inverse kinematics of the MANUS/ARM arm (the 6 revolute joints).
+
+The modified-DH table (see ``arm.py``) is PUMA-like: joints 4–6 meet at the wrist
+centre, so the first three joints place the wrist centre and the last three orient
+the gripper. In the frame turned by q1 the wrist centre sits at (u, d3, v) with
+
+    u = a2·cos q2 + d4·sin(q2 + q3),   v = −a2·sin q2 + d4·cos(q2 + q3)
+
+which gives q1 (two shoulder branches), q3 from u² + v² = a2² + d4² + 2·a2·d4·sin q3
+(two elbow branches) and q2 as a planar two-link angle. The wrist rotation
+R36 = R03ᵀ·R06 has third column (sin q5 cos q4, −cos q5, sin q4 sin q5) and
+second row (sin q5 cos q6, −sin q5 sin q6, ·), giving the two wrist branches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+A2, D3, D4 = 0.3967, 0.0992, 0.3234  # [m], from the MANUS table
+SINGULAR = 1e-9
+
+
+def _rot03(q1: float, q2: float, q3: float) -> np.ndarray:
+    """Rotation of frame 3 (MDH rows 1–3: α = 0, −90°, 0)."""
+    c1, s1, c23, s23 = np.cos(q1), np.sin(q1), np.cos(q2 + q3), np.sin(q2 + q3)
+    return np.array([[c1 * c23, -c1 * s23, -s1],
+                     [s1 * c23, -s1 * s23, c1],
+                     [-s23, -c23, 0.0]])
+
+
+def _rot36_to_r4(q4: float) -> np.ndarray:
+    """Rotation of MDH row 4 (α3 = +90°) at q4."""
+    c, s = np.cos(q4), np.sin(q4)
+    return np.array([[c, -s, 0.0], [0.0, 0.0, -1.0], [s, c, 0.0]])
+
+
+def wrist_centre_joints(w: np.ndarray) -> list[tuple[float, float, float]]:
+    """(q1, q2, q3) placing the wrist centre at ``w`` (arm frame): up to four branches."""
+    r2 = w[0] ** 2 + w[1] ** 2
+    if r2 < D3**2 - 1e-12:
+        return []  # inside the cylinder swept by the shoulder offset
+    out = []
+    for u in {np.sqrt(max(r2 - D3**2, 0.0)), -np.sqrt(max(r2 - D3**2, 0.0))}:
+        q1 = np.arctan2(w[1], w[0]) - np.arctan2(D3, u)
+        v = w[2]
+        s3 = (u**2 + v**2 - A2**2 - D4**2) / (2 * A2 * D4)
+        if abs(s3) > 1 + 1e-12:
+            continue
+        s3 = float(np.clip(s3, -1.0, 1.0))
+        for q3 in {np.arcsin(s3), np.pi - np.arcsin(s3)}:
+            phi = q3 - np.pi / 2  # forearm angle relative to the upper arm, in the arm's plane
+            q2 = np.arctan2(-v, u) - np.arctan2(D4 * np.sin(phi), A2 + D4 * np.cos(phi))
+            out.append((float(q1), float(q2), float(q3)))
+    return out
+
+
+def wrist_joints(r36: np.ndarray, q4_hint: float = 0.0) -> list[tuple[float, float, float]]:
+    """(q4, q5, q6) giving the wrist rotation ``r36``: two branches, one at the q5 = 0 singularity."""
+    c5 = float(np.clip(-r36[1, 2], -1.0, 1.0))
+    s5 = np.sqrt(max(1.0 - c5**2, 0.0))
+    if s5 < SINGULAR:  # q4 and q6 turn about the same axis: keep q4, give the rest to q6
+        q4 = q4_hint
+        m = _rot36_to_r4(q4).T @ r36  # the remaining rotation of rows 5 and 6
+        q5 = 0.0 if c5 > 0 else np.pi
+        q6 = float(np.arctan2(-m[0, 1], m[0, 0])) if c5 > 0 else float(np.arctan2(m[0, 1], -m[0, 0]))
+        return [(q4, q5, q6)]
+    out = []
+    for s in (s5, -s5):
+        q4 = np.arctan2(r36[2, 2] / s, r36[0, 2] / s)
+        q5 = np.arctan2(s, c5)
+        q6 = np.arctan2(-r36[1, 1] / s, r36[1, 0] / s)
+        out.append((float(q4), float(q5), float(q6)))
+    return out
+
+
+def elbow_up(q1: float, q2: float, q3: float) -> bool:
+    """Whether the elbow sits above the shoulder–wrist line (the ARM controller's choice)."""
+    elbow_v = -A2 * np.sin(q2)
+    wrist_u, wrist_v = A2 * np.cos(q2) + D4 * np.sin(q2 + q3), -A2 * np.sin(q2) + D4 * np.cos(q2 + q3)
+    elbow_u = A2 * np.cos(q2)
+    # height of the shoulder–wrist line under the elbow (the line may be vertical: compare across it)
+    cross = wrist_u * elbow_v - wrist_v * elbow_u
+    return bool(cross > 0) if wrist_u >= 0 else bool(cross < 0)
+
+
+def arm_ik(wrist_pose: np.ndarray) -> list[np.ndarray]:
+    """All 6-joint solutions placing frame 6 at ``wrist_pose`` (4x4, arm frame), angles in (−π, π]."""
+    sols = []
+    for q1, q2, q3 in wrist_centre_joints(wrist_pose[:3, 3]):
+        r36 = _rot03(q1, q2, q3).T @ wrist_pose[:3, :3]
+        for q4, q5, q6 in wrist_joints(r36):
+            sols.append(np.array([q1, q2, q3, q4, q5, q6]))
+    return [np.arctan2(np.sin(s), np.cos(s)) for s in sols]
