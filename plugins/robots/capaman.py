@@ -208,7 +208,7 @@ class CapamanRobot(Robot):
             raise ValueError(f"capaman: plate pose off the mechanism's 3-DoF set by {np.abs(residual).max():.2e} m")
         return alpha
 
-    def ik(self, pose: np.ndarray) -> list[np.ndarray]:
+    def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
         """Cranks within their range putting the tool tip at ``pose``'s position (orientation follows).
 
         Bounded least squares from a few starts: the all-vertical home pose is a

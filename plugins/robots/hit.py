@@ -151,7 +151,7 @@ class HitRobot(Robot):
         """⁰₆A for joints ``q`` [rad], in the shoulder frame."""
         return fk(q, *self._lengths)
 
-    def ik(self, pose: np.ndarray) -> list[np.ndarray]:
+    def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
         """All joint solutions for hand pose ``pose`` (4x4, shoulder frame)."""
         return ik(pose, *self._lengths)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol
@@ -32,6 +33,11 @@ class Context:
         control_dt: Controller period [s].
         robot: The robot plugin instance, once built (robots themselves get ``None``).
         world: The scenario's world section.
+        out_dir: Where the run writes its files (``None`` when it writes none).
+        plan: For controllers that plan on their own (e.g. an HMI replaying a stored target):
+            ``plan(t, q, qd, targets)`` asks the scenario's planner, checks, logs and returns
+            the :class:`Plan`, or raises :class:`PlanningError`.
+        note: ``note(t, text)`` keeps a message for people (an HMI display line) in the summary and log.
     """
 
     scenario_dir: Path
@@ -40,6 +46,9 @@ class Context:
     robot: Robot | None = None
     world: World | None = None
     instruments: list[Instrument] = field(default_factory=list)
+    out_dir: Path | None = None
+    plan: Callable[..., Plan] | None = None
+    note: Callable[[float, str], None] | None = None
 
     def resolve(self, path: str | Path) -> Path:
         """A path from the scenario, made absolute relative to the scenario file."""
@@ -94,8 +103,12 @@ class Robot(ABC):
             self._pin_data = self.model.new_pin_data()
         return self._pin_data
 
-    def ik(self, pose: np.ndarray) -> list[np.ndarray]:
-        """Every joint solution reaching ``pose`` (4x4, base frame). Robots without IK raise."""
+    def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
+        """Every joint solution reaching ``pose`` (4x4, base frame). Robots without IK raise.
+
+        ``reference`` is the current configuration, when there is one: joints the IK does not
+        solve for (a lift, a gripper) keep their values from it.
+        """
         raise IKUnavailableError(f"robot '{self.model.name}' has no inverse kinematics for Cartesian targets")
 
     def __repr__(self) -> str:
@@ -195,12 +208,17 @@ class Controller(ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
 
     ``reference`` is the space of the references it takes (see :class:`Planner`).
-    A controller that builds its own joint reference (e.g. by closed-loop IK)
-    exposes it as ``joint_reference`` so runs can record and plot it.
+    A controller that builds its own joint reference (e.g. by closed-loop IK, or from
+    a user's key presses) exposes it as ``joint_reference`` so runs can record and plot it.
     """
 
     reference: ClassVar[ReferenceSpace] = "joint"
     joint_reference: np.ndarray | None = None
+    own_reference: ClassVar[bool] = False  # it makes its own joint reference (e.g. an HMI), ignoring the runner's
+
+    def run_metrics(self, trace: Any) -> dict[str, float]:
+        """Figures about the executed run only this controller can judge (default none)."""
+        return {}
 
     @abstractmethod
     def compute(

@@ -45,11 +45,13 @@ def collect_metrics(run: Runner, trace: Trace, wall: float, setup: float, contac
     """Every metric of a run: tracking, the planner's and sensors' own, timing, contacts, safety."""
     sim_time = len(trace.t) * run.schedule.control_dt
     cart = run.planner.space == "cartesian"
-    metrics, per_joint = tracking_metrics(trace, run.robot, None if cart else run.goal)
+    own = run.controller.own_reference  # the runner's goal is not where such a controller went
+    metrics, per_joint = tracking_metrics(trace, run.robot, None if cart or own else run.goal)
     if cart:
         metrics.update(cartesian_metrics(trace))
     metrics.update(run.diag)
     metrics.update(run.planner.run_metrics(trace))
+    metrics.update(run.controller.run_metrics(trace))
     for sensor in run.sensors.values():
         metrics.update(sensor.run_metrics(trace))
     metrics.update({
@@ -90,6 +92,6 @@ def build_summary(run: Runner, metrics: dict[str, float], per_joint: dict[str, A
         "real_time_factor": metrics["real_time_factor"],
         "metrics": metrics, "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": run.safety.tripped, "events": [e.as_dict() for e in run.safety.events]},
-        "events": run.fired, "plans": run.plans,
+        "events": run.fired, "plans": run.plans, "notes": run.notes,
         "reports": {name: text for name, s in run.sensors.items() if (text := s.report(metrics))},
     }

@@ -60,6 +60,7 @@ class Runner:
         self.registry = registry or default_registry()
         self.out_dir, self.spawn, self.progress = out_dir, spawn, progress
         self.observations: dict[str, dict[str, Any]] = {}
+        self.notes: list[dict[str, Any]] = []
 
     # -- construction -------------------------------------------------------
 
@@ -72,7 +73,8 @@ class Runner:
 
     def build(self) -> None:
         sc = self.sc
-        ctx = Context(self.loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world)
+        ctx = Context(self.loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
+                      out_dir=self.out_dir)
         self.robot = self._make("robot", sc.robot, ctx)
         ctx.robot = self.robot
         # sensors before the backend: their instruments go into the scene it builds
@@ -80,6 +82,7 @@ class Runner:
         ctx.instruments = [i for s in self.sensors.values() for i in s.instruments()]
         self.backend = self._make("backend", sc.backend, ctx)
         self.planner = self._make("planner", sc.planner, ctx)
+        ctx.plan, ctx.note = self.plan_for_controller, self.note
         self.controller = self._make("controller", sc.controller, ctx)
         if self.planner.space != self.controller.reference:
             raise SetupError(f"planner '{sc.planner.type}' plans in {self.planner.space} space but controller "
@@ -152,21 +155,48 @@ class Runner:
         except PlanningError as exc:
             self.safety.trip(t, q, "plan", f"planner failed: {exc}")
             return None
+        problem = self._limit_problem(plan)
+        if problem:
+            self.safety.trip(t, q, "plan", f"{problem}; not executed")
+            return None
+        return self._accept(plan)
+
+    def _limit_problem(self, plan: Plan) -> str | None:
+        """What joint limit a joint-space plan breaks, if any (Cartesian plans are mapped by the controller)."""
         if self.planner.space == "cartesian":
-            # the planner checked it against the workspace; the controller maps it into the joint ranges
-            return self._accept(plan)
+            return None
         lim = self.robot.model.limits
         ts = np.arange(0.0, plan.trajectory.duration + 1e-9, 0.005)
         qs, qds, _ = plan.trajectory.sample(ts)
-        bad_q = (qs < lim.lower) | (qs > lim.upper)
+        bad_q = (qs < lim.lower - 1e-9) | (qs > lim.upper + 1e-9)
         bad_v = np.abs(qds) > lim.velocity
-        if bad_q.any() or bad_v.any():
-            what = "position" if bad_q.any() else "velocity"
-            k, j = np.argwhere(bad_q if bad_q.any() else bad_v)[0]
-            self.safety.trip(t, q, "plan", f"planned trajectory breaks the {what} limit of "
-                             f"{self.robot.model.joint_names[j]} at t+{ts[k]:.3f}s; not executed")
+        if not (bad_q.any() or bad_v.any()):
             return None
-        return self._accept(plan)
+        what = "position" if bad_q.any() else "velocity"
+        k, j = np.argwhere(bad_q if bad_q.any() else bad_v)[0]
+        return f"planned trajectory breaks the {what} limit of {self.robot.model.joint_names[j]} at t+{ts[k]:.3f}s"
+
+    def plan_for_controller(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
+        """A plan a controller asks for (e.g. a keypad's replay); it follows the trajectory itself.
+
+        Checked against the joint limits, logged and listed in the summary like the runner's own plans.
+        Raises :class:`PlanningError` with the reason when there is none.
+        """
+        plan = self.planner.plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
+        problem = self._limit_problem(plan)
+        if problem:
+            raise PlanningError(problem)
+        k0 = int(round(t / self.schedule.control_dt))
+        x = plan.trajectory.sample(np.arange(0.0, plan.trajectory.duration + self.schedule.control_dt,
+                                             self.schedule.control_dt))[0]
+        self._announce(k0, self._accept(plan), x)
+        return plan
+
+    def note(self, t: float, text: str) -> None:
+        """A plugin's message for people (an HMI display line): kept in the summary and the log."""
+        self.notes.append({"t": round(t, 6), "text": text})
+        if self.log:
+            self.log.event(t, text, level="INFO")
 
     def _accept(self, plan: Plan) -> Plan:
         for key, value in plan.diagnostics.items():  # residual-like figures: keep the worst over replans
@@ -232,6 +262,10 @@ class Runner:
         bar = tqdm(total=n, unit="step", delay=1.0, disable=not self.progress, leave=False)
         safety, stop_after = self.safety, sc.safety.stop_after_s
         tx, tqr, controller, ee = trace.x, trace.q_ref, self.controller, self._ee_world
+        own_ref = self.controller.own_reference
+        if own_ref:  # the controller's own reference is what it tracked; record that
+            trace.q_ref = tqr = np.zeros((n, dof))
+            trace.qd_ref = np.zeros((n, dof))
         contact_steps, due, k = 0, 0, 0
         t_loop = time.perf_counter()
         for k in range(n):
@@ -253,6 +287,8 @@ class Runner:
                 tx[k] = ee(q)  # world frame here; moved into the base frame once, at the end
                 if controller.joint_reference is not None:
                     tqr[k] = controller.joint_reference
+            elif own_ref:
+                tqr[k] = controller.joint_reference
             command(tau)
             step(sub)
             if contacts():
@@ -347,18 +383,23 @@ class Runner:
         """Write a plan's reference into the step arrays from step ``k0`` on."""
         if plan is None:
             return
-        cart = self.planner.space == "cartesian"
-        way = plan.waypoints
-        entry = {"t": round(k0 * self.schedule.control_dt, 6), "duration_s": plan.trajectory.duration}
-        if way is not None:
-            entry["waypoints_m" if cart else "waypoints_deg"] = np.round(way if cart else np.degrees(way), 6).tolist()
-        self.plans.append({**entry, **{k: v for k, v in plan.diagnostics.items() if isinstance(v, (int, float))},
-                           **plan.details})
         ref, ref_d, ref_dd = self._ref
         dt = self.schedule.control_dt
         x, xd, xdd = plan.trajectory.sample(np.arange(len(ref) - k0) * dt)
         ref[k0:], ref_d[k0:], ref_dd[k0:] = x, xd, xdd
         self.goal = x[-1].copy()
+        self._announce(k0, plan, x)
+
+    def _announce(self, k0: int, plan: Plan, x: np.ndarray) -> None:
+        """List a plan in the summary and draw it (``x``: its reference sampled at the control rate)."""
+        cart = self.planner.space == "cartesian"
+        dt = self.schedule.control_dt
+        way = plan.waypoints
+        entry = {"t": round(k0 * dt, 6), "duration_s": plan.trajectory.duration}
+        if way is not None:
+            entry["waypoints_m" if cart else "waypoints_deg"] = np.round(way if cart else np.degrees(way), 6).tolist()
+        self.plans.append({**entry, **{k: v for k, v in plan.diagnostics.items() if isinstance(v, (int, float))},
+                           **plan.details})
         if self.log:
             model = self.robot.model
             if cart:

@@ -128,8 +128,9 @@ def _enclosing(boxes: list[Box], frame: Box, name: str) -> Box:
 
 
 class _Router:
-    def __init__(self, plan_boxes: list[Box], clearance: float) -> None:
+    def __init__(self, plan_boxes: list[Box], clearance: float, floor: tuple[np.ndarray, float] | None = None) -> None:
         self.plan = plan_boxes
+        self.floor = floor
         self.budget = 40 * len(plan_boxes) + 40
         # "hit" boxes, stacked for vectorised tests: the plan boxes shrunk by half the clearance,
         # so segments lying on a plan box's faces do not count as entering it
@@ -164,6 +165,10 @@ class _Router:
         local = np.einsum("nij,kni->knj", self._r, pts[:, None, :] - self._c[None])
         return bool(np.any(np.all(np.abs(local) <= self._h[None], axis=2)))
 
+    def below_floor(self, pts: np.ndarray) -> bool:
+        """Whether any point lies on the wrong side of the floor plane (no detour goes under the floor)."""
+        return self.floor is not None and bool(np.any(np.asarray(pts) @ self.floor[0] < self.floor[1] - 1e-12))
+
     def route(self, a: np.ndarray, b: np.ndarray, depth: int) -> list[np.ndarray]:
         i = self.first_hit(a, b)
         if i is None:
@@ -173,7 +178,7 @@ class _Router:
             raise _BlockedError(i)
         blamed = i
         for cand in surface_candidates(self.plan[i], a, b):
-            if self.inside_any(cand):
+            if self.inside_any(cand) or self.below_floor(cand):
                 continue
             pts = [a, *cand, b]
             try:
@@ -188,13 +193,14 @@ class _Router:
         raise _BlockedError(i if blamed == i else blamed)
 
 
-def _escape(p: np.ndarray, router: _Router, label: str) -> list[np.ndarray]:
-    """Points leading from ``p`` out of every planning box it lies in (within the clearance gap).
+def _escape(p: np.ndarray, router: _Router, solids: list[Solid], label: str) -> list[np.ndarray]:
+    """Points leading from ``p`` out of every planning box it lies in.
 
-    A point outside an inflated obstacle can still lie inside its planning box (the
-    clearance shell, or the corners of a sphere's or cylinder's bounding box). Moving it
-    outward along one box axis only increases its distance from the solid, so the step
-    stays clear of that obstacle.
+    A point outside the inflated obstacles can still lie inside a planning box: in the
+    clearance shell, in the corners of a sphere's or cylinder's bounding box, or inside
+    the enclosing box of merged overlapping obstacles (e.g. beside a cup standing on a
+    tray). It leaves along one box axis, to the nearest face whose straight step touches
+    no inflated obstacle and stays above the floor.
     """
     pts = [p]
     for _ in range(len(router.plan) + 1):
@@ -203,9 +209,18 @@ def _escape(p: np.ndarray, router: _Router, label: str) -> list[np.ndarray]:
             return pts
         box = router.plan[inside]
         local = box.to_local(pts[-1])
-        k, sign = _face_of(local, box.half)
-        local[k] = sign * box.half[k]
-        pts.append(box.to_world(local))
+        steps = []
+        for k, sign in itertools.product(range(3), (-1.0, 1.0)):
+            q = local.copy()
+            q[k] = sign * box.half[k]
+            steps.append((abs(q[k] - local[k]), box.to_world(q)))
+        for _, q in sorted(steps, key=lambda s: s[0]):
+            if not router.below_floor(q[None]) and not any(o.hits_segment(pts[-1], q) for o in solids):
+                pts.append(q)
+                break
+        else:
+            raise NoPathError(f"{label} is boxed in by overlapping obstacles {box.name!r}: every step out of "
+                              "their enclosing box runs into one of them")
     raise NoPathError(f"{label} is boxed in by overlapping obstacles near it")
 
 
@@ -215,15 +230,23 @@ def plan_path(
     obstacles: list[Solid],
     margin: float = 0.0,
     clearance: float = 0.005,
+    floor: tuple[np.ndarray, float] | None = None,
 ) -> AvoidResult:
     """Collision-free polyline from ``start`` to ``goal`` around ``obstacles``.
 
     ``margin`` inflates every obstacle (gripper size); ``clearance`` (m) is the extra gap
-    the faces are planned at, so the path never grazes an inflated obstacle.
+    the faces are planned at, so the path never grazes an inflated obstacle. ``floor``,
+    a unit normal n and offset c, keeps every path point in the half-space n·p ≥ c (so
+    an obstacle standing on the floor is never passed underneath).
     Raises :class:`NoPathError` when start or goal lies inside an inflated obstacle or no
     path is found.
     """
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    if floor is not None:
+        floor = (np.asarray(floor[0], dtype=float), float(floor[1]))
+        for label, p in (("start", start), ("goal", goal)):
+            if p @ floor[0] < floor[1]:
+                raise NoPathError(f"{label} {np.round(p, 4).tolist()} lies below the floor")
     check = [o.inflated(margin) for o in obstacles]
     for label, p in (("start", start), ("goal", goal)):
         for o in check:
@@ -234,10 +257,10 @@ def plan_path(
     boxes = [o.inflated(margin + clearance).bounding_box() for o in obstacles]
     merges = 0
     while True:
-        router = _Router(boxes, clearance)
+        router = _Router(boxes, clearance, floor)
         try:
-            head = _escape(start, router, "start")
-            tail = _escape(goal, router, "goal")[::-1]
+            head = _escape(start, router, check, "start")
+            tail = _escape(goal, router, check, "goal")[::-1]
             middle = router.route(head[-1], tail[0], 0)
             path = np.array(head[:-1] + middle + tail[1:])
             break
@@ -251,14 +274,10 @@ def plan_path(
                 ) from None
             members = [boxes[i]] + [boxes[j] for j in group]
             merged = _enclosing(members, boxes[i], "+".join(b.name for b in members))
-            inner = Box(merged.center, merged.half - clearance / 2, merged.rotation)
-            for label, p in (("start", start), ("goal", goal)):
-                if inner.contains(p):
-                    raise NoPathError(
-                        f"{label} lies inside the merged hull of overlapping obstacles {merged.name!r}"
-                    ) from None
             boxes = [b for j, b in enumerate(boxes) if j != i and j not in group] + [merged]
             merges += 1
+    if floor is not None and np.any(path @ floor[0] < floor[1] - 1e-9):
+        raise NoPathError("internal check: planned path dips under the floor; refusing to return it")
     for o in check:
         if path_hits(path, o):
             raise NoPathError(f"internal check: planned path touches obstacle {o.name!r}; refusing to return it")

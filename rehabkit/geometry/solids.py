@@ -55,6 +55,12 @@ class Box:
         signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
         return self.to_world(signs * self.half)
 
+    def distance(self, pts: np.ndarray) -> np.ndarray:
+        """Signed distance of points (N, 3) to the box surface (negative inside)."""
+        d = np.abs(self.to_local(np.atleast_2d(pts))) - self.half
+        outside = np.linalg.norm(np.maximum(d, 0.0), axis=1)
+        return np.where(outside > 0, outside, d.max(axis=1))
+
     def segment_interval(self, p0: np.ndarray, p1: np.ndarray) -> tuple[float, float] | None:
         """Parameter interval [t_in, t_out] ⊂ [0, 1] of the segment inside the box, or None."""
         return _slab_interval(self.to_local(p0), self.to_local(p1), self.half)
@@ -100,6 +106,10 @@ class Sphere:
     def contains(self, p: np.ndarray) -> bool:
         return float(np.linalg.norm(np.asarray(p) - self.center)) <= self.radius
 
+    def distance(self, pts: np.ndarray) -> np.ndarray:
+        """Signed distance of points (N, 3) to the sphere surface (negative inside)."""
+        return np.linalg.norm(np.atleast_2d(pts) - self.center, axis=1) - self.radius
+
     def hits_segment(self, p0: np.ndarray, p1: np.ndarray) -> bool:
         p0, p1 = np.asarray(p0, dtype=float), np.asarray(p1, dtype=float)
         d = p1 - p0
@@ -143,6 +153,15 @@ class Cylinder:
         h = float(v @ self.axis)
         return abs(h) <= self.half_length and float(np.linalg.norm(v - h * self.axis)) <= self.radius
 
+    def distance(self, pts: np.ndarray) -> np.ndarray:
+        """Signed distance of points (N, 3) to the cylinder surface (negative inside)."""
+        v = np.atleast_2d(pts) - self.center
+        h = v @ self.axis
+        d = np.column_stack([np.linalg.norm(v - h[:, None] * self.axis, axis=1) - self.radius,
+                             np.abs(h) - self.half_length])
+        outside = np.linalg.norm(np.maximum(d, 0.0), axis=1)
+        return np.where(outside > 0, outside, d.max(axis=1))
+
     def hits_segment(self, p0: np.ndarray, p1: np.ndarray) -> bool:
         a = np.asarray(p0, dtype=float) - self.center
         d = np.asarray(p1, dtype=float) - np.asarray(p0, dtype=float)
@@ -165,6 +184,18 @@ class Cylinder:
 
 
 Solid = Box | Sphere | Cylinder
+
+
+def make_solid(shape: str, size: tuple[float, ...], center: np.ndarray, rotation: np.ndarray, name: str) -> Solid:
+    """A solid from a scene primitive (MuJoCo sizes: box half extents, cylinder radius and
+    half length along its local z, sphere radius)."""
+    if shape == "box":
+        return Box(center, np.asarray(size, float), rotation, name)
+    if shape == "cylinder":
+        return Cylinder(center, np.asarray(rotation)[:, 2], size[0], size[1], name)
+    if shape == "sphere":
+        return Sphere(center, size[0], name)
+    raise ValueError(f"no solid for shape {shape!r}; box, cylinder and sphere are known")
 
 
 def path_hits(path: np.ndarray, solid: Solid) -> bool:

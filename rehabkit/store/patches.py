@@ -50,6 +50,7 @@ class Patch(BaseModel):
     joints_rad: list[float] | None = None
     pose: list[list[float]] | None = Field(None, description="4x4 gripper pose in the robot base frame")
     actions: list[Action] | None = None
+    net_motion_rad: list[float] | None = Field(None, description="sequence: the joint change it made when recorded")
     recorded_at: float = Field(default_factory=time.time)
 
     @model_validator(mode="after")
