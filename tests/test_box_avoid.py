@@ -115,3 +115,8 @@ def test_a_cup_on_a_tray_start_between_them_and_never_under_the_floor():
     assert res.path[1, 2] > start[2] and np.allclose(res.path[1, :2], start[:2])  # first step: straight up
     with pytest.raises(NoPathError, match="below the floor"):
         plan_path(np.array([1.0, 1.0, 0.02]), goal, [tray], margin=0.07, floor=floor)
+
+
+def test_no_obstacles_gives_the_straight_segment():
+    res = plan_path(np.zeros(3), np.ones(3), [])
+    assert len(res.path) == 2 and res.length == pytest.approx(np.sqrt(3))

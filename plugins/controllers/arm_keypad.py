@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import Field, ValidationError, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
 from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S, check_timeline
 from scipy.spatial.transform import Rotation
 
@@ -61,13 +62,14 @@ class ArmKeypadConfig(StrictModel):
     kp_gripper: float = Field(400.0, ge=0, description="[N/m]")
     kd_gripper: float = Field(20.0, ge=0, description="[N·s/m]")
 
-    @field_validator("keys")
-    @classmethod
-    def _walk_menus(cls, keys: list[KeyPress]) -> list[KeyPress]:
-        problems = check_timeline([(k.at, k.key, k.hold_s) for k in keys])
-        if problems:
-            raise ValueError("; ".join(problems))
-        return keys
+    @model_validator(mode="after")
+    def _walk_menus(self) -> ArmKeypadConfig:
+        problems = check_timeline([(k.at, k.key, k.hold_s) for k in self.keys])
+        if problems:  # located at the offending press, so the scenario error points at its line
+            raise ValidationError.from_exception_data(type(self).__name__, [
+                InitErrorDetails(type=PydanticCustomError("keypad", text), loc=("keys", i, "key"),
+                                 input=self.keys[i].key) for i, text in problems])
+        return self
 
 
 @dataclass

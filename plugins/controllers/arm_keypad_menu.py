@@ -29,31 +29,31 @@ MENUS: dict[str, dict[str, str]] = {  # key -> what it does: 'go:MENU', 'jog', '
 JOG_KEYS = set(JOINT_JOGS) | set(CARTESIAN_JOGS)
 
 
-def check_timeline(keys: list[tuple[float, str, float]]) -> list[str]:
-    """Problems with a timeline of (time, key, hold) presses, walking the menus from MAIN."""
+def check_timeline(keys: list[tuple[float, str, float]]) -> list[tuple[int, str]]:
+    """Problems (press index, message) with a timeline of (time, key, hold) presses, walking the menus from MAIN."""
     problems, menu, selected, recording = [], "MAIN", None, False
     for i, (at, key, hold) in enumerate(keys):
         where = f"keys[{i}] (t = {at} s, '{key}')"
         if i and at < keys[i - 1][0] + keys[i - 1][2]:
-            problems.append(f"{where}: pressed while keys[{i - 1}] is still held (until "
-                            f"{keys[i - 1][0] + keys[i - 1][2]:g} s)")
+            problems.append((i, f"{where}: pressed while keys[{i - 1}] is still held (until "
+                            f"{keys[i - 1][0] + keys[i - 1][2]:g} s)"))
         action = MENUS[menu].get(key)
         if action is None:
-            problems.append(f"{where}: not a key of the {menu} menu; its keys: {', '.join(MENUS[menu])}")
+            problems.append((i, f"{where}: not a key of the {menu} menu; its keys: {', '.join(MENUS[menu])}"))
             continue
         if action.startswith("go:"):
             menu = action[3:]
         elif action == "select":
             selected = key
         elif action == "store" and (selected is None or hold < STORE_HOLD_S):
-            problems.append(f"{where}: " + ("select a patch (1-12) first" if selected is None
-                                            else f"hold it {STORE_HOLD_S:g} s to store (hold_s is {hold:g})"))
+            problems.append((i, f"{where}: " + ("select a patch (1-12) first" if selected is None
+                                                else f"hold it {STORE_HOLD_S:g} s to store (hold_s is {hold:g})")))
         elif action == "record-start":
             if selected is None:
-                problems.append(f"{where}: select a patch (1-12) before recording")
+                problems.append((i, f"{where}: select a patch (1-12) before recording"))
             recording = True
         elif action == "record-stop":
             if not recording:
-                problems.append(f"{where}: no recording to stop (press 'circle' first)")
+                problems.append((i, f"{where}: no recording to stop (press 'circle' first)"))
             recording = False
     return problems

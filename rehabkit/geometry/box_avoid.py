@@ -134,9 +134,9 @@ class _Router:
         self.budget = 40 * len(plan_boxes) + 40
         # "hit" boxes, stacked for vectorised tests: the plan boxes shrunk by half the clearance,
         # so segments lying on a plan box's faces do not count as entering it
-        self._c = np.array([b.center for b in plan_boxes])
-        self._r = np.array([b.rotation for b in plan_boxes])
-        self._h = np.array([b.half for b in plan_boxes]) - clearance / 2
+        self._c = np.array([b.center for b in plan_boxes]).reshape(-1, 3)
+        self._r = np.array([b.rotation for b in plan_boxes]).reshape(-1, 3, 3)
+        self._h = np.array([b.half for b in plan_boxes]).reshape(-1, 3) - clearance / 2
 
     def first_hit(self, a: np.ndarray, b: np.ndarray) -> int | None:
         """Index of the hit box the segment a→b enters first (all boxes' slab tests at once)."""
