@@ -159,3 +159,24 @@ def test_fold_and_unfold_are_preprogrammed_and_any_key_stops_a_motion():
     moved_after_stop = np.abs(np.diff(q[int(22.6 / 0.002):, 1:7], axis=0)).max()
     assert moved_after_stop < 1e-5  # held where the key press stopped it
     assert r.metrics["max_velocity_ratio"] < 1.0
+
+
+def test_cartesian_mode_moves_along_the_axes_and_keeps_the_gripper_orientation(arm):
+    keys = [{"at": 0.2, "key": "C"}, {"at": 0.5, "key": "y-", "hold_s": 2.0}, {"at": 3.0, "key": "z-", "hold_s": 2.0},
+            {"at": 5.5, "key": "yaw+", "hold_s": 2.0}, {"at": 8.0, "key": "x+", "hold_s": 6.0}]
+    r = run_scenario(SCENARIO, {"controller.keys": keys, "duration": 14.5})
+    assert not r.summary["safety"]["events"] and r.metrics["max_velocity_ratio"] < 0.95  # jogs slow, never trip
+    poses = arm.fk_batch(r.trace.q)
+    k = lambda t: int(t / 0.002)  # noqa: E731
+    start, after_y, after_z = poses[k(0.4)], poses[k(2.95)], poses[k(5.45)]
+    np.testing.assert_allclose(after_y[:3, 3] - start[:3, 3], [0, -0.10, 0], atol=2e-3)  # 5 cm/s for 2 s
+    down = after_z[:3, 3] - after_y[:3, 3]
+    assert np.abs(down[:2]).max() < 1e-3 and -0.102 < down[2] < -0.05  # along z only (slowed near the limits)
+    turn = np.degrees(np.arccos(np.clip((np.trace(poses[: k(5.45)][:, :3, :3] @ start[:3, :3].T, axis1=1, axis2=2)
+                                          - 1) / 2, -1, 1)))
+    assert turn.max() < 0.2  # translation jogs keep the orientation (to the servo's tracking error)
+    yawed = poses[k(7.95)][:3, :3] @ after_z[:3, :3].T
+    assert np.degrees(np.arccos((np.trace(yawed) - 1) / 2)) == pytest.approx(30.0, abs=0.5)  # 15 deg/s for 2 s
+    np.testing.assert_allclose(poses[k(7.95)][:3, 3], after_z[:3, 3], atol=2e-3)  # turning in place
+    # stretching out along x+ ends at the edge of the workspace with a message, not a trip
+    assert any("'x+': the arm can go no further" in n["text"] for n in r.summary["notes"])

@@ -26,8 +26,9 @@ from rehabkit.core.interfaces import Context, Controller, PlanningError, StrictM
 from rehabkit.store.patches import Action, Patch, PatchStore, StoreError, default_path
 
 AXES = {"x": 0, "y": 1, "z": 2, "roll": 0, "pitch": 1, "yaw": 2}
-SETTLE_S = 1.0
-SOFT_LIMIT_FRACTION = 0.002  # after a replay ends, the error to the stored target is measured this much later
+SETTLE_S = 1.0  # after a replay ends, the error to the stored target is measured this much later
+SOFT_LIMIT_FRACTION = 0.002
+JOINT_SPEED_FRACTION = 0.9  # Cartesian jogs slow down so no joint passes this share of its speed limit
 
 
 class KeyPress(StrictModel):
@@ -294,22 +295,39 @@ class ArmKeypad(Controller):
                 j = self.lift if name == "lift" else self.arm.start + int(name[1:]) - 1
             new[j] += sign * jog.factor * cfg.jog_joint_fraction * lim.velocity[j] * dt
         else:
-            pose = jog.pose.copy()
-            if name in ("x", "y", "z"):
-                pose[AXES[name], 3] += sign * jog.factor * cfg.jog_speed_m_s * dt
-            else:
-                turn = np.zeros(3)
-                turn[AXES[name]] = sign * jog.factor * np.radians(cfg.jog_turn_deg_s) * dt
-                pose[:3, :3] = pose[:3, :3] @ Rotation.from_rotvec(turn).as_matrix()
-            sols = self.robot.ik(pose, reference=self.q_ref)
-            if not sols or np.any(np.abs(sols[0] - self.q_ref) > lim.velocity * dt * 1.5):
+            new = self._cartesian_step(t, jog, name, sign, dt)
+            if new is None:
                 self._note(t, f"'{jog.key}': the arm can go no further (reach, joint limit or singularity)")
                 self.jog, self.qd_ref = None, np.zeros_like(self.qd_ref)
                 return
-            new, jog.pose = sols[0], pose
         new = np.clip(new, self.soft_lower, self.soft_upper)
         self.qd_ref = (new - self.q_ref) / dt
         self.q_ref = new
+
+    def _cartesian_step(self, t: float, jog: _Jog, name: str, sign: float, dt: float) -> np.ndarray | None:
+        """Joint values one step further along a Cartesian jog, slowed where a joint would pass its speed limit."""
+        cap = self.model.limits.velocity * dt * JOINT_SPEED_FRACTION
+        scale = 1.0
+        for _ in range(3):  # the joint step is nearly linear in the Cartesian step: rescale, check again
+            pose = jog.pose.copy()
+            amount = sign * jog.factor * scale * dt
+            if name in ("x", "y", "z"):
+                pose[AXES[name], 3] += amount * self.config.jog_speed_m_s
+            else:
+                turn = np.zeros(3)
+                turn[AXES[name]] = amount * np.radians(self.config.jog_turn_deg_s)
+                pose[:3, :3] = pose[:3, :3] @ Rotation.from_rotvec(turn).as_matrix()
+            sols = self.robot.ik(pose, reference=self.q_ref)
+            if not sols:
+                return None
+            ratio = float(np.max(np.abs(sols[0] - self.q_ref) / cap))
+            if ratio <= 1.0:
+                jog.pose = pose
+                return sols[0]
+            if ratio > 50.0:  # a branch jump, not a slow joint: a singularity or the edge of the workspace
+                return None
+            scale /= ratio * 1.02
+        return None
 
     def _advance_auto(self, t: float, q: np.ndarray) -> None:
         auto = self.auto
