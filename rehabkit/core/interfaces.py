@@ -341,8 +341,12 @@ class Backend(ABC):
         """Advance ``n`` timesteps."""
 
     def contacts(self) -> list[Contact]:
-        """Current contacts involving the robot; backends without contact sensing return []."""
+        """Current contacts involving the robot (support contacts of its feet excluded); default []."""
         return []
+
+    def base_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A floating robot's root: world position, quaternion (w, x, y, z), linear and angular velocity (world)."""
+        raise NotImplementedError(f"{type(self).__name__} has no floating base to report")
 
     def body_poses(self) -> BodyPoses:
         """World poses of the bodies that carry :meth:`visual_geoms`; default none."""

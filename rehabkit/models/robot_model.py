@@ -69,6 +69,10 @@ class RobotModel:
         gravity: World gravity [m/s^2].
         passive_joints: Joints in the MJCF that are simulated and can be measured but
             not driven (e.g. a free wrist rotation); Pinocchio's model locks them at zero.
+        floating: The root body has a free joint (a humanoid): ``base_pose`` is then only
+            where it starts, and Pinocchio's model (with ``root`` among the passive joints)
+            is the robot seen from its root body.
+        support_geoms: Geoms whose contact with the floor is support (feet), not a collision.
     """
 
     name: str
@@ -81,6 +85,8 @@ class RobotModel:
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
     asset_dir: Path | None = None
     passive_joints: list[str] = field(default_factory=list)
+    floating: bool = False
+    support_geoms: list[str] = field(default_factory=list)
 
     @property
     def dof(self) -> int:

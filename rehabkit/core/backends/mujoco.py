@@ -62,6 +62,18 @@ class MujocoBackend(Backend):
         else:
             self._views = None
         self._ee_site = self.model.site(robot.ee_site).id
+        # feet on the floor hold the robot up: not collisions
+        floor = [self.model.geom("floor").id] if context.world is None or context.world.floor else []
+        self._support = np.zeros(self.model.ngeom, dtype=bool)
+        self._support[[self.model.geom(g).id for g in robot.support_geoms]] = True
+        self._floor = np.zeros(self.model.ngeom, dtype=bool)
+        self._floor[floor] = True
+        self._root_joint = None
+        if robot.floating:
+            root_body = self.model.body(self.spec.worldbody.first_body().name)
+            self._root_joint = int(self.model.body_jntadr[root_body.id])
+            if self.model.jnt_type[self._root_joint] != mujoco.mjtJoint.mjJNT_FREE:
+                raise ValueError(f"robot '{robot.name}' is floating but its root body has no free joint")
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._drawn = np.arange(1, self.model.nbody)
         self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
@@ -96,9 +108,21 @@ class MujocoBackend(Backend):
             return []
         geoms = d.contact.geom[:n]
         robot = self._robot_body[m.geom_bodyid[geoms]]
-        hits = np.flatnonzero(robot[:, 0] != robot[:, 1])
+        support = (self._support[geoms[:, 0]] & self._floor[geoms[:, 1]]) | (
+            self._support[geoms[:, 1]] & self._floor[geoms[:, 0]])
+        hits = np.flatnonzero((robot[:, 0] != robot[:, 1]) & ~support)
         return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
+
+    def base_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        if self._root_joint is None:
+            return super().base_state()
+        qa, va = self.model.jnt_qposadr[self._root_joint], self.model.jnt_dofadr[self._root_joint]
+        d = self.data
+        rot = d.xmat[self.model.jnt_bodyid[self._root_joint]].reshape(3, 3)
+        # MuJoCo's free-joint angular velocity is in the body frame; report it in the world frame
+        return d.qpos[qa : qa + 3].copy(), d.qpos[qa + 3 : qa + 7].copy(), d.qvel[va : va + 3].copy(), \
+            rot @ d.qvel[va + 3 : va + 6]
 
     def set_joints(self, values: dict[str, np.ndarray]) -> None:
         for name, value in values.items():

@@ -1,0 +1,122 @@
+"""Whole-body control by a stack of QPs at the control rate (after Mohammadi et al.), for floating robots.
+
+Each cycle: Pinocchio kinematics of the stack's own configuration, each level's task
+rows, the inequalities (joint limits as a velocity damper, joint speeds, CoM height,
+CoM inside the support polygon), the cascade of QPs (``rehabkit.wholebody.stack``),
+then the velocity is integrated into the joint reference. The robot is servoed to it
+by joint PD plus the torques that hold it standing on its feet. Levels and tasks
+come from YAML, in priority order: add, remove or reorder them without code.
+
+A ``frame`` task with ``reference: runner`` follows the scenario planner's Cartesian
+reference (positions in the robot's base frame, e.g. a throw for the hand).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Literal
+
+import numpy as np
+import pinocchio as pin
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, Controller, StrictModel
+from rehabkit.wholebody.stack import Level, solve_cascade
+from rehabkit.wholebody.tasks import Constraints, ConstraintSpec, KinematicState, Task, TaskSpec
+
+
+class LevelSpec(StrictModel):
+    """One priority level: its tasks share it softly (weights)."""
+
+    name: str = ""
+    tasks: list[TaskSpec] = Field(min_length=1)
+
+
+class QpStackConfig(StrictModel):
+    """Levels (highest priority first), the inequalities they all obey, the solver and the servo."""
+
+    levels: list[LevelSpec] = Field(min_length=1)
+    constraints: ConstraintSpec = ConstraintSpec()
+    solver: Literal["daqp", "proxqp"] = "daqp"
+    regularization: float = Field(1e-4, gt=0, description="ε of the regulariser ½ε vᵀHv")
+    metric: Literal["kinetic-energy", "identity"] = Field(
+        "kinetic-energy", description="H: the joint-space inertia matrix (eq. 1) or the identity (minimum norm)")
+    kp: float = Field(300.0, gt=0, description="joint servo stiffness [N·m/rad]")
+    kd: float = Field(5.0, ge=0, description="joint servo damping [N·m·s/rad]")
+
+
+class QpStack(Controller):
+    """Cascade of velocity-level QPs (strict priorities, soft weights within a level), PD servo."""
+
+    reference = "cartesian"
+
+    def __init__(self, config: QpStackConfig, context: Context):
+        robot = context.robot
+        if not getattr(robot.model, "floating", False) or not hasattr(robot, "floating_model"):
+            raise ValueError("qp-stack needs a floating-base robot with a 'floating_model' (e.g. 'coman')")
+        self.config, self.robot, self.dt = config, robot, context.control_dt
+        self.state = KinematicState(robot.floating_model)
+        self.q_des = robot.pin_configuration(np.zeros(robot.model.dof))
+        self._configure(self.q_des)
+        self.warm: list[np.ndarray | None] = []
+        self.cycle_ns: list[int] = []
+        self.failures = 0
+        self.residuals: list[list[float]] = []
+        self.joint_reference = None
+        self._started = False
+
+    def _configure(self, q_full: np.ndarray) -> None:
+        """Bind tasks and constraints to the starting configuration (held tasks keep it)."""
+        self.state.update(q_full)
+        names = self.robot.model.joint_names
+        self.levels = [[Task(t, self.state, names) for t in lv.tasks] for lv in self.config.levels]
+        lim = self.robot.model.limits
+        self.constraints = Constraints(self.config.constraints, self.state, lim.lower, lim.upper, lim.velocity)
+        self.base_pose = pin.SE3(self.robot.model.base_pose[:3, :3], self.robot.model.base_pose[:3, 3])
+
+    def solve(self, x_ref: np.ndarray | None, xd_ref: np.ndarray | None) -> np.ndarray:
+        """One cycle of the stack at the current reference configuration: the generalised velocity."""
+        st = self.state
+        st.update(self.q_des)
+        ref = None
+        if x_ref is not None:  # runner references are in the base frame; tasks work in the world
+            ref = (self.base_pose.act(np.asarray(x_ref, float)), self.base_pose.rotation @ np.asarray(xd_ref, float))
+        levels = []
+        for tasks in self.levels:
+            rows = [t.rows(st, ref if t.spec.type == "frame" and t.spec.reference == "runner" else None)
+                    for t in tasks]
+            levels.append(Level(np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
+        metric = pin.crba(st.model, st.data, self.q_des) if self.config.metric == "kinetic-energy" else None
+        result = solve_cascade(levels, self.constraints.build(st), self.config.regularization, self.config.solver,
+                               self.warm, metric)
+        if result.failed_levels:
+            self.failures += 1
+        self.residuals.append(result.residuals)
+        return result.v
+
+    def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        if not self._started:  # the stack starts from where the robot stands
+            self.q_des = self.robot.pin_configuration(np.asarray(q, float).copy())
+            self._configure(self.q_des)
+            self._started = True
+        t0 = time.perf_counter_ns()
+        v = self.solve(q_ref, qd_ref)
+        self.cycle_ns.append(time.perf_counter_ns() - t0)
+        self.q_des = pin.integrate(self.state.model, self.q_des, v * self.dt)
+        joints = self.q_des[7:]
+        self.joint_reference = joints
+        return self.config.kp * (joints - q) + self.config.kd * (v[6:] - qd) + self.robot.support_torque(self.q_des)
+
+    def run_metrics(self, trace) -> dict[str, float]:
+        if not self.cycle_ns:
+            return {}
+        ms = np.array(self.cycle_ns) / 1e6
+        return {"qp_cycles": float(len(ms)), "qp_cycle_median_ms": float(np.median(ms)),
+                "qp_cycle_p99_ms": float(np.percentile(ms, 99)), "qp_cycle_max_ms": float(ms.max()),
+                "qp_failed_cycles": float(self.failures)}
+
+
+@hookimpl
+def rehabkit_register_controllers(registry) -> None:
+    registry.add("qp-stack", config=QpStackConfig, factory=QpStack)

@@ -1,0 +1,1 @@
+"""Whole-body velocity control: tasks, constraints and the cascade of QPs."""

@@ -1,0 +1,101 @@
+"""A cascade of velocity-level QPs (strict priorities), and the single weighted QP it is compared with.
+
+Each level holds equality tasks ``A v = b`` (rows already weighted: tasks sharing a level
+are soft with respect to each other) and every level obeys the same inequalities
+``G v ≤ h`` and bounds ``lb ≤ v ≤ ub``. Level k minimises ``½‖A_k v − b_k‖² + ½ε vᵀHv``
+without changing what the levels above achieved: their task velocities, as solved, become
+equality constraints of the levels below (the paper's hard priorities, eqs. 7–9). The QPs
+go to ``qpsolvers`` (daqp or proxqp), warm-started from the previous cycle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from qpsolvers import daqp_solve_qp, proxqp_solve_qp
+
+
+@dataclass
+class Level:
+    """One priority level: stacked, weighted task rows."""
+
+    A: np.ndarray
+    b: np.ndarray
+
+
+@dataclass
+class Inequalities:
+    """Constraints every level obeys: ``G v ≤ h`` and ``lb ≤ v ≤ ub`` (finite: a large value where free)."""
+
+    G: np.ndarray
+    h: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+
+
+@dataclass
+class StackResult:
+    v: np.ndarray
+    residuals: list[float] = field(default_factory=list)  # ‖A_k v − b_k‖ per level
+    failed_levels: list[int] = field(default_factory=list)
+
+
+# the solvers' own qpsolvers entry points: the generic dispatcher's checks cost ~75 us a call at this size
+SOLVERS = {"daqp": daqp_solve_qp, "proxqp": proxqp_solve_qp}
+
+
+def _qp(P, q, ineq: Inequalities, E, e, solver, init):
+    G, h = (ineq.G, ineq.h) if len(ineq.h) else (None, None)
+    return SOLVERS[solver](P, q, G, h, E, e, ineq.lb, ineq.ub, initvals=init)
+
+
+def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, solver: str = "daqp",
+                  warm: list[np.ndarray | None] | None = None, metric: np.ndarray | None = None) -> StackResult:
+    """Lexicographic solution of ``levels`` (first = highest priority) under ``ineq``.
+
+    Level k minimises its own residual plus ½ε vᵀHv subject to every higher level keeping
+    the task velocity it achieved (``A_j v = A_j v_j``) and to the inequalities. ``metric``
+    H is the regulariser's weight (the paper's eq. 1: the inertia matrix makes it the kinetic
+    energy, so the heavy pelvis is not moved for the sake of a light arm). A level whose QP
+    fails (e.g. its equalities became numerically inconsistent) is skipped and reported.
+    """
+    n = len(ineq.lb)
+    H = np.eye(n) if metric is None else metric
+    v = np.zeros(n)
+    rows: list[np.ndarray] = []
+    values: list[np.ndarray] = []
+    out = StackResult(v)
+    for k, level in enumerate(levels):
+        P = level.A.T @ level.A + reg * H
+        q = -level.A.T @ level.b
+        E = np.vstack(rows) if rows else None
+        e = np.concatenate(values) if values else None
+        init = warm[k] if warm is not None and k < len(warm) else None
+        x = _qp(P, q, ineq, E, e, solver, init)
+        if x is None:
+            out.failed_levels.append(k)
+        else:
+            v = x
+            if warm is not None:
+                while len(warm) <= k:
+                    warm.append(None)
+                warm[k] = x
+        rows.append(level.A)
+        values.append(level.A @ v)
+        out.residuals.append(float(np.linalg.norm(level.A @ v - level.b)))
+    out.v = v
+    return out
+
+
+def solve_weighted(levels: list[Level], weights: list[float], ineq: Inequalities, reg: float = 1e-6,
+                   solver: str = "daqp", metric: np.ndarray | None = None) -> StackResult:
+    """All levels in one QP, level k's rows scaled by ``weights[k]`` (the soft-priority alternative)."""
+    n = len(ineq.lb)
+    H = np.eye(n) if metric is None else metric
+    A = np.vstack([w * lv.A for w, lv in zip(weights, levels)])
+    b = np.concatenate([w * lv.b for w, lv in zip(weights, levels)])
+    v = _qp(A.T @ A + reg * H, -A.T @ b, ineq, None, None, solver, None)
+    out = StackResult(np.zeros(n) if v is None else v, failed_levels=[] if v is not None else [0])
+    out.residuals = [float(np.linalg.norm(lv.A @ out.v - lv.b)) for lv in levels]
+    return out

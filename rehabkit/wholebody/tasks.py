@@ -1,0 +1,204 @@
+"""Velocity-level tasks and constraints of a whole-body stack, from Pinocchio kinematics.
+
+A task gives rows ``A v = b`` on the generalised velocity ``v`` (floating base twist,
+then the joints): ``A`` its Jacobian, ``b`` a feed-forward velocity plus a gain times
+the error, so errors do not accumulate (Mohammadi et al., eqs. 13–16). Constraints are
+the paper's inequalities: joint position limits as a velocity damper with gain μ,
+joint velocity limits, CoM height bounds, and the CoM ground projection kept inside
+the support polygon (also as a damper).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+import pinocchio as pin
+from pydantic import Field
+from scipy.spatial import ConvexHull
+
+from rehabkit.core.interfaces import StrictModel
+from rehabkit.wholebody.stack import Inequalities
+
+AXIS = {"x": 0, "y": 1, "z": 2}
+FREE = 1e9  # bound of an unconstrained velocity (the floating base's)
+
+
+class FrameTaskSpec(StrictModel):
+    """A frame's pose (or position): held where it starts, or following the runner's Cartesian reference."""
+
+    type: Literal["frame"]
+    frame: str
+    reference: Literal["hold", "runner"] = Field("hold", description="'runner': the plan's position reference")
+    position_only: bool = False
+    gain: float = Field(10.0, ge=0, description="λ for the position error [1/s]")
+    rotation_gain: float = Field(10.0, ge=0, description="λ for the orientation error [1/s]")
+    weight: float = Field(1.0, gt=0, description="soft priority within its level (ψ)")
+
+
+class OrientationTaskSpec(StrictModel):
+    """A frame's orientation about chosen world axes, held as it starts (quaternion error)."""
+
+    type: Literal["orientation"]
+    frame: str
+    axes: list[Literal["x", "y", "z"]] = Field(["x", "y"], min_length=1, description="e.g. roll and pitch only")
+    gain: float = Field(10.0, ge=0)
+    weight: float = Field(1.0, gt=0)
+
+
+class PostureTaskSpec(StrictModel):
+    """Joint values: ``target_deg`` (default: where they start)."""
+
+    type: Literal["posture"]
+    joints: list[str] | None = Field(None, description="default: every joint")
+    target_deg: list[float] | None = None
+    gain: float = Field(2.0, ge=0)
+    weight: float = Field(1.0, gt=0)
+
+
+class ComTaskSpec(StrictModel):
+    """Centre of mass held where it starts along chosen axes."""
+
+    type: Literal["com"]
+    axes: list[Literal["x", "y", "z"]] = ["x", "y"]
+    gain: float = Field(5.0, ge=0)
+    weight: float = Field(1.0, gt=0)
+
+
+TaskSpec = Annotated[FrameTaskSpec | OrientationTaskSpec | PostureTaskSpec | ComTaskSpec, Field(discriminator="type")]
+
+
+class ConstraintSpec(StrictModel):
+    """Inequalities applied on every level."""
+
+    joint_damper_mu: float = Field(5.0, gt=0, description="μ of the joint-limit velocity damper [1/s]")
+    velocity_fraction: float = Field(1.0, gt=0, le=1, description="share of each joint's speed limit allowed")
+    com_height_m: tuple[float, float] | None = Field(None, description="CoM height bounds (world z) [m]")
+    support_frames: list[str] = Field([], description="frames whose ground projections span the support polygon")
+    support_margin_m: float = Field(0.02, ge=0, description="CoM kept this far inside the polygon edges")
+    com_gain: float = Field(5.0, gt=0, description="damper gain of the CoM constraints [1/s]")
+
+
+class KinematicState:
+    """One cycle's kinematics of a floating-base model at configuration ``q`` (Pinocchio)."""
+
+    def __init__(self, model: pin.Model):
+        self.model, self.data = model, model.createData()
+        self.q = pin.neutral(model)
+
+    def update(self, q: np.ndarray) -> None:
+        self.q = q
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        self.com_jacobian = pin.jacobianCenterOfMass(self.model, self.data, q, False)
+        self.com = self.data.com[0]
+
+    def frame_id(self, name: str) -> int:
+        if not self.model.existFrame(name):
+            known = sorted({f.name for f in self.model.frames if f.name})
+            raise ValueError(f"no frame '{name}' in the model; frames include: {', '.join(known[:40])}")
+        return self.model.getFrameId(name)
+
+    def placement(self, fid: int) -> pin.SE3:
+        return self.data.oMf[fid]
+
+    def jacobian(self, fid: int) -> np.ndarray:
+        return pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)
+
+
+def orientation_error(current: np.ndarray, desired: np.ndarray) -> np.ndarray:
+    """Quaternion error (Yuan; the paper's eq. 15, sign chosen so ω = λ·e converges), world axes."""
+    x, y, z, w = pin.Quaternion(current).coeffs()
+    xd, yd, zd, wd = pin.Quaternion(desired).coeffs()
+    # η ε_d − η_d ε − ε_d × ε, written out: np.cross costs ~30 us a call at this size
+    return np.array([w * xd - wd * x - (yd * z - zd * y),
+                     w * yd - wd * y - (zd * x - xd * z),
+                     w * zd - wd * z - (xd * y - yd * x)])
+
+
+class Task:
+    """A configured task bound to a model: ``rows(state, ref) -> (A, b)``."""
+
+    def __init__(self, spec, state: KinematicState, joint_names: list[str]):
+        self.spec = spec
+        nv = state.model.nv
+        if spec.type in ("frame", "orientation"):
+            self.fid = state.frame_id(spec.frame)
+            self.start = state.placement(self.fid).copy()
+        if spec.type == "frame":
+            self.rows_sel = slice(0, 3) if spec.position_only else slice(0, 6)
+        if spec.type == "orientation":
+            self.axes = [AXIS[a] for a in spec.axes]
+        if spec.type == "posture":
+            names = spec.joints or joint_names
+            unknown = [n for n in names if n not in joint_names]
+            if unknown:
+                raise ValueError(f"posture task: unknown joint(s) {unknown}")
+            self.idx = np.array([6 + joint_names.index(n) for n in names])
+            self.qidx = self.idx + 1  # q has the quaternion's extra entry
+            if spec.target_deg is not None and len(spec.target_deg) != len(names):
+                raise ValueError(f"posture task: {len(spec.target_deg)} targets for {len(names)} joints")
+            self.target = np.radians(spec.target_deg) if spec.target_deg is not None else state.q[self.qidx].copy()
+            self.A = np.zeros((len(names), nv))
+            self.A[np.arange(len(names)), self.idx] = 1.0
+        if spec.type == "com":
+            self.axes = [AXIS[a] for a in spec.axes]
+            self.start_com = state.com.copy()
+
+    def rows(self, st: KinematicState, ref: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+        s = self.spec
+        if s.type == "frame":
+            now = st.placement(self.fid)
+            J = st.jacobian(self.fid)
+            goal_p, ff = (self.start.translation, np.zeros(3)) if ref is None else ref
+            b = np.concatenate([ff + s.gain * (goal_p - now.translation),
+                                s.rotation_gain * orientation_error(now.rotation, self.start.rotation)])
+            return s.weight * J[self.rows_sel], s.weight * b[self.rows_sel]
+        if s.type == "orientation":
+            J = st.jacobian(self.fid)[3:][self.axes]
+            err = orientation_error(st.placement(self.fid).rotation, self.start.rotation)[self.axes]
+            return s.weight * J, s.weight * s.gain * err
+        if s.type == "posture":
+            return s.weight * self.A, s.weight * s.gain * (self.target - st.q[self.qidx])
+        J = st.com_jacobian[self.axes]
+        return s.weight * J, s.weight * s.gain * (self.start_com[self.axes] - st.com[self.axes])
+
+
+class Constraints:
+    """The stack's inequalities for a model with joint limits (joint order after the 6 base velocities)."""
+
+    def __init__(self, spec: ConstraintSpec, state: KinematicState, lower, upper, velocity):
+        self.spec = spec
+        self.lower, self.upper = np.asarray(lower), np.asarray(upper)
+        self.vmax = np.asarray(velocity) * spec.velocity_fraction
+        self.polygon = None
+        if spec.support_frames:
+            pts = np.array([state.placement(state.frame_id(f)).translation[:2] for f in spec.support_frames])
+            hull = ConvexHull(pts)
+            # outward normals n and offsets d of the edges: n·p ≤ d inside; shrunk by the margin
+            self.polygon = (hull.equations[:, :2], -hull.equations[:, 2] - spec.support_margin_m)
+            self.hull_points = pts[hull.vertices]
+
+    def build(self, st: KinematicState) -> Inequalities:
+        s, nv = self.spec, st.model.nv
+        qj = st.q[7:]
+        lb = np.full(nv, -FREE)
+        ub = np.full(nv, FREE)
+        lb[6:] = np.maximum(-self.vmax, s.joint_damper_mu * (self.lower - qj))
+        ub[6:] = np.maximum(np.minimum(self.vmax, s.joint_damper_mu * (self.upper - qj)), lb[6:])  # never empty
+        rows, h = [], []
+        if s.com_height_m is not None:
+            jz = st.com_jacobian[2]
+            rows += [jz, -jz]
+            h += [s.com_gain * (s.com_height_m[1] - st.com[2]), -s.com_gain * (s.com_height_m[0] - st.com[2])]
+        if self.polygon is not None:
+            normals, offsets = self.polygon
+            rows.extend(normals @ st.com_jacobian[:2])
+            h.extend(s.com_gain * (offsets - normals @ st.com[:2]))
+        G = np.array(rows).reshape(-1, nv)
+        return Inequalities(G, np.array(h, float), lb, ub)
+
+    def com_margin(self, com_xy: np.ndarray) -> float:
+        """Distance of a point inside the (unshrunk) support polygon to its nearest edge (negative outside)."""
+        normals, offsets = self.polygon
+        return float(np.min(offsets + self.spec.support_margin_m - normals @ com_xy))
