@@ -163,12 +163,15 @@ class Plan:
         diagnostics: Scalar figures merged into the run's metrics (e.g. continuity residuals).
         waypoints: Joint values of the via points actually used, for logging.
         details: Non-scalar results for the summary (e.g. an optimiser's history).
+        actions: Things to do to the scene while the plan runs: ``(t, "release" | "grasp", object)``,
+            ``t`` from the plan's start (e.g. a throw lets go of the ball at its release instant).
     """
 
     trajectory: Trajectory
     diagnostics: dict[str, float] = field(default_factory=dict)
     waypoints: np.ndarray | None = None
     details: dict[str, Any] = field(default_factory=dict)
+    actions: list[tuple[float, str, str]] = field(default_factory=list)
 
 
 class PlanningError(RuntimeError):
@@ -377,6 +380,14 @@ class Backend(ABC):
     def move_object(self, name: str, position: np.ndarray) -> None:
         """Put a kinematic (mocap) object at a world position."""
         raise NotImplementedError(f"{type(self).__name__} cannot move scene objects")
+
+    def grasp(self, name: str) -> None:
+        """Put a held object (``held_by``) back at its holder, at rest, and hold it there."""
+        raise NotImplementedError(f"{type(self).__name__} cannot hold objects")
+
+    def release(self, name: str) -> None:
+        """Let go of a held object: from now on it moves freely."""
+        raise NotImplementedError(f"{type(self).__name__} cannot hold objects")
 
     def object_position(self, name: str) -> np.ndarray:
         """Ground-truth world position of a scene object."""

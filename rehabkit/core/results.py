@@ -92,6 +92,6 @@ def build_summary(run: Runner, metrics: dict[str, float], per_joint: dict[str, A
         "real_time_factor": metrics["real_time_factor"],
         "metrics": metrics, "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": run.safety.tripped, "events": [e.as_dict() for e in run.safety.events]},
-        "events": run.fired, "plans": run.plans, "notes": run.notes,
+        "events": run.fired, "plans": run.plans, "notes": run.notes, "actions": run.acted,
         "reports": {name: text for name, s in run.sensors.items() if (text := s.report(metrics))},
     }

@@ -30,6 +30,7 @@ from rehabkit.core.targets import resolve_targets
 
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
 LOG_FLUSH_SAMPLES = 500  # log-rate samples buffered between column sends
+SCENE_ACTIONS = ("release", "grasp")  # what a plan may do to held objects (Backend methods of these names)
 
 
 class SetupError(RuntimeError):
@@ -227,6 +228,7 @@ class Runner:
         self.log = log = self._open_log()
         self.diag: dict[str, float] = {}
         self.fired: list[dict] = []
+        self._actions: list[tuple[int, str, str]] = []
         self.plans: list[dict] = []
 
         q0 = self.start_q()
@@ -250,6 +252,7 @@ class Runner:
         # 'moved' events: [position last planned for, candidate new position, readings it has held]
         self._watch = {i: [None, None, 0] for i, e in enumerate(sc.task.events) if e.moved is not None}
         self._next_reach, self._stop_at = 0, n
+        self.acted: list[dict] = []
         self._sensor_due = [0] * len(self.sensors)
 
         # the hot loop: one integer comparison a step decides whether anything besides control is due
@@ -330,6 +333,12 @@ class Runner:
         try:
             while self._timed and self._timed[0][0] <= k:
                 self._fire(self._timed.pop(0)[1], k, t, q, qd)
+            while self._actions and self._actions[0][0] <= k:
+                _, kind, obj = self._actions.pop(0)
+                getattr(self.backend, kind)(obj)  # 'release' / 'grasp'
+                self.acted.append({"t": round(t, 6), "action": kind, "object": obj})
+                if self.log:
+                    self.log.event(t, f"{kind} {obj}", level="INFO")
             if self._waiting and k >= self._next_reach:
                 self._next_reach = k + sch.reach_every
                 ee = self.robot.fk(q)[:3, 3]  # base frame, as target poses are
@@ -356,6 +365,8 @@ class Runner:
         upcoming = [self._stop_at, *self._sensor_due]
         if self._timed:
             upcoming.append(self._timed[0][0])
+        if self._actions:
+            upcoming.append(self._actions[0][0])
         if self._waiting:
             upcoming.append(self._next_reach)
         return max(k + 1, min(upcoming))
@@ -394,6 +405,12 @@ class Runner:
         """List a plan in the summary and draw it (``x``: its reference sampled at the control rate)."""
         cart = self.planner.space == "cartesian"
         dt = self.schedule.control_dt
+        # scene actions of the plan (a throw's release): they replace those of the plan before
+        bad = [kind for _, kind, _ in plan.actions if kind not in SCENE_ACTIONS]
+        if bad:
+            raise PlanningError(f"plan action(s) {bad} unknown; known: {', '.join(SCENE_ACTIONS)}")
+        self._actions = sorted([a for a in self._actions if a[0] < k0]
+                               + [(k0 + int(round(at / dt)), kind, obj) for at, kind, obj in plan.actions])
         way = plan.waypoints
         entry = {"t": round(k0 * dt, 6), "duration_s": plan.trajectory.duration}
         if way is not None:

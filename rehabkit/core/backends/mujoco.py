@@ -75,6 +75,12 @@ class MujocoBackend(Backend):
             if self.model.jnt_type[self._root_joint] != mujoco.mjtJoint.mjJNT_FREE:
                 raise ValueError(f"robot '{robot.name}' is floating but its root body has no free joint")
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        # held objects: their weld to the holder, the holder site, the object's free joint
+        self._held = {}
+        for obj in (context.world.objects if context.world else []):
+            if obj.held_by is not None:
+                self._held[obj.name] = (self.model.equality(f"{obj.name}_hold").id, self.model.site(obj.held_by).id,
+                                        self.model.joint(f"{obj.name}_free").id)
         self._drawn = np.arange(1, self.model.nbody)
         self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
 
@@ -82,6 +88,36 @@ class MujocoBackend(Backend):
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self._q] = q0
         mujoco.mj_forward(self.model, self.data)
+        for name in self._held:
+            self.grasp(name)
+
+    def grasp(self, name: str) -> None:
+        eq, site, joint = self._held_entry(name)
+        m, d = self.model, self.data
+        qa, va = m.jnt_qposadr[joint], m.jnt_dofadr[joint]
+        d.qpos[qa : qa + 3] = d.site_xpos[site]
+        d.qpos[qa + 3 : qa + 7] = [1.0, 0.0, 0.0, 0.0]
+        d.qvel[va : va + 6] = 0.0
+        mujoco.mj_forward(m, d)
+        # weld at the present relative pose: the holder body as seen from the object
+        obj_body, holder = m.eq_obj1id[eq], m.eq_obj2id[eq]
+        rot = d.xmat[obj_body].reshape(3, 3)
+        m.eq_data[eq, 0:3] = 0.0  # anchor at the holder's origin
+        m.eq_data[eq, 3:6] = rot.T @ (d.xpos[holder] - d.xpos[obj_body])
+        inv = np.zeros(4)
+        mujoco.mju_negQuat(inv, d.xquat[obj_body])
+        rel = np.zeros(4)
+        mujoco.mju_mulQuat(rel, inv, d.xquat[holder])
+        m.eq_data[eq, 6:10] = rel
+        d.eq_active[eq] = 1
+
+    def release(self, name: str) -> None:
+        self.data.eq_active[self._held_entry(name)[0]] = 0
+
+    def _held_entry(self, name: str):
+        if name not in self._held:
+            raise ValueError(f"'{name}' is not a held object; held: {', '.join(self._held) or 'none'}")
+        return self._held[name]
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         d = self.data

@@ -15,6 +15,10 @@ INTEGRATORS = {"implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "implici
                "euler": mujoco.mjtIntegrator.mjINT_EULER, "rk4": mujoco.mjtIntegrator.mjINT_RK4}
 
 
+HELD_TYPE = 2  # collision bit of objects the robot carries
+WORLD_AFFINITY = 1 | HELD_TYPE  # the floor and obstacles meet the robot (bit 1) and carried objects (bit 2)
+
+
 def _size3(size: list[float]) -> list[float]:
     return [*size, *([0.0] * (3 - len(size)))]
 
@@ -64,7 +68,7 @@ def build_scene(robot: RobotModel, world: World, timestep: float, integrator: st
     spec.worldbody.add_light(name="key_light", pos=[0, -1.0, 3.0], dir=[0, 0.3, -1], diffuse=[0.8, 0.8, 0.8])
     if world.floor:
         spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.05],
-                                contype=0, conaffinity=1, rgba=[0.85, 0.85, 0.82, 1])
+                                contype=0, conaffinity=WORLD_AFFINITY, rgba=[0.85, 0.85, 0.82, 1])
     for cam in world.cameras:
         spec.worldbody.add_camera(name=cam.name, pos=cam.position, quat=matrix_to_quat_wxyz(camera_axes(cam)),
                                   fovy=cam.fovy_deg)
@@ -81,8 +85,18 @@ def build_scene(robot: RobotModel, world: World, timestep: float, integrator: st
         elif obj.dynamic:  # free: collides with the robot and the world
             body = spec.worldbody.add_body(name=obj.name, pos=obj.pose.position, quat=quat)
             body.add_freejoint(name=f"{obj.name}_free")
-            body.add_geom(**geom, mass=obj.mass, contype=1, conaffinity=1)
+            if obj.held_by is None:
+                body.add_geom(**geom, mass=obj.mass, contype=1, conaffinity=1)
+            else:  # carried by the robot: touches the world, never the hand holding it
+                body.add_geom(**geom, mass=obj.mass, contype=HELD_TYPE, conaffinity=HELD_TYPE)
+                holder = spec.site(obj.held_by)
+                if holder is None:
+                    sites = sorted(s.name for s in spec.sites if s.name)
+                    raise ValueError(f"object '{obj.name}': held_by '{obj.held_by}' is not a site of the robot; "
+                                     f"sites: {', '.join(sites)}")
+                spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name=f"{obj.name}_hold", name1=obj.name,
+                                  name2=holder.parent.name, objtype=mujoco.mjtObj.mjOBJ_BODY)
         else:  # static obstacle
-            spec.worldbody.add_geom(**geom, pos=obj.pose.position, quat=quat, contype=0, conaffinity=1)
+            spec.worldbody.add_geom(**geom, pos=obj.pose.position, quat=quat, contype=0, conaffinity=WORLD_AFFINITY)
     return spec
 

@@ -42,6 +42,8 @@ class WorldObject(StrictModel):
     mass: float = Field(0.1, gt=0, description="[kg], dynamic objects only")
     rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.3, 0.6)
     emission: float = Field(0.0, ge=0, le=1, description="self-lit fraction of its colour (a fluorescent target)")
+    held_by: str | None = Field(None, description="dynamic objects: the robot site it starts held at (a ball in a "
+                                                  "hand); plans release and grasp it again")
 
     @model_validator(mode="after")
     def _size_matches_shape(self) -> WorldObject:
@@ -50,6 +52,8 @@ class WorldObject(StrictModel):
             raise ValueError(f"a {self.shape} takes {n} size value(s) ({what}), got {len(self.size)}")
         if self.dynamic and self.mocap:
             raise ValueError(f"object '{self.name}': dynamic (free) and mocap (kinematic) exclude each other")
+        if self.held_by is not None and not self.dynamic:
+            raise ValueError(f"object '{self.name}': only a dynamic object can be held (add dynamic: true)")
         return self
 
 
