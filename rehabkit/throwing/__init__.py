@@ -1,0 +1,1 @@
+"""Throwing: parametric underhand throws, retargeting, ballistics and a learned throw generator."""
