@@ -3,12 +3,13 @@
     python tools/make_throws.py plugins/planners/throw_demos.npz
 
 We have no motion capture, so the demonstrations are synthesised from the pendulum-like
-wrist model of ``rehabkit.throwing.model`` at human scale (arm 0.68 m, swung with the elbow slightly bent: radius about 0.62 m), with trial-to-trial
-variability around a gentle therapeutic toss (release speed about 1.9 m/s, near the peak of the swing): each throw's
-back-swing and release angles, phase durations, release angular speed, hand radius and aim
-are drawn from normal distributions (seed fixed). Each record holds the parameters and the
-sampled wrist path (200 Hz, shoulder frame, x forward, z up) from the start of the motion
-to the release, as a capture system would.
+wrist model of ``rehabkit.throwing.model`` at human scale: an arm of 0.68 m swung with the
+elbow slightly bent (radius about 0.62 m), a gentle therapeutic toss released near the peak
+of the swing at about 1.9 m/s. Trial-to-trial variability: each throw's back-swing and
+release angles, phase durations, release angular speed, hand radius and aim are drawn from
+normal distributions (seed fixed). Each record holds the parameters and the sampled wrist
+path (200 Hz, shoulder frame, x forward, z up) from the start of the motion to the release,
+as a capture system would.
 """
 
 from __future__ import annotations

@@ -62,6 +62,7 @@ class QpStack(Controller):
         self.warm: list[np.ndarray | None] = []
         self.cycle_ns: list[int] = []
         self.failures = 0
+        self.solves: dict[str, int] = {}
         self.residuals: list[list[float]] = []
         self.joint_reference = None
         self._started = False
@@ -87,9 +88,12 @@ class QpStack(Controller):
             rows = [t.rows(st, ref if t.spec.type == "frame" and t.spec.reference == "runner" else None)
                     for t in tasks]
             levels.append(Level(np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
-        metric = pin.crba(st.model, st.data, self.q_des) if self.config.metric == "kinetic-energy" else None
+        metric = None
+        if self.config.metric == "kinetic-energy":
+            upper = pin.crba(st.model, st.data, self.q_des)  # Pinocchio fills the upper triangle only
+            metric = np.triu(upper) + np.triu(upper, 1).T
         result = solve_cascade(levels, self.constraints.build(st), self.config.regularization, self.config.solver,
-                               self.warm, metric)
+                               self.warm, metric, self.solves)
         if result.failed_levels:
             self.failures += 1
         self.residuals.append(result.residuals)
@@ -114,7 +118,8 @@ class QpStack(Controller):
         ms = np.array(self.cycle_ns) / 1e6
         return {"qp_cycles": float(len(ms)), "qp_cycle_median_ms": float(np.median(ms)),
                 "qp_cycle_p99_ms": float(np.percentile(ms, 99)), "qp_cycle_max_ms": float(ms.max()),
-                "qp_failed_cycles": float(self.failures)}
+                "qp_failed_cycles": float(self.failures),
+                "qp_solver_calls_share": self.solves.get("solver", 0) / max(1, sum(self.solves.values()))}
 
 
 @hookimpl

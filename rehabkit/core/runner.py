@@ -246,6 +246,9 @@ class Runner:
             trace.q_ref, trace.qd_ref = self.reference[0], self.reference[1]
         self.goal = start.copy()
         self._install(0, self._plan(0.0, q0, np.zeros(dof), sc.task.order()))
+        if log:  # drawn after the first plan: some planners' drawings (a throw's parabola) come from it
+            for name, points in self.planner.visuals().items():
+                log.points(f"world/planner/{name}", self._to_world(points), (120, 120, 200), 0.003)
         self._timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(sc.task.events)
                              if e.at is not None)
         self._waiting = [i for i, e in enumerate(sc.task.events) if e.reached is not None]
@@ -464,8 +467,6 @@ class Runner:
         pts = np.array([self.robot.model.base_pose[:3, :3] @ t.pose[:3, 3] + self.robot.model.base_pose[:3, 3]
                         for _, t in named]).reshape(-1, 3)
         log.targets(0.0, [n for n, _ in named], pts)
-        for name, points in self.planner.visuals().items():
-            log.points(f"world/planner/{name}", self._to_world(points), (120, 120, 200), 0.003)
         if self.robot.model.dof == 3:  # a joint space one can look at: degrees on three axes
             for name, points in self.planner.joint_space_visuals().items():
                 log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from qpsolvers import daqp_solve_qp, proxqp_solve_qp
+from scipy.linalg.lapack import dgesv
 
 
 @dataclass
@@ -45,13 +46,42 @@ class StackResult:
 SOLVERS = {"daqp": daqp_solve_qp, "proxqp": proxqp_solve_qp}
 
 
-def _qp(P, q, ineq: Inequalities, E, e, solver, init):
+FEASIBLE_TOL = 1e-9
+
+
+def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None):
+    """min ½vᵀPv + qᵀv s.t. E v = e and the inequalities.
+
+    The equality-constrained optimum (one KKT solve) is tried first: when it already
+    satisfies every inequality it is the QP's optimum too (the problem is convex), and
+    the QP solver is only called when it does not, which at a standstill or in smooth
+    motion is the exception.
+    """
+    n = len(q)
+    if E is None:
+        kkt, rhs = P, -q
+    else:
+        m = len(E)
+        kkt = np.zeros((n + m, n + m))
+        kkt[:n, :n], kkt[:n, n:], kkt[n:, :n] = P, E.T, E
+        rhs = np.concatenate([-q, e])
+    _, _, x, info = dgesv(kkt, rhs)  # LAPACK directly: numpy's wrapper doubles the cost at this size
+    v = x[:n]
+    solved = info == 0 and (E is None or np.abs(E @ v - e).max() < 1e-7)  # else singular/inconsistent: solver
+    if solved and (np.all(v >= ineq.lb - FEASIBLE_TOL) and np.all(v <= ineq.ub + FEASIBLE_TOL)
+                   and (not len(ineq.h) or np.all(ineq.G @ v <= ineq.h + FEASIBLE_TOL))):
+        if stats is not None:
+            stats["direct"] = stats.get("direct", 0) + 1
+        return v
+    if stats is not None:
+        stats["solver"] = stats.get("solver", 0) + 1
     G, h = (ineq.G, ineq.h) if len(ineq.h) else (None, None)
     return SOLVERS[solver](P, q, G, h, E, e, ineq.lb, ineq.ub, initvals=init)
 
 
 def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, solver: str = "daqp",
-                  warm: list[np.ndarray | None] | None = None, metric: np.ndarray | None = None) -> StackResult:
+                  warm: list[np.ndarray | None] | None = None, metric: np.ndarray | None = None,
+                  stats: dict | None = None) -> StackResult:
     """Lexicographic solution of ``levels`` (first = highest priority) under ``ineq``.
 
     Level k minimises its own residual plus ½ε vᵀHv subject to every higher level keeping
@@ -72,7 +102,7 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
         E = np.vstack(rows) if rows else None
         e = np.concatenate(values) if values else None
         init = warm[k] if warm is not None and k < len(warm) else None
-        x = _qp(P, q, ineq, E, e, solver, init)
+        x = _qp(P, q, ineq, E, e, solver, init, stats)
         if x is None:
             out.failed_levels.append(k)
         else:
@@ -89,13 +119,13 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
 
 
 def solve_weighted(levels: list[Level], weights: list[float], ineq: Inequalities, reg: float = 1e-6,
-                   solver: str = "daqp", metric: np.ndarray | None = None) -> StackResult:
+                   solver: str = "daqp", metric: np.ndarray | None = None, stats: dict | None = None) -> StackResult:
     """All levels in one QP, level k's rows scaled by ``weights[k]`` (the soft-priority alternative)."""
     n = len(ineq.lb)
     H = np.eye(n) if metric is None else metric
     A = np.vstack([w * lv.A for w, lv in zip(weights, levels)])
     b = np.concatenate([w * lv.b for w, lv in zip(weights, levels)])
-    v = _qp(A.T @ A + reg * H, -A.T @ b, ineq, None, None, solver, None)
+    v = _qp(A.T @ A + reg * H, -A.T @ b, ineq, None, None, solver, None, stats)
     out = StackResult(np.zeros(n) if v is None else v, failed_levels=[] if v is not None else [0])
     out.residuals = [float(np.linalg.norm(lv.A @ out.v - lv.b)) for lv in levels]
     return out

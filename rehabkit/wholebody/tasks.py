@@ -51,6 +51,7 @@ class PostureTaskSpec(StrictModel):
 
     type: Literal["posture"]
     joints: list[str] | None = Field(None, description="default: every joint")
+    exclude: list[str] = Field([], description="joints left out (e.g. the throwing arm, in a whole-body posture)")
     target_deg: list[float] | None = None
     gain: float = Field(2.0, ge=0)
     weight: float = Field(1.0, gt=0)
@@ -130,8 +131,8 @@ class Task:
         if spec.type == "orientation":
             self.axes = [AXIS[a] for a in spec.axes]
         if spec.type == "posture":
-            names = spec.joints or joint_names
-            unknown = [n for n in names if n not in joint_names]
+            unknown = [n for n in (spec.joints or []) + spec.exclude if n not in joint_names]
+            names = [n for n in (spec.joints or joint_names) if n not in spec.exclude]
             if unknown:
                 raise ValueError(f"posture task: unknown joint(s) {unknown}")
             self.idx = np.array([6 + joint_names.index(n) for n in names])

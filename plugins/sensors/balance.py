@@ -1,0 +1,74 @@
+"""Balance of a standing floating-base robot: CoM margin in the support polygon, feet slip, pelvis tilt.
+
+Reads the true pelvis state from the backend (an IMU and leg odometry would estimate
+it on hardware) and the joints, and computes with the robot's floating Pinocchio model.
+The support polygon is the convex hull of the foot-corner frames at the first reading.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from pydantic import Field
+from scipy.spatial import ConvexHull
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
+
+
+class BalanceConfig(SensorConfig):
+    """Frames spanning the support polygon, and the feet."""
+
+    rate_hz: float = Field(1000.0, gt=0)
+    support_frames: list[str] = Field(min_length=3, description="foot corner frames")
+    feet: list[str] = Field(["l_sole", "r_sole"], min_length=1)
+
+
+class Balance(Sensor):
+    """CoM margin to the support polygon's edges, feet displacement and pelvis tilt, every reading."""
+
+    def __init__(self, config: BalanceConfig, context: Context):
+        robot = context.robot
+        if not getattr(robot.model, "floating", False) or not hasattr(robot, "floating_model"):
+            raise ValueError("balance needs a floating-base robot with a 'floating_model' (e.g. 'coman')")
+        self.robot, self.config, self.rate_hz = robot, config, config.rate_hz
+        self.model = robot.floating_model
+        self.data = self.model.createData()
+        for f in config.support_frames + config.feet:
+            if not self.model.existFrame(f):
+                raise ValueError(f"balance: no frame '{f}' in robot '{robot.model.name}'")
+        self._corners = [self.model.getFrameId(f) for f in config.support_frames]
+        self._feet = [self.model.getFrameId(f) for f in config.feet]
+        self._polygon = None
+        self.margin_min, self.slip_max, self.tilt_max = np.inf, 0.0, 0.0
+
+    def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, float]:
+        pos, quat, _, _ = backend.base_state()
+        qf = self.robot.pin_configuration(np.asarray(q, float), pos, quat)
+        com = pin.centerOfMass(self.model, self.data, qf)
+        pin.updateFramePlacements(self.model, self.data)
+        feet = np.array([self.data.oMf[f].translation for f in self._feet])
+        if self._polygon is None:
+            pts = np.array([self.data.oMf[f].translation[:2] for f in self._corners])
+            hull = ConvexHull(pts)
+            self._polygon = (hull.equations[:, :2], -hull.equations[:, 2])
+            self._feet0 = feet.copy()
+        normals, offsets = self._polygon
+        margin = float(np.min(offsets - normals @ com[:2]))
+        slip = float(np.abs(feet - self._feet0).max())
+        up = self.data.oMi[1].rotation[:, 2]  # the pelvis' z axis
+        tilt = float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
+        self.margin_min = min(self.margin_min, margin)
+        self.slip_max, self.tilt_max = max(self.slip_max, slip), max(self.tilt_max, tilt)
+        return {"com_margin_m": margin, "feet_slip_mm": slip * 1e3, "pelvis_tilt_deg": tilt}
+
+    def run_metrics(self, trace=None) -> dict[str, float]:
+        if self._polygon is None:
+            return {}
+        return {"com_margin_min_m": self.margin_min, "feet_slip_max_mm": self.slip_max * 1e3,
+                "pelvis_tilt_max_deg": self.tilt_max}
+
+
+@hookimpl
+def rehabkit_register_sensors(registry) -> None:
+    registry.add("balance", config=BalanceConfig, factory=Balance)
