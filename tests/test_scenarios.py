@@ -1,16 +1,12 @@
-"""Every built-in scenario meets its own expectations (through the pytest plugin's fixture)."""
+"""Scenario variations through the pytest plugin's fixture.
+
+Every built-in scenario is also collected as a test of its own by the plugin (``testpaths``
+includes ``scenarios/``), so they are not run a second time here.
+"""
 
 import pytest
 
 from tests.conftest import SCENARIOS
-
-BUILT_IN = sorted(p for p in SCENARIOS.glob("*.yaml") if not p.name.startswith("_"))
-
-
-@pytest.mark.parametrize("path", BUILT_IN, ids=[p.stem for p in BUILT_IN])
-def test_built_in_scenario_passes(run_scenario, path):
-    result = run_scenario(path, write=False)
-    assert result.passed, result.failures or result.summary["safety"]["events"]
 
 
 @pytest.mark.parametrize("durations, limit_deg", [([1.5] * 4, 0.5), ([3.0] * 4, 0.2)])

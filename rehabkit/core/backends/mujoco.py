@@ -95,6 +95,7 @@ class MujocoBackend(Backend):
         eq, site, joint = self._held_entry(name)
         m, d = self.model, self.data
         qa, va = m.jnt_qposadr[joint], m.jnt_dofadr[joint]
+        mujoco.mj_kinematics(m, d)  # site positions of the present state (mj_step leaves those of the last one)
         d.qpos[qa : qa + 3] = d.site_xpos[site]
         d.qpos[qa + 3 : qa + 7] = [1.0, 0.0, 0.0, 0.0]
         d.qvel[va : va + 6] = 0.0
