@@ -39,9 +39,10 @@ class QpStackConfig(StrictModel):
     levels: list[LevelSpec] = Field(min_length=1)
     constraints: ConstraintSpec = ConstraintSpec()
     solver: Literal["daqp", "proxqp"] = "daqp"
-    regularization: float = Field(1e-4, gt=0, description="ε of the regulariser ½ε vᵀHv")
+    regularization: float = Field(1e-6, gt=0, description="ε of each level's damping ½ε‖v‖²")
     metric: Literal["kinetic-energy", "identity"] = Field(
-        "kinetic-energy", description="H: the joint-space inertia matrix (eq. 1) or the identity (minimum norm)")
+        "kinetic-energy", description="among the optima, the least ½vᵀHv: H the joint-space inertia matrix "
+                                      "(kinetic energy, eq. 1) or the identity (minimum norm)")
     kp: float = Field(300.0, gt=0, description="joint servo stiffness [N·m/rad]")
     kd: float = Field(5.0, ge=0, description="joint servo damping [N·m·s/rad]")
 

@@ -84,21 +84,25 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
                   stats: dict | None = None) -> StackResult:
     """Lexicographic solution of ``levels`` (first = highest priority) under ``ineq``.
 
-    Level k minimises its own residual plus ½ε vᵀHv subject to every higher level keeping
-    the task velocity it achieved (``A_j v = A_j v_j``) and to the inequalities. ``metric``
-    H is the regulariser's weight (the paper's eq. 1: the inertia matrix makes it the kinetic
-    energy, so the heavy pelvis is not moved for the sake of a light arm). A level whose QP
-    fails (e.g. its equalities became numerically inconsistent) is skipped and reported.
+    Level k minimises its own residual (plus a small damping ½ε‖v‖² that keeps the problem
+    well posed near singularities) subject to every higher level keeping the task velocity it
+    achieved (``A_j v = A_j v_j``) and to the inequalities. Among all velocities that keep
+    every level's result, a last step picks the one of least ½vᵀHv: with ``metric`` H the
+    joint-space inertia matrix that is the kinetic energy of the paper's eq. (1), so the heavy
+    pelvis is not moved for the sake of a light arm (identity: the minimum-norm solution).
+    A step whose QP fails (e.g. its equalities became numerically inconsistent) is skipped
+    and reported.
     """
     n = len(ineq.lb)
-    H = np.eye(n) if metric is None else metric
     v = np.zeros(n)
     rows: list[np.ndarray] = []
     values: list[np.ndarray] = []
     out = StackResult(v)
-    for k, level in enumerate(levels):
-        P = level.A.T @ level.A + reg * H
-        q = -level.A.T @ level.b
+    damping = reg * np.eye(n)
+    steps = [(lv.A.T @ lv.A + damping, -lv.A.T @ lv.b, lv) for lv in levels]
+    if sum(len(lv.b) for lv in levels) < n:  # otherwise the levels leave nothing to choose (generically)
+        steps.append((np.eye(n) if metric is None else metric, np.zeros(n), None))  # least kinetic energy
+    for k, (P, q, level) in enumerate(steps):
         E = np.vstack(rows) if rows else None
         e = np.concatenate(values) if values else None
         init = warm[k] if warm is not None and k < len(warm) else None
@@ -111,9 +115,10 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
                 while len(warm) <= k:
                     warm.append(None)
                 warm[k] = x
-        rows.append(level.A)
-        values.append(level.A @ v)
-        out.residuals.append(float(np.linalg.norm(level.A @ v - level.b)))
+        if level is not None:
+            rows.append(level.A)
+            values.append(level.A @ v)
+    out.residuals = [float(np.linalg.norm(lv.A @ v - lv.b)) for lv in levels]
     out.v = v
     return out
 
