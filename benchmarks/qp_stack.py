@@ -63,7 +63,7 @@ def main() -> None:
         t0 = time.perf_counter_ns()
         v = stack.solve(x[k], xd[k])
         t_c.append(time.perf_counter_ns() - t0)
-        res_c.append(stack.residuals[-1])
+        res_c.append(stack.last_residuals)
         # the weighted QP at the same state: same kinematics and rows, one solve
         t0 = time.perf_counter_ns()
         st.update(stack.q_des)

@@ -61,10 +61,11 @@ class QpStack(Controller):
         self.q_des = robot.pin_configuration(np.zeros(robot.model.dof))
         self._configure(self.q_des)
         self.warm: list[np.ndarray | None] = []
-        self.cycle_ns: list[int] = []
+        self.cycle_ns: list[int] = []  # ints: no work for the garbage collector
         self.failures = 0
         self.solves: dict[str, int] = {}
-        self.residuals: list[list[float]] = []
+        self.last_residuals: list[float] = []  # per level, of the latest cycle
+        self.max_residuals = np.zeros(len(config.levels))  # per level, over the run
         self.joint_reference = None
         self._started = False
 
@@ -97,7 +98,8 @@ class QpStack(Controller):
                                self.warm, metric, self.solves)
         if result.failed_levels:
             self.failures += 1
-        self.residuals.append(result.residuals)
+        self.last_residuals = result.residuals
+        np.maximum(self.max_residuals, result.residuals, out=self.max_residuals)
         return result.v
 
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
@@ -120,6 +122,7 @@ class QpStack(Controller):
         return {"qp_cycles": float(len(ms)), "qp_cycle_median_ms": float(np.median(ms)),
                 "qp_cycle_p99_ms": float(np.percentile(ms, 99)), "qp_cycle_max_ms": float(ms.max()),
                 "qp_failed_cycles": float(self.failures),
+                **{f"qp_level{i + 1}_max_residual": float(r) for i, r in enumerate(self.max_residuals)},
                 "qp_solver_calls_share": self.solves.get("solver", 0) / max(1, sum(self.solves.values()))}
 
 

@@ -9,6 +9,7 @@ The loop calls plugin objects directly; pluggy is only used to find them.
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from dataclasses import dataclass, field
@@ -266,6 +267,9 @@ class Runner:
         log_every = sch.log_every
         next_log = 0 if log else -1
         bar = tqdm(total=n, unit="step", delay=1.0, disable=not self.progress, leave=False)
+        # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
+        gc.collect()
+        gc.freeze()
         safety, stop_after = self.safety, sc.safety.stop_after_s
         tx, tqr, controller, ee = trace.x, trace.q_ref, self.controller, self._ee_world
         own_ref = self.controller.own_reference
@@ -312,6 +316,7 @@ class Runner:
         else:
             k = n
         wall = time.perf_counter() - t_loop
+        gc.unfreeze()
         bar.close()
         if cart:
             base = self.robot.model.base_pose
