@@ -74,6 +74,9 @@ class QpStack(Controller):
         self.state.update(q_full)
         names = self.robot.model.joint_names
         self.levels = [[Task(t, self.state, names) for t in lv.tasks] for lv in self.config.levels]
+        # the kinetic-energy choice only matters if the levels leave some velocity free (generically)
+        self._freedom_left = sum(sum(t.rows(self.state, None)[1].size for t in lv) for lv in self.levels) \
+            < self.state.model.nv
         lim = self.robot.model.limits
         self.constraints = Constraints(self.config.constraints, self.state, lim.lower, lim.upper, lim.velocity)
         self.base_pose = pin.SE3(self.robot.model.base_pose[:3, :3], self.robot.model.base_pose[:3, 3])
@@ -87,11 +90,11 @@ class QpStack(Controller):
             ref = (self.base_pose.act(np.asarray(x_ref, float)), self.base_pose.rotation @ np.asarray(xd_ref, float))
         levels = []
         for tasks in self.levels:
-            rows = [t.rows(st, ref if t.spec.type == "frame" and t.spec.reference == "runner" else None)
-                    for t in tasks]
-            levels.append(Level(np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
+            rows = [t.rows(st, ref if t.follows_runner else None) for t in tasks]
+            levels.append(Level(*rows[0]) if len(rows) == 1 else
+                          Level(np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
         metric = None
-        if self.config.metric == "kinetic-energy":
+        if self.config.metric == "kinetic-energy" and self._freedom_left:
             upper = pin.crba(st.model, st.data, self.q_des)  # Pinocchio fills the upper triangle only
             metric = np.triu(upper) + np.triu(upper, 1).T
         result = solve_cascade(levels, self.constraints.build(st), self.config.regularization, self.config.solver,

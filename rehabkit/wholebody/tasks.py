@@ -122,12 +122,11 @@ class Task:
 
     def __init__(self, spec, state: KinematicState, joint_names: list[str]):
         self.spec = spec
+        self.follows_runner = spec.type == "frame" and spec.reference == "runner"
         nv = state.model.nv
         if spec.type in ("frame", "orientation"):
             self.fid = state.frame_id(spec.frame)
             self.start = state.placement(self.fid).copy()
-        if spec.type == "frame":
-            self.rows_sel = slice(0, 3) if spec.position_only else slice(0, 6)
         if spec.type == "orientation":
             self.axes = [AXIS[a] for a in spec.axes]
         if spec.type == "posture":
@@ -151,10 +150,12 @@ class Task:
         if s.type == "frame":
             now = st.placement(self.fid)
             J = st.jacobian(self.fid)
-            goal_p, ff = (self.start.translation, np.zeros(3)) if ref is None else ref
-            b = np.concatenate([ff + s.gain * (goal_p - now.translation),
-                                s.rotation_gain * orientation_error(now.rotation, self.start.rotation)])
-            return s.weight * J[self.rows_sel], s.weight * b[self.rows_sel]
+            goal_p, ff = (self.start.translation, 0.0) if ref is None else ref
+            linear = ff + s.gain * (goal_p - now.translation)
+            if s.position_only:
+                return s.weight * J[:3], s.weight * linear
+            b = np.concatenate([linear, s.rotation_gain * orientation_error(now.rotation, self.start.rotation)])
+            return s.weight * J, s.weight * b
         if s.type == "orientation":
             J = st.jacobian(self.fid)[3:][self.axes]
             err = orientation_error(st.placement(self.fid).rotation, self.start.rotation)[self.axes]
