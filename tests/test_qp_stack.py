@@ -86,3 +86,12 @@ def test_coman_hand_circle_keeps_feet_fixed_and_com_inside():
     # priorities as configured: feet exact, then hand
     res = np.array(residuals)
     assert res[:, 0].max() < 1e-6 and res[500:, 1].max() < 1e-2
+
+
+def test_a_misspelt_frame_names_the_closest_ones():
+    robot = ComanRobot(ComanConfig())
+    ctx = Context(Path("."), np.random.default_rng(0), 0.001, robot=robot, world=World())
+    cfg = _stack_config().model_dump()
+    cfg["levels"][0]["tasks"][0]["frame"] = "l_soel"
+    with pytest.raises(ValueError, match="no frame 'l_soel' in the model; did you mean 'l_sole'"):
+        QpStack(QpStackConfig.model_validate(cfg), ctx)

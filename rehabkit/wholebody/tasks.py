@@ -18,6 +18,7 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit.core.interfaces import StrictModel
+from rehabkit.core.plugins import suggest
 from rehabkit.wholebody.stack import Inequalities
 
 AXIS = {"x": 0, "y": 1, "z": 2}
@@ -96,8 +97,7 @@ class KinematicState:
 
     def frame_id(self, name: str) -> int:
         if not self.model.existFrame(name):
-            known = sorted({f.name for f in self.model.frames if f.name})
-            raise ValueError(f"no frame '{name}' in the model; frames include: {', '.join(known[:40])}")
+            raise ValueError(f"no frame '{name}' in the model{suggest(name, {f.name for f in self.model.frames})}")
         return self.model.getFrameId(name)
 
     def placement(self, fid: int) -> pin.SE3:
