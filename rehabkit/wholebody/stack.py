@@ -68,8 +68,8 @@ def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None)
     _, _, x, info = dgesv(kkt, rhs)  # LAPACK directly: numpy's wrapper doubles the cost at this size
     v = x[:n]
     solved = info == 0 and (E is None or np.abs(E @ v - e).max() < 1e-7)  # else singular/inconsistent: solver
-    if solved and (np.all(v >= ineq.lb - FEASIBLE_TOL) and np.all(v <= ineq.ub + FEASIBLE_TOL)
-                   and (not len(ineq.h) or np.all(ineq.G @ v <= ineq.h + FEASIBLE_TOL))):
+    if solved and np.all((v >= ineq.lb - FEASIBLE_TOL) & (v <= ineq.ub + FEASIBLE_TOL)) \
+            and (not len(ineq.h) or np.all(ineq.G @ v <= ineq.h + FEASIBLE_TOL)):
         if stats is not None:
             stats["direct"] = stats.get("direct", 0) + 1
         return v
@@ -98,8 +98,11 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
     rows: list[np.ndarray] = []
     values: list[np.ndarray] = []
     out = StackResult(v)
-    damping = reg * np.eye(n)
-    steps = [(lv.A.T @ lv.A + damping, -lv.A.T @ lv.b, lv) for lv in levels]
+    steps = []
+    for lv in levels:
+        P = lv.A.T @ lv.A
+        P.flat[:: n + 1] += reg  # the damping, on the diagonal in place
+        steps.append((P, -lv.A.T @ lv.b, lv))
     if sum(len(lv.b) for lv in levels) < n:  # otherwise the levels leave nothing to choose (generically)
         steps.append((np.eye(n) if metric is None else metric, np.zeros(n), None))  # least kinetic energy
     for k, (P, q, level) in enumerate(steps):
@@ -118,9 +121,13 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
         if level is not None:
             rows.append(level.A)
             values.append(level.A @ v)
-    out.residuals = [float(np.linalg.norm(lv.A @ v - lv.b)) for lv in levels]
+    out.residuals = [_norm(lv.A @ v - lv.b) for lv in levels]
     out.v = v
     return out
+
+
+def _norm(r: np.ndarray) -> float:
+    return float(np.sqrt(r @ r))
 
 
 def solve_weighted(levels: list[Level], weights: list[float], ineq: Inequalities, reg: float = 1e-6,

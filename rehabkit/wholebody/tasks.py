@@ -107,10 +107,13 @@ class KinematicState:
         return pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)
 
 
-def orientation_error(current: np.ndarray, desired: np.ndarray) -> np.ndarray:
-    """Quaternion error (Yuan; the paper's eq. 15, sign chosen so ω = λ·e converges), world axes."""
+def orientation_error(current: np.ndarray, desired: tuple[float, float, float, float]) -> np.ndarray:
+    """Quaternion error (Yuan; the paper's eq. 15, sign chosen so ω = λ·e converges), world axes.
+
+    ``current`` is a rotation matrix, ``desired`` the quaternion (x, y, z, w) it should reach.
+    """
     x, y, z, w = pin.Quaternion(current).coeffs()
-    xd, yd, zd, wd = pin.Quaternion(desired).coeffs()
+    xd, yd, zd, wd = desired
     # η ε_d − η_d ε − ε_d × ε, written out: np.cross costs ~30 us a call at this size
     return np.array([w * xd - wd * x - (yd * z - zd * y),
                      w * yd - wd * y - (zd * x - xd * z),
@@ -127,6 +130,8 @@ class Task:
         if spec.type in ("frame", "orientation"):
             self.fid = state.frame_id(spec.frame)
             self.start = state.placement(self.fid).copy()
+            self.start_quat = tuple(float(c) for c in pin.Quaternion(self.start.rotation).coeffs())
+            self.start_p = self.start.translation.copy()
         if spec.type == "orientation":
             self.axes = [AXIS[a] for a in spec.axes]
         if spec.type == "posture":
@@ -150,15 +155,15 @@ class Task:
         if s.type == "frame":
             now = st.placement(self.fid)
             J = st.jacobian(self.fid)
-            goal_p, ff = (self.start.translation, 0.0) if ref is None else ref
+            goal_p, ff = (self.start_p, 0.0) if ref is None else ref
             linear = ff + s.gain * (goal_p - now.translation)
             if s.position_only:
-                return s.weight * J[:3], s.weight * linear
-            b = np.concatenate([linear, s.rotation_gain * orientation_error(now.rotation, self.start.rotation)])
-            return s.weight * J, s.weight * b
+                return (J[:3], linear) if s.weight == 1.0 else (s.weight * J[:3], s.weight * linear)
+            b = np.concatenate([linear, s.rotation_gain * orientation_error(now.rotation, self.start_quat)])
+            return (J, b) if s.weight == 1.0 else (s.weight * J, s.weight * b)
         if s.type == "orientation":
             J = st.jacobian(self.fid)[3:][self.axes]
-            err = orientation_error(st.placement(self.fid).rotation, self.start.rotation)[self.axes]
+            err = orientation_error(st.placement(self.fid).rotation, self.start_quat)[self.axes]
             return s.weight * J, s.weight * s.gain * err
         if s.type == "posture":
             return s.weight * self.A, s.weight * s.gain * (self.target - st.q[self.qidx])
