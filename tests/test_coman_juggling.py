@@ -27,3 +27,20 @@ def test_two_throws_are_released_caught_and_drawn(tmp_path):
     for entity in ("/world/bodies/Waist", "/world/bodies/RSoftHand", "/world/bodies/ball", "/world/planner/parabola_1",
                    "/world/planner/catch_zone", "/world/plan/path", "/world/end_effector_path"):
         assert entity in text, entity
+
+
+def test_a_plan_with_an_unknown_scene_action_is_refused_not_crashed(monkeypatch):
+    from rehabkit_plugins.planners import throw_lwlr
+
+    original = throw_lwlr.ThrowPlanner.plan
+
+    def plan_with_teleport(self, request):
+        plan = original(self, request)
+        plan.actions.append((0.1, "teleport", "ball"))
+        return plan
+
+    monkeypatch.setattr(throw_lwlr.ThrowPlanner, "plan", plan_with_teleport)
+    r = run_scenario(SCENARIOS / "coman_juggling.yaml", {"task.sequence": ["catch"], "duration": 0.3})
+    ev = r.summary["safety"]["events"]
+    assert ev and ev[0]["rule"] == "plan" and "plan action(s) ['teleport'] unknown" in ev[0]["message"]
+    assert r.summary["actions"] == []

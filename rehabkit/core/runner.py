@@ -157,11 +157,16 @@ class Runner:
         except PlanningError as exc:
             self.safety.trip(t, q, "plan", f"planner failed: {exc}")
             return None
-        problem = self._limit_problem(plan)
+        problem = self._limit_problem(plan) or self._action_problem(plan)
         if problem:
             self.safety.trip(t, q, "plan", f"{problem}; not executed")
             return None
         return self._accept(plan)
+
+    @staticmethod
+    def _action_problem(plan: Plan) -> str | None:
+        bad = sorted({kind for _, kind, _ in plan.actions if kind not in SCENE_ACTIONS})
+        return f"plan action(s) {bad} unknown; known: {', '.join(SCENE_ACTIONS)}" if bad else None
 
     def _limit_problem(self, plan: Plan) -> str | None:
         """What joint limit a joint-space plan breaks, if any (Cartesian plans are mapped by the controller)."""
@@ -185,7 +190,7 @@ class Runner:
         Raises :class:`PlanningError` with the reason when there is none.
         """
         plan = self.planner.plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
-        problem = self._limit_problem(plan)
+        problem = self._limit_problem(plan) or self._action_problem(plan)
         if problem:
             raise PlanningError(problem)
         k0 = int(round(t / self.schedule.control_dt))
@@ -414,9 +419,6 @@ class Runner:
         cart = self.planner.space == "cartesian"
         dt = self.schedule.control_dt
         # scene actions of the plan (a throw's release): they replace those of the plan before
-        bad = [kind for _, kind, _ in plan.actions if kind not in SCENE_ACTIONS]
-        if bad:
-            raise PlanningError(f"plan action(s) {bad} unknown; known: {', '.join(SCENE_ACTIONS)}")
         self._actions = sorted([a for a in self._actions if a[0] < k0]
                                + [(k0 + int(round(at / dt)), kind, obj) for at, kind, obj in plan.actions])
         way = plan.waypoints
