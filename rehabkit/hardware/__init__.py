@@ -1,0 +1,1 @@
+"""Hardware link: the wire protocol between rehabkit and a robot-side bridge."""

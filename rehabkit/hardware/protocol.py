@@ -1,0 +1,131 @@
+"""The wire format between the host (rehabkit's hardware backend) and a robot-side bridge, over UDP.
+
+One datagram is one message, little-endian::
+
+    header  magic 'RK' (2s) · version (B) · kind (B) · robot id (I) · sequence (I)
+            · sent at (d, sender's monotonic clock [s]) · echo (d, the peer's last 'sent at' seen)
+            · joint count (H) · status bits (H) · error bits (H)
+    body    STATE:   q, q̇, τ (3 × n doubles)     COMMAND: τ (n doubles)
+    trailer CRC-32 of everything before it (I)
+
+``echo`` lets the host measure round trips without synchronised clocks. A receiver
+accepts a message only if it is well formed (length, magic, version, kind, robot,
+joint count, checksum, finite numbers), newer than the last one accepted (sequence
+numbers compared modulo 2³², so duplicates and late arrivals are dropped) and not
+stale (sent less than ``max_age`` ago, when both ends share the clock, as over
+loopback). Every dropped message is counted by reason; none is ever applied.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import time
+import zlib
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MAGIC = b"RK"
+VERSION = 1
+STATE, COMMAND = 1, 2
+HEADER = struct.Struct("<2sBBIIddHHH")
+CRC = struct.Struct("<I")
+
+# status bits (bridge → host)
+ENABLED, HOLDING, ESTOPPED, WATCHDOG = 1, 2, 4, 8
+# command flags, sent in the status field (host → bridge)
+CMD_ESTOP, CMD_HOLD = 1, 2
+
+
+@dataclass
+class Message:
+    """A decoded message."""
+
+    kind: int
+    robot: int
+    seq: int
+    sent_at: float
+    echo: float
+    status: int
+    errors: int
+    values: np.ndarray  # STATE: (3, n) rows q, qd, tau; COMMAND: (n,) torques
+
+    @property
+    def n(self) -> int:
+        return self.values.shape[-1]
+
+
+def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
+           status: int = 0, errors: int = 0) -> bytes:
+    """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND)."""
+    values = np.ascontiguousarray(values, dtype="<f8")
+    n = values.shape[-1]
+    if kind == STATE and values.shape != (3, n) or kind == COMMAND and values.shape != (n,):
+        raise ValueError(f"kind {kind} takes {'(3, n)' if kind == STATE else '(n,)'} values, got {values.shape}")
+    head = HEADER.pack(MAGIC, VERSION, kind, robot, seq & 0xFFFFFFFF,
+                       time.monotonic() if sent_at is None else sent_at, echo, n, status, errors)
+    body = head + values.tobytes()
+    return body + CRC.pack(zlib.crc32(body))
+
+
+def newer(seq: int, last: int) -> bool:
+    """Serial-number order (RFC 1982) on 32 bits: ``seq`` comes after ``last``."""
+    diff = (seq - last) & 0xFFFFFFFF
+    return 0 < diff < 0x80000000
+
+
+@dataclass
+class Receiver:
+    """Validates incoming datagrams of one kind from one robot; counts what it drops and why."""
+
+    kind: int
+    robot: int
+    joints: int
+    max_age: float | None = None  # seconds; None: senders do not share our clock
+    last_seq: int | None = None
+    accepted: int = 0
+    dropped: Counter = field(default_factory=Counter)
+
+    def accept(self, data: bytes, now: float | None = None) -> Message | None:
+        """The message if it may be applied, else ``None`` (and the reason counted)."""
+        msg, reason = self._parse(data)
+        if msg is None:
+            self.dropped[reason] += 1
+            return None
+        if self.last_seq is not None and not newer(msg.seq, self.last_seq):
+            self.dropped["duplicate" if msg.seq == self.last_seq else "out-of-order"] += 1
+            return None
+        if self.max_age is not None:
+            age = (time.monotonic() if now is None else now) - msg.sent_at
+            if age > self.max_age:
+                self.dropped["stale"] += 1
+                return None
+        self.last_seq = msg.seq
+        self.accepted += 1
+        return msg
+
+    def _parse(self, data: bytes) -> tuple[Message | None, str]:
+        per_joint = 3 if self.kind == STATE else 1
+        expected = HEADER.size + 8 * per_joint * self.joints + CRC.size
+        if len(data) != expected:
+            return None, "length"
+        if CRC.unpack_from(data, expected - CRC.size)[0] != zlib.crc32(data[: expected - CRC.size]):
+            return None, "checksum"
+        magic, version, kind, robot, seq, sent_at, echo, n, status, errors = HEADER.unpack_from(data)
+        if magic != MAGIC:
+            return None, "magic"
+        if version != VERSION:
+            return None, "version"
+        if kind != self.kind:
+            return None, "kind"
+        if robot != self.robot:
+            return None, "robot"
+        if n != self.joints:
+            return None, "joints"
+        values = np.frombuffer(data, dtype="<f8", count=per_joint * n, offset=HEADER.size)
+        if not (np.all(np.isfinite(values)) and math.isfinite(sent_at) and math.isfinite(echo)):
+            return None, "non-finite"
+        values = values.reshape(3, n) if self.kind == STATE else values
+        return Message(kind, robot, seq, sent_at, echo, status, errors, values.copy()), ""
