@@ -86,6 +86,19 @@ def cmd_schema(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_bridge(args: argparse.Namespace) -> int:
+    from rehabkit.core.plugins import default_registry
+    from rehabkit.hardware.bridge import Bridge, MujocoPlant
+
+    registry = default_registry()
+    info = registry.get("robot", args.robot)
+    robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), None)
+    bridge = Bridge(MujocoPlant(robot, 1.0 / args.rate), args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3)
+    print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
+    bridge.serve(args.duration)
+    return EXIT_OK
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="rehabkit", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -104,6 +117,15 @@ def parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=cmd_plugins)
     sc = sub.add_parser("schema", help="print the JSON Schema of scenarios (for editors)")
     sc.set_defaults(func=cmd_schema)
+    b = sub.add_parser("bridge", help="serve a robot over UDP (its MuJoCo model as the plant), next to its drives")
+    b.add_argument("robot", help="robot plugin name")
+    b.add_argument("--port", type=int, default=0, help="UDP port (0: any free one; printed)")
+    b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section)")
+    b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
+    b.add_argument("--robot-id", type=int, default=1)
+    b.add_argument("--watchdog-ms", type=float, default=5.0, help="hold the robot without valid commands this long")
+    b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
+    b.set_defaults(func=cmd_bridge)
     return p
 
 

@@ -47,6 +47,7 @@ class Context:
     world: World | None = None
     instruments: list[Instrument] = field(default_factory=list)
     out_dir: Path | None = None
+    robot_spec: dict[str, Any] | None = None  # the scenario's robot section (type + settings), e.g. for a bridge
     plan: Callable[..., Plan] | None = None
     note: Callable[[float, str], None] | None = None
 
@@ -322,6 +323,10 @@ class BodyPoses:
     quats_wxyz: np.ndarray
 
 
+class BackendFaultError(RuntimeError):
+    """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason."""
+
+
 class Backend(ABC):
     """Where commands go and state comes from: a simulator or a robot link."""
 
@@ -400,6 +405,10 @@ class Backend(ABC):
     def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
         """World position, world rotation (OpenCV axes: x right, y down, z forward) and vertical FOV [rad]."""
         raise NotImplementedError(f"{type(self).__name__} has no cameras")
+
+    def run_metrics(self) -> dict[str, float]:
+        """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""
+        return {}
 
     def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

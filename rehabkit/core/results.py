@@ -52,6 +52,7 @@ def collect_metrics(run: Runner, trace: Trace, wall: float, setup: float, contac
     metrics.update(run.diag)
     metrics.update(run.planner.run_metrics(trace))
     metrics.update(run.controller.run_metrics(trace))
+    metrics.update(run.backend.run_metrics())
     for sensor in run.sensors.values():
         metrics.update(sensor.run_metrics(trace))
     metrics.update({

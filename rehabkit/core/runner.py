@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from rehabkit.core.interfaces import Context, Plan, PlanningError, PlanRequest, Target
+from rehabkit.core.interfaces import BackendFaultError, Context, Plan, PlanningError, PlanRequest, Target
 from rehabkit.core.io import atomic_write_json
 from rehabkit.core.log import RerunLog
 from rehabkit.core.metrics import Trace
@@ -76,7 +76,7 @@ class Runner:
     def build(self) -> None:
         sc = self.sc
         ctx = Context(self.loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
-                      out_dir=self.out_dir)
+                      out_dir=self.out_dir, robot_spec=sc.robot.model_dump(mode="json"))
         self.robot = self._make("robot", sc.robot, ctx)
         ctx.robot = self.robot
         # sensors before the backend: their instruments go into the scene it builds
@@ -238,7 +238,10 @@ class Runner:
         self.plans: list[dict] = []
 
         q0 = self.start_q()
-        self.backend.reset(q0)
+        try:
+            self.backend.reset(q0)
+        except BackendFaultError as exc:
+            raise SetupError(f"backend '{sc.backend.type}': {exc}") from exc
         if hasattr(self.robot, "passive_state"):  # parallel mechanisms: assemble the passive joints too
             self.backend.set_joints(self.robot.passive_state(q0))
         cart = self.planner.space == "cartesian"
@@ -304,8 +307,13 @@ class Runner:
                     tqr[k] = controller.joint_reference
             elif own_ref:
                 tqr[k] = controller.joint_reference
-            command(tau)
-            step(sub)
+            try:
+                command(tau)
+                step(sub)
+            except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete
+                safety.trip(t, q, "backend", str(exc))
+                k += 1
+                break
             if contacts():
                 contact_steps += 1
             if k == next_log:

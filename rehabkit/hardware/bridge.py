@@ -1,0 +1,181 @@
+"""The robot-side bridge: the program next to a robot's drives, serving the host over UDP.
+
+Each tick (the plant's rate, 1 kHz by default) it applies the newest valid command, steps
+the plant, and sends the state back with the echo of the command it used. Commands pass
+the protocol's checks (``protocol.Receiver``) and are clipped to the effort limits. If no
+valid command arrives for ``watchdog_s`` while running, or an e-stop command comes, the
+bridge holds the robot where it is (PD to that posture plus gravity) and says so in its
+status bits; a reset from the host re-enables it. Real drives plug in as another
+:class:`Plant`; :class:`MujocoPlant` is the robot's MuJoCo model as the plant, for tests and
+hardware-in-the-loop rehearsal.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from abc import ABC, abstractmethod
+
+import mujoco
+import numpy as np
+
+from rehabkit.core.backends.scene import build_scene
+from rehabkit.core.scenario.models import World
+from rehabkit.hardware.protocol import (
+    CMD_ESTOP,
+    CMD_RESET,
+    COMMAND,
+    ENABLED,
+    ESTOPPED,
+    HOLDING,
+    STATE,
+    WATCHDOG,
+    Receiver,
+    encode,
+)
+
+HOLD_KP, HOLD_KD = 60.0, 6.0
+
+
+class Plant(ABC):
+    """What a bridge drives: real drives, or a simulation standing in for them."""
+
+    joints: int
+    timestep: float
+    effort: np.ndarray
+
+    @abstractmethod
+    def reset(self, q0: np.ndarray) -> None:
+        """Bring the robot to rest at ``q0`` (a simulation jumps there; drives would move)."""
+
+    @abstractmethod
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """Joint positions and velocities."""
+
+    @abstractmethod
+    def apply(self, tau: np.ndarray) -> None:
+        """Joint torques until the next call."""
+
+    @abstractmethod
+    def advance(self) -> None:
+        """One tick of the plant (a simulation steps; drives just run)."""
+
+    @abstractmethod
+    def gravity(self, q: np.ndarray) -> np.ndarray:
+        """Torques holding the robot still at ``q``."""
+
+
+class MujocoPlant(Plant):
+    """A robot's MuJoCo model as the plant (the robot alone on the floor)."""
+
+    def __init__(self, robot, timestep: float = 0.001):
+        self.robot, self.timestep = robot, timestep
+        self.model = build_scene(robot.model, World(), timestep).compile()
+        self.data = mujoco.MjData(self.model)
+        ids = [self.model.joint(n).id for n in robot.model.joint_names]
+        self._q = np.array([self.model.jnt_qposadr[j] for j in ids])
+        self._v = np.array([self.model.jnt_dofadr[j] for j in ids])
+        self.joints, self.effort = len(ids), robot.model.limits.effort
+
+    def reset(self, q0):
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[self._q] = q0
+        mujoco.mj_forward(self.model, self.data)
+
+    def read(self):
+        return self.data.qpos[self._q].copy(), self.data.qvel[self._v].copy()
+
+    def apply(self, tau):
+        self.data.qfrc_applied[self._v] = tau
+
+    def advance(self):
+        mujoco.mj_step(self.model, self.data)
+
+    def gravity(self, q):
+        return self.robot.gravity_torque(q)
+
+
+class Bridge:
+    """Serves one host over UDP at the plant's rate, with a command watchdog and an e-stop."""
+
+    def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
+                 watchdog_s: float = 0.005):
+        self.plant, self.robot_id, self.watchdog_s = plant, robot_id, watchdog_s
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((host, port))
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        self.rx = Receiver(COMMAND, robot_id, plant.joints)
+        self.peer = None
+        self.tau = np.zeros(plant.joints)
+        self.status = 0
+        self.hold_q: np.ndarray | None = None
+        self.last_valid = -np.inf
+        self.echo = 0.0
+        self.seq = 0
+        self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
+        self.waiting = False  # reset done, no torque command yet: holding the start posture
+
+    def _hold(self, now: float, why: str, bit: int) -> None:
+        if self.hold_q is None or self.waiting:
+            self.waiting = False
+            self.hold_q = self.plant.read()[0]
+            self.trips.append((now, why))
+        self.status = (self.status | HOLDING | bit) & ~ENABLED
+
+    def _receive(self, now: float) -> None:
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(65536)
+            except BlockingIOError:
+                return
+            msg = self.rx.accept(data, now)
+            if msg is None:
+                continue
+            self.peer, self.echo = addr, msg.sent_at
+            if msg.status & CMD_RESET:  # also the way back from a hold: held at q0 until the first command
+                self.plant.reset(msg.values)
+                self.tau[:] = 0.0
+                self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED, np.inf
+                self.waiting = True
+                continue
+            self.last_valid = now
+            if msg.status & CMD_ESTOP:
+                self._hold(now, "e-stop", ESTOPPED)
+            elif self.status & ENABLED:
+                if self.waiting:  # the host's loop has started: its torques take over from the start hold
+                    self.hold_q, self.waiting = None, False
+                self.tau = np.clip(msg.values, -self.plant.effort, self.plant.effort)
+
+    def tick(self, now: float) -> None:
+        """One cycle: commands in, watchdog, torques, plant step, state out."""
+        self._receive(now)
+        if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
+            self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
+        q, qd = self.plant.read()
+        tau = self.tau
+        if self.hold_q is not None:
+            tau = np.clip(HOLD_KP * (self.hold_q - q) - HOLD_KD * qd + self.plant.gravity(q),
+                          -self.plant.effort, self.plant.effort)
+        self.plant.apply(tau)
+        self.plant.advance()
+        if self.peer is not None:
+            q, qd = self.plant.read()
+            self.seq += 1
+            self.sock.sendto(encode(STATE, self.robot_id, self.seq, np.vstack([q, qd, tau]), echo=self.echo,
+                                    status=self.status), self.peer)
+
+    def serve(self, duration: float | None = None) -> None:
+        """Tick in real time (sleep, then spin to the deadline) until ``duration`` or interrupted."""
+        period = self.plant.timestep
+        start = time.monotonic()
+        deadline = start
+        try:
+            while duration is None or deadline - start < duration:
+                self.tick(time.monotonic())
+                deadline += period
+                while (left := deadline - time.monotonic()) > 0:
+                    if left > 3e-4:
+                        time.sleep(left - 2e-4)
+        finally:
+            self.sock.close()
