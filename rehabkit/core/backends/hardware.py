@@ -168,7 +168,8 @@ class HardwareBackend(Backend):
         rtt = np.array(self.rtt) * 1e3
         out = {"link_ticks": float(self.ticks), "deadline_misses": float(self.misses),
                "deadline_miss_rate": self.misses / max(1, self.ticks),
-               "states_dropped": float(sum(self.rx.dropped.values()))}
+               "states_dropped": float(sum(self.rx.dropped.values())),
+               **{f"states_dropped_{why.replace('-', '_')}": float(n) for why, n in self.rx.dropped.items()}}
         if len(late):
             out.update({"tick_lateness_median_ms": float(np.median(late)),
                         "tick_lateness_p99_ms": float(np.percentile(late, 99))})
