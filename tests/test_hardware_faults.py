@@ -79,3 +79,31 @@ def test_a_killed_bridge_stops_the_run_and_the_logs_say_so(bridge, tmp_path):
     text = subprocess.run([shutil.which("rerun"), "rrd", "print", str(tmp_path / "run.rrd")], capture_output=True,
                           text=True, timeout=120).stdout
     assert "/events" in text and "/joints/" in text  # the log was finished, the safety event in it
+
+
+@pytest.mark.parametrize("fault, rule", [("nan", "non-finite"), ("push", None)])
+def test_bad_commands_are_stopped_on_the_host_before_the_link(monkeypatch, tmp_path, fault, rule):
+    """A controller outputting NaN, or driving a joint into its stop: the safety layer holds the robot over the link."""
+    from rehabkit_plugins.controllers import joint_pd
+
+    original = joint_pd.JointPD.compute
+
+    def faulty(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        tau = original(self, t, q, qd, q_ref, qd_ref, qdd_ref)
+        if t >= 2.0:
+            tau = tau * np.nan if fault == "nan" else tau + np.array([0, 0, 0, 0, 0, 40.0])
+        return tau
+
+    monkeypatch.setattr(joint_pd.JointPD, "compute", faulty)
+    r = run_scenario(HIT, {"backend": {"type": "hardware", "bridge_watchdog_ms": 200, "state_timeout_s": 0.5}},
+                     out_dir=tmp_path)
+    events = r.summary["safety"]["events"]
+    assert events and 2.0 <= events[0]["t"] < 2.5
+    if rule:
+        assert events[0]["rule"] == rule
+    else:  # the wrist is driven toward its stop: a speed or range rule catches it first
+        assert events[0]["rule"] in ("velocity", "position", "torque")
+    assert r.metrics["joint_limit_excess_deg"] < 1.0  # within the safety margin of the range at most
+    after = r.trace.t >= events[0]["t"] + 0.3  # held: the robot settles where it was stopped
+    assert np.degrees(np.abs(np.diff(r.trace.q[after], axis=0))).max() < 0.05
+    assert json.loads((tmp_path / "summary.json").read_text())["safety"]["tripped"]
