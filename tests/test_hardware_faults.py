@@ -79,6 +79,7 @@ def test_a_killed_bridge_stops_the_run_and_the_logs_say_so(bridge, tmp_path):
     text = subprocess.run([shutil.which("rerun"), "rrd", "print", str(tmp_path / "run.rrd")], capture_output=True,
                           text=True, timeout=120).stdout
     assert "/events" in text and "/joints/" in text  # the log was finished, the safety event in it
+    assert "/link/tick_lateness_ms" in text and "/link/round_trip_ms" in text  # the link timing, per tick
 
 
 @pytest.mark.parametrize("fault, rule", [("nan", "non-finite"), ("push", None)])

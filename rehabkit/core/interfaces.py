@@ -410,5 +410,9 @@ class Backend(ABC):
         """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""
         return {}
 
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Time series only the backend knows, name → (times [s], values), for the log; default none."""
+        return {}
+
     def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

@@ -139,6 +139,12 @@ class RerunLog:
                                ("torque_nm", tau), ("tracking_error_deg", deg(q_ref - q))):
             self.rec.send_columns(f"joints/{series}", indexes=[times], columns=rr.Scalars.columns(scalars=values))
 
+    def series(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
+        """A scalar time series sent as one column (e.g. a link's latency per tick)."""
+        if len(t):
+            self.rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, float))],
+                                  columns=rr.Scalars.columns(scalars=np.asarray(values, float)))
+
     def sensor(self, t: float, sensor: str, reading: dict) -> None:
         """A sensor reading: images are logged at once, numbers buffered."""
         numbers = {}

@@ -497,6 +497,8 @@ class Runner:
         if self.log:
             for ev in self.safety.events:
                 self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level="ERROR")
+            for path, (t, values) in self.backend.series().items():
+                self.log.series(path, t, values)
         summary = build_summary(self, metrics, per_joint)
         if self.out_dir is not None:
             if self.log:

@@ -66,6 +66,7 @@ class HardwareBackend(Backend):
         self.misses, self.ticks = 0, 0
         self.lateness: list[float] = []
         self.rtt: list[float] = []
+        self.rtt_at: list[int] = []  # round trips measured before each tick, to place them on the timeline
         self.held_at: float | None = None  # when the bridge first reported holding the robot
         self.silent_ticks = 0
         self._started = False
@@ -146,6 +147,7 @@ class HardwareBackend(Backend):
             late = time.monotonic() - self.deadline
             self.ticks += 1
             self.lateness.append(late)
+            self.rtt_at.append(len(self.rtt))
             if late > self.timestep:  # this tick starts after the next one was due
                 self.misses += 1
             # silence counted in our own ticks too: after a stall of this host, states still in flight get a chance
@@ -177,6 +179,15 @@ class HardwareBackend(Backend):
             out["bridge_hold_at_s"] = self.held_at
         if len(rtt):
             out.update({"rtt_median_ms": float(np.median(rtt)), "rtt_p99_ms": float(np.percentile(rtt, 99))})
+        return out
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per tick: lateness of the loop, and the newest round trip measured by then [ms]."""
+        ticks = np.arange(len(self.lateness)) * self.timestep
+        out = {"link/tick_lateness_ms": (ticks, np.array(self.lateness) * 1e3)}
+        if self.rtt:
+            idx = np.clip(np.array(self.rtt_at) - 1, 0, len(self.rtt) - 1)
+            out["link/round_trip_ms"] = (ticks, np.array(self.rtt)[idx] * 1e3)
         return out
 
     def close(self) -> None:
