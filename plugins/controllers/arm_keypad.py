@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Controller, PlanningError, StrictModel, Target
 from rehabkit.store.patches import Action, Patch, PatchStore, StoreError, default_path
+from rehabkit.workspace.trajectory import blend_weight
 
 AXES = {"x": 0, "y": 1, "z": 2, "roll": 0, "pitch": 1, "yaw": 2}
 SETTLE_S = 1.0  # after a replay ends, the error to the stored target is measured this much later
@@ -109,11 +110,8 @@ class _Quintic:
         self.q0, self.dq, self.duration = q0, q1 - q0, max(duration, 1e-3)
 
     def sample(self, t):
-        u = np.clip(np.atleast_1d(t) / self.duration, 0.0, 1.0)[:, None]
-        s = u**3 * (10 - 15 * u + 6 * u**2)
-        ds = 30 * u**2 * (1 - u) ** 2 / self.duration
-        dds = 60 * u * (1 - u) * (1 - 2 * u) / self.duration**2
-        return self.q0 + s * self.dq, ds * self.dq, dds * self.dq
+        s, ds, dds = (w[:, None] for w in blend_weight(np.atleast_1d(t) / self.duration))
+        return self.q0 + s * self.dq, ds / self.duration * self.dq, dds / self.duration**2 * self.dq
 
 
 class ArmKeypad(Controller):

@@ -26,6 +26,7 @@ from rehabkit.core.targets import angular_distance
 from rehabkit.geometry.box_avoid import NoPathError, plan_path
 from rehabkit.geometry.solids import Solid, make_solid
 from rehabkit.models.chain import rpy_to_matrix
+from rehabkit.workspace.trajectory import blend_weight
 
 PEAK = 1.875  # peak / mean speed of the minimum-jerk time law
 
@@ -63,10 +64,6 @@ class PiecewiseSpline:
         ended = t >= self.duration
         out[1][ended], out[2][ended] = 0.0, 0.0
         return tuple(out)
-
-
-def _min_jerk(u: np.ndarray) -> np.ndarray:
-    return u**3 * (10 - 15 * u + 6 * u**2)
 
 
 class BoxAvoidPlanner(Planner):
@@ -150,7 +147,7 @@ class BoxAvoidPlanner(Planner):
         duration = PEAK * seg / cfg.speed_m_s
         n = max(4, int(np.ceil(duration * cfg.sample_hz)) + 1)
         u = np.linspace(0.0, 1.0, n)
-        s = _min_jerk(u)
+        s = blend_weight(u)[0]
         rots = turn(f0 + (f1 - f0) * s).as_matrix()
         lim = robot.model.limits
         qs, prev = [], q

@@ -26,6 +26,7 @@ from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
+from rehabkit.workspace.trajectory import blend_weight
 
 RATE = 1000.0  # samples per second of the planned hand path
 
@@ -76,12 +77,9 @@ class _Phases:
 
 def _move(p0: np.ndarray, p1: np.ndarray, duration: float):
     """Rest-to-rest minimum-jerk straight line, sampled."""
-    u = np.arange(0.0, duration, 1.0 / RATE)[:, None] / duration
-    s = 10 * u**3 - 15 * u**4 + 6 * u**5
-    ds = (30 * u**2 - 60 * u**3 + 30 * u**4) / duration
-    dds = (60 * u - 180 * u**2 + 120 * u**3) / duration**2
+    s, ds, dds = (w[:, None] for w in blend_weight(np.arange(0.0, duration, 1.0 / RATE) / duration))
     d = p1 - p0
-    return p0 + s * d, ds * d, dds * d
+    return p0 + s * d, ds / duration * d, dds / duration**2 * d
 
 
 class ThrowPlanner(Planner):

@@ -15,6 +15,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from rehabkit.workspace.trajectory import blend_weight
+
 GRAVITY = 9.81
 PARAMS = ("back", "release", "t_back", "t_fwd", "omega", "radius", "aim")  # angles [rad], times [s], [rad/s], [m]
 
@@ -72,10 +74,9 @@ def swing_angle(th: Throw, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _rest_to_rest(p0, p1, T, t):
-    u = np.clip(t / T, 0.0, 1.0)
+    s, ds, dds = blend_weight(t / T)
     d = p1 - p0
-    return (p0 + d * (10 * u**3 - 15 * u**4 + 6 * u**5), d * (30 * u**2 - 60 * u**3 + 30 * u**4) / T,
-            d * (60 * u - 180 * u**2 + 120 * u**3) / T**2)
+    return p0 + d * s, d * ds / T, d * dds / T**2
 
 
 def hand_path(th: Throw, shoulder: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -87,8 +88,8 @@ def follow_through(th: Throw, shoulder: np.ndarray, t: np.ndarray) -> tuple[np.n
     """After the release the swing goes on along its arc, its speed fading to rest over ``t[-1]``."""
     T = float(t[-1]) if len(t) and t[-1] > 0 else 1.0
     u = np.clip(np.asarray(t, float) / T, 0.0, 1.0)
-    s = 10 * u**3 - 15 * u**4 + 6 * u**5
-    ds = (30 * u**2 - 60 * u**3 + 30 * u**4) / T
+    s, ds, _ = blend_weight(u)
+    ds = ds / T
     covered = u - (2.5 * u**4 - 3 * u**5 + u**6)  # ∫(1 − s) du
     return on_arc(th, shoulder, th.release + th.omega * T * covered, th.omega * (1 - s), -th.omega * ds)
 
