@@ -16,6 +16,8 @@ import numpy as np
 from qpsolvers import daqp_solve_qp, proxqp_solve_qp
 from scipy.linalg.lapack import dgesv
 
+from rehabkit.wholebody.equality_cascade import equality_cascade
+
 
 @dataclass
 class Level:
@@ -49,14 +51,16 @@ SOLVERS = {"daqp": daqp_solve_qp, "proxqp": proxqp_solve_qp}
 FEASIBLE_TOL = 1e-9
 
 
-def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None):
+def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None, try_direct: bool = True):
     """min ½vᵀPv + qᵀv s.t. E v = e and the inequalities.
 
     The equality-constrained optimum (one KKT solve) is tried first: when it already
     satisfies every inequality it is the QP's optimum too (the problem is convex), and
     the QP solver is only called when it does not, which at a standstill or in smooth
-    motion is the exception.
+    motion is the exception (``try_direct=False``: the caller already knows it does not).
     """
+    if not try_direct:
+        return _solver(P, q, ineq, E, e, solver, init, stats)
     n = len(q)
     if E is None:
         kkt, rhs = P, -q
@@ -73,6 +77,10 @@ def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None)
         if stats is not None:
             stats["direct"] = stats.get("direct", 0) + 1
         return v
+    return _solver(P, q, ineq, E, e, solver, init, stats)
+
+
+def _solver(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None):
     if stats is not None:
         stats["solver"] = stats.get("solver", 0) + 1
     G, h = (ineq.G, ineq.h) if len(ineq.h) else (None, None)
@@ -94,22 +102,39 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
     and reported.
     """
     n = len(ineq.lb)
+    H = np.eye(n) if metric is None else metric
+    A, b = np.vstack([lv.A for lv in levels]), np.concatenate([lv.b for lv in levels])
+    sizes = np.array([len(lv.b) for lv in levels])
+    ends = np.cumsum(sizes)
+    freedom_left = bool(ends[-1] < n)  # else the levels leave nothing to choose (generically)
+    # the common case first: every step's equality-constrained optimum, in one compiled call
+    V, done = equality_cascade(A, b, ends, reg, H, freedom_left, ineq.lb, ineq.ub, ineq.G, ineq.h)
+    if stats is not None:
+        stats["direct"] = stats.get("direct", 0) + done
+    if done == len(V):
+        if warm is not None:
+            warm[:] = list(V)
+        r = A @ V[-1] - b
+        return StackResult(V[-1], np.sqrt(np.add.reduceat(r * r, ends - sizes)).tolist())  # ‖A_k v − b_k‖
+    steps: list[tuple[np.ndarray, np.ndarray, Level | None]] = [(np.empty(0), np.empty(0), lv) for lv in levels]
+    if freedom_left:
+        steps.append((H, np.zeros(n), None))  # least kinetic energy
     v = np.zeros(n)
     rows: list[np.ndarray] = []
     values: list[np.ndarray] = []
     out = StackResult(v)
-    steps = []
-    for lv in levels:
-        P = lv.A.T @ lv.A
-        P.flat[:: n + 1] += reg  # the damping, on the diagonal in place
-        steps.append((P, -lv.A.T @ lv.b, lv))
-    if sum(len(lv.b) for lv in levels) < n:  # otherwise the levels leave nothing to choose (generically)
-        steps.append((np.eye(n) if metric is None else metric, np.zeros(n), None))  # least kinetic energy
     for k, (P, q, level) in enumerate(steps):
-        E = np.vstack(rows) if rows else None
-        e = np.concatenate(values) if values else None
-        init = warm[k] if warm is not None and k < len(warm) else None
-        x = _qp(P, q, ineq, E, e, solver, init, stats)
+        if k < done:
+            x = V[k]
+        else:  # at `done` an inequality is in the way (or the system is singular): the QP solver
+            if level is not None:
+                P = level.A.T @ level.A
+                P.flat[:: n + 1] += reg  # the damping, on the diagonal in place
+                q = -level.A.T @ level.b
+            E = np.vstack(rows) if rows else None
+            e = np.concatenate(values) if values else None
+            init = warm[k] if warm is not None and k < len(warm) else None
+            x = _qp(P, q, ineq, E, e, solver, init, stats, try_direct=k > done)
         if x is None:
             out.failed_levels.append(k)
         else:
@@ -124,6 +149,12 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
     out.residuals = [_norm(lv.A @ v - lv.b) for lv in levels]
     out.v = v
     return out
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's cache) the compiled path now, so a control loop's first cycle does not."""
+    free = Inequalities(np.zeros((0, 2)), np.zeros(0), np.full(2, -1.0), np.full(2, 1.0))
+    solve_cascade([Level(np.eye(1, 2), np.zeros(1))], free)
 
 
 def _norm(r: np.ndarray) -> float:
