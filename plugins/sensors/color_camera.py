@@ -44,6 +44,8 @@ class ColorCameraConfig(SensorConfig):
 class ColorCamera(Sensor):
     """Overhead colour camera locating a ball: HSV mask, centroid, diameter → 3-D point in the robot frame."""
 
+    blocking = True  # a frame: ~70 ms of software rendering here, several ticks on any machine
+
     def __init__(self, config: ColorCameraConfig, context: Context):
         self.config, self.rate_hz = config, config.rate_hz
         self.base = context.robot.model.base_pose

@@ -258,6 +258,8 @@ class Sensor(ABC):
     """Reads something at its own rate; readings go to the log and to ``Runner.observations``."""
 
     rate_hz: float
+    blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time
+    #                         backend it is read in a thread of its own (``rehabkit.core.sensor_threads``)
 
     @abstractmethod
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, Any]:
@@ -331,6 +333,7 @@ class Backend(ABC):
     """Where commands go and state comes from: a simulator or a robot link."""
 
     timestep: float
+    realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
 
     @abstractmethod
     def reset(self, q0: np.ndarray) -> None:

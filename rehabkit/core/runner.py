@@ -21,12 +21,13 @@ from tqdm import tqdm
 
 from rehabkit.core.interfaces import BackendFaultError, Context, Plan, PlanningError, PlanRequest, Target
 from rehabkit.core.io import atomic_write_json
-from rehabkit.core.log import RerunLog
+from rehabkit.core.log import RerunLog, encode_images
 from rehabkit.core.metrics import Trace
 from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
 from rehabkit.core.results import RunResult, build_summary, collect_metrics
 from rehabkit.core.safety import SafetyLayer
 from rehabkit.core.scenario.loader import LoadedScenario
+from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.core.targets import resolve_targets
 
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
@@ -215,12 +216,16 @@ class Runner:
     def run(self) -> RunResult:
         """Build, run and finish; outputs are complete files or none."""
         self.log = None
+        self._threads: SensorThreads | None = None
         try:
             return self._run()
         except BaseException:
             if self.log is not None:
                 self.log.discard()
             raise
+        finally:
+            if self._threads is not None:
+                self._threads.close()
 
     def _run(self) -> RunResult:
         t_setup = time.perf_counter()
@@ -266,6 +271,9 @@ class Runner:
         self._next_reach, self._stop_at = 0, n
         self.acted: list[dict] = []
         self._sensor_due = [0] * len(self.sensors)
+        if self.backend.realtime and any(s.blocking for s in self.sensors.values()):
+            self._threads = SensorThreads([name for name, s in self.sensors.items() if s.blocking],
+                                          prepare=encode_images if log else None)
 
         # the hot loop: one integer comparison a step decides whether anything besides control is due
         ref_q, ref_qd, ref_qdd = self._ref
@@ -274,6 +282,9 @@ class Runner:
         concat, dt, sub = np.concatenate, sch.control_dt, sch.substeps
         log_every = sch.log_every
         next_log = 0 if log else -1
+        deferred_log = bool(log) and self.backend.realtime
+        if deferred_log:
+            log.deferred = True
         bar = tqdm(total=n, unit="step", delay=1.0, disable=not self.progress, leave=False)
         # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
         gc.collect()
@@ -321,6 +332,8 @@ class Runner:
                 log.record(t, self.backend.body_poses(), self._ee_world(q))
                 if log.pending >= LOG_FLUSH_SAMPLES:
                     self._flush_log(k + 1)
+            if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
+                log.send_one()
             if k % 1000 == 999:
                 bar.update(1000)
             if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
@@ -330,6 +343,10 @@ class Runner:
             k = n
         wall = time.perf_counter() - t_loop
         gc.unfreeze()
+        if self._threads is not None:  # no reading in flight while the run is summed up
+            self._threads.close()
+            self.diag.update({f"sensor_overruns_{name}": float(self._threads.overruns[name])
+                              for name in self.sensors if name in self._threads})
         bar.close()
         if cart:
             base = self.robot.model.base_pose
@@ -373,14 +390,13 @@ class Runner:
             for j, ((name, sensor), every) in enumerate(zip(self.sensors.items(), sch.sensor_every)):
                 if k >= self._sensor_due[j]:
                     self._sensor_due[j] = k + every
-                    reading = sensor.read(t, q, qd, self.backend)
-                    self.observations[name] = reading
-                    if self.log:
-                        self.log.sensor(t, name, reading)
-                        if reading.get("target_position") is not None:
-                            self.log.points(f"world/sensed/{name}", self._to_world(reading["target_position"]),
-                                            (40, 220, 40), 0.02, t)
-                    self._check_moved(name, k, t, q, qd)
+                    if self._threads is not None and name in self._threads:
+                        self._threads.start(name, sensor, t, q, qd, self.backend)
+                    else:
+                        self._take(name, t, sensor.read(t, q, qd, self.backend), k, t, q, qd)
+            if self._threads is not None:
+                for name, t_read, reading in self._threads.finished():
+                    self._take(name, t_read, reading, k, t, q, qd)
         except Exception as exc:
             self.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
         upcoming = [self._stop_at, *self._sensor_due]
@@ -390,7 +406,19 @@ class Runner:
             upcoming.append(self._actions[0][0])
         if self._waiting:
             upcoming.append(self._next_reach)
+        if self._threads is not None and self._threads.busy:
+            upcoming.append(k + 1)  # a sensor thread's reading is taken at the first tick after it is done
         return max(k + 1, min(upcoming))
+
+    def _take(self, name: str, t_read: float, reading: dict, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
+        """A sensor's reading (started at ``t_read``) into the observations and the log; 'moved' events."""
+        self.observations[name] = reading
+        if self.log:
+            self.log.sensor(t_read, name, reading)
+            if reading.get("target_position") is not None:
+                self.log.points(f"world/sensed/{name}", self._to_world(reading["target_position"]),
+                                (40, 220, 40), 0.02, t_read)
+        self._check_moved(name, k, t, q, qd)
 
     def _check_moved(self, sensor: str, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         """Fire 'moved' events whose target this sensor sees somewhere new, once it has settled there."""

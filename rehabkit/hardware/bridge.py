@@ -12,6 +12,7 @@ hardware-in-the-loop rehearsal.
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 from abc import ABC, abstractmethod
@@ -20,6 +21,7 @@ import mujoco
 import numpy as np
 
 from rehabkit.core.backends.scene import build_scene
+from rehabkit.core.backends.scene_view import measured_joints
 from rehabkit.core.scenario.models import World
 from rehabkit.hardware.protocol import (
     CMD_ESTOP,
@@ -52,6 +54,10 @@ class Plant(ABC):
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """Joint positions and velocities."""
 
+    def read_measured(self) -> np.ndarray:
+        """Positions of measured-only joints (passive, with an encoder), in the robot's order; default none."""
+        return np.zeros(0)
+
     @abstractmethod
     def apply(self, tau: np.ndarray) -> None:
         """Joint torques until the next call."""
@@ -76,14 +82,23 @@ class MujocoPlant(Plant):
         self._q = np.array([self.model.jnt_qposadr[j] for j in ids])
         self._v = np.array([self.model.jnt_dofadr[j] for j in ids])
         self.joints, self.effort = len(ids), robot.model.limits.effort
+        self._m = measured_joints(self.model, robot.model)
 
     def reset(self, q0):
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self._q] = q0
+        if hasattr(self.robot, "passive_state"):  # a parallel mechanism: its passive joints close the loops
+            for name, value in self.robot.passive_state(q0).items():
+                adr = self.model.jnt_qposadr[self.model.joint(name).id]
+                value = np.atleast_1d(value)
+                self.data.qpos[adr : adr + len(value)] = value
         mujoco.mj_forward(self.model, self.data)
 
     def read(self):
         return self.data.qpos[self._q].copy(), self.data.qvel[self._v].copy()
+
+    def read_measured(self):
+        return self.data.qpos[self._m]
 
     def apply(self, tau):
         self.data.qfrc_applied[self._v] = tau
@@ -163,15 +178,20 @@ class Bridge:
             q, qd = self.plant.read()
             self.seq += 1
             self.sock.sendto(encode(STATE, self.robot_id, self.seq, np.vstack([q, qd, tau]), echo=self.echo,
-                                    status=self.status), self.peer)
+                                    status=self.status, measured=self.plant.read_measured()), self.peer)
 
-    def serve(self, duration: float | None = None) -> None:
-        """Tick in real time (sleep, then spin to the deadline) until ``duration`` or interrupted."""
+    def serve(self, duration: float | None = None, parent: int | None = None) -> None:
+        """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given
+        ``parent`` — once that process is gone (a bridge a host started must not outlive it)."""
         period = self.plant.timestep
         start = time.monotonic()
         deadline = start
+        ticks = 0
         try:
             while duration is None or deadline - start < duration:
+                ticks += 1
+                if parent is not None and ticks % 500 == 0 and os.getppid() != parent:
+                    return
                 self.tick(time.monotonic())
                 deadline += period
                 while (left := deadline - time.monotonic()) > 0:

@@ -4,13 +4,14 @@ One datagram is one message, little-endian::
 
     header  magic 'RK' (2s) · version (B) · kind (B) · robot id (I) · sequence (I)
             · sent at (d, sender's monotonic clock [s]) · echo (d, the peer's last 'sent at' seen)
-            · joint count (H) · status bits (H) · error bits (H)
-    body    STATE:   q, q̇, τ (3 × n doubles)     COMMAND: τ (n doubles)
+            · joint count n (H) · measured-only joint count m (H) · status bits (H) · error bits (H)
+    body    STATE:   q, q̇, τ (3 × n doubles), then the m measured-only joints' positions
+            COMMAND: τ (n doubles; m = 0)
     trailer CRC-32 of everything before it (I)
 
 ``echo`` lets the host measure round trips without synchronised clocks. A receiver
 accepts a message only if it is well formed (length, magic, version, kind, robot,
-joint count, checksum, finite numbers), newer than the last one accepted (sequence
+joint counts, checksum, finite numbers), newer than the last one accepted (sequence
 numbers compared modulo 2³², so duplicates and late arrivals are dropped) and not
 stale (sent less than ``max_age`` ago, when both ends share the clock, as over
 loopback). Every dropped message is counted by reason; none is ever applied.
@@ -28,9 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 1
+VERSION = 2  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE
 STATE, COMMAND = 1, 2
-HEADER = struct.Struct("<2sBBIIddHHH")
+HEADER = struct.Struct("<2sBBIIddHHHH")
 CRC = struct.Struct("<I")
 
 # status bits (bridge → host)
@@ -51,6 +52,7 @@ class Message:
     status: int
     errors: int
     values: np.ndarray  # STATE: (3, n) rows q, qd, tau; COMMAND: (n,) torques
+    measured: np.ndarray = field(default_factory=lambda: np.zeros(0))  # STATE: measured-only joint positions
 
     @property
     def n(self) -> int:
@@ -58,15 +60,18 @@ class Message:
 
 
 def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
-           status: int = 0, errors: int = 0) -> bytes:
-    """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND)."""
+           status: int = 0, errors: int = 0, measured: np.ndarray | None = None) -> bytes:
+    """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND; ``measured``: STATE only)."""
     values = np.ascontiguousarray(values, dtype="<f8")
+    extra = np.ascontiguousarray(np.zeros(0) if measured is None else measured, dtype="<f8").ravel()
     n = values.shape[-1]
     if kind == STATE and values.shape != (3, n) or kind == COMMAND and values.shape != (n,):
         raise ValueError(f"kind {kind} takes {'(3, n)' if kind == STATE else '(n,)'} values, got {values.shape}")
+    if kind == COMMAND and len(extra):
+        raise ValueError("commands carry no measured-only joints")
     head = HEADER.pack(MAGIC, VERSION, kind, robot, seq & 0xFFFFFFFF,
-                       time.monotonic() if sent_at is None else sent_at, echo, n, status, errors)
-    body = head + values.tobytes()
+                       time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, errors)
+    body = head + values.tobytes() + extra.tobytes()
     return body + CRC.pack(zlib.crc32(body))
 
 
@@ -83,6 +88,7 @@ class Receiver:
     kind: int
     robot: int
     joints: int
+    measured: int = 0  # measured-only joints each STATE carries
     max_age: float | None = None  # seconds; None: senders do not share our clock
     last_seq: int | None = None
     accepted: int = 0
@@ -108,12 +114,13 @@ class Receiver:
 
     def _parse(self, data: bytes) -> tuple[Message | None, str]:
         per_joint = 3 if self.kind == STATE else 1
-        expected = HEADER.size + 8 * per_joint * self.joints + CRC.size
+        count = per_joint * self.joints + self.measured
+        expected = HEADER.size + 8 * count + CRC.size
         if len(data) != expected:
             return None, "length"
         if CRC.unpack_from(data, expected - CRC.size)[0] != zlib.crc32(data[: expected - CRC.size]):
             return None, "checksum"
-        magic, version, kind, robot, seq, sent_at, echo, n, status, errors = HEADER.unpack_from(data)
+        magic, version, kind, robot, seq, sent_at, echo, n, m, status, errors = HEADER.unpack_from(data)
         if magic != MAGIC:
             return None, "magic"
         if version != VERSION:
@@ -122,10 +129,11 @@ class Receiver:
             return None, "kind"
         if robot != self.robot:
             return None, "robot"
-        if n != self.joints:
+        if n != self.joints or m != self.measured:
             return None, "joints"
-        values = np.frombuffer(data, dtype="<f8", count=per_joint * n, offset=HEADER.size)
+        values = np.frombuffer(data, dtype="<f8", count=count, offset=HEADER.size)
         if not (np.all(np.isfinite(values)) and math.isfinite(sent_at) and math.isfinite(echo)):
             return None, "non-finite"
-        values = values.reshape(3, n) if self.kind == STATE else values
-        return Message(kind, robot, seq, sent_at, echo, status, errors, values.copy()), ""
+        head = values[: per_joint * n]
+        head = head.reshape(3, n) if self.kind == STATE else head
+        return Message(kind, robot, seq, sent_at, echo, status, errors, head.copy(), values[per_joint * n:].copy()), ""

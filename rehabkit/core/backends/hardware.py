@@ -8,11 +8,18 @@ state arrives for ``state_timeout_s`` the link is lost: the run stops with that 
 (:class:`LinkLostError`), the logs complete. With ``spawn_bridge`` the backend starts
 ``rehabkit bridge`` itself, driving the robot's MuJoCo model as the plant: the same
 scenario runs against the link with only ``backend:`` changed.
+
+The scenario's scene is mirrored on the host, posed from the measured joints
+(:class:`~rehabkit.core.backends.scene_view.SceneMirror`): the log draws the whole robot,
+the scripted world objects live there, and a simulated camera looks at it — from a sensor
+thread, since the backend is ``realtime`` and a frame takes longer than a tick, with the
+pixels rendered in a process of their own (:mod:`~rehabkit.core.backends.frame_server`).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -22,13 +29,29 @@ import time
 import numpy as np
 from pydantic import Field
 
+from rehabkit.core.backends.frame_server import FrameServer
+from rehabkit.core.backends.scene_view import SceneMirror, SceneView
 from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import Backend, BackendFaultError, Context, StrictModel
-from rehabkit.hardware.protocol import CMD_ESTOP, CMD_RESET, COMMAND, HOLDING, STATE, Receiver, encode
+from rehabkit.core.interfaces import Backend, BackendFaultError, BodyPoses, Context, GeomVisual, StrictModel
+from rehabkit.hardware.protocol import (
+    CMD_ESTOP,
+    CMD_RESET,
+    COMMAND,
+    ESTOPPED,
+    HOLDING,
+    STATE,
+    WATCHDOG,
+    Receiver,
+    encode,
+)
 
 
 class LinkLostError(BackendFaultError):
     """No valid state from the robot for longer than allowed."""
+
+
+class BridgeHoldError(BackendFaultError):
+    """The bridge stopped the robot on its own (its command watchdog, or an e-stop at the robot)."""
 
 
 class HardwareConfig(StrictModel):
@@ -39,18 +62,26 @@ class HardwareConfig(StrictModel):
     spawn_bridge: bool = Field(True, description="start 'rehabkit bridge' with the robot's MuJoCo model as plant")
     robot_id: int = Field(1, ge=0)
     timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
-    state_timeout_s: float = Field(0.02, gt=0, description="host watchdog: no valid state for this long stops")
+    # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
+    # and then; with an RT kernel both can be far tighter (the fault tests run the bridge's at 5 ms)
+    state_timeout_s: float = Field(0.1, gt=0, description="host watchdog: no valid state for this long stops")
     max_age_s: float = Field(0.005, gt=0, description="older states are stale and dropped")
-    bridge_watchdog_ms: float = Field(5.0, gt=0, description="bridge holds the robot without commands this long")
+    bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
 
 
 class HardwareBackend(Backend):
     """The robot over UDP (a bridge in front of its drives, or of a MuJoCo plant)."""
 
+    realtime = True
+
     def __init__(self, config: HardwareConfig, context: Context):
         self.config, self.timestep = config, config.timestep
         robot = context.robot
         self.n = robot.model.dof
+        self.mirror = SceneMirror(robot.model, context.world)
+        self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
+        self.measured = np.zeros(self.mirror.measured_count)
+        self._posed = False
         self.process = None
         port = config.port
         if config.spawn_bridge:
@@ -58,7 +89,7 @@ class HardwareBackend(Backend):
         self.addr = (config.host, port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
-        self.rx = Receiver(STATE, config.robot_id, self.n, max_age=config.max_age_s)
+        self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured), max_age=config.max_age_s)
         self.seq, self.tau = 0, np.zeros(self.n)
         self.q, self.qd = np.zeros(self.n), np.zeros(self.n)
         self.status = 0
@@ -70,13 +101,15 @@ class HardwareBackend(Backend):
         self.held_at: float | None = None  # when the bridge first reported holding the robot
         self.silent_ticks = 0
         self._started = False
+        self._estop_sent = False
+        self._fault: str | None = None
 
     @staticmethod
     def _spawn(context: Context, config: HardwareConfig) -> tuple[subprocess.Popen, int]:
         spec = context.robot_spec
         cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
                "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
-               "--watchdog-ms", str(config.bridge_watchdog_ms)]
+               "--watchdog-ms", str(config.bridge_watchdog_ms), "--parent-pid", str(os.getpid())]
         # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
         log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
@@ -106,16 +139,24 @@ class HardwareBackend(Backend):
             msg = self.rx.accept(data, now)
             if msg is None:
                 continue
-            self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()
+            self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
+            self.measured, self._posed = msg.measured, False
             self.status, self.last_state, got = msg.status, now, True
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
+                if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
+                    why = (f"its watchdog saw no valid command for {self.config.bridge_watchdog_ms:g} ms"
+                           if msg.status & WATCHDOG else "an e-stop at the robot" if msg.status & ESTOPPED else
+                           "status holding")
+                    self._fault = f"the bridge holds the robot ({why}) at t={self.held_at:.3f}s"
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
 
     # -- Backend ----------------------------------------------------------------
 
     def reset(self, q0: np.ndarray) -> None:
+        if self.frames is not None:
+            self.frames.wait_ready()  # started with the backend; up before the loop
         limit = time.monotonic() + 5.0
         while time.monotonic() < limit:  # the bridge may still be starting: ask until it answers from q0
             self._send(np.asarray(q0, float), CMD_RESET)
@@ -152,13 +193,58 @@ class HardwareBackend(Backend):
                 self.misses += 1
             # silence counted in our own ticks too: after a stall of this host, states still in flight get a chance
             self.silent_ticks = 0 if self._receive() else self.silent_ticks + 1
+            if self._fault is not None:
+                fault, self._fault = self._fault, None
+                raise BridgeHoldError(fault)
             silent = time.monotonic() - self.last_state
             if silent > self.config.state_timeout_s and self.silent_ticks * self.timestep > self.config.state_timeout_s:
                 raise LinkLostError(f"no valid state from the bridge for {1e3 * silent:.0f} ms "
                                     f"(dropped: {dict(self.rx.dropped) or 'none'})")
 
+    # -- the mirrored scene (log, scripted objects, simulated sensors) -----------
+
+    def _view(self) -> SceneView:
+        if not self._posed:
+            self.mirror.pose(self.q, self.measured)
+            self._posed = True
+        return self.mirror
+
+    def body_poses(self) -> BodyPoses:
+        return self._view().body_poses()
+
+    def visual_geoms(self) -> list[GeomVisual]:
+        return self.mirror.visual_geoms()
+
+    def ee_position(self) -> np.ndarray:
+        return self._view().ee_position()
+
+    def joint_positions(self, names: list[str]) -> np.ndarray:
+        return self._view().joint_positions(names)
+
+    def set_joints(self, values: dict[str, np.ndarray]) -> None:
+        """The mechanism assembles itself (its passive joints are measured): nothing to send."""
+
+    def move_object(self, name: str, position: np.ndarray) -> None:
+        self.mirror.move_object(name, position)
+
+    def object_position(self, name: str) -> np.ndarray:
+        """Where a scene object is in the frame last rendered (a sensor thread's question)."""
+        return self.mirror.frame_view.object_position(name)
+
+    def render(self, camera: str, width: int, height: int) -> np.ndarray:
+        """A frame of the mirrored scene at the newest measured state (from a sensor thread; another process
+        renders it)."""
+        if self.frames is None:
+            raise RuntimeError("this hardware backend renders no frames (the scenario has no cameras)")
+        view = self.mirror.frame(self.q, self.measured)
+        return self.frames.render(view.data, camera, width, height)
+
+    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
+        return self.mirror.frame_view.camera_pose(camera)
+
     def estop(self) -> None:
         """Tell the bridge to hold the robot now."""
+        self._estop_sent = True
         self._send(np.zeros(self.n), CMD_ESTOP)
 
     @property
@@ -191,13 +277,17 @@ class HardwareBackend(Backend):
         return out
 
     def close(self) -> None:
-        self.sock.close()
-        if self.process is not None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=2)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
+        try:
+            if self.process is not None:  # the bridge first: nothing below may leave it running
+                self.process.terminate()
+                try:
+                    self.process.wait(timeout=2)
+                except subprocess.TimeoutExpired:
+                    self.process.kill()
+        finally:
+            self.sock.close()
+            if self.frames is not None:
+                self.frames.close()
 
 
 @hookimpl

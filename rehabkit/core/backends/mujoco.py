@@ -9,14 +9,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit.core.backends.scene import INTEGRATORS, add_instruments, build_scene
+from rehabkit.core.backends.scene_view import SceneView
 from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import Backend, BodyPoses, Contact, Context, GeomVisual, StrictModel
-
-_GEOM_SHAPES = {  # int keys: model arrays hold numpy ints, which don't hash-match the enum
-    int(mujoco.mjtGeom.mjGEOM_BOX): "box", int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
-    int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule", int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
-    int(mujoco.mjtGeom.mjGEOM_PLANE): "plane", int(mujoco.mjtGeom.mjGEOM_ELLIPSOID): "ellipsoid",
-}
+from rehabkit.core.interfaces import Backend, Contact, Context, StrictModel
 
 
 class MujocoConfig(StrictModel):
@@ -33,7 +28,7 @@ def _span(indices: np.ndarray) -> slice | np.ndarray:
     return indices
 
 
-class MujocoBackend(Backend):
+class MujocoBackend(SceneView, Backend):
     """MuJoCo physics: the robot's MJCF plus the scenario's world, driven by joint torques."""
 
     def __init__(self, config: MujocoConfig, context: Context):
@@ -61,7 +56,7 @@ class MujocoBackend(Backend):
             self._views = (self.data.qpos[self._q], self.data.qvel[self._v])
         else:
             self._views = None
-        self._ee_site = self.model.site(robot.ee_site).id
+        self._init_view(robot.ee_site)
         # feet on the floor hold the robot up: not collisions
         floor = [self.model.geom("floor").id] if context.world is None or context.world.floor else []
         self._support = np.zeros(self.model.ngeom, dtype=bool)
@@ -74,15 +69,12 @@ class MujocoBackend(Backend):
             self._root_joint = int(self.model.body_jntadr[root_body.id])
             if self.model.jnt_type[self._root_joint] != mujoco.mjtJoint.mjJNT_FREE:
                 raise ValueError(f"robot '{robot.name}' is floating but its root body has no free joint")
-        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         # held objects: their weld to the holder, the holder site, the object's free joint
         self._held = {}
         for obj in (context.world.objects if context.world else []):
             if obj.held_by is not None:
                 self._held[obj.name] = (self.model.equality(f"{obj.name}_hold").id, self.model.site(obj.held_by).id,
                                         self.model.joint(f"{obj.name}_free").id)
-        self._drawn = np.arange(1, self.model.nbody)
-        self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
 
     def reset(self, q0: np.ndarray) -> None:
         mujoco.mj_resetData(self.model, self.data)
@@ -135,9 +127,6 @@ class MujocoBackend(Backend):
         else:
             mujoco.mj_step(self.model, self.data, nstep=n)
 
-    def ee_position(self) -> np.ndarray:
-        return self.data.site_xpos[self._ee_site].copy()
-
     def contacts(self) -> list[Contact]:
         d, m = self.data, self.model
         n = d.ncon
@@ -161,73 +150,12 @@ class MujocoBackend(Backend):
         return d.qpos[qa : qa + 3].copy(), d.qpos[qa + 3 : qa + 7].copy(), d.qvel[va : va + 3].copy(), \
             rot @ d.qvel[va + 3 : va + 6]
 
-    def set_joints(self, values: dict[str, np.ndarray]) -> None:
-        for name, value in values.items():
-            adr = self.model.jnt_qposadr[self.model.joint(name).id]
-            value = np.atleast_1d(value)
-            self.data.qpos[adr : adr + len(value)] = value
-        mujoco.mj_forward(self.model, self.data)
-
     def read_instrument(self, name: str) -> np.ndarray:
         s = self.model.sensor(name)
         return self.data.sensordata[s.adr[0] : s.adr[0] + s.dim[0]].copy()
 
-    def joint_positions(self, names: list[str]) -> np.ndarray:
-        adr = [self.model.jnt_qposadr[self.model.joint(n).id] for n in names]
-        return self.data.qpos[adr].copy()
-
-    def move_object(self, name: str, position: np.ndarray) -> None:
-        body = self.model.body(name)
-        if body.mocapid[0] < 0:
-            raise ValueError(f"object '{name}' is not kinematic; set mocap: true on it to move it by events")
-        self.data.mocap_pos[body.mocapid[0]] = position
-
-    def object_position(self, name: str) -> np.ndarray:
-        return self.data.xpos[self.model.body(name).id].copy()
-
-    def render(self, camera: str, width: int, height: int) -> np.ndarray:
-        key = (width, height)
-        if self._renderers.get(key) is None:
-            try:
-                self._renderers[key] = mujoco.Renderer(self.model, height, width)
-            except mujoco.FatalError as exc:  # typically: MuJoCo chose GLFW and there is no display
-                raise RuntimeError(
-                    f"cannot render camera '{camera}' offscreen ({exc}); without a display set MUJOCO_GL=egl "
-                    "before MuJoCo is first imported (rehabkit does this itself when it is imported first)"
-                ) from None
-        renderer = self._renderers[key]
-        renderer.update_scene(self.data, camera=camera)
-        return renderer.render()
-
-    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
-        cid = self.model.camera(camera).id
-        mj_rot = self.data.cam_xmat[cid].reshape(3, 3)
-        # MuJoCo cameras look along -z with +y up; OpenCV's look along +z with +y down
-        return self.data.cam_xpos[cid].copy(), mj_rot @ np.diag([1.0, -1.0, -1.0]), np.radians(self.model.cam_fovy[cid])
-
     def close(self) -> None:
-        for renderer in self._renderers.values():
-            renderer.close()
-        self._renderers.clear()
-
-    def body_poses(self) -> BodyPoses:
-        return BodyPoses(self._drawn_names, self.data.xpos[self._drawn], self.data.xquat[self._drawn])
-
-    def visual_geoms(self) -> list[GeomVisual]:
-        m = self.model
-        out = []
-        for g in range(m.ngeom):
-            shape = _GEOM_SHAPES.get(int(m.geom_type[g]))
-            if shape is None:
-                continue
-            size = m.geom_size[g]
-            size = {"box": size[:3], "sphere": size[:1], "plane": size[:2], "ellipsoid": size[:3]}.get(shape, size[:2])
-            out.append(GeomVisual(
-                body=m.body(m.geom_bodyid[g]).name or "world", name=m.geom(g).name or f"geom{g}", shape=shape,
-                size=tuple(float(s) for s in size), position=tuple(m.geom_pos[g]), quat_wxyz=tuple(m.geom_quat[g]),
-                rgba=tuple(float(c) for c in m.geom_rgba[g]),
-            ))
-        return out
+        self.close_view()
 
 
 @hookimpl

@@ -1,0 +1,172 @@
+"""What sensors, scripted worlds and the log read from a compiled MuJoCo scene, and the scene mirror.
+
+:class:`SceneView` holds those read-outs for any ``(model, data)`` pair: the simulation
+backend is one; :class:`SceneMirror` is another, the scenario's scene on the host of a
+hardware run, posed from the robot's measured joints. With it a hardware run logs the
+whole robot and a simulated camera can look at the rehearsal scene (its world objects
+are moved by the scenario's events, as a therapist moves the real ones).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import mujoco
+import numpy as np
+
+from rehabkit.core.backends.scene import build_scene
+from rehabkit.core.interfaces import BodyPoses, GeomVisual
+from rehabkit.core.scenario.models import World
+from rehabkit.models.robot_model import RobotModel
+
+_GEOM_SHAPES = {  # int keys: model arrays hold numpy ints, which don't hash-match the enum
+    int(mujoco.mjtGeom.mjGEOM_BOX): "box", int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere",
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule", int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
+    int(mujoco.mjtGeom.mjGEOM_PLANE): "plane", int(mujoco.mjtGeom.mjGEOM_ELLIPSOID): "ellipsoid",
+}
+_QPOS_SIZE = {int(mujoco.mjtJoint.mjJNT_HINGE): 1, int(mujoco.mjtJoint.mjJNT_SLIDE): 1,
+              int(mujoco.mjtJoint.mjJNT_BALL): 4}  # a free joint is a floating base, not a measured joint
+
+
+def measured_joints(model: mujoco.MjModel, robot: RobotModel) -> np.ndarray:
+    """``qpos`` addresses of the robot's passive joints (measured, not driven; sent over a link), in its order."""
+    out = []
+    for name in robot.passive_joints:
+        j = model.joint(name).id
+        size = _QPOS_SIZE.get(int(model.jnt_type[j]), 0)
+        out.extend(range(model.jnt_qposadr[j], model.jnt_qposadr[j] + size))
+    return np.array(out, int)
+
+
+class SceneView:
+    """Read-outs of ``self.model`` / ``self.data`` (set by the subclass before :meth:`_init_view`)."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+
+    def _init_view(self, ee_site: str) -> None:
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._ee_site = self.model.site(ee_site).id
+        self._drawn = np.arange(1, self.model.nbody)
+        self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
+
+    def ee_position(self) -> np.ndarray:
+        return self.data.site_xpos[self._ee_site].copy()
+
+    def set_joints(self, values: dict[str, np.ndarray]) -> None:
+        for name, value in values.items():
+            adr = self.model.jnt_qposadr[self.model.joint(name).id]
+            value = np.atleast_1d(value)
+            self.data.qpos[adr : adr + len(value)] = value
+        mujoco.mj_forward(self.model, self.data)
+
+    def joint_positions(self, names: list[str]) -> np.ndarray:
+        adr = [self.model.jnt_qposadr[self.model.joint(n).id] for n in names]
+        return self.data.qpos[adr].copy()
+
+    def move_object(self, name: str, position: np.ndarray) -> None:
+        body = self.model.body(name)
+        if body.mocapid[0] < 0:
+            raise ValueError(f"object '{name}' is not kinematic; set mocap: true on it to move it by events")
+        self.data.mocap_pos[body.mocapid[0]] = position
+
+    def object_position(self, name: str) -> np.ndarray:
+        return self.data.xpos[self.model.body(name).id].copy()
+
+    def render(self, camera: str, width: int, height: int) -> np.ndarray:
+        key = (width, height)
+        if self._renderers.get(key) is None:
+            try:
+                self._renderers[key] = mujoco.Renderer(self.model, height, width)
+            except mujoco.FatalError as exc:  # typically: MuJoCo chose GLFW and there is no display
+                raise RuntimeError(
+                    f"cannot render camera '{camera}' offscreen ({exc}); without a display set MUJOCO_GL=egl "
+                    "before MuJoCo is first imported (rehabkit does this itself when it is imported first)"
+                ) from None
+        renderer = self._renderers[key]
+        renderer.update_scene(self.data, camera=camera)
+        return renderer.render()
+
+    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
+        cid = self.model.camera(camera).id
+        mj_rot = self.data.cam_xmat[cid].reshape(3, 3)
+        # MuJoCo cameras look along -z with +y up; OpenCV's look along +z with +y down
+        return self.data.cam_xpos[cid].copy(), mj_rot @ np.diag([1.0, -1.0, -1.0]), np.radians(self.model.cam_fovy[cid])
+
+    def body_poses(self) -> BodyPoses:
+        return BodyPoses(self._drawn_names, self.data.xpos[self._drawn], self.data.xquat[self._drawn])
+
+    def visual_geoms(self) -> list[GeomVisual]:
+        m = self.model
+        out = []
+        for g in range(m.ngeom):
+            shape = _GEOM_SHAPES.get(int(m.geom_type[g]))
+            if shape is None:
+                continue
+            size = m.geom_size[g]
+            size = {"box": size[:3], "sphere": size[:1], "plane": size[:2], "ellipsoid": size[:3]}.get(shape, size[:2])
+            out.append(GeomVisual(
+                body=m.body(m.geom_bodyid[g]).name or "world", name=m.geom(g).name or f"geom{g}", shape=shape,
+                size=tuple(float(s) for s in size), position=tuple(m.geom_pos[g]), quat_wxyz=tuple(m.geom_quat[g]),
+                rgba=tuple(float(c) for c in m.geom_rgba[g]),
+            ))
+        return out
+
+
+    def close_view(self) -> None:
+        for renderer in self._renderers.values():
+            renderer.close()
+        self._renderers.clear()
+
+
+class SceneMirror(SceneView):
+    """The scenario's scene posed from measured joints (no physics): a hardware run's view of its robot.
+
+    Two copies of the scene's data: the control thread poses and reads one (log, end
+    effector); a sensor thread renders from the other, posed from the newest state when it
+    starts a frame, so a slow frame never holds up the loop nor sees a half-updated pose.
+    """
+
+    def __init__(self, robot: RobotModel, world: World | None):
+        spec = build_scene(robot, world or World(), 0.001)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.frame_data = mujoco.MjData(self.model)
+        self._init_view(robot.ee_site)
+        self._q = np.array([self.model.jnt_qposadr[self.model.joint(n).id] for n in robot.joint_names], int)
+        self._m = measured_joints(self.model, robot)
+        self.measured_count = len(self._m)
+        self._lock = threading.Lock()  # scripted object moves vs a frame copying them
+        self.frame_view = _FrameView(self)  # read it after frame(): what the frame showed
+
+    def pose(self, q: np.ndarray, measured: np.ndarray) -> None:
+        """Put the mirror at the measured joints (control thread)."""
+        self.data.qpos[self._q] = q
+        self.data.qpos[self._m] = measured
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)
+
+    def move_object(self, name: str, position: np.ndarray) -> None:
+        with self._lock:
+            super().move_object(name, position)
+            mujoco.mj_kinematics(self.model, self.data)
+
+    def frame(self, q: np.ndarray, measured: np.ndarray) -> SceneView:
+        """The frame copy, posed at ``q`` with the objects where they are now (any thread)."""
+        f = self.frame_data
+        with self._lock:
+            f.mocap_pos[:], f.mocap_quat[:] = self.data.mocap_pos, self.data.mocap_quat
+        f.qpos[self._q] = q
+        f.qpos[self._m] = measured
+        mujoco.mj_kinematics(self.model, f)
+        mujoco.mj_camlight(self.model, f)
+        return self.frame_view
+
+
+
+class _FrameView(SceneView):
+    """The mirror's frame copy as a view (its own renderers)."""
+
+    def __init__(self, mirror: SceneMirror):
+        self.model, self.data = mirror.model, mirror.frame_data
+        self._init_view(mirror.model.site(mirror._ee_site).name)
