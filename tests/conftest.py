@@ -19,6 +19,13 @@ def hit():
     return HitRobot(HitConfig())
 
 
+@pytest.fixture(scope="session")
+def lexos():
+    from rehabkit_plugins.robots.lexos import LexosConfig, LexosRobot
+
+    return LexosRobot(LexosConfig())
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

@@ -80,3 +80,16 @@ def test_a_wrong_joint_count_is_refused():
     assert Receiver(STATE, robot=7, joints=5).accept(_state(1)) is None
     with pytest.raises(ValueError, match="takes"):
         encode(STATE, 7, 1, np.zeros(6))
+
+
+def test_measured_only_joints_travel_with_the_state_and_their_count_is_checked():
+    values = np.arange(18, dtype=float).reshape(3, 6)
+    data = encode(STATE, 7, 1, values, sent_at=1.0, measured=np.array([0.25, -0.5]))
+    got = Receiver(STATE, robot=7, joints=6, measured=2).accept(data)
+    np.testing.assert_array_equal(got.values, values)
+    np.testing.assert_array_equal(got.measured, [0.25, -0.5])
+    # a receiver expecting another count drops it (a different robot model on the other side)
+    rx = Receiver(STATE, robot=7, joints=6, measured=1)
+    assert rx.accept(data) is None and rx.dropped["length"] == 1
+    with pytest.raises(ValueError, match="measured-only"):
+        encode(COMMAND, 7, 1, np.zeros(6), measured=np.zeros(1))

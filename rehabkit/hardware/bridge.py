@@ -23,6 +23,7 @@ import numpy as np
 from rehabkit.core.backends.scene import build_scene
 from rehabkit.core.backends.scene_view import measured_joints
 from rehabkit.core.scenario.models import World
+from rehabkit.hardware.clock import wait_until
 from rehabkit.hardware.protocol import (
     CMD_ESTOP,
     CMD_RESET,
@@ -37,8 +38,6 @@ from rehabkit.hardware.protocol import (
 )
 
 HOLD_KP, HOLD_KD = 60.0, 6.0
-
-
 class Plant(ABC):
     """What a bridge drives: real drives, or a simulation standing in for them."""
 
@@ -194,8 +193,6 @@ class Bridge:
                     return
                 self.tick(time.monotonic())
                 deadline += period
-                while (left := deadline - time.monotonic()) > 0:
-                    if left > 3e-4:
-                        time.sleep(left - 2e-4)
+                wait_until(deadline)
         finally:
             self.sock.close()

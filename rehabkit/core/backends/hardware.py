@@ -33,6 +33,7 @@ from rehabkit.core.backends.frame_server import FrameServer
 from rehabkit.core.backends.scene_view import SceneMirror, SceneView
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, BackendFaultError, BodyPoses, Context, GeomVisual, StrictModel
+from rehabkit.hardware.clock import wait_until
 from rehabkit.hardware.protocol import (
     CMD_ESTOP,
     CMD_RESET,
@@ -167,6 +168,7 @@ class HardwareBackend(Backend):
             raise LinkLostError(f"the bridge at udp://{self.addr[0]}:{self.addr[1]} does not answer")
         self.t0 = self.deadline = self.last_state = time.monotonic()
         self._started = False
+        self.held_at, self._fault, self._estop_sent = None, None, False  # a reset re-enables the bridge
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         return self.deadline - self.t0, self.q, self.qd
@@ -182,9 +184,7 @@ class HardwareBackend(Backend):
         for _ in range(n):
             self._send(self.tau)
             self.deadline += self.timestep
-            while (left := self.deadline - time.monotonic()) > 0:
-                if left > 3e-4:
-                    time.sleep(left - 2e-4)
+            wait_until(self.deadline)
             late = time.monotonic() - self.deadline
             self.ticks += 1
             self.lateness.append(late)
