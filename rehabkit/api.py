@@ -1,4 +1,4 @@
-"""The public Python API: load and run scenarios."""
+"""The public Python API: load and run scenarios, and sweeps of them."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import Any
 from rehabkit.core.plugins import PluginRegistry
 from rehabkit.core.runner import Runner, RunResult
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
+from rehabkit.sweep.engine import SweepResult, run_sweep
 
 
 def run_scenario(
@@ -37,3 +38,6 @@ def run_scenario(
     loaded: LoadedScenario = load_scenario(path, overrides, registry)
     out = Path(out_dir) if out_dir is not None else None
     return Runner(loaded, registry, out, spawn=spawn, progress=progress).run()
+
+
+__all__ = ["LoadedScenario", "RunResult", "SweepResult", "load_scenario", "run_scenario", "run_sweep"]

@@ -1,4 +1,4 @@
-"""``rehabkit`` command line: run, validate, plugins, schema.
+"""``rehabkit`` command line: run, sweep, validate, plugins, schema, bridge.
 
 Exit codes: 0 success (all expectations met), 1 an expectation failed or the
 run stopped on a safety event, 2 invalid input. Errors are printed as
@@ -42,6 +42,26 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"{name}:\n{text}")
     print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))
     return EXIT_OK if result.passed else EXIT_FAILED
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from rehabkit.sweep.engine import run_sweep
+
+    try:
+        result = run_sweep(args.scenario, args.grid, args.seeds, args.out, address=args.address, workers=args.workers,
+                           serial=args.serial, timeout_s=args.timeout, metrics=args.metric, progress=True)
+    except ValueError as exc:  # a malformed --grid
+        _err(f"error: {exc}")
+        return EXIT_INVALID
+    print(result.table())
+    how = "serially" if args.serial else f"on Ray ({args.address or 'local'})"
+    print(f"\n{len(result.records)} runs: {result.executed} run now {how}, {result.skipped} already done; "
+          f"{len(result.failed)} failed; {result.wall_s:.1f} s")
+    for rec in result.failed[:10]:
+        point = ", ".join(f"{k}={rec[k]}" for k in result.keys)
+        print(f"  FAILED  {point + ', ' if point else ''}seed={rec['seed']}: {rec['error']}")
+    print(f"wrote {result.out_dir / 'results.parquet'} and {result.out_dir / 'aggregate.csv'}")
+    return EXIT_OK if not result.failed else EXIT_FAILED
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -108,6 +128,18 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
     r.add_argument("--spawn", action="store_true", help="also stream to a Rerun viewer")
     r.set_defaults(func=cmd_run)
+    w = sub.add_parser("sweep", help="run a scenario over a grid of settings x seeds, on Ray; resumable")
+    w.add_argument("scenario")
+    w.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2,...",
+                   help="a setting and its values (YAML each); adds to the scenario's sweep: block")
+    w.add_argument("--seeds", type=int, default=None, help="runs per grid point (scenario seeds 0..N-1)")
+    w.add_argument("--out", metavar="DIR", help="sweep folder (default: out/sweep_<scenario name>); resumes there")
+    w.add_argument("--address", help="an existing Ray cluster, e.g. ray://head:10001 (default: a local Ray)")
+    w.add_argument("--workers", type=int, default=None, help="CPUs of the local Ray (default: all)")
+    w.add_argument("--serial", action="store_true", help="run one after the other in this process, no Ray")
+    w.add_argument("--timeout", type=float, default=None, metavar="S", help="per-run limit [s]")
+    w.add_argument("--metric", action="append", default=[], help="also show this metric in the aggregate")
+    w.set_defaults(func=cmd_sweep)
     v = sub.add_parser("validate", help="check scenario files without running them")
     v.add_argument("scenarios", nargs="+")
     v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")

@@ -41,6 +41,9 @@ def pytest_collect_file(parent: pytest.Collector, file_path: Path):
 class ScenarioFile(pytest.File):
     def collect(self):
         yield ScenarioItem.from_parent(self, name=self.path.stem)
+        with open(self.path) as f:
+            if isinstance(head := yaml.safe_load(f), dict) and head.get("sweep"):
+                yield SweepItem.from_parent(self, name=f"{self.path.stem}[sweep]")
 
 
 class ScenarioFailedError(Exception):
@@ -77,6 +80,43 @@ class ScenarioItem(pytest.Item):
 
     def reportinfo(self):
         return self.path, 0, f"scenario: {self.path.name}"
+
+
+class SweepItem(pytest.Item):
+    """A scenario's declared ``sweep:``, with its ``test_seeds`` (serially, in this process): every run ends
+    without an error and meets the scenario's expectations."""
+
+    def runtest(self) -> None:
+        from rehabkit.core.scenario.loader import load_scenario
+        from rehabkit.sweep.engine import run_sweep
+
+        spec = load_scenario(self.path).model.sweep
+        out = Path(self.config._tmp_path_factory.mktemp(f"{self.path.stem}_sweep"))  # type: ignore[attr-defined]
+        result = run_sweep(self.path, seeds=spec.test_seeds or spec.seeds, out_dir=out, serial=True)
+        bad = [r for r in result.records if r["error"] is not None or not r["passed"]]
+        if bad:
+            lines = [", ".join(f"{k}={r[k]}" for k in result.keys) + f", seed={r['seed']}: "
+                     + (r["error"] or "expectations not met: " + ", ".join(
+                         k[7:] for k, v in r.items() if k.startswith("expect.") and v is False)) for r in bad]
+            raise AssertionError(f"sweep of {self.path.name}: {len(bad)} of {len(result.records)} runs failed\n"
+                                 + "\n".join(lines))
+
+    def reportinfo(self):
+        return self.path, 0, f"sweep: {self.path.name}"
+
+
+@pytest.fixture
+def run_sweep(tmp_path: Path) -> Callable[..., Any]:
+    """Run a sweep (``rehabkit.sweep.engine.run_sweep`` arguments) into a fresh folder; returns its result."""
+    from rehabkit.sweep.engine import run_sweep as _sweep
+
+    counter = iter(range(1_000_000))
+
+    def sweep(path: str | Path, grid: Any = None, seeds: int | None = None, **kw: Any):
+        kw.setdefault("serial", True)
+        return _sweep(path, grid, seeds, tmp_path / f"sweep{next(counter)}", **kw)
+
+    return sweep
 
 
 @pytest.fixture

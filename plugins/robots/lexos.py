@@ -153,6 +153,16 @@ class LexosRobot(Robot):
         """(N, swivel_samples, 4) joint values for hand positions ``p`` (base frame)."""
         return position_ik(p, self.swivel, *self.lengths)
 
+    def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
+        """Joint values putting the hand at the pose's position (4 DoF: position only), one per elbow swivel
+        sample within every joint range; nearest ``reference`` first (default: the middle of the ranges)."""
+        lim = self.model.limits
+        q = self.position_ik(np.asarray(pose, float)[:3, 3])[0]
+        with np.errstate(invalid="ignore"):
+            q = q[np.all((q >= lim.lower) & (q <= lim.upper), axis=1)]
+        ref = 0.5 * (lim.lower + lim.upper) if reference is None else np.asarray(reference, float)
+        return list(q[np.argsort(np.linalg.norm(q - ref, axis=1))])
+
     def reachable(self, p: np.ndarray) -> np.ndarray:
         """Whether some elbow swivel puts the hand at each ``p`` within every joint range."""
         return self._reachability(p)

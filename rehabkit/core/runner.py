@@ -98,7 +98,7 @@ class Runner:
                 raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
                                  f"{suggest(t.sensor, self.sensors)}")
         try:
-            self.targets = resolve_targets(sc.task, self.robot)
+            self.targets = resolve_targets(sc.task, self.robot, sc.seed)
         except PlanningError as exc:
             raise SetupError(f"task: {exc}") from exc
         self.schedule = self._schedule()

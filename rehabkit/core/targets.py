@@ -9,11 +9,17 @@ import numpy as np
 from rehabkit.core.interfaces import PlanningError, Robot, Target
 from rehabkit.core.scenario.models import TaskSpec
 from rehabkit.models.chain import rpy_to_matrix
+from rehabkit.workspace.sampling import random_inner, random_inner_not_straight
 
 
-def resolve_targets(task: TaskSpec, robot: Robot) -> dict[str, Target]:
-    """Every named target as a :class:`Target` (joint values and/or a base-frame pose)."""
+def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Target]:
+    """Every named target as a :class:`Target` (joint values and/or a base-frame pose).
+
+    A ``random`` target draws from the robot's workspace table with its own stream of the
+    scenario seed (``seed``, the target's index), so a sweep over seeds gets reproducible targets.
+    """
     specs = {t.name: t for t in task.targets}
+    index = {t.name: i for i, t in enumerate(task.targets)}
     out: dict[str, Target] = {}
 
     def get(name: str, stack: tuple[str, ...] = ()) -> Target:
@@ -29,6 +35,19 @@ def resolve_targets(task: TaskSpec, robot: Robot) -> dict[str, Target]:
             tgt = Target(name, q=None if ref.q is None else ref.q.copy(),
                          pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only,
                          same_as=ref.same_as or ref.name)
+        elif spec.random is not None:
+            ws = _workspace(robot, name)
+            rng = np.random.default_rng([seed, index[name]])
+            if spec.random.not_straight_from is not None:
+                ref = get(spec.random.not_straight_from, (*stack, name))
+                if ref.pose is None:
+                    raise PlanningError(f"target '{name}': '{spec.random.not_straight_from}' has no position")
+                point = random_inner_not_straight(ws, rng, ref.pose[:3, 3])
+            else:
+                point = random_inner(ws, rng)
+            pose = np.eye(4)
+            pose[:3, 3] = point
+            tgt = Target(name, pose=pose, position_only=True)
         elif spec.joints_deg is not None or spec.joints_rad is not None:
             q = np.radians(spec.joints_deg) if spec.joints_deg is not None else np.asarray(spec.joints_rad, float)
             if len(q) != robot.model.dof:
@@ -54,6 +73,13 @@ def resolve_targets(task: TaskSpec, robot: Robot) -> dict[str, Target]:
     for name in specs:
         get(name)
     return out
+
+
+def _workspace(robot: Robot, target: str):
+    if not hasattr(robot, "workspace"):
+        raise PlanningError(f"target '{target}': random targets need a robot with a workspace table "
+                            f"('{robot.model.name}' has none)")
+    return robot.workspace(progress=False)
 
 
 def angular_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:

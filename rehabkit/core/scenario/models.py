@@ -9,7 +9,7 @@ load. Angles in the DSL carry a ``_deg`` suffix; everything else is SI.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field, create_model, model_validator
 
@@ -83,8 +83,16 @@ class World(StrictModel):
         return self
 
 
+class RandomTargetSpec(StrictModel):
+    """A point drawn from the robot's workspace table with the scenario's seed (one stream per target)."""
+
+    within: Literal["workspace"] = "workspace"
+    not_straight_from: str | None = Field(
+        None, description="redraw until the straight segment from this target's point leaves the workspace")
+
+
 class TargetSpec(StrictModel):
-    """A task target: joint values, a Cartesian point (base frame), or a copy of another target."""
+    """A task target: joint values, a Cartesian point (base frame), a random point, or a copy of another."""
 
     name: str
     joints_deg: list[float] | None = None
@@ -94,10 +102,11 @@ class TargetSpec(StrictModel):
     orientation_of: str | None = Field(None, description="use the orientation of this (joint-space) target")
     same_as: str | None = None
     sensor: str | None = Field(None, description="position seen by this sensor (its 'target_position' reading)")
+    random: RandomTargetSpec | None = Field(None, description="a random point of the workspace (seeded)")
 
     @model_validator(mode="after")
     def _one_kind(self) -> TargetSpec:
-        kinds = ("joints_deg", "joints_rad", "position", "same_as", "sensor")
+        kinds = ("joints_deg", "joints_rad", "position", "same_as", "sensor", "random")
         given = [k for k in kinds if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(
@@ -213,6 +222,16 @@ class Bound(StrictModel):
         return " and ".join(f"{ops[k]} {getattr(self, k)}" for k in ops if getattr(self, k) is not None)
 
 
+class SweepSpec(StrictModel):
+    """A study over this scenario (``rehabkit sweep``): every combination of ``grid`` values × ``seeds`` runs."""
+
+    grid: dict[str, list[Any]] = Field({}, description="key path, as for --set → the values it takes")
+    seeds: int = Field(1, ge=1, description="runs per grid point, with scenario seeds 0..seeds-1")
+    timeout_s: float = Field(600.0, gt=0, description="a run taking longer is stopped and recorded as failed")
+    metrics: list[str] = Field([], description="metrics the aggregate table shows (besides the expect: ones)")
+    test_seeds: int | None = Field(None, ge=1, description="seeds the scenario's test runs (default: all)")
+
+
 class ScenarioBase(StrictModel):
     """The plugin-independent part of a scenario."""
 
@@ -226,6 +245,7 @@ class ScenarioBase(StrictModel):
     logging: Logging = Logging()
     safety: SafetyConfig = SafetyConfig()
     expect: dict[str, Bound] = {}
+    sweep: SweepSpec | None = None
 
 
 PLUGIN_SECTIONS = {"robot": "robot", "backend": "backend", "planner": "planner", "controller": "controller"}

@@ -1,0 +1,68 @@
+"""What a sweep runs: the grid's combinations × seeds, each with a stable id."""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a sweep: the scenario with these overrides and this seed."""
+
+    point: tuple[tuple[str, Any], ...]  # grid key → value, in the grid's key order
+    seed: int
+    run_id: str
+
+    @property
+    def overrides(self) -> dict[str, Any]:
+        return {**dict(self.point), "seed": self.seed}
+
+
+def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
+    """``["planner.type=voxel-astar,voxel-hill", "controller.kp=[1,2],[3,4]"]`` → key → values (YAML each)."""
+    grid: dict[str, list[Any]] = {}
+    for text in items:
+        key, sep, raw = text.partition("=")
+        if not sep or not key.strip() or not raw.strip():
+            raise ValueError(f"--grid '{text}': expected key.path=value1,value2,...")
+        try:
+            values = yaml.safe_load(f"[{raw}]")
+        except yaml.YAMLError as exc:
+            raise ValueError(f"--grid '{text}': the values are not valid YAML ({exc})") from None
+        grid[key.strip()] = values
+    return grid
+
+
+def scenario_digest(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def expand(path: Path, grid: Mapping[str, list[Any]], seeds: int) -> list[RunSpec]:
+    """Every combination of the grid's values (first key slowest) × seeds 0..seeds-1."""
+    if "seed" in grid:
+        raise ValueError("'seed' is set by the sweep's seeds, not by the grid")
+    for key, values in grid.items():
+        if not values:
+            raise ValueError(f"grid key '{key}' has no values")
+    digest = scenario_digest(path)
+    keys = list(grid)
+    runs = []
+    for combo in itertools.product(*(grid[k] for k in keys)):
+        point = tuple(zip(keys, combo))
+        for seed in range(seeds):
+            ident = json.dumps({"scenario": digest, "point": point, "seed": seed}, sort_keys=True, default=str)
+            runs.append(RunSpec(point, seed, hashlib.sha256(ident.encode()).hexdigest()[:16]))
+    return runs
+
+
+def point_label(point: tuple[tuple[str, Any], ...]) -> dict[str, str]:
+    """Grid values as text, one column per key (strings as they are, anything else as JSON)."""
+    return {k: v if isinstance(v, str) else json.dumps(v) for k, v in point}

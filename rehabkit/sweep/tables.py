@@ -1,0 +1,85 @@
+"""A sweep's rows as a columnar table (Parquet), and the per-grid-point aggregate."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from rehabkit.core.io import atomic_write_text
+from rehabkit.sweep.grid import RunSpec, point_label
+
+
+def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """One flat record per run, in the sweep's order: grid values, seed, outcome, metric.*, expect.*."""
+    out = []
+    for spec in specs:
+        row = rows[spec.run_id]
+        rec: dict[str, Any] = {"run_id": spec.run_id, **point_label(spec.point), "seed": spec.seed,
+                               "passed": bool(row["passed"]), "error": row["error"],
+                               "wall_time_s": float(row["wall_time_s"])}
+        rec.update({f"metric.{k}": v for k, v in sorted(row["metrics"].items())})
+        rec.update({f"expect.{k}": v for k, v in sorted(row["expectations"].items())})
+        out.append(rec)
+    return out
+
+
+def write_parquet(path: Path, records: list[dict[str, Any]]) -> None:
+    """All records in one Parquet file (columns: the union of the records' keys; missing values null)."""
+    columns: dict[str, None] = {}
+    for rec in records:
+        columns.update(dict.fromkeys(rec))
+    table = pa.Table.from_pylist([{c: rec.get(c) for c in columns} for rec in records])
+    tmp = path.with_name(path.name + ".tmp")
+    pq.write_table(table, tmp)
+    tmp.replace(path)
+
+
+def read_parquet(path: Path) -> list[dict[str, Any]]:
+    return pq.read_table(path).to_pylist()
+
+
+def aggregate(records: list[dict[str, Any]], keys: list[str], metrics: list[str]) -> list[dict[str, Any]]:
+    """Per grid point (in first-seen order): runs, errors, share passed, and mean/std/n of ``metrics``."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for rec in records:
+        groups.setdefault(tuple(rec[k] for k in keys), []).append(rec)
+    out = []
+    for point, recs in groups.items():
+        row: dict[str, Any] = dict(zip(keys, point))
+        row.update(runs=len(recs), errors=sum(r["error"] is not None for r in recs),
+                   passed=float(np.mean([r["passed"] for r in recs])))
+        for m in metrics:
+            vals = np.array([r.get(f"metric.{m}") for r in recs if r.get(f"metric.{m}") is not None], float)
+            row[f"{m}.mean"] = float(vals.mean()) if len(vals) else math.nan
+            row[f"{m}.std"] = float(vals.std()) if len(vals) else math.nan
+            row[f"{m}.n"] = len(vals)
+        out.append(row)
+    return out
+
+
+def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    buf = io.StringIO()
+    if rows:
+        writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
+
+
+def format_table(rows: list[dict[str, Any]], keys: list[str], metrics: list[str]) -> str:
+    """The aggregate for people: one line per grid point, metrics as mean ± std (n)."""
+    head = [*keys, "runs", "errors", "passed", *metrics]
+    lines = [head]
+    for r in rows:
+        cells = [str(r[k]) for k in keys] + [str(r["runs"]), str(r["errors"]), f"{r['passed']:.0%}"]
+        cells += [f"{r[f'{m}.mean']:.4g} ± {r[f'{m}.std']:.2g} ({r[f'{m}.n']})" for m in metrics]
+        lines.append(cells)
+    widths = [max(len(line[i]) for line in lines) for i in range(len(head))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip() for line in lines)

@@ -1,0 +1,92 @@
+"""Sweeps: the grid, serial against Ray row for row, resuming a killed sweep, failing and hanging runs."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.sweep.engine import run_sweep
+from rehabkit.sweep.execute import WALL_CLOCK
+from rehabkit.sweep.grid import expand, parse_grid
+from tests.conftest import SCENARIOS
+
+TRIAL = SCENARIOS / "lexos_planner_trial.yaml"
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+
+
+def test_grid_values_are_yaml_and_the_product_is_in_grid_order_with_stable_ids():
+    grid = parse_grid(["planner.type=voxel-astar,voxel-hill", "planner.segment_durations=[1, 2],[3, 4]"])
+    assert grid == {"planner.type": ["voxel-astar", "voxel-hill"], "planner.segment_durations": [[1, 2], [3, 4]]}
+    runs = expand(TRIAL, grid, seeds=3)
+    assert len(runs) == 12 and len({r.run_id for r in runs}) == 12
+    assert [r.seed for r in runs[:4]] == [0, 1, 2, 0] and runs[3].point[1][1] == [3, 4]
+    assert [r.run_id for r in expand(TRIAL, grid, seeds=3)] == [r.run_id for r in runs]  # stable: resumable
+    with pytest.raises(ValueError, match="expected key.path=value1,value2"):
+        parse_grid(["planner.type"])
+    with pytest.raises(ValueError, match="set by the sweep's seeds"):
+        expand(TRIAL, {"seed": [1, 2]}, 2)
+
+
+def test_a_bad_grid_value_is_refused_before_any_run_with_its_place(tmp_path):
+    with pytest.raises(ScenarioError, match=r"planner.type: unknown planner plugin 'voxel-astra'; did you mean"):
+        run_sweep(TRIAL, ["planner.type=voxel-astar,voxel-astra"], 2, tmp_path, serial=True)
+    assert not list((tmp_path / "runs").glob("*.json")) if (tmp_path / "runs").exists() else True
+
+
+def _comparable(records):
+    return [{k: v for k, v in r.items()
+             if k != "wall_time_s" and not (k.startswith("metric.") and WALL_CLOCK.search(k[7:]))} for r in records]
+
+
+def test_serial_and_ray_give_the_same_rows_and_a_second_call_runs_nothing(tmp_path):
+    grid = ["planner.type=voxel-astar,voxel-beam"]
+    serial = run_sweep(TRIAL, grid, 3, tmp_path / "serial", serial=True)
+    ray = run_sweep(TRIAL, grid, 3, tmp_path / "ray", workers=2)
+    assert serial.executed == ray.executed == 6 and not serial.failed and not ray.failed
+    assert _comparable(serial.records) == _comparable(ray.records)
+    # different start/goal pairs per seed; the same pairs for both planners; A* never longer than beam
+    lengths = {(r["planner.type"], r["seed"]): r["metric.decimated_path_length_m"] for r in serial.records}
+    assert len({lengths["voxel-astar", s] for s in range(3)}) == 3
+    assert all(lengths["voxel-astar", s] <= lengths["voxel-beam", s] + 1e-9 for s in range(3))
+    agg = {a["planner.type"]: a for a in serial.aggregate}
+    assert agg["voxel-astar"]["runs"] == 3 and agg["voxel-astar"]["decimated_path_length_m.n"] == 3
+    assert (tmp_path / "serial" / "results.parquet").stat().st_size > 0
+    assert (tmp_path / "serial" / "aggregate.csv").read_text().startswith("planner.type,runs,errors,passed")
+    again = run_sweep(TRIAL, grid, 3, tmp_path / "serial", serial=True)
+    assert again.executed == 0 and again.skipped == 6 and _comparable(again.records) == _comparable(serial.records)
+
+
+def test_a_killed_sweep_resumes_without_redoing_finished_runs(tmp_path):
+    out = tmp_path / "sweep"
+    cmd = [sys.executable, "-m", "rehabkit.cli", "sweep", str(TRIAL), "--grid", "planner.type=voxel-astar,voxel-hill",
+           "--seeds", "6", "--serial", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list((out / "runs").glob("*.json"))) < 3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)  # no chance to tidy up
+    finally:
+        proc.wait()
+    finished = {f.name for f in (out / "runs").glob("*.json")}
+    assert 3 <= len(finished) < 12 and not (out / "results.parquet").exists()
+    resumed = run_sweep(TRIAL, ["planner.type=voxel-astar,voxel-hill"], 6, out, serial=True)
+    assert resumed.skipped == len(finished) and resumed.executed == 12 - len(finished)
+    assert len(resumed.records) == 12 and not resumed.failed
+    fresh = run_sweep(TRIAL, ["planner.type=voxel-astar,voxel-hill"], 6, tmp_path / "fresh", serial=True)
+    assert _comparable(resumed.records) == _comparable(fresh.records)
+
+
+@pytest.mark.parametrize("mode", ["serial", "ray"])
+def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode):
+    # 300 s of simulated HIT take far longer than the 3 s allowed; the 0.5 s run finishes
+    result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=3)
+    by = {r["duration"]: r for r in result.records}
+    assert by["0.5"]["error"] is None and by["0.5"]["metric.sim_time_s"] == pytest.approx(0.5)
+    assert by["300"]["error"].startswith("RunTimeoutError") and not by["300"]["passed"]
+    assert by["300"]["wall_time_s"] < 30
+    assert [a["errors"] for a in result.aggregate] == [0, 1]
