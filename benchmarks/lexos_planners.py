@@ -1,6 +1,7 @@
 """L-Exos workspace planners: the paper's Monte Carlo comparison, and the look-up table's costs.
 
-* 600 random start/goal pairs of inner voxels that a straight line cannot link;
+* 600 random start/goal pairs of inner voxels that a straight line cannot link (the same
+  pairs as a sweep of ``scenarios/lexos_planner_trial.yaml`` over seeds 0..599: ``--from-sweep``);
   A*, weighted A* (h x 1.5), hill and beam (k = 5 cm) on each; mean ± std of the
   decimated (n = 3) path length and of planning time, over the pairs every planner
   solved; failures counted. Table printed, plot saved (PNG).
@@ -24,6 +25,7 @@ import numpy as np
 from rehabkit_plugins.robots.lexos import LexosConfig, LexosRobot
 
 from rehabkit.workspace.grid import BOUNDARY
+from rehabkit.workspace.sampling import random_inner, random_inner_not_straight
 from rehabkit.workspace.search import SearchFailedError, astar, beam, decimate, hill, path_length
 
 PLANNERS = {
@@ -34,14 +36,42 @@ PLANNERS = {
 }
 
 
-def random_pairs(ws, n: int, rng) -> list[tuple[np.ndarray, np.ndarray]]:
-    inner = ws.inner_points()
+def random_pairs(ws, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Pair k: the draws of ``scenarios/lexos_planner_trial.yaml`` at seed k (start: stream (k, 0); goal: stream
+    (k, 1), redrawn until a straight line cannot link it), so ``rehabkit sweep`` of that scenario plans the
+    same pairs."""
     pairs = []
-    while len(pairs) < n:
-        a, b = inner[rng.integers(len(inner), size=2)]
-        if not ws.segment_inner(a, b):
-            pairs.append((a, b))
+    for k in range(n):
+        a = random_inner(ws, np.random.default_rng([k, 0]))
+        pairs.append((a, random_inner_not_straight(ws, np.random.default_rng([k, 1]), a)))
     return pairs
+
+
+SWEEP_NAMES = {"voxel-astar": "A*", "voxel-wastar": "weighted A* (1.5h)", "voxel-hill": "hill",
+               "voxel-beam": "beam (k=5 cm)"}
+
+
+def compare_with_sweep(directory: Path, lengths: dict[str, np.ndarray]) -> None:
+    """The sweep's per-run decimated lengths against this benchmark's, pair by pair (seed = pair index)."""
+    from rehabkit.sweep.tables import read_parquet
+
+    rows = read_parquet(directory / "results.parquet")
+    print(f"\nagainst the sweep in {directory} ({len(rows)} runs):")
+    print(f"{'planner':20} {'pairs':>6} {'same length':>12} {'max |diff| [m]':>15} {'straight in sweep':>18} "
+          f"{'failures sweep/here':>20}")
+    for plugin, name in SWEEP_NAMES.items():
+        mine = {r["seed"]: r for r in rows if r["planner.type"] == plugin}
+        seeds = [s for s in mine if s < len(lengths[name])]
+        length = {s: mine[s].get("metric.decimated_path_length_m") for s in seeds}
+        both = [s for s in seeds if length[s] is not None and not np.isnan(lengths[name][s])]
+        diff = max((abs(length[s] - lengths[name][s]) for s in both), default=0.0)
+        same = sum(abs(length[s] - lengths[name][s]) < 1e-9 for s in both)
+        # the run plans from the hand where IK put it (start to ~1e-12): on a voxel edge the table's straight-line
+        # test can then pass where it failed from the voxel centre, and no search is needed
+        straight = sum(length[s] is None and bool(mine[s].get("metric.straight_legs")) for s in seeds)
+        fails = (sum(length[s] is None and not mine[s].get("metric.straight_legs") for s in seeds),
+                 int(np.isnan(lengths[name][seeds]).sum()))
+        print(f"{name:20} {len(seeds):6d} {same:12d} {diff:15.2e} {straight:18d} {fails[0]:>10d}/{fails[1]:<9d}")
 
 
 def main() -> None:
@@ -49,6 +79,8 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=600)
     ap.add_argument("--png", default="out/lexos_planners.png")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--from-sweep", type=Path, default=None, metavar="DIR",
+                    help="also compare with a sweep of scenarios/lexos_planner_trial.yaml, pair by pair")
     args = ap.parse_args()
     robot = LexosRobot(LexosConfig())
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
@@ -62,7 +94,7 @@ def main() -> None:
           f"inner {counts[2]}, boundary {counts[1]}, unreachable {counts[0]}")
 
     rng = np.random.default_rng(args.seed)
-    pairs = random_pairs(ws, args.pairs, rng)
+    pairs = random_pairs(ws, args.pairs)
     lengths = {k: np.full(len(pairs), np.nan) for k in PLANNERS}
     times = {k: np.full(len(pairs), np.nan) for k in PLANNERS}
     for i, (a, b) in enumerate(pairs):
@@ -86,6 +118,9 @@ def main() -> None:
         rows.append((name, L.mean(), L.std(), T.mean(), T.std()))
         print(f"{name:20} {fails:8d} {L.mean():12.4f} ± {L.std():.4f} {L.mean() / ref_len - 1:+7.1%} "
               f"{T.mean():9.2f} ± {T.std():6.2f} {ref_t * 1e3 / T.mean():8.1f}")
+
+    if args.from_sweep is not None:
+        compare_with_sweep(args.from_sweep, lengths)
 
     # straight-segment test: table vs inverse kinematics at 100 samples
     segs = [pairs[i] for i in range(min(200, len(pairs)))]

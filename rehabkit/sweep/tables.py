@@ -78,7 +78,7 @@ def format_table(rows: list[dict[str, Any]], keys: list[str], metrics: list[str]
     head = [*keys, "runs", "errors", "passed", *metrics]
     lines = [head]
     for r in rows:
-        cells = [str(r[k]) for k in keys] + [str(r["runs"]), str(r["errors"]), f"{r['passed']:.0%}"]
+        cells = [str(r[k]) for k in keys] + [str(r["runs"]), str(r["errors"]), f"{r['passed']:.1%}"]
         cells += [f"{r[f'{m}.mean']:.4g} ± {r[f'{m}.std']:.2g} ({r[f'{m}.n']})" for m in metrics]
         lines.append(cells)
     widths = [max(len(line[i]) for line in lines) for i in range(len(head))]
