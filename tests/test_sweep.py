@@ -90,3 +90,16 @@ def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, m
     assert by["300"]["error"].startswith("RunTimeoutError") and not by["300"]["passed"]
     assert by["300"]["wall_time_s"] < 30
     assert [a["errors"] for a in result.aggregate] == [0, 1]
+
+
+@pytest.mark.parametrize("mode", ["serial", "ray"])
+def test_a_crashing_run_is_recorded_with_its_error_and_the_others_complete(tmp_path, mode):
+    # a whole-body controller on an arm: valid settings, but the run cannot be put together
+    grid = {"controller": [{"type": "clik-pd"}, {"type": "qp-stack", "levels": [{"tasks": [{"type": "com"}]}]}]}
+    result = run_sweep(TRIAL, {"planner.type": ["voxel-astar"], **grid}, 2, tmp_path, serial=mode == "serial",
+                       workers=2)  # (the scenario's own grid has four planners; one is enough here)
+    assert len(result.records) == 4
+    ok, crashed = result.records[:2], result.records[2:]
+    assert all(r["error"] is None and r["passed"] for r in ok)
+    assert all("qp-stack needs a floating-base robot" in r["error"] and not r["passed"] for r in crashed)
+    assert [a["errors"] for a in result.aggregate] == [0, 2] and len(result.failed) == 2
