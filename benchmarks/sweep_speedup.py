@@ -3,7 +3,8 @@
 The L-Exos planner comparison (``scenarios/lexos_planner_trial.yaml``: 4 planners x N
 start/goal seeds) is run twice from scratch: serially in this process, then on a local Ray
 with ``--workers`` CPUs. Printed: wall time of each (the Ray one with and without starting
-Ray), runs per second, the speed-up, and whether the two gave the same rows (wall-clock
+Ray), runs per second, the speed-up, the machine's own ceiling (the same pure-CPU work in
+``--workers`` processes against one), and whether the two gave the same rows (wall-clock
 figures aside).
 
     python benchmarks/sweep_speedup.py [--seeds 100] [--workers 2]
@@ -12,6 +13,7 @@ figures aside).
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import platform
 import tempfile
@@ -24,6 +26,27 @@ from rehabkit.sweep.engine import run_sweep
 from rehabkit.sweep.execute import WALL_CLOCK
 
 TRIAL = Path(__file__).resolve().parents[1] / "scenarios" / "lexos_planner_trial.yaml"
+
+
+def _spin(n: int) -> int:
+    s = 0
+    for i in range(n):
+        s += i * i % 7
+    return s
+
+
+def ceiling(workers: int, n: int = 6_000_000) -> float:
+    """This machine's speed-up for perfectly parallel CPU-bound work: ``workers`` processes vs one (a VM's
+    vCPUs may share physical cores)."""
+    t0 = time.perf_counter()
+    for _ in range(workers):
+        _spin(n)
+    one = time.perf_counter() - t0
+    with multiprocessing.get_context("spawn").Pool(workers) as pool:
+        pool.map(_spin, [1000] * workers)  # started
+        t0 = time.perf_counter()
+        pool.map(_spin, [n] * workers)
+        return one / (time.perf_counter() - t0)
 
 
 def comparable(records):
@@ -53,6 +76,8 @@ def main() -> None:
           f"   (+ {start:.1f} s to start Ray)")
     print(f"speed-up: {serial.wall_s / parallel.wall_s:.2f}x (Ray's start included: "
           f"{serial.wall_s / (parallel.wall_s + start):.2f}x)")
+    print(f"this machine's ceiling: {args.workers} processes of pure CPU work vs one: {ceiling(args.workers):.2f}x "
+          "(measured now)")
     same = comparable(serial.records) == comparable(parallel.records)
     print(f"rows identical (wall-clock figures aside): {same}; failed runs: serial {len(serial.failed)}, "
           f"Ray {len(parallel.failed)}")
