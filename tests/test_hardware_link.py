@@ -11,7 +11,8 @@ import pytest
 from rehabkit.api import run_scenario
 from rehabkit.core.backends.hardware import BridgeHoldError, HardwareBackend, HardwareConfig
 from rehabkit.core.interfaces import Context
-from rehabkit.hardware.protocol import COMMAND, ESTOPPED, WATCHDOG, encode
+from rehabkit.hardware.bridge import Bridge, MujocoPlant
+from rehabkit.hardware.protocol import CMD_RESET, COMMAND, ENABLED, ESTOPPED, HOLDING, STALE, WATCHDOG, encode
 from tests.conftest import SCENARIOS
 
 
@@ -100,13 +101,13 @@ def test_lexos_reaching_over_the_link_reaches_the_proxy_points_of_the_simulation
     assert len(goals(hw)) == len(goals(sim)) == 3
     off = np.linalg.norm(goals(hw) - goals(sim), axis=1)
     assert off[:2].max() < 0.003 and off[2] < 0.03
-    # the hand's executed path against the simulation's, whatever the timing of the replans, up to the third
-    # replan: the same route to 25 mm (the leg to Proxy 2 grazes the concavity: a camera estimate 1-3 mm
-    # apart can make it a straight leg in one run and a searched one in the other, 10-20 mm apart)
-    until = min(r.summary["plans"][3]["t"] for r in (sim, hw))
+    # the hand's executed path to Proxy 1 (planned from rest) against the simulation's, whatever the timing of
+    # the replan: within 5 mm (later legs start wherever the arm is when the camera has seen the ball settle,
+    # and the leg to Proxy 2 grazes the concavity: straight in one run, searched in another)
+    until = min(r.summary["plans"][2]["t"] for r in (sim, hw))
     a, b = (r.trace.x[: int(until * 1000) : 20] for r in (sim, hw))
     d = np.linalg.norm(a[:, None] - b[None], axis=2)
-    assert max(d.min(axis=0).max(), d.min(axis=1).max()) < 0.025
+    assert max(d.min(axis=0).max(), d.min(axis=1).max()) < 0.005
 
 
 def test_measured_only_joints_come_over_the_link_and_pose_the_mirror(lexos):
@@ -157,3 +158,38 @@ def test_forged_and_malformed_commands_never_move_the_robot(link):
     _, q, _ = backend.state()
     assert np.degrees(np.abs(q - q0)).max() < 0.5 and not backend.holding
     sock.close()
+
+
+def test_a_late_command_is_not_applied_open_loop_and_fresh_ones_take_over_again(hit):
+    """Bridge clock driven by hand: a torque is applied while its command is fresh; 3 ms after the newest
+    command the bridge holds the robot in place instead (status STALE), and follows again when commands
+    return — without latching, which only the 50 ms watchdog does."""
+    plant = MujocoPlant(hit)
+    bridge = Bridge(plant, watchdog_s=0.05, stale_s=0.003)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    addr = ("127.0.0.1", bridge.port)
+    q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
+    try:
+        sock.sendto(encode(COMMAND, 1, 1, q0, status=CMD_RESET), addr)
+        time.sleep(0.01)
+        bridge.tick(0.0)
+        push = np.full(6, 3.0)
+        sock.sendto(encode(COMMAND, 1, 2, push), addr)
+        time.sleep(0.01)
+        applied = []
+        for now in (0.001, 0.002, 0.003, 0.0045, 0.006):
+            bridge.tick(now)
+            applied.append((plant.data.qfrc_applied[plant._v].copy(), bridge.status))
+        for tau, status in applied[:3]:  # 0-2 ms old: the host's torque
+            np.testing.assert_allclose(tau, push)
+            assert not status & STALE
+        for tau, status in applied[3:]:  # 3.5 and 5 ms old: held in place, not latched
+            assert np.abs(tau - push).max() > 0.5 and status & STALE and status & ENABLED
+        sock.sendto(encode(COMMAND, 1, 3, push), addr)
+        time.sleep(0.01)
+        bridge.tick(0.007)
+        np.testing.assert_allclose(plant.data.qfrc_applied[plant._v], push)
+        assert not bridge.status & STALE and not bridge.status & HOLDING
+    finally:
+        sock.close()
+        bridge.sock.close()
