@@ -113,8 +113,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     registry = default_registry()
     info = registry.get("robot", args.robot)
     robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), None)
-    bridge = Bridge(MujocoPlant(robot, 1.0 / args.rate), args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3,
-                    stale_s=args.stale_ms / 1e3)
+    bridge = Bridge(MujocoPlant(robot, 1.0 / args.rate), args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
     bridge.serve(args.duration, parent=args.parent_pid)
     return EXIT_OK
@@ -157,8 +156,6 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
     b.add_argument("--robot-id", type=int, default=1)
     b.add_argument("--watchdog-ms", type=float, default=5.0, help="hold the robot without valid commands this long")
-    b.add_argument("--stale-ms", type=float, default=3.0,
-                   help="hold the robot in place while the newest command is older than this")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
     b.add_argument("--parent-pid", type=int, default=None, help="stop when this process (the host) is gone")
     b.set_defaults(func=cmd_bridge)

@@ -2,12 +2,10 @@
 
 Each tick (the plant's rate, 1 kHz by default) it applies the newest valid command, steps
 the plant, and sends the state back with the echo of the command it used. Commands pass
-the protocol's checks (``protocol.Receiver``) and are clipped to the effort limits. A torque
-is never applied open-loop for long: when no fresh command has come for ``stale_s`` (a few
-ticks: the host stalled, or datagrams were lost) the bridge holds the robot where it is
-(PD to that posture plus gravity, status STALE) until commands come back. If none comes for
-``watchdog_s``, or an e-stop command comes, it holds for good and says so in its status
-bits; a reset from the host re-enables it. Real drives plug in as another
+the protocol's checks (``protocol.Receiver``) and are clipped to the effort limits. If no
+valid command arrives for ``watchdog_s`` while running, or an e-stop command comes, the
+bridge holds the robot where it is (PD to that posture plus gravity) and says so in its
+status bits; a reset from the host re-enables it. Real drives plug in as another
 :class:`Plant`; :class:`MujocoPlant` is the robot's MuJoCo model as the plant, for tests and
 hardware-in-the-loop rehearsal.
 """
@@ -33,7 +31,6 @@ from rehabkit.hardware.protocol import (
     ENABLED,
     ESTOPPED,
     HOLDING,
-    STALE,
     STATE,
     WATCHDOG,
     Receiver,
@@ -116,9 +113,8 @@ class Bridge:
     """Serves one host over UDP at the plant's rate, with a command watchdog and an e-stop."""
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
-                 watchdog_s: float = 0.005, stale_s: float = 0.003):
-        self.plant, self.robot_id, self.watchdog_s, self.stale_s = plant, robot_id, watchdog_s, stale_s
-        self.stale_q: np.ndarray | None = None  # where the robot is held while commands are late
+                 watchdog_s: float = 0.005):
+        self.plant, self.robot_id, self.watchdog_s = plant, robot_id, watchdog_s
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((host, port))
         self.sock.setblocking(False)
@@ -172,17 +168,8 @@ class Bridge:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
         tau = self.tau
-        late = self.hold_q is None and self.status & ENABLED and now - self.last_valid > self.stale_s
-        if late:  # the last torque was computed for a state long gone: don't keep applying it
-            if self.stale_q is None:
-                self.stale_q = q.copy()
-            self.status |= STALE
-        elif self.stale_q is not None:
-            self.stale_q = None
-            self.status &= ~STALE
-        held = self.hold_q if self.hold_q is not None else self.stale_q
-        if held is not None:
-            tau = np.clip(HOLD_KP * (held - q) - HOLD_KD * qd + self.plant.gravity(q),
+        if self.hold_q is not None:
+            tau = np.clip(HOLD_KP * (self.hold_q - q) - HOLD_KD * qd + self.plant.gravity(q),
                           -self.plant.effort, self.plant.effort)
         self.plant.apply(tau)
         self.plant.advance()

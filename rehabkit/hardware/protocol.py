@@ -35,7 +35,7 @@ HEADER = struct.Struct("<2sBBIIddHHHH")
 CRC = struct.Struct("<I")
 
 # status bits (bridge → host)
-ENABLED, HOLDING, ESTOPPED, WATCHDOG, STALE = 1, 2, 4, 8, 16  # STALE: commands late, holding in place
+ENABLED, HOLDING, ESTOPPED, WATCHDOG = 1, 2, 4, 8
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
 

@@ -40,7 +40,6 @@ from rehabkit.hardware.protocol import (
     COMMAND,
     ESTOPPED,
     HOLDING,
-    STALE,
     STATE,
     WATCHDOG,
     Receiver,
@@ -69,7 +68,6 @@ class HardwareConfig(StrictModel):
     state_timeout_s: float = Field(0.1, gt=0, description="host watchdog: no valid state for this long stops")
     max_age_s: float = Field(0.005, gt=0, description="older states are stale and dropped")
     bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
-    bridge_stale_ms: float = Field(3.0, gt=0, description="bridge holds in place while commands are this late")
 
 
 class HardwareBackend(Backend):
@@ -103,7 +101,6 @@ class HardwareBackend(Backend):
         self.rtt_at: list[int] = []  # round trips measured before each tick, to place them on the timeline
         self.held_at: float | None = None  # when the bridge first reported holding the robot
         self.silent_ticks = 0
-        self.stale_states = 0  # states in which the bridge held in place for lack of a fresh command
         self._started = False
         self._estop_sent = False
         self._fault: str | None = None
@@ -113,8 +110,7 @@ class HardwareBackend(Backend):
         spec = context.robot_spec
         cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
                "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
-               "--watchdog-ms", str(config.bridge_watchdog_ms), "--stale-ms", str(config.bridge_stale_ms),
-               "--parent-pid", str(os.getpid())]
+               "--watchdog-ms", str(config.bridge_watchdog_ms), "--parent-pid", str(os.getpid())]
         # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
         log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
@@ -147,8 +143,6 @@ class HardwareBackend(Backend):
             self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
             self.measured, self._posed = msg.measured, False
             self.status, self.last_state, got = msg.status, now, True
-            if msg.status & STALE:
-                self.stale_states += 1
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
@@ -263,11 +257,11 @@ class HardwareBackend(Backend):
         out = {"link_ticks": float(self.ticks), "deadline_misses": float(self.misses),
                "deadline_miss_rate": self.misses / max(1, self.ticks),
                "states_dropped": float(sum(self.rx.dropped.values())),
-               "bridge_stale_states": float(self.stale_states),
                **{f"states_dropped_{why.replace('-', '_')}": float(n) for why, n in self.rx.dropped.items()}}
         if len(late):
             out.update({"tick_lateness_median_ms": float(np.median(late)),
-                        "tick_lateness_p99_ms": float(np.percentile(late, 99))})
+                        "tick_lateness_p99_ms": float(np.percentile(late, 99)),
+                        "tick_lateness_max_ms": float(late.max())})
         if self.held_at is not None:
             out["bridge_hold_at_s"] = self.held_at
         if len(rtt):
