@@ -29,3 +29,21 @@ def lexos():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def stalled_trip(result, before: float = float("inf")) -> bool:
+    """The run was stopped by a speed/torque/range trip (before ``before``) while this shared VM had stalled the
+    host: a tick more than 10 ms late, the last torque meanwhile applied open-loop by the bridge (the link's
+    known weakness: see the hardware backend's notes)."""
+    events = result.summary["safety"]["events"]
+    return (bool(events) and events[0]["rule"] in ("velocity", "torque", "position") and events[0]["t"] < before
+            and result.metrics.get("tick_lateness_max_ms", 0.0) > 10.0)
+
+
+def retry_stalls(run, before: float = float("inf"), tries: int = 3):
+    """``run()`` again while its result is a :func:`stalled_trip` (at most ``tries`` times); the last result."""
+    for _ in range(tries):
+        result = run()
+        if not stalled_trip(result, before):
+            return result
+    return result

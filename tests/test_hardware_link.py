@@ -12,7 +12,7 @@ from rehabkit.api import run_scenario
 from rehabkit.core.backends.hardware import BridgeHoldError, HardwareBackend, HardwareConfig
 from rehabkit.core.interfaces import Context
 from rehabkit.hardware.protocol import COMMAND, ESTOPPED, WATCHDOG, encode
-from tests.conftest import SCENARIOS
+from tests.conftest import SCENARIOS, retry_stalls
 
 
 @pytest.fixture
@@ -51,18 +51,9 @@ LINK = {"backend": {"type": "hardware", "bridge_watchdog_ms": 200, "state_timeou
 
 
 def _over_the_link(path):
-    """The scenario over the link. A stall of this VM can leave the last torque on a joint for tens of ms and
-    the safety layer then stops the run: such a run is retried once, after checking its stop was safe (a
-    safety event, no joint beyond its range) and that the host was indeed stalled (a tick > 10 ms late)."""
-    for _ in range(2):
-        hw = run_scenario(path, LINK)
-        if hw.passed:
-            return hw
-        m = hw.metrics
-        assert m["safety_events"] >= 1 and m["joint_limit_excess_deg"] < 0.5, hw.summary["safety"]
-        assert m["tick_lateness_max_ms"] > 10, (hw.summary["safety"], m["tick_lateness_max_ms"],
-                                                [e for e in hw.summary["expectations"] if not e["passed"]])
-    return hw
+    """The scenario over the link, run again if a stall of this VM left the last torque on a joint for tens of
+    ms and the safety layer stopped the run (``stalled_trip``: that is the bridge's known weakness, not parity)."""
+    return retry_stalls(lambda: run_scenario(path, LINK))
 
 
 def test_hit_round_trip_over_the_link_tracks_like_the_simulation():
