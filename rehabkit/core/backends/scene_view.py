@@ -112,7 +112,6 @@ class SceneView:
             ))
         return out
 
-
     def close_view(self) -> None:
         for renderer in self._renderers.values():
             renderer.close()
@@ -123,8 +122,9 @@ class SceneMirror(SceneView):
     """The scenario's scene posed from measured joints (no physics): a hardware run's view of its robot.
 
     Two copies of the scene's data: the control thread poses and reads one (log, end
-    effector); a sensor thread renders from the other, posed from the newest state when it
-    starts a frame, so a slow frame never holds up the loop nor sees a half-updated pose.
+    effector); a sensor thread poses the other at the newest state when it starts a frame
+    (whose pixels the frame server renders), so a slow frame never holds up the loop nor
+    sees a half-updated pose.
     """
 
     def __init__(self, robot: RobotModel, world: World | None):
@@ -161,7 +161,6 @@ class SceneMirror(SceneView):
         mujoco.mj_kinematics(self.model, f)
         mujoco.mj_camlight(self.model, f)
         return self.frame_view
-
 
 
 class _FrameView(SceneView):
