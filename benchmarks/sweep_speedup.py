@@ -23,7 +23,7 @@ from pathlib import Path
 import ray
 
 from rehabkit.sweep.engine import run_sweep
-from rehabkit.sweep.execute import WALL_CLOCK
+from rehabkit.sweep.tables import reproducible
 
 TRIAL = Path(__file__).resolve().parents[1] / "scenarios" / "lexos_planner_trial.yaml"
 
@@ -47,11 +47,6 @@ def ceiling(workers: int, n: int = 6_000_000) -> float:
         t0 = time.perf_counter()
         pool.map(_spin, [n] * workers)
         return one / (time.perf_counter() - t0)
-
-
-def comparable(records):
-    return [{k: v for k, v in r.items()
-             if k != "wall_time_s" and not (k.startswith("metric.") and WALL_CLOCK.search(k[7:]))} for r in records]
 
 
 def main() -> None:
@@ -78,7 +73,7 @@ def main() -> None:
           f"{serial.wall_s / (parallel.wall_s + start):.2f}x)")
     print(f"this machine's ceiling: {args.workers} processes of pure CPU work vs one: {ceiling(args.workers):.2f}x "
           "(measured now)")
-    same = comparable(serial.records) == comparable(parallel.records)
+    same = reproducible(serial.records) == reproducible(parallel.records)
     print(f"rows identical (wall-clock figures aside): {same}; failed runs: serial {len(serial.failed)}, "
           f"Ray {len(parallel.failed)}")
 

@@ -10,8 +10,8 @@ import pytest
 
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.sweep.engine import run_sweep
-from rehabkit.sweep.execute import WALL_CLOCK
 from rehabkit.sweep.grid import expand, parse_grid
+from rehabkit.sweep.tables import reproducible
 from tests.conftest import SCENARIOS
 
 TRIAL = SCENARIOS / "lexos_planner_trial.yaml"
@@ -37,17 +37,12 @@ def test_a_bad_grid_value_is_refused_before_any_run_with_its_place(tmp_path):
     assert not list((tmp_path / "runs").glob("*.json")) if (tmp_path / "runs").exists() else True
 
 
-def _comparable(records):
-    return [{k: v for k, v in r.items()
-             if k != "wall_time_s" and not (k.startswith("metric.") and WALL_CLOCK.search(k[7:]))} for r in records]
-
-
 def test_serial_and_ray_give_the_same_rows_and_a_second_call_runs_nothing(tmp_path):
     grid = ["planner.type=voxel-astar,voxel-beam"]
     serial = run_sweep(TRIAL, grid, 3, tmp_path / "serial", serial=True)
     ray = run_sweep(TRIAL, grid, 3, tmp_path / "ray", workers=2)
     assert serial.executed == ray.executed == 6 and not serial.failed and not ray.failed
-    assert _comparable(serial.records) == _comparable(ray.records)
+    assert reproducible(serial.records) == reproducible(ray.records)
     # different start/goal pairs per seed; the same pairs for both planners; A* never longer than beam
     lengths = {(r["planner.type"], r["seed"]): r["metric.decimated_path_length_m"] for r in serial.records}
     assert len({lengths["voxel-astar", s] for s in range(3)}) == 3
@@ -57,7 +52,7 @@ def test_serial_and_ray_give_the_same_rows_and_a_second_call_runs_nothing(tmp_pa
     assert (tmp_path / "serial" / "results.parquet").stat().st_size > 0
     assert (tmp_path / "serial" / "aggregate.csv").read_text().startswith("planner.type,runs,errors,passed")
     again = run_sweep(TRIAL, grid, 3, tmp_path / "serial", serial=True)
-    assert again.executed == 0 and again.skipped == 6 and _comparable(again.records) == _comparable(serial.records)
+    assert again.executed == 0 and again.skipped == 6 and reproducible(again.records) == reproducible(serial.records)
 
 
 def test_a_killed_sweep_resumes_without_redoing_finished_runs(tmp_path):
@@ -78,7 +73,7 @@ def test_a_killed_sweep_resumes_without_redoing_finished_runs(tmp_path):
     assert resumed.skipped == len(finished) and resumed.executed == 12 - len(finished)
     assert len(resumed.records) == 12 and not resumed.failed
     fresh = run_sweep(TRIAL, ["planner.type=voxel-astar,voxel-hill"], 6, tmp_path / "fresh", serial=True)
-    assert _comparable(resumed.records) == _comparable(fresh.records)
+    assert reproducible(resumed.records) == reproducible(fresh.records)
 
 
 @pytest.mark.parametrize("mode", ["serial", "ray"])

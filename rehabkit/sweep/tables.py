@@ -13,6 +13,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rehabkit.core.io import atomic_write_text
+from rehabkit.sweep.execute import WALL_CLOCK
 from rehabkit.sweep.grid import RunSpec, point_label
 
 
@@ -28,6 +29,12 @@ def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dic
         rec.update({f"expect.{k}": v for k, v in sorted(row["expectations"].items())})
         out.append(rec)
     return out
+
+
+def reproducible(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records without their wall-clock figures: what any two runs of the same sweep agree on."""
+    return [{k: v for k, v in r.items()
+             if k != "wall_time_s" and not (k.startswith("metric.") and WALL_CLOCK.search(k[7:]))} for r in records]
 
 
 def write_parquet(path: Path, records: list[dict[str, Any]]) -> None:

@@ -16,7 +16,7 @@ import numpy as np
 from qpsolvers import daqp_solve_qp, proxqp_solve_qp
 from scipy.linalg.lapack import dgesv
 
-from rehabkit.wholebody.equality_cascade import equality_cascade
+from rehabkit.wholebody.equality_cascade import FEASIBLE_TOL, equality_cascade
 
 
 @dataclass
@@ -47,8 +47,6 @@ class StackResult:
 # the solvers' own qpsolvers entry points: the generic dispatcher's checks cost ~75 us a call at this size
 SOLVERS = {"daqp": daqp_solve_qp, "proxqp": proxqp_solve_qp}
 
-
-FEASIBLE_TOL = 1e-9
 
 
 def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None, try_direct: bool = True):
@@ -116,18 +114,18 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
             warm[:] = list(V)
         r = A @ V[-1] - b
         return StackResult(V[-1], np.sqrt(np.add.reduceat(r * r, ends - sizes)).tolist())  # ‖A_k v − b_k‖
-    steps: list[tuple[np.ndarray, np.ndarray, Level | None]] = [(np.empty(0), np.empty(0), lv) for lv in levels]
-    if freedom_left:
-        steps.append((H, np.zeros(n), None))  # least kinetic energy
+    steps: list[Level | None] = [*levels, *([None] if freedom_left else [])]  # None: the least kinetic energy
     v = np.zeros(n)
     rows: list[np.ndarray] = []
     values: list[np.ndarray] = []
     out = StackResult(v)
-    for k, (P, q, level) in enumerate(steps):
+    for k, level in enumerate(steps):
         if k < done:
             x = V[k]
         else:  # at `done` an inequality is in the way (or the system is singular): the QP solver
-            if level is not None:
+            if level is None:
+                P, q = H, np.zeros(n)
+            else:
                 P = level.A.T @ level.A
                 P.flat[:: n + 1] += reg  # the damping, on the diagonal in place
                 q = -level.A.T @ level.b
