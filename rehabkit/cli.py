@@ -1,4 +1,4 @@
-"""``rehabkit`` command line: run, sweep, validate, plugins, schema, bridge.
+"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge.
 
 Exit codes: 0 success (all expectations met), 1 an expectation failed or the
 run stopped on a safety event, 2 invalid input. Errors are printed as
@@ -62,6 +62,18 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"  FAILED  {point + ', ' if point else ''}seed={rec['seed']}: {rec['error']}")
     print(f"wrote {result.out_dir / 'results.parquet'} and {result.out_dir / 'aggregate.csv'}")
     return EXIT_OK if not result.failed else EXIT_FAILED
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from rehabkit.rehab.replay import replay
+
+    rep = replay(args.run_dir, args.set, args.out, progress=True)
+    print(rep.table())
+    for ev in rep.result.summary["safety"]["events"]:
+        print(f"  SAFETY  {ev['message']}")
+    out, outputs = rep.result.out_dir, rep.result.summary["outputs"]
+    print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "rrd" in outputs else ""))
+    return EXIT_OK if rep.result.passed else EXIT_FAILED
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -140,6 +152,13 @@ def parser() -> argparse.ArgumentParser:
     w.add_argument("--timeout", type=float, default=None, metavar="S", help="per-run limit [s]")
     w.add_argument("--metric", action="append", default=[], help="also show this metric in the aggregate")
     w.set_defaults(func=cmd_sweep)
+    rp = sub.add_parser("replay", help="run a recorded session again with other settings (same seed, targets, "
+                                       "patient); prints the outcome measures side by side")
+    rp.add_argument("run_dir", help="a folder written by 'rehabkit run'")
+    rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="what to change, e.g. controller.type=assist-as-needed")
+    rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>)")
+    rp.set_defaults(func=cmd_replay)
     v = sub.add_parser("validate", help="check scenario files without running them")
     v.add_argument("scenarios", nargs="+")
     v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")

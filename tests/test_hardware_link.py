@@ -1,6 +1,7 @@
 """The hardware backend against a bridge over loopback: the same scenario, watchdog, e-stop, forged packets."""
 
 import contextlib
+import json
 import socket
 import time
 from pathlib import Path
@@ -164,3 +165,20 @@ def test_forged_and_malformed_commands_never_move_the_robot(link):
     assert np.degrees(np.abs(q - q0)).max() < 0.5 and not backend.holding
     sock.close()
 
+
+
+def test_a_safety_breach_logs_the_same_event_in_simulation_and_over_the_link(tmp_path):
+    """The envelope runs on the host for every backend: the hand leaving the keep-in box is one event, whatever
+    drives the robot."""
+    envelope = {"safety": {"keep_in": {"min": [-0.8, -0.4, -0.15], "max": [0.0, 0.4, 0.2], "frame": "base"},
+                           "stop_after_s": 0.3}, "expect": {"safety_events": {"eq": 1}}}
+    sim = run_scenario(SCENARIOS / "hit_roundtrip.yaml", envelope, out_dir=tmp_path / "sim")
+    hw = retry_stalls(lambda: run_scenario(SCENARIOS / "hit_roundtrip.yaml", {**envelope, **LINK},
+                                           out_dir=tmp_path / "hw"))
+    a, b = (json.loads((tmp_path / d / "summary.json").read_text())["safety"]["events"] for d in ("sim", "hw"))
+    assert len(a) == len(b) == 1
+    assert {k: a[0][k] for k in ("rule", "joint", "limit")} == {k: b[0][k] for k in ("rule", "joint", "limit")}
+    assert a[0]["rule"] == "keep-in" and a[0]["data"]["axis"] == b[0]["data"]["axis"] == "z"
+    assert abs(a[0]["t"] - b[0]["t"]) < 0.02 and abs(a[0]["value"] - b[0]["value"]) < 0.002
+    assert a[0]["message"].split(": ")[1] == b[0]["message"].split(": ")[1] == "hand outside the keep-in box (z min)"
+    assert sim.passed and hw.passed

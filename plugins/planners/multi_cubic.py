@@ -141,7 +141,7 @@ class MultiCubicPlanner(Planner):
                 diag[f"continuity_{name}_{what}"] = float(jumps[k, i].max())
         for i, what in enumerate(("position_deg", "velocity_deg_s", "acceleration_deg_s2")):
             diag[f"continuity_max_{what}"] = float(jumps[:, i].max()) if len(jumps) else 0.0
-        return Plan(traj, diag, points)
+        return Plan(traj, diag, points, waypoint_times=traj.breaks)
 
 
 @hookimpl

@@ -62,4 +62,10 @@ def rehabkit_register_backends(registry: Registrar) -> None:
     """Register backend plugins: ``factory(config, context)`` returns a :class:`rehabkit.core.interfaces.Backend`."""
 
 
-KINDS: tuple[str, ...] = ("robot", "planner", "controller", "sensor", "backend")
+@hookspec(historic=True)
+def rehabkit_register_patients(registry: Registrar) -> None:
+    """Register simulated-patient plugins: ``factory(config, context)`` returns a
+    :class:`rehabkit.core.interfaces.Patient` (a person's behaviour at the robot's joints, in simulation)."""
+
+
+KINDS: tuple[str, ...] = ("robot", "planner", "controller", "sensor", "backend", "patient")

@@ -50,6 +50,18 @@ class Context:
     robot_spec: dict[str, Any] | None = None  # the scenario's robot section (type + settings), e.g. for a bridge
     plan: Callable[..., Plan] | None = None
     note: Callable[[float, str], None] | None = None
+    reference_space: ReferenceSpace = "joint"  # what the scenario's planner produces (controllers taking either)
+    seed: int = 0
+    safety: Any = None  # the scenario's safety envelope (``SafetyConfig``), e.g. for a link's heartbeat
+    patient: Any = None  # the scenario's patient profile (``rehabkit.rehab.patient.PatientBase``), if any
+
+    def stream(self, name: str) -> np.random.Generator:
+        """A random generator of its own for ``name``, from the scenario seed.
+
+        Draws from it don't depend on what other plugins draw, so a counterfactual replay with another
+        controller sees the same patient noise and sensor noise.
+        """
+        return np.random.default_rng([self.seed, *name.encode()])
 
     def resolve(self, path: str | Path) -> Path:
         """A path from the scenario, made absolute relative to the scenario file."""
@@ -166,6 +178,8 @@ class Plan:
         details: Non-scalar results for the summary (e.g. an optimiser's history).
         actions: Things to do to the scene while the plan runs: ``(t, "release" | "grasp", object)``,
             ``t`` from the plan's start (e.g. a throw lets go of the ball at its release instant).
+        waypoint_times: When the trajectory passes each of ``waypoints`` [s from its start]; each stretch
+            between two is a reach for the outcome measures (default: the whole plan is one reach).
     """
 
     trajectory: Trajectory
@@ -173,6 +187,7 @@ class Plan:
     waypoints: np.ndarray | None = None
     details: dict[str, Any] = field(default_factory=dict)
     actions: list[tuple[float, str, str]] = field(default_factory=list)
+    waypoint_times: np.ndarray | None = None  # when it passes each waypoint [s from its start]: the reaches counted
 
 
 class PlanningError(RuntimeError):
@@ -205,6 +220,33 @@ class Planner(ABC):
 
     def joint_space_visuals(self) -> dict[str, np.ndarray]:
         """Point sets in joint space [rad] worth drawing once (3-DoF robots), e.g. obstacles; default none."""
+        return {}
+
+
+class Patient(ABC):
+    """A simulated person at the robot's joints: the torques their arm applies, each control step.
+
+    ``delay_s`` is how late the person perceives the task: the runner passes the goal of the
+    movement under way (in the planner's space: a hand position or joint values) as it was that
+    long ago.
+    """
+
+    delay_s: float = 0.0
+
+    @abstractmethod
+    def torque(self, t: float, q: np.ndarray, qd: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Joint torques [N·m] the person applies to the robot now (positive along each joint's axis)."""
+
+    def run_metrics(self, trace: Any) -> dict[str, float]:
+        """Figures about the person over the run (e.g. fatigue); default none."""
+        return {}
+
+    def inputs(self) -> dict[str, str]:
+        """Fingerprints of what drove the person (e.g. a digest of the noise drawn), for replays; default none."""
+        return {}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Internal states over time for the log, name → (times [s], values); default none."""
         return {}
 
 
@@ -350,6 +392,10 @@ class Backend(ABC):
     @abstractmethod
     def step(self, n: int = 1) -> None:
         """Advance ``n`` timesteps."""
+
+    def external_torque(self, tau: np.ndarray) -> None:
+        """Joint torques from outside the robot (a simulated person), added to the command just sent."""
+        raise NotImplementedError(f"{type(self).__name__} cannot apply simulated external torques")
 
     def contacts(self) -> list[Contact]:
         """Current contacts involving the robot (support contacts of its feet excluded); default []."""

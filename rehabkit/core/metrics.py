@@ -23,10 +23,11 @@ class Trace:
     qd_ref: np.ndarray
     x: np.ndarray | None = None  # end effector, robot base frame (Cartesian runs)
     x_ref: np.ndarray | None = None
+    tau_h: np.ndarray | None = None  # torques a (simulated) person applied at the joints
 
     def trimmed(self, n: int) -> Trace:
         return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]
-                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref")))
+                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h")))
 
 
 def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import rehabkit
 from rehabkit.core.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
+from rehabkit.rehab.run_outcomes import run_outcomes
 
 if TYPE_CHECKING:
     from rehabkit.core.runner import Runner
@@ -55,6 +58,12 @@ def collect_metrics(run: Runner, trace: Trace, wall: float, setup: float, contac
     metrics.update(run.backend.run_metrics())
     for sensor in run.sensors.values():
         metrics.update(sensor.run_metrics(trace))
+    if run.patient is not None:
+        metrics.update(run.patient.run_metrics(trace))
+    breaches = sum(e.rule not in ("ramp-in", "ramp-out") for e in run.safety.interventions)
+    outcomes, run.outcome_details = run_outcomes(trace, run.robot, run.reaches, run.schedule.control_dt,
+                                                 run.sc.outcomes, breaches)
+    metrics.update(outcomes)
     metrics.update({
         "sim_time_s": sim_time, "wall_time_s": wall, "setup_time_s": setup,
         "real_time_factor": sim_time / wall if wall > 0 else float("inf"),
@@ -69,11 +78,33 @@ def plugin_versions(run: Runner) -> dict[str, Any]:
     sc, registry = run.sc, run.registry
     out: dict[str, Any] = {}
     for kind, cfg in (("robot", sc.robot), ("backend", sc.backend), ("planner", sc.planner),
-                      ("controller", sc.controller)):
+                      ("controller", sc.controller), ("patient", getattr(sc.patient, "model", None))):
+        if cfg is None:
+            continue
         p = registry.get(kind, cfg.type).provider
         out[kind] = {"type": cfg.type, "package": p.package, "version": p.version}
     out["sensors"] = {n: {"type": c.type, **vars(registry.get("sensor", c.type).provider)}
                       for n, c in sc.sensors.items()}
+    return out
+
+
+def run_inputs(run: Runner) -> dict[str, Any]:
+    """Fingerprints of what drove the run besides its plugins, so a replay can tell whether they were the same."""
+    rng_state = json.dumps(run.rng.bit_generator.state, sort_keys=True, default=str).encode()
+    return {"seed": run.sc.seed, "target_timeline": [[f["t"], f["trigger"]] for f in run.fired],
+            "sensor_noise": hashlib.sha256(rng_state).hexdigest()[:16],
+            **(run.patient.inputs() if run.patient is not None else {})}
+
+
+def patient_summary(run: Runner) -> dict[str, Any] | None:
+    """Who the run was for (pseudonymous), what their profile changed, and the effective limits' sources."""
+    p = run.sc.patient
+    if p is None and not run.limit_sources.by_joint:
+        return None
+    out: dict[str, Any] = {"effective_limits": run.limit_sources.as_dict(), "replaced_targets": run.replaced}
+    if p is not None:
+        out.update(id=p.id, side=p.side, segments=run.segments,
+                   simulated=None if run.patient is None else p.model.type)
     return out
 
 
@@ -92,7 +123,11 @@ def build_summary(run: Runner, metrics: dict[str, float], per_joint: dict[str, A
         "sim_time_s": metrics["sim_time_s"], "wall_time_s": metrics["wall_time_s"],
         "real_time_factor": metrics["real_time_factor"],
         "metrics": metrics, "per_joint": per_joint, "expectations": verdicts,
-        "safety": {"tripped": run.safety.tripped, "events": [e.as_dict() for e in run.safety.events]},
+        "safety": {"tripped": run.safety.tripped, "events": [e.as_dict() for e in run.safety.events],
+                   "interventions": [e.as_dict() for e in run.safety.interventions]},
+        "patient": patient_summary(run),
+        "inputs": run_inputs(run),
+        "outcomes": {k: v for k, v in run.outcome_details.items() if k != "interaction_force_n"},
         "events": run.fired, "plans": run.plans, "notes": run.notes, "actions": run.acted,
         "reports": {name: text for name, s in run.sensors.items() if (text := s.report(metrics))},
     }

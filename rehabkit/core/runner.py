@@ -17,19 +17,25 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from tqdm import tqdm
 
 from rehabkit.core.interfaces import BackendFaultError, Context, Plan, PlanningError, PlanRequest, Target
-from rehabkit.core.io import atomic_write_json
+from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.log import RerunLog, encode_images
 from rehabkit.core.metrics import Trace
 from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
 from rehabkit.core.results import RunResult, build_summary, collect_metrics
 from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.core.targets import resolve_targets
+from rehabkit.rehab.admission import admit_targets
+from rehabkit.rehab.patient import effective_limits, interaction_force_limit, unknown_joints
+from rehabkit.rehab.run_outcomes import HandForce, Reach
 
+SNAPSHOT = "scenario.yaml"  # the scenario as run, in the run's folder: what `rehabkit replay` starts from
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
 LOG_FLUSH_SAMPLES = 500  # log-rate samples buffered between column sends
 SCENE_ACTIONS = ("release", "grasp")  # what a plan may do to held objects (Backend methods of these names)
@@ -76,22 +82,43 @@ class Runner:
 
     def build(self) -> None:
         sc = self.sc
-        ctx = Context(self.loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
-                      out_dir=self.out_dir, robot_spec=sc.robot.model_dump(mode="json"))
-        self.robot = self._make("robot", sc.robot, ctx)
+        profile = sc.patient
+        self.rng = np.random.default_rng(sc.seed)
+        ctx = Context(self.loaded.directory, self.rng, 1.0 / sc.rates.control_hz, world=sc.world,
+                      out_dir=self.out_dir, robot_spec=sc.robot.model_dump(mode="json"), seed=sc.seed,
+                      safety=sc.safety, patient=profile)
+        self.robot = self._make("robot", self._adapted_robot(profile), ctx)
         ctx.robot = self.robot
+        # the patient's range and comfort and the envelope narrow the robot's limits before anything plans with them
+        self.robot_limits = self.robot.model.limits
+        self.robot.model.limits = self._effective_limits(profile)
         # sensors before the backend: their instruments go into the scene it builds
         self.sensors = {name: self._make("sensor", cfg, ctx) for name, cfg in sc.sensors.items()}
         ctx.instruments = [i for s in self.sensors.values() for i in s.instruments()]
         self.backend = self._make("backend", sc.backend, ctx)
         self.planner = self._make("planner", sc.planner, ctx)
-        ctx.plan, ctx.note = self.plan_for_controller, self.note
+        ctx.plan, ctx.note, ctx.reference_space = self.plan_for_controller, self.note, self.planner.space
         self.controller = self._make("controller", sc.controller, ctx)
         if self.planner.space != self.controller.reference:
             raise SetupError(f"planner '{sc.planner.type}' plans in {self.planner.space} space but controller "
                              f"'{sc.controller.type}' takes {self.controller.reference} references; "
                              "pick a matching pair")
-        self.safety = SafetyLayer(self.robot.model, sc.safety, gravity=self.robot.gravity_torque)
+        self.patient = None
+        if profile is not None and getattr(profile, "model", None) is not None:
+            if self.backend.realtime:  # a real robot has a real person in it
+                self.note(0.0, f"patient.model '{profile.model.type}' is not simulated on the "
+                               f"'{sc.backend.type}' backend: the person is real")
+            else:
+                self.patient = self._make("patient", profile.model, ctx)
+        force_limit = interaction_force_limit(profile, sc.safety)
+        if force_limit is not None and self.patient is None:
+            raise SetupError(f"an interaction-force limit ({force_limit:g} N, from safety.interaction_force_n or "
+                             "patient.comfort) needs a source of the force: a simulated patient (patient.model); "
+                             f"backend '{sc.backend.type}' measures none")
+        self.hand_force = HandForce(self.robot.model) if force_limit is not None else None
+        self.safety = SafetyLayer(self.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
+                                  gravity=self.robot.gravity_torque, dt=ctx.control_dt,
+                                  hand=lambda q: self.robot.ee_world(q[None])[0])
         self._specs = {t.name: t for t in sc.task.targets}
         for t in sc.task.targets:
             if t.sensor and t.sensor not in self.sensors:
@@ -101,7 +128,43 @@ class Runner:
             self.targets = resolve_targets(sc.task, self.robot, sc.seed)
         except PlanningError as exc:
             raise SetupError(f"task: {exc}") from exc
+        self.replaced = admit_targets(self.targets, sc.task, self.robot, self.robot_limits, self.limit_sources,
+                                      profile, self.loaded.source)
         self.schedule = self._schedule()
+
+    def _adapted_robot(self, profile):
+        """The robot section with the patient's segment lengths where the robot has a setting of that name."""
+        cfg = self.sc.robot
+        self.segments: dict[str, str] = {}
+        if profile is None:
+            return cfg
+        fields, update = type(cfg).model_fields, {}
+        for name, length in profile.segments.items():
+            if name not in fields:
+                self.segments[name] = f"robot '{cfg.type}' has no setting '{name}': not adapted"
+            elif ("robot", name) in self.loaded.source.value_marks:
+                self.segments[name] = f"robot.{name} = {getattr(cfg, name)} set in the scenario wins"
+            else:
+                update[name] = length
+                self.segments[name] = f"robot.{name} = {length} (from the profile)"
+        return cfg.model_copy(update=update)
+
+    def _effective_limits(self, profile):
+        """Robot ∩ patient ∩ envelope limits; unknown joint names refused where they are written."""
+        src, model = self.loaded.source, self.robot.model
+        problems = []
+        for section, names in (("patient", profile.joints if profile else {}), ("safety", self.sc.safety.joints)):
+            for name in names:
+                for msg in unknown_joints([name], model):
+                    path = (section, "joints", name)
+                    problems.append(Diagnostic(src.key_marks.get(path, src.value_marks[()]), ".".join(path), msg))
+        if problems:
+            raise ScenarioError(problems)
+        try:
+            limits, self.limit_sources = effective_limits(model, profile, self.sc.safety)
+        except ValueError as exc:
+            raise SetupError(str(exc)) from exc
+        return limits
 
     def _schedule(self) -> _Schedule:
         sc, dt = self.sc, self.backend.timestep
@@ -235,12 +298,14 @@ class Runner:
         # q, qd, tau of a step sit side by side: the safety layer checks that row in place
         packed = np.zeros((n, 3 * dof))
         self.trace = trace = Trace(np.arange(n) * sch.control_dt, packed[:, :dof], packed[:, dof : 2 * dof],
-                                   packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)))
+                                   packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)),
+                                   tau_h=np.zeros((n, dof)) if self.patient is not None else None)
         self.log = log = self._open_log()
         self.diag: dict[str, float] = {}
         self.fired: list[dict] = []
         self._actions: list[tuple[int, str, str]] = []
         self.plans: list[dict] = []
+        self.reaches: list[Reach] = []
 
         q0 = self.start_q()
         try:
@@ -259,7 +324,11 @@ class Runner:
         else:
             trace.q_ref, trace.qd_ref = self.reference[0], self.reference[1]
         self.goal = start.copy()
+        self.goal_at = np.tile(start, (n, 1))
         self._install(0, self._plan(0.0, q0, np.zeros(dof), sc.task.order()))
+        if self.safety.tripped and self.limit_sources.by_joint:  # refused before it runs, not stopped at t=0
+            raise SetupError(f"{self.safety.events[0].message.split(': ', 1)[1].rsplit(';', 1)[0]} "
+                             "(joint limits narrowed by the patient's profile or the safety envelope)")
         if log:  # drawn after the first plan: some planners' drawings (a throw's parabola) come from it
             for name, points in self.planner.visuals().items():
                 log.points(f"world/planner/{name}", self._to_world(points), (120, 120, 200), 0.003)
@@ -269,6 +338,8 @@ class Runner:
         # 'moved' events: [position last planned for, candidate new position, readings it has held]
         self._watch = {i: [None, None, 0] for i, e in enumerate(sc.task.events) if e.moved is not None}
         self._next_reach, self._stop_at = 0, n
+        ramp_steps = int(round(sc.safety.ramp_out_s / sch.control_dt))
+        self._ramp_steps, self._ramp_out_at = ramp_steps, (n - ramp_steps if ramp_steps else None)
         self.acted: list[dict] = []
         self._sensor_due = [0] * len(self.sensors)
         if self.backend.realtime and any(s.blocking for s in self.sensors.values()):
@@ -295,6 +366,9 @@ class Runner:
         if own_ref:  # the controller's own reference is what it tracked; record that
             trace.q_ref = tqr = np.zeros((n, dof))
             trace.qd_ref = np.zeros((n, dof))
+        person = self.patient.torque if self.patient is not None else None
+        late = int(round(self.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
+        push, tau_h, hand_force, goal_at = self.backend.external_torque, trace.tau_h, self.hand_force, self.goal_at
         contact_steps, due, k = 0, 0, 0
         t_loop = time.perf_counter()
         for k in range(n):
@@ -311,6 +385,10 @@ class Runner:
                 safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
                 compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
                 concat((q, qd, np.zeros(dof)), out=row)
+            if person is not None:
+                tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
+                if hand_force is not None:
+                    safety.check_force(t, q, hand_force(q, tau_h[k]))
             tau = check(t, row)
             if cart:
                 tx[k] = ee(q)  # world frame here; moved into the base frame once, at the end
@@ -320,6 +398,8 @@ class Runner:
                 tqr[k] = controller.joint_reference
             try:
                 command(tau)
+                if person is not None:
+                    push(tau_h[k])
                 step(sub)
             except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete
                 safety.trip(t, q, "backend", str(exc))
@@ -351,6 +431,8 @@ class Runner:
         if cart:
             base = self.robot.model.base_pose
             trace.x[:k] = (trace.x[:k] - base[:3, 3]) @ base[:3, :3]
+            if controller.joint_reference is None:  # a controller without a joint reference: no joint tracking
+                trace.q_ref[:] = np.nan
         if log:
             self._flush_log(k)
             if self.robot.model.dof == 3 and k:
@@ -385,6 +467,9 @@ class Runner:
                     if np.linalg.norm(ee - self.targets[ev.reached].pose[:3, 3]) <= ev.tolerance_m:
                         self._waiting.remove(i)
                         self._fire(i, k, t, q, qd)
+            if self._ramp_out_at is not None and k >= self._ramp_out_at:
+                self.safety.begin_ramp_out(t, q)
+                self._ramp_out_at = None
             if k >= self._stop_at:
                 return -1
             for j, ((name, sensor), every) in enumerate(zip(self.sensors.items(), sch.sensor_every)):
@@ -400,6 +485,8 @@ class Runner:
         except Exception as exc:
             self.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
         upcoming = [self._stop_at, *self._sensor_due]
+        if self._ramp_out_at is not None:
+            upcoming.append(self._ramp_out_at)
         if self._timed:
             upcoming.append(self._timed[0][0])
         if self._actions:
@@ -457,6 +544,7 @@ class Runner:
         # scene actions of the plan (a throw's release): they replace those of the plan before
         self._actions = sorted([a for a in self._actions if a[0] < k0]
                                + [(k0 + int(round(at / dt)), kind, obj) for at, kind, obj in plan.actions])
+        self._add_reaches(k0, plan, x)
         way = plan.waypoints
         entry = {"t": round(k0 * dt, 6), "duration_s": plan.trajectory.duration}
         if way is not None:
@@ -479,6 +567,25 @@ class Runner:
                         self.log.points("joint_space/task_points", np.degrees(way), (60, 160, 255), 1.0, k0 * dt)
             self.log.plan(k0 * dt, path, way_w)
 
+    def _add_reaches(self, k0: int, plan: Plan, x: np.ndarray) -> None:
+        """The plan's movements for the outcome measures: one per stretch between waypoints, or the whole plan."""
+        dt, cart = self.schedule.control_dt, self.planner.space == "cartesian"
+        hand = (lambda p: np.asarray(p, float)) if cart else (lambda q: self.robot.fk(q)[:3, 3])  # noqa: E731
+        self.reaches = [r for r in self.reaches if r.k0 < k0]  # a replan cuts the movement under way
+        if self.reaches:
+            self.reaches[-1].k1 = min(self.reaches[-1].k1, k0)
+        times, way = plan.waypoint_times, plan.waypoints
+        n = self.schedule.steps
+        if times is not None and way is not None and len(times) == len(way) > 1:
+            starts = [k0 + int(round(t / dt)) for t in times]
+            new = [Reach(starts[i - 1], starts[i], hand(way[i]), np.asarray(way[i], float)) for i in range(1, len(way))]
+            new[-1].k1 = n  # the last one may settle after its end
+        else:
+            new = [Reach(k0, n, hand(x[-1]), x[-1].copy())]
+        for r in new:  # what a (simulated) person aims for, step by step
+            self.goal_at[r.k0 :] = r.target
+        self.reaches += new
+
     def _ee_world(self, q: np.ndarray) -> np.ndarray:
         ee = self.backend.ee_position()
         if ee is not None:
@@ -492,8 +599,10 @@ class Runner:
         self.fired.append({"event": i, "t": round(t, 6), "action": ev.action, "trigger": trigger})
         if self.log:
             self.log.event(t, f"event {i}: {trigger} -> {ev.action}", level="INFO")
-        if ev.action == "stop":
-            self._stop_at = k
+        if ev.action == "stop":  # with a ramp-out, the robot is eased into holding first
+            self._stop_at = min(self._stop_at, k + self._ramp_steps)
+            if self._ramp_steps:
+                self._ramp_out_at = k
         elif ev.action == "move":
             self.backend.move_object(ev.object, np.asarray(ev.position, float))
         else:
@@ -523,15 +632,31 @@ class Runner:
         """Metrics, verdicts, the summary; the log and summary written whole."""
         metrics, per_joint = collect_metrics(self, trace, wall, setup, contact_steps)
         if self.log:
-            for ev in self.safety.events:
-                self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level="ERROR")
-            for path, (t, values) in self.backend.series().items():
-                self.log.series(path, t, values)
+            levels = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN"}
+            for ev in self.safety.interventions:
+                self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=levels.get(ev.rule, "ERROR"))
+            series = {**self.backend.series(), **getattr(self.controller, "series", dict)()}
+            if self.patient is not None:
+                series.update(self.patient.series())
+                every = self.schedule.log_every
+                series["outcomes/interaction_force_n"] = (trace.t[::every],
+                                                          self.outcome_details["interaction_force_n"][::every])
+            for reach in self.outcome_details["reaches"]:
+                for key in ("sparc", "path_length_ratio", "time_to_target_s"):
+                    series.setdefault(f"outcomes/{key}", ([], []))
+                    series[f"outcomes/{key}"][0].append(reach["t0_s"])
+                    series[f"outcomes/{key}"][1].append(reach[key])
+            for path, (t, values) in series.items():
+                self.log.series(path, np.asarray(t, float), np.asarray(values, float))
         summary = build_summary(self, metrics, per_joint)
         if self.out_dir is not None:
             if self.log:
                 self.log.close()
                 summary["outputs"] = {"rrd": "run.rrd"}
+            summary.setdefault("outputs", {})["scenario"] = SNAPSHOT
+            atomic_write_text(self.out_dir / SNAPSHOT, f"# {self.loaded.path} as this run used it (extends merged, "
+                              "profile inlined, --set applied); `rehabkit replay` reads it\n"
+                              + yaml.safe_dump(self.loaded.source.data, sort_keys=False))
             atomic_write_json(self.out_dir / "summary.json", summary)
         self.backend.close()
         return RunResult(summary, trace, self.out_dir)

@@ -1,29 +1,76 @@
-"""The safety layer between every controller and every backend.
+"""The safety layer between every controller and every backend: the scenario's ``safety:`` envelope.
 
 Each control step it checks the measured state and the commanded torques
-against the robot's limits. A non-finite value, a joint outside its range or
-faster than its speed limit trips a latched stop: from then on the controller is
+against the effective limits (the robot's, narrowed by the patient's profile and
+the envelope's per-joint limits). A non-finite value, a joint outside its range or
+faster than its speed limit, the hand outside the keep-in box or an interaction
+force above its limit trips a latched stop: from then on the controller is
 ignored and the robot is held where it was (``hold``: PD to the trip posture
 with gravity compensation, within effort limits) or left limp
 (``zero-torque``), as the robot model says. Torques beyond the effort limit
-are clipped and counted, or trip the stop if the scenario asks.
+are clipped (each episode an intervention) or trip the stop if the scenario asks.
+A ramp-in blends from holding the start posture to the controller's torque, a
+ramp-out back to holding the posture where it began.
+
+The layer runs on the host for every backend, so a breach produces the same
+event in simulation and over a hardware link; the ``heartbeat`` timings go to
+backends that have a link to watch.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from rehabkit.core.interfaces import StrictModel
-from rehabkit.models.robot_model import RobotModel
+from rehabkit.models.robot_model import JointLimits, RobotModel
+
+Vec3 = tuple[float, float, float]
+
+
+class JointEnvelope(StrictModel):
+    """Limits of one joint, tighter than the robot's (a wider value is refused: the robot's own limits hold)."""
+
+    range_deg: tuple[float, float] | None = Field(None, description="[lowest, highest] position")
+    velocity_deg_s: float | None = Field(None, gt=0, description="largest speed")
+    torque_nm: float | None = Field(None, gt=0, description="largest torque")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> JointEnvelope:
+        if self.range_deg is not None and self.range_deg[0] >= self.range_deg[1]:
+            raise ValueError(f"range_deg must be [lowest, highest], got {list(self.range_deg)}")
+        return self
+
+
+class KeepInBox(StrictModel):
+    """An axis-aligned box the hand (end effector) must stay in."""
+
+    min: Vec3 = Field(description="lowest corner [m]")
+    max: Vec3 = Field(description="highest corner [m]")
+    frame: Literal["world", "base"] = Field("world", description="frame of the corners: world or robot base")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> KeepInBox:
+        if any(a >= b for a, b in zip(self.min, self.max)):
+            raise ValueError(f"keep_in: min {list(self.min)} must be below max {list(self.max)} on every axis")
+        return self
+
+
+class Heartbeat(StrictModel):
+    """Link timing for backends with a link (a hardware bridge); a simulator has none to watch."""
+
+    command_timeout_ms: float = Field(50.0, gt=0, description="the robot side holds the robot without a valid "
+                                                               "command this long")
+    state_timeout_ms: float = Field(100.0, gt=0, description="the host stops without a valid state this long")
 
 
 class SafetyConfig(StrictModel):
-    """Safety-layer settings of a scenario."""
+    """Safety-layer settings of a scenario: the envelope every command passes."""
 
     position_margin_deg: float = Field(0.5, ge=0, description="tolerance beyond a joint's range before tripping")
     velocity_factor: float = Field(1.0, gt=0, description="trip above this multiple of the velocity limit")
@@ -31,11 +78,18 @@ class SafetyConfig(StrictModel):
     hold_kp: float = Field(60.0, gt=0, description="hold stiffness after a trip [N·m/rad]")
     hold_kd: float = Field(6.0, gt=0, description="hold damping after a trip [N·m·s/rad]")
     stop_after_s: float = Field(0.5, ge=0, description="keep simulating this long after a trip, then end the run")
+    joints: dict[str, JointEnvelope] = Field({}, description="per-joint limits tighter than the robot's")
+    keep_in: KeepInBox | None = Field(None, description="box the hand must stay in")
+    interaction_force_n: float | None = Field(None, gt=0, description="largest force between person and robot "
+                                                                       "at the hand")
+    ramp_in_s: float = Field(0.0, ge=0, description="soft start: blend from holding the start posture")
+    ramp_out_s: float = Field(0.0, ge=0, description="soft stop: blend to holding the posture, before the end")
+    heartbeat: Heartbeat | None = Field(None, description="link timing (hardware backends)")
 
 
 @dataclass
 class SafetyEvent:
-    """Why the safety layer acted."""
+    """Why the safety layer acted: a trip, a clipping episode or a ramp."""
 
     t: float
     rule: str
@@ -43,17 +97,31 @@ class SafetyEvent:
     value: float | None
     limit: float | None
     message: str
+    data: dict = field(default_factory=dict)  # rule-specific values (a clipping episode's length, a box axis)
 
     def as_dict(self) -> dict:
         return asdict(self)
 
 
-class SafetyLayer:
-    """Checks every command; see the module docstring for the rules."""
+AXES = "xyz"
 
-    def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None):
-        """``gravity(q)`` gives the holding torques of a trip (``None``: PD only)."""
-        lim = robot.limits
+
+def _blend(s: float) -> float:
+    """Half-cosine from 0 to 1: no jump in the torque's rate at either end of a ramp."""
+    return 0.5 - 0.5 * math.cos(math.pi * min(max(s, 0.0), 1.0))
+
+
+class SafetyLayer:
+    """Checks every command; see the module docstring for the rules.
+
+    ``limits`` are the effective joint limits (default: the robot's); ``hand(q)`` gives the end
+    effector's world position, needed for a keep-in box; ``dt`` is the control period (it tells one
+    clipping episode from the next).
+    """
+
+    def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None, limits: JointLimits | None = None,
+                 hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):
+        lim = limits or robot.limits
         margin = math.radians(config.position_margin_deg)
         self.names = robot.joint_names
         self.lo, self.hi = lim.lower - margin, lim.upper + margin
@@ -61,12 +129,31 @@ class SafetyLayer:
         self.effort = lim.effort
         self.config = config
         self.mode = robot.safe_stop
-        self.events: list[SafetyEvent] = []
+        self.events: list[SafetyEvent] = []  # trips
+        self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
         self.tripped_at: float | None = None
         self.saturated_steps = 0
         self._hold_q: np.ndarray | None = None
         self._gravity = gravity
         self._zero = np.zeros(robot.dof)
+        self._dt = dt
+        self._clip: SafetyEvent | None = None  # the clipping episode under way
+        self._box = None
+        if config.keep_in is not None:
+            if hand is None:
+                raise ValueError("safety.keep_in needs the hand's position; the runner passes it")
+            box = config.keep_in
+            lo, hi = np.array(box.min, float), np.array(box.max, float)
+            if box.frame == "base":  # kept in the world frame: the hand is measured there
+                corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+                base = robot.base_pose
+                w = corners @ base[:3, :3].T + base[:3, 3]
+                lo, hi = w.min(axis=0), w.max(axis=0)
+            self._box = (lo, hi)
+        self._hand = hand
+        self._ramp_in, self._ramp_in_noted = config.ramp_in_s, False
+        self._ramp_from: tuple[float, float, np.ndarray] | None = None  # ramp-out: (start, length, posture)
+        self._start_q: np.ndarray | None = None
         # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
         n = robot.dof
         self._n = n
@@ -78,6 +165,10 @@ class SafetyLayer:
     @property
     def tripped(self) -> bool:
         return self.tripped_at is not None
+
+    @property
+    def watches_box(self) -> bool:
+        return self._box is not None
 
     def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
@@ -93,7 +184,15 @@ class SafetyLayer:
             b = np.subtract(row, self._centre, out=self._buf)
             np.abs(b, out=b)
             if np.less_equal(b, self._bound, out=self._ok).all():
-                return row[2 * n :]
+                tau = row[2 * n :]
+                if self._box is not None and self._outside_box(t, row[:n]):
+                    tau[:] = self._stop_torque(row[:n], row[n : 2 * n])
+                    return tau
+                if self._start_q is None:
+                    self._start_q = row[:n].copy()
+                if t < self._ramp_in or self._ramp_from is not None:
+                    self._ramp(t, row[:n], row[n : 2 * n], tau)
+                return tau
         q, qd, tau = row[:n], row[n : 2 * n], row[2 * n :]
         if self.tripped_at is None:
             # slow path: find out what went wrong
@@ -108,7 +207,11 @@ class SafetyLayer:
                     return tau
                 if self.config.torque_policy == "clip":
                     self.saturated_steps += 1
-                    return np.clip(tau, -self.effort, self.effort, out=tau)
+                    self._clipped(t, tau, over)
+                    np.clip(tau, -self.effort, self.effort, out=tau)
+                    if self._box is not None and self._outside_box(t, q):
+                        tau[:] = self._stop_torque(q, qd)
+                    return tau
                 j = int(np.argmax(over))
                 self._trip(
                     t, q, "torque", j, float(tau[j]), float(self.effort[j]), "commanded torque beyond effort limit"
@@ -118,9 +221,72 @@ class SafetyLayer:
         tau[:] = self._stop_torque(q, qd)
         return tau
 
+    def check_force(self, t: float, q: np.ndarray, force: np.ndarray) -> None:
+        """Trip if the interaction force at the hand (world frame [N]) is above the envelope's limit."""
+        limit = self.config.interaction_force_n
+        if limit is None or self.tripped_at is not None:
+            return
+        magnitude = float(np.linalg.norm(force))
+        if not magnitude <= limit:  # NaN trips too
+            self._trip(t, q, "interaction-force", None, magnitude, limit, "interaction force above its limit",
+                       {"force_n": np.round(force, 3).tolist()})
+
     def trip(self, t: float, q: np.ndarray, rule: str, message: str) -> None:
         """Trip from outside (a rejected plan, an external e-stop)."""
         self._trip(t, q, rule, None, None, None, message)
+
+    def begin_ramp_out(self, t: float, q: np.ndarray) -> None:
+        """Start the soft stop: over ``ramp_out_s`` the torque blends into holding posture ``q``."""
+        if self._ramp_from is None and self.config.ramp_out_s > 0 and self.tripped_at is None:
+            self._ramp_from = (t, self.config.ramp_out_s, np.array(q, float))
+            self._note(SafetyEvent(t, "ramp-out", None, None, None,
+                                   f"t={t:.3f}s: ramp-out over {self.config.ramp_out_s:g} s to holding the posture",
+                                   {"duration_s": self.config.ramp_out_s}))
+
+    def _ramp(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
+        if self._ramp_from is not None:
+            t0, length, posture = self._ramp_from
+            s = 1.0 - _blend((t - t0) / length)
+        else:
+            if not self._ramp_in_noted:
+                self._ramp_in_noted = True
+                self._note(SafetyEvent(t, "ramp-in", None, None, None,
+                                       f"t={t:.3f}s: ramp-in over {self._ramp_in:g} s from holding the start posture",
+                                       {"duration_s": self._ramp_in}))
+            posture, s = self._start_q, _blend(t / self._ramp_in)
+        hold = self._hold_torque(posture, q, qd)
+        tau *= s
+        tau += (1.0 - s) * hold
+
+    def _outside_box(self, t: float, q: np.ndarray) -> bool:
+        x = self._hand(q)
+        lo, hi = self._box
+        below, above = x < lo, x > hi
+        if not (below.any() or above.any()):
+            return False
+        a = int(np.argmax(below | above))
+        bound = float(lo[a] if below[a] else hi[a])
+        side = "min" if below[a] else "max"
+        self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
+                   {"axis": AXES[a], "hand_m": np.round(x, 5).tolist()})
+        return True
+
+    def _clipped(self, t: float, tau: np.ndarray, over: np.ndarray) -> None:
+        """Clipping steps in a row are one intervention; its peak and length are kept."""
+        j = int(np.argmax(np.where(over, np.abs(tau) / self.effort, 0.0)))
+        ep = self._clip
+        if ep is not None and t - ep.data["until_s"] <= 1.5 * self._dt:
+            ep.data["until_s"], ep.data["steps"] = t, ep.data["steps"] + 1
+            if abs(tau[j]) / self.effort[j] > abs(ep.value) / ep.limit:
+                ep.joint, ep.value, ep.limit = self.names[j], float(tau[j]), float(self.effort[j])
+            return
+        self._clip = SafetyEvent(t, "torque-clip", self.names[j], float(tau[j]), float(self.effort[j]),
+                                 f"t={t:.3f}s: commanded torque clipped to the effort limit",
+                                 {"until_s": t, "steps": 1})
+        self._note(self._clip)
+
+    def _note(self, event: SafetyEvent) -> None:
+        self.interventions.append(event)
 
     def _diagnose(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         for name, arr in (("state position", q), ("state velocity", qd), ("command torque", tau)):
@@ -137,21 +303,27 @@ class SafetyLayer:
         j = int(np.argmax(np.abs(qd) / self.vmax))
         self._trip(t, q, "velocity", j, float(qd[j]), float(self.vmax[j]), "joint faster than its limit")
 
-    def _trip(self, t, q, rule, joint, value, limit, message) -> None:
-        name = self.names[joint] if joint is not None else None
-        text = f"t={t:.3f}s: {message}" + (f": {name} = {value:.4g} (limit {limit:.4g})" if value is not None else "")
+    def _trip(self, t, q, rule, joint, value, limit, message, data=None) -> None:
+        name = self.names[joint] if isinstance(joint, int) else joint
+        subject = f"{name} = " if name else ""
+        text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.4g} (limit {limit:.4g})" if value is not None else "")
         text += f"; robot {'held' if self.mode == 'hold' else 'set to zero torque'}"
-        self.events.append(SafetyEvent(t, rule, name, value, limit, text))
+        event = SafetyEvent(t, rule, name, value, limit, text, data or {})
+        self.events.append(event)
+        self._note(event)
         self.tripped_at = t
         hold = np.where(np.isfinite(q), q, 0.0)
         self._hold_q = np.clip(hold, self.lo, self.hi)
+
+    def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
+        if self._gravity is not None:
+            tau += self._gravity(q)
+        return np.clip(tau, -self.effort, self.effort)
 
     def _stop_torque(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         if self.mode == "zero-torque":
             return self._zero.copy()
         q = np.where(np.isfinite(q), q, self._hold_q)
         qd = np.where(np.isfinite(qd), qd, 0.0)
-        tau = self.config.hold_kp * (self._hold_q - q) - self.config.hold_kd * qd
-        if self._gravity is not None:
-            tau += self._gravity(q)
-        return np.clip(tau, -self.effort, self.effort)
+        return self._hold_torque(self._hold_q, q, qd)

@@ -37,7 +37,9 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
     try:
         result = run_scenario(Path(path), overrides)
         row["passed"] = result.passed
-        row["metrics"] = {k: float(v) for k, v in result.metrics.items() if isinstance(v, (int, float))}
+        # NaN (a measure with nothing to measure) as None, as the stored rows have it
+        row["metrics"] = {k: None if v != v else float(v) for k, v in result.metrics.items()
+                          if isinstance(v, (int, float))}
         row["expectations"] = {e["metric"]: bool(e["passed"]) for e in result.summary["expectations"]}
     except (Exception, RunTimeoutError) as exc:  # noqa: BLE001 (recorded: the sweep goes on)
         row.update(passed=False, metrics={}, expectations={}, error=f"{type(exc).__name__}: {exc}")

@@ -76,6 +76,10 @@ class HardwareBackend(Backend):
     realtime = True
 
     def __init__(self, config: HardwareConfig, context: Context):
+        beat = getattr(context.safety, "heartbeat", None)
+        if beat is not None:  # the scenario's safety envelope sets the link timing, over the backend's defaults
+            config = config.model_copy(update={"bridge_watchdog_ms": beat.command_timeout_ms,
+                                               "state_timeout_s": beat.state_timeout_ms / 1e3})
         self.config, self.timestep = config, config.timestep
         robot = context.robot
         self.n = robot.model.dof

@@ -121,6 +121,9 @@ class MujocoBackend(SceneView, Backend):
     def command(self, tau: np.ndarray) -> None:
         self.data.qfrc_applied[self._v] = tau
 
+    def external_torque(self, tau: np.ndarray) -> None:
+        self.data.qfrc_applied[self._v] += tau  # on top of the command just sent
+
     def step(self, n: int = 1) -> None:
         if n == 1:
             mujoco.mj_step(self.model, self.data)  # the nstep keyword alone costs ~0.5 us

@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import types
 import typing
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -167,6 +168,21 @@ def _with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
     return Source(deep_merge(merged_data, src.data), keys, values, [*files, path])
 
 
+def _with_profile(src: Source, path: Path) -> None:
+    """``patient: some/profile.yaml`` → that file's mapping, its marks kept (errors point into the profile)."""
+    ref = src.data.get("patient")
+    if not isinstance(ref, str):
+        return
+    ppath = (path.parent / ref).resolve()
+    if not ppath.exists():
+        raise ScenarioError([Diagnostic(src.value_marks[("patient",)], "patient", f"profile not found: {ppath}")])
+    prof = read_yaml(ppath)
+    src.data["patient"] = prof.data
+    for marks, theirs in ((src.key_marks, prof.key_marks), (src.value_marks, prof.value_marks)):
+        marks.update({("patient", *k): m for k, m in theirs.items()})
+    src.files.append(ppath)
+
+
 def parse_override(text: str) -> tuple[list[str], Any]:
     """``"a.b.c=value"`` → (["a", "b", "c"], value parsed as YAML)."""
     if "=" not in text:
@@ -212,6 +228,37 @@ def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -
                     node[part] = {}
                 node = node[part]
             src.key_marks[path] = src.value_marks[path] = mark
+
+
+def _plugin_kind(path: list[str]) -> str | None:
+    """The plugin kind of a section path (``controller``, ``sensors.camera``, ``patient.model``), if it is one."""
+    if len(path) == 1 and path[0] in PLUGIN_SECTIONS:
+        return PLUGIN_SECTIONS[path[0]]
+    return {("sensors",): "sensor", ("patient",): "patient"}.get(tuple(path[:1])) if len(path) == 2 else None
+
+
+def _fit_new_types(src: Source, overrides: Iterable[str] | Mapping[str, Any], registry: PluginRegistry) -> None:
+    """``--set controller.type=other``: settings the other plugin has no field for are dropped, with a warning.
+
+    Shared settings stay (a planner's speed limits when switching planners); the new plugin's
+    defaults fill the rest.
+    """
+    items = overrides.items() if isinstance(overrides, Mapping) else (parse_override(o) for o in overrides)
+    for key, value in items:
+        parts = key.split(".") if isinstance(key, str) else list(key)
+        kind = _plugin_kind(parts[:-1]) if parts[-1:] == ["type"] else None
+        info = registry.plugins.get(kind, {}).get(value) if kind else None
+        node: Any = src.data
+        for part in parts[:-1]:
+            node = node.get(part) if isinstance(node, dict) else None
+        if info is None or not isinstance(node, dict):
+            continue  # an unknown type is reported by validation, with suggestions
+        dropped = [k for k in node if k != "type" and k not in info.config.model_fields]
+        for k in dropped:
+            del node[k]
+        if dropped:
+            warnings.warn(f"--set {'.'.join(parts)}={value}: dropped {', '.join(dropped)} ('{value}' has no such "
+                          f"settings; its defaults apply)", stacklevel=2)
 
 
 # ---------------------------------------------------------------------------
@@ -283,6 +330,9 @@ def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnosti
     sensors = src.data.get("sensors")
     if isinstance(sensors, dict):
         sections += [(("sensors", name), "sensor") for name in sensors]
+    patient = src.data.get("patient")
+    if isinstance(patient, dict) and "model" in patient:
+        sections.append((("patient", "model"), "patient"))
     for path, kind in sections:
         node: Any = src.data
         for p in path:
@@ -350,6 +400,7 @@ def load_scenario(
     path: str | Path,
     overrides: Iterable[str] | Mapping[str, Any] = (),
     registry: PluginRegistry | None = None,
+    origin: Path | None = None,
 ) -> LoadedScenario:
     """Read, merge, override and validate a scenario file.
 
@@ -357,6 +408,8 @@ def load_scenario(
         path: The scenario YAML.
         overrides: ``["a.b=1", ...]`` as on the command line, or ``{"a.b": 1}``.
         registry: Plugins to validate against (default: the installed ones).
+        origin: For a run's snapshot of a scenario: the file it was taken from (relative paths resolve
+            from its folder, and the run reports it as its scenario).
 
     Raises:
         ScenarioError: with one :class:`Diagnostic` per problem.
@@ -366,12 +419,14 @@ def load_scenario(
         raise ScenarioError([Diagnostic(Mark(str(path), 0, 0), "", "no such file")])
     registry = registry or default_registry()
     src = _with_extends(path)
+    _with_profile(src, path)
     try:
         apply_overrides(src, overrides)
     except ValueError as exc:
         raise ScenarioError([Diagnostic(Mark("<--set>", 0, 0), "", str(exc))]) from None
+    _fit_new_types(src, overrides, registry)
     _relabel(src, path)
-    return LoadedScenario(validate_source(src, registry, path), path.resolve(), src)
+    return LoadedScenario(validate_source(src, registry, path), (origin or path).resolve(), src)
 
 
 def _relabel(src: Source, path: Path) -> None:

@@ -9,13 +9,14 @@ load. Angles in the DSL carry a ``_deg`` suffix; everything else is SI.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal, Optional, Union
 
 from pydantic import Field, create_model, model_validator
 
 from rehabkit.core.interfaces import StrictModel
 from rehabkit.core.plugins import PluginRegistry
 from rehabkit.core.safety import SafetyConfig
+from rehabkit.rehab.patient import PatientBase
 
 Vec3 = tuple[float, float, float]
 
@@ -232,6 +233,14 @@ class SweepSpec(StrictModel):
     test_seeds: int | None = Field(None, ge=1, description="seeds the scenario's test runs (default: all)")
 
 
+class OutcomeSpec(StrictModel):
+    """How movements are cut into reaches for the outcome measures."""
+
+    tolerance_m: float = Field(0.01, gt=0, description="target radius: a reach ends when the hand is this close")
+    dwell_s: float = Field(0.2, ge=0, description="... and stays for this long")
+    min_reach_m: float = Field(0.02, ge=0, description="movements shorter than this are not counted as reaches")
+
+
 class ScenarioBase(StrictModel):
     """The plugin-independent part of a scenario."""
 
@@ -244,6 +253,8 @@ class ScenarioBase(StrictModel):
     seed: int = 0
     logging: Logging = Logging()
     safety: SafetyConfig = SafetyConfig()
+    patient: PatientBase | None = Field(None, description="the patient's profile, inline or a file path")
+    outcomes: OutcomeSpec = OutcomeSpec()
     expect: dict[str, Bound] = {}
     sweep: SweepSpec | None = None
 
@@ -274,4 +285,9 @@ def scenario_model(registry: PluginRegistry) -> type[ScenarioBase]:
     sensor_union = _union(registry, "sensor")
     if sensor_union is not None:
         fields["sensors"] = (dict[str, sensor_union], {})
+    patient_union = _union(registry, "patient")
+    if patient_union is not None:
+        profile = create_model("Patient", __base__=PatientBase,
+                               model=(Optional[patient_union], Field(None, description="simulated behaviour")))  # noqa: UP045
+        fields["patient"] = (Optional[profile], None)  # noqa: UP045 (runtime-built model)
     return create_model("Scenario", __base__=ScenarioBase, **fields)

@@ -1,0 +1,1 @@
+"""Simulated-patient plugins."""

@@ -1,0 +1,193 @@
+"""A simulated patient's arm in the exoskeleton: the torques a person applies at the robot's joints.
+
+Per joint, the person's torque is the sum of
+
+- passive tissue: a spring toward a rest posture and a damper, τ_p = −K (q − q_rest) − B q̇;
+- spastic resistance: a velocity-dependent stretch reflex, τ_s = −G · sign(q̇) · max(0, |q̇(t − d_r)| − v_th),
+  from the velocity a reflex delay d_r ago (resistance grows with speed above a threshold);
+- voluntary effort toward the movement's goal as the person perceives it (``delay_s`` ago): a hand
+  force F = K_v (x_goal − x) − D_v ẋ capped at the person's force, τ_v = Jᵀ F (or the joint-space
+  form for joint-space tasks), capped at each joint's strength, not pushing a joint further out of
+  its active range, scaled by the remaining capacity and by signal-dependent noise (a band-limited
+  Gaussian process whose deviation is a fraction of the effort). The person goes for the goal at
+  their own pace, not along the robot's path: a stiff robot holds them back, a compliant one lets
+  them do the work;
+- fatigue: the capacity falls with effort and recovers at rest, dc/dt = −r_f e + r_r (1 − c), with e
+  the effort as a fraction of strength, so repetitions wear the person out.
+
+Everything random comes from the plugin's own stream of the scenario seed, so a replay with another
+controller gives the person the same noise.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+import pinocchio as pin
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, Patient, StrictModel
+
+PerJoint = float | list[float]
+SERIES_EVERY = 10  # control steps between logged samples of the person's state
+
+
+class Spasticity(StrictModel):
+    """Velocity-dependent stretch reflex."""
+
+    gain_nms_rad: PerJoint = Field(0.0, description="resistance per rad/s above the threshold [N·m·s/rad]")
+    threshold_deg_s: PerJoint = Field(30.0, ge=0, description="reflex threshold speed")
+    reflex_delay_s: float = Field(0.03, ge=0, le=0.2, description="reflex loop delay")
+
+
+class Voluntary(StrictModel):
+    """The person's own effort toward the cue."""
+
+    strength_nm: PerJoint = Field(5.0, description="largest voluntary torque per joint [N·m]")
+    hand_force_n: float = Field(20.0, gt=0, description="largest voluntary hand force (Cartesian cues) [N]")
+    stiffness: float = Field(300.0, ge=0, description="effort per distance to the goal: N/m (hand) or N·m/rad")
+    damping: float = Field(20.0, ge=0, description="effort against the own speed: N·s/m or N·m·s/rad")
+    delay_s: float = Field(0.2, ge=0, le=1.0, description="reaction delay: a new goal is perceived this late")
+    noise: float = Field(0.15, ge=0, description="signal-dependent noise, deviation as a fraction of the effort")
+    noise_hz: float = Field(4.0, gt=0, description="bandwidth of the noise process")
+    participation: float = Field(1.0, ge=0, le=1, description="how much of their capacity the person uses")
+
+
+class Fatigue(StrictModel):
+    """Capacity lost with effort and regained at rest."""
+
+    rate_per_s: float = Field(0.02, ge=0, description="capacity lost per second at full effort")
+    recovery_per_s: float = Field(0.005, ge=0, description="share of the lost capacity regained per second")
+
+
+class SimulatedArmConfig(StrictModel):
+    """A person's arm: passive tissue, spasticity, voluntary effort and fatigue (parameters per joint or one)."""
+
+    stiffness_nm_rad: PerJoint = Field(2.0, description="passive stiffness [N·m/rad]")
+    damping_nms_rad: PerJoint = Field(0.3, description="passive damping [N·m·s/rad]")
+    rest_deg: list[float] | None = Field(None, description="rest posture (default: the middle of the active range)")
+    spasticity: Spasticity = Spasticity()
+    voluntary: Voluntary = Voluntary()
+    fatigue: Fatigue = Fatigue()
+
+
+def _per_joint(value: PerJoint, n: int, name: str) -> np.ndarray:
+    v = np.full(n, float(value)) if isinstance(value, (int, float)) else np.asarray(value, float)
+    if v.shape != (n,) or np.any(v < 0):
+        raise ValueError(f"simulated-arm: {name} needs one value or {n} values, all >= 0")
+    return v
+
+
+class SimulatedArm(Patient):
+    """Passive tissue + delayed stretch reflex + noisy, fatiguing voluntary effort; see the module docstring."""
+
+    def __init__(self, config: SimulatedArmConfig, context: Context):
+        model = context.robot.model
+        n, dt = model.dof, context.control_dt
+        self.n, self.dt = n, dt
+        self.k = _per_joint(config.stiffness_nm_rad, n, "stiffness_nm_rad")
+        self.b = _per_joint(config.damping_nms_rad, n, "damping_nms_rad")
+        sp, vol, fat = config.spasticity, config.voluntary, config.fatigue
+        self.g_s = _per_joint(sp.gain_nms_rad, n, "spasticity.gain_nms_rad")
+        self.v_th = np.radians(_per_joint(sp.threshold_deg_s, n, "spasticity.threshold_deg_s"))
+        self.strength = _per_joint(vol.strength_nm, n, "voluntary.strength_nm")
+        if not np.all(self.strength > 0):
+            raise ValueError("simulated-arm: voluntary.strength_nm must be > 0")
+        self.vol, self.fat = vol, fat
+        self.delay_s = vol.delay_s
+        lim = model.limits  # the effective limits: the profile's passive range is in them
+        lo, hi = lim.lower.copy(), lim.upper.copy()
+        profile = context.patient
+        for j, name in enumerate(model.joint_names):
+            rom = profile.joints.get(name) if profile is not None else None
+            if rom is not None and rom.active_deg is not None:
+                lo[j], hi[j] = np.radians(rom.active_deg)
+        self.active_lo, self.active_hi = lo, hi
+        if config.rest_deg is not None:
+            if len(config.rest_deg) != n:
+                raise ValueError(f"simulated-arm: rest_deg needs {n} values")
+            self.rest = np.radians(config.rest_deg)
+        else:
+            self.rest = (lo + hi) / 2
+        self.cartesian = context.reference_space == "cartesian"
+        if self.cartesian:
+            self.pin_model = model.pin_model
+            self.data = self.pin_model.createData()
+            self.frame = model.ee_frame_id
+        self.rng = context.stream("patient")
+        self.noise_a = math.exp(-2 * math.pi * vol.noise_hz * dt)
+        self.noise_b = math.sqrt(1 - self.noise_a**2)
+        self.noise_state = self.rng.standard_normal(n)
+        self._draws = np.empty((0, n))
+        self._digest = hashlib.sha256(self.noise_state.tobytes())
+        self._next = 0
+        self.reflex = np.zeros((max(1, round(sp.reflex_delay_s / dt)), n))  # ring buffer of past velocities
+        self.step = 0
+        self.capacity = 1.0
+        self.voluntary_work = 0.0
+        self._log_t: list[float] = []
+        self._log: list[tuple[float, float, float]] = []
+
+    def _white(self) -> np.ndarray:
+        if self._next >= len(self._draws):  # drawn in blocks: one call per step would cost more than the model
+            self._draws, self._next = self.rng.standard_normal((4096, self.n)), 0
+            self._digest.update(self._draws.tobytes())
+        w = self._draws[self._next]
+        self._next += 1
+        return w
+
+    def torque(self, t, q, qd, goal):
+        tau = -self.k * (q - self.rest) - self.b * qd
+        slot = self.step % len(self.reflex)
+        qd_late = self.reflex[slot].copy()  # the velocity one reflex delay ago
+        self.reflex[slot] = qd
+        tau -= self.g_s * np.sign(qd_late) * np.maximum(0.0, np.abs(qd_late) - self.v_th)
+
+        vol = self.vol
+        if self.cartesian:
+            J = pin.computeFrameJacobian(self.pin_model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+            x = self.data.oMf[self.frame].translation
+            force = vol.stiffness * (goal - x) - vol.damping * (J @ qd)
+            size = float(np.linalg.norm(force))
+            if size > vol.hand_force_n:
+                force *= vol.hand_force_n / size
+            effort = J.T @ force
+        else:
+            target = np.clip(goal, self.active_lo, self.active_hi)
+            effort = vol.stiffness * (target - q) - vol.damping * qd
+        np.clip(effort, -self.strength, self.strength, out=effort)
+        # no voluntary push further out of the active range
+        effort[((q >= self.active_hi) & (effort > 0)) | ((q <= self.active_lo) & (effort < 0))] = 0.0
+        self.noise_state = self.noise_a * self.noise_state + self.noise_b * self._white()
+        effort *= self.capacity * vol.participation * (1.0 + vol.noise * self.noise_state)
+        tau += effort
+
+        load = float(np.mean(np.abs(effort) / self.strength))
+        fat = self.fat
+        self.capacity += self.dt * (-fat.rate_per_s * load + fat.recovery_per_s * (1.0 - self.capacity))
+        self.capacity = min(1.0, max(0.0, self.capacity))
+        self.voluntary_work += max(0.0, float(effort @ qd)) * self.dt
+        if self.step % SERIES_EVERY == 0:
+            self._log_t.append(t)
+            self._log.append((self.capacity, float(np.linalg.norm(effort)), load))
+        self.step += 1
+        return tau
+
+    def run_metrics(self, trace=None) -> dict[str, float]:
+        return {"patient_capacity_final": self.capacity, "patient_voluntary_work_j": self.voluntary_work}
+
+    def inputs(self) -> dict[str, str]:
+        return {"patient_noise": self._digest.hexdigest()[:16]}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        t, v = np.asarray(self._log_t), np.asarray(self._log).reshape(-1, 3)
+        return {"patient/capacity": (t, v[:, 0]), "patient/voluntary_torque_nm": (t, v[:, 1]),
+                "patient/effort_fraction": (t, v[:, 2])}
+
+
+@hookimpl
+def rehabkit_register_patients(registry) -> None:
+    registry.add("simulated-arm", config=SimulatedArmConfig, factory=SimulatedArm)

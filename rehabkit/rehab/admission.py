@@ -1,0 +1,119 @@
+"""Admitting a scenario's targets into the patient's range of motion before anything moves.
+
+Targets with joint values are checked directly; Cartesian ones through the robot's
+IK (some posture within the robot's ranges must also be within the narrowed
+ones). A target outside is refused with its place in the YAML, the joint and
+both ranges named, or — where the profile says ``outside_rom: nearest`` —
+replaced by the nearest admissible posture (joint values clipped into the range;
+a Cartesian target moves to where that posture puts the hand).
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+
+import numpy as np
+
+from rehabkit.core.interfaces import Robot, Target
+from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
+from rehabkit.core.scenario.models import TaskSpec
+from rehabkit.models.robot_model import JointLimits
+from rehabkit.rehab.patient import LimitSource, PatientBase, outside
+
+
+@contextmanager
+def _robot_limits(robot: Robot, limits: JointLimits):
+    """The robot's own limits for a moment (its IK filters solutions by the model's limits)."""
+    narrowed, robot.model.limits = robot.model.limits, limits
+    try:
+        yield
+    finally:
+        robot.model.limits = narrowed
+
+
+def _into_range(q: np.ndarray, limits: JointLimits) -> np.ndarray:
+    """Angles shifted by whole turns into the range where that helps."""
+    q = np.array(q, float)
+    for j in range(len(q)):
+        for shift in (0.0, 2 * math.pi, -2 * math.pi):
+            if limits.lower[j] <= q[j] + shift <= limits.upper[j]:
+                q[j] += shift
+                break
+    return q
+
+
+def _violation(q: np.ndarray, limits: JointLimits) -> float:
+    return float(np.sum(np.maximum(0, limits.lower - q) + np.maximum(0, q - limits.upper)))
+
+
+def _posture(target: Target, robot: Robot, robot_limits: JointLimits) -> np.ndarray | None:
+    """The target's joint values, or the robot-admissible IK posture nearest the narrowed ranges."""
+    if target.q is not None:
+        return np.asarray(target.q, float)
+    if target.pose is None:
+        return None
+    try:
+        with _robot_limits(robot, robot_limits):
+            solutions = robot.ik(target.pose)
+    except NotImplementedError:
+        return None  # no IK: the planner's limit check sees its via points
+    inside = [s for s in (_into_range(s, robot_limits) for s in solutions)
+              if np.all(s >= robot_limits.lower - 1e-9) and np.all(s <= robot_limits.upper + 1e-9)]
+    if not inside:
+        return None  # out of the robot's reach: the planner says so
+    return min(inside, key=lambda s: _violation(s, robot.model.limits))
+
+
+def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robot_limits: JointLimits,
+                  sources: LimitSource, profile: PatientBase | None, source) -> list[dict]:
+    """Check (and where asked, replace) every fixed target; returns the replacements made.
+
+    Raises:
+        ScenarioError: a target outside the narrowed ranges, located at the target in the YAML.
+    """
+    limits, names = robot.model.limits, robot.model.joint_names
+    narrowed = [j for j, n in enumerate(names) if {"lower", "upper"} & set(sources.by_joint.get(n, {}))]
+    if not narrowed:
+        return []
+    nearest = profile is not None and profile.outside_rom == "nearest"
+    problems, replaced = [], []
+    for i, spec in enumerate(task.targets):
+        tgt = targets[spec.name]
+        if spec.sensor or spec.random is not None or tgt.same_as:
+            continue  # sensed and random targets come from the narrowed workspace; aliases follow their original
+        q = _posture(tgt, robot, robot_limits)
+        if q is None:
+            continue
+        bad = [j for j in outside(q, limits) if j in narrowed]
+        if not bad:
+            continue
+        if nearest:
+            q_new = np.clip(q, limits.lower, limits.upper)
+            pose = robot.fk(q_new)
+            targets[spec.name] = Target(spec.name, q=q_new if tgt.q is not None else None, pose=pose,
+                                        position_only=tgt.position_only)
+            replaced.append({"target": spec.name, "joints": [names[j] for j in bad],
+                             "from_deg": np.round(np.degrees(q), 3).tolist(),
+                             "to_deg": np.round(np.degrees(q_new), 3).tolist(),
+                             "moved_m": float(np.linalg.norm(pose[:3, 3] - tgt.pose[:3, 3]))})
+            continue
+        path = ("task", "targets", i)
+        mark = source.value_marks.get(path, source.value_marks[()])
+        for j in bad:
+            who, _ = sources.by_joint[names[j]].get("upper" if q[j] > limits.upper[j] else "lower")
+            whose = f"patient {profile.id}'s passive range" if who == "patient" else "the safety envelope's range"
+            how = "its joint values" if tgt.q is not None else "the posture the IK finds for it"
+            problems.append(Diagnostic(mark, ".".join(map(str, path)), (
+                f"target '{spec.name}': {how} put {names[j]} at {math.degrees(q[j]):.1f}°, outside {whose} "
+                f"[{math.degrees(limits.lower[j]):.1f}, {math.degrees(limits.upper[j]):.1f}]°; move the target into "
+                "the range, or set patient.outside_rom: nearest to use the nearest admissible point")))
+    if problems:
+        raise ScenarioError(problems)
+    for spec in task.targets:  # aliases of a replaced target go where it went
+        tgt = targets[spec.name]
+        if tgt.same_as and any(r["target"] == tgt.same_as for r in replaced):
+            orig = targets[tgt.same_as]
+            targets[spec.name] = Target(spec.name, q=None if orig.q is None else orig.q.copy(),
+                                        pose=orig.pose.copy(), position_only=orig.position_only, same_as=tgt.same_as)
+    return replaced

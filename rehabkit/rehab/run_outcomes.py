@@ -1,0 +1,116 @@
+"""A run's outcome measures: its movements cut into reaches, then :mod:`rehabkit.rehab.outcomes` on each.
+
+A reach is a plan's movement: from the plan's start to where the hand stays within
+``tolerance_m`` of the plan's goal (or to the next plan). Per reach: SPARC of the
+hand's speed, path-length ratio to the straight line, time to target. Over the run:
+each joint's range of motion, the assistance ratio (the robot's positive work beyond
+carrying its own weight, over that plus the person's), the peak interaction force at
+the hand, and the safety layer's interventions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from rehabkit.core.metrics import Trace
+from rehabkit.models.robot_model import RobotModel
+from rehabkit.rehab.outcomes import (
+    assistance_ratio,
+    interaction_forces,
+    path_length_ratio,
+    range_of_motion,
+    sparc,
+    time_to_target,
+)
+
+
+class HandForce:
+    """The hand force equivalent to joint torques (Jᵀ F = τ, least squares), from the robot's Jacobian."""
+
+    def __init__(self, model: RobotModel):
+        self.model, self.data, self.frame = model.pin_model, model.pin_model.createData(), model.ee_frame_id
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        return pin.computeFrameJacobian(self.model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+
+    def __call__(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Force [N] in the robot base frame's axes."""
+        return np.linalg.lstsq(self.jacobian(q).T, tau, rcond=None)[0]
+
+    def batch(self, qs: np.ndarray, taus: np.ndarray) -> np.ndarray:
+        return interaction_forces(np.stack([self.jacobian(q) for q in qs]), taus)
+
+
+@dataclass
+class Reach:
+    """One planned movement: control-step indices, the hand's goal (robot base frame) and the goal in the
+    planner's space (joint values or the same position)."""
+
+    k0: int
+    k1: int
+    goal: np.ndarray
+    target: np.ndarray
+
+
+def reach_outcomes(t: np.ndarray, hand: np.ndarray, reaches: list[Reach], dt: float, tolerance: float,
+                   dwell: float, min_length: float) -> list[dict[str, Any]]:
+    """Per-reach SPARC, path-length ratio and time to target; reaches shorter than ``min_length`` skipped."""
+    out = []
+    for r in reaches:
+        k1 = min(r.k1, len(t))
+        if k1 - r.k0 < 2:
+            continue
+        p0 = hand[r.k0]
+        straight = float(np.linalg.norm(r.goal - p0))
+        if straight < min_length:
+            continue
+        seg = hand[r.k0 : k1]
+        ttt = time_to_target(t[r.k0 : k1], seg, r.goal, tolerance, dwell)
+        end = r.k0 + (int(round(ttt / dt)) + 1 if np.isfinite(ttt) else k1 - r.k0)
+        moved = hand[r.k0 : max(end, r.k0 + 2)]
+        speed = np.linalg.norm(np.gradient(moved, dt, axis=0), axis=1)
+        out.append({
+            "t0_s": round(float(t[r.k0]), 6), "distance_m": straight, "time_to_target_s": ttt,
+            "reached": bool(np.isfinite(ttt)), "sparc": sparc(speed, 1.0 / dt),
+            "path_length_ratio": path_length_ratio(moved),
+        })
+    return out
+
+
+def run_outcomes(trace: Trace, robot, reaches: list[Reach], dt: float, spec, interventions: int
+                 ) -> tuple[dict[str, float], dict[str, Any]]:
+    """Outcome metrics of a run (scalars for ``metrics``) and the per-reach and per-joint details.
+
+    ``spec`` is the scenario's ``outcomes:`` section (target radius, dwell, shortest reach).
+    """
+    model: RobotModel = robot.model
+    hand = trace.x if trace.x is not None else robot.fk_batch(trace.q)[:, :3, 3]
+    per_reach = (reach_outcomes(trace.t, hand, reaches, dt, spec.tolerance_m, spec.dwell_s, spec.min_reach_m)
+                 if len(trace.t) else [])
+
+    def mean(key: str) -> float:
+        values = [r[key] for r in per_reach if np.isfinite(r[key])]
+        return float(np.mean(values)) if values else float("nan")
+
+    rom = np.degrees(range_of_motion(trace.q)) if len(trace.q) else np.zeros(model.dof)
+    tau_h = trace.tau_h if trace.tau_h is not None else np.zeros_like(trace.tau)
+    own_weight = np.array([robot.gravity_torque(q) for q in trace.q]).reshape(trace.tau.shape)
+    force = HandForce(model).batch(trace.q, tau_h) if np.any(tau_h) else np.zeros((len(trace.q), 3))
+    magnitude = np.linalg.norm(force, axis=1)
+    metrics = {
+        "reaches": float(len(per_reach)), "reaches_completed": float(sum(r["reached"] for r in per_reach)),
+        "sparc": mean("sparc"), "path_length_ratio": mean("path_length_ratio"),
+        "time_to_target_s": mean("time_to_target_s"),
+        "assistance_ratio": assistance_ratio(trace.tau - own_weight, tau_h, trace.qd, dt) if len(trace.t) else
+        float("nan"),
+        "peak_interaction_force_n": float(magnitude.max()) if len(magnitude) else 0.0,
+        "safety_interventions": float(interventions),
+        **{f"rom_deg_{name}": float(rom[j]) for j, name in enumerate(model.joint_names)},
+    }
+    details = {"reaches": per_reach, "rom_deg": dict(zip(model.joint_names, np.round(rom, 4).tolist())),
+               "interaction_force_n": magnitude}
+    return metrics, details
