@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rehabkit_plugins.controllers.assist_as_needed import AssistAsNeeded, AssistAsNeededConfig
+from rehabkit_plugins.patients.simulated_arm import SimulatedArm, SimulatedArmConfig
 
 from rehabkit.api import run_scenario
 from rehabkit.core.interfaces import Context
-from rehabkit_plugins.controllers.assist_as_needed import AssistAsNeeded, AssistAsNeededConfig
-from rehabkit_plugins.patients.simulated_arm import SimulatedArm, SimulatedArmConfig
 from tests.conftest import SCENARIOS
 
 DT = 1e-3
