@@ -181,4 +181,4 @@ def test_a_safety_breach_logs_the_same_event_in_simulation_and_over_the_link(tmp
     assert a[0]["rule"] == "keep-in" and a[0]["data"]["axis"] == b[0]["data"]["axis"] == "z"
     assert abs(a[0]["t"] - b[0]["t"]) < 0.02 and abs(a[0]["value"] - b[0]["value"]) < 0.002
     assert a[0]["message"].split(": ")[1] == b[0]["message"].split(": ")[1] == "hand outside the keep-in box (z min)"
-    assert sim.passed and hw.passed
+    assert sim.summary["safety"]["tripped"] and hw.summary["safety"]["tripped"]

@@ -78,8 +78,8 @@ def test_a_killed_sweep_resumes_without_redoing_finished_runs(tmp_path):
 
 @pytest.mark.parametrize("mode", ["serial", "ray"])
 def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode):
-    # 300 s of simulated HIT take far longer than the 3 s allowed; the 0.5 s run finishes
-    result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=3)
+    # 300 s of simulated HIT take far longer than the 5 s allowed; the 0.5 s run finishes
+    result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=5)
     by = {r["duration"]: r for r in result.records}
     assert by["0.5"]["error"] is None and by["0.5"]["metric.sim_time_s"] == pytest.approx(0.5)
     assert by["300"]["error"].startswith("RunTimeoutError") and not by["300"]["passed"]

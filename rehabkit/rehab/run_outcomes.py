@@ -97,16 +97,18 @@ def run_outcomes(trace: Trace, robot, reaches: list[Reach], dt: float, spec, int
         return float(np.mean(values)) if values else float("nan")
 
     rom = np.degrees(range_of_motion(trace.q)) if len(trace.q) else np.zeros(model.dof)
-    tau_h = trace.tau_h if trace.tau_h is not None else np.zeros_like(trace.tau)
-    own_weight = np.array([robot.gravity_torque(q) for q in trace.q]).reshape(trace.tau.shape)
-    force = HandForce(model).batch(trace.q, tau_h) if np.any(tau_h) else np.zeros((len(trace.q), 3))
-    magnitude = np.linalg.norm(force, axis=1)
+    person = trace.tau_h is not None and len(trace.t) and np.any(trace.tau_h)
+    if person:
+        own_weight = np.array([robot.gravity_torque(q) for q in trace.q]).reshape(trace.tau.shape)
+        assist = assistance_ratio(trace.tau - own_weight, trace.tau_h, trace.qd, dt)
+        magnitude = np.linalg.norm(HandForce(model).batch(trace.q, trace.tau_h), axis=1)
+    else:  # nobody in the robot: whatever work was done, the robot did
+        assist, magnitude = (1.0 if len(trace.t) else float("nan")), np.zeros(len(trace.t))
     metrics = {
         "reaches": float(len(per_reach)), "reaches_completed": float(sum(r["reached"] for r in per_reach)),
         "sparc": mean("sparc"), "path_length_ratio": mean("path_length_ratio"),
         "time_to_target_s": mean("time_to_target_s"),
-        "assistance_ratio": assistance_ratio(trace.tau - own_weight, tau_h, trace.qd, dt) if len(trace.t) else
-        float("nan"),
+        "assistance_ratio": assist,
         "peak_interaction_force_n": float(magnitude.max()) if len(magnitude) else 0.0,
         "safety_interventions": float(interventions),
         **{f"rom_deg_{name}": float(rom[j]) for j, name in enumerate(model.joint_names)},
