@@ -38,6 +38,14 @@ def cmd_run(args: argparse.Namespace) -> int:
               + (f"  — {e['reason']}" if e.get("reason") else ""))
     for ev in s["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
+    for r in (s.get("patient") or {}).get("replaced_targets", []):
+        print(f"  PATIENT target '{r['target']}' outside the range of {', '.join(r['joints'])}: replaced by the "
+              f"nearest admissible posture ({r['moved_m'] * 1000:.1f} mm away)")
+    m = s["metrics"]
+    if m.get("reaches"):
+        shown = [f"{k} {m[k]:.3g}" for k in ("reaches_completed", "sparc", "path_length_ratio", "time_to_target_s",
+                                             "assistance_ratio", "peak_interaction_force_n") if m.get(k) is not None]
+        print("  outcomes: " + ", ".join(shown))
     for name, text in s.get("reports", {}).items():
         print(f"{name}:\n{text}")
     print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))

@@ -10,7 +10,7 @@ import yaml
 
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
-from rehabkit.core.runner import Runner
+from rehabkit.core.runner import Runner, SetupError
 from rehabkit.core.safety import SafetyConfig
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
@@ -129,3 +129,14 @@ def test_the_lexos_adapts_its_segments_to_the_profile_unless_the_scenario_sets_t
     assert run.robot.lengths == (0.31, 0.31)  # upper_arm set in the scenario wins; forearm from the profile
     assert "from the profile" in run.segments["forearm"] and "set in the scenario" in run.segments["upper_arm"]
     assert "no setting 'hand'" in run.segments["hand"]
+
+
+def test_a_plan_faster_than_the_patients_comfort_is_refused_before_it_runs(tmp_path):
+    # the round trip's 2 s segments turn the wrist at ~35 °/s; this person is comfortable with 20 °/s
+    path = _scenario(tmp_path, {"id": "P9", "side": "right", "comfort": {"max_speed_deg_s": 20}})
+    with pytest.raises(SetupError, match=r"breaks the velocity limit of wrist_1 at t\+0.250s \(\d+\.\d °/s, "
+                                         r"limit 20.0 °/s\)"):
+        run_scenario(path, out_dir=tmp_path / "o")
+    assert not (tmp_path / "o" / "summary.json").exists()
+    slower = run_scenario(path, {"planner.segment_durations": [5, 5, 5, 5], "duration": 20.5})
+    assert slower.summary["safety"]["events"] == [] and slower.metrics["final_position_error_m"] < 0.005

@@ -245,7 +245,12 @@ class Runner:
             return None
         what = "position" if bad_q.any() else "velocity"
         k, j = np.argwhere(bad_q if bad_q.any() else bad_v)[0]
-        return f"planned trajectory breaks the {what} limit of {self.robot.model.joint_names[j]} at t+{ts[k]:.3f}s"
+        if what == "position":
+            value, limit, unit = qs[k, j], (lim.lower[j] if qs[k, j] < lim.lower[j] else lim.upper[j]), "°"
+        else:
+            value, limit, unit = abs(qds[k, j]), lim.velocity[j], " °/s"
+        return (f"planned trajectory breaks the {what} limit of {self.robot.model.joint_names[j]} at t+{ts[k]:.3f}s "
+                f"({np.degrees(value):.1f}{unit}, limit {np.degrees(limit):.1f}{unit})")
 
     def plan_for_controller(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
         """A plan a controller asks for (e.g. a keypad's replay); it follows the trajectory itself.
