@@ -116,3 +116,13 @@ def test_heartbeat_sets_the_links_timing(hit):
         assert backend.config.bridge_watchdog_ms == 80 and backend.config.state_timeout_s == pytest.approx(0.15)
     finally:
         backend.close()
+
+
+def test_the_patients_comfort_force_stops_a_session_that_presses_too_hard():
+    result = run_scenario(SCENARIOS / "lexos_patient.yaml", {"patient": {"comfort": {"max_interaction_force_n": 20}}})
+    ev = result.summary["safety"]["events"]
+    assert len(ev) == 1 and ev[0]["rule"] == "interaction-force" and ev[0]["limit"] == 20.0
+    assert 20.0 < ev[0]["value"] < 21.0  # caught at the first step above the limit
+    assert np.linalg.norm(ev[0]["data"]["force_n"]) == pytest.approx(ev[0]["value"], abs=1e-2)
+    assert 4.0 < ev[0]["t"] < 10.0  # during the first reach (the ball shows at 4 s)
+    assert result.summary["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.5, abs=2e-3)

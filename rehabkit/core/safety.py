@@ -306,7 +306,9 @@ class SafetyLayer:
     def _trip(self, t, q, rule, joint, value, limit, message, data=None) -> None:
         name = self.names[joint] if isinstance(joint, int) else joint
         subject = f"{name} = " if name else ""
-        text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.4g} (limit {limit:.4g})" if value is not None else "")
+        digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
+        text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
+                                            if value is not None else "")
         text += f"; robot {'held' if self.mode == 'hold' else 'set to zero torque'}"
         event = SafetyEvent(t, rule, name, value, limit, text, data or {})
         self.events.append(event)
