@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 import yaml
@@ -50,6 +52,12 @@ def test_replay_with_assist_as_needed_same_inputs_less_assistance(session, tmp_p
     assert "assistance_ratio" in table and "inputs: seed same" in table
     saved = json.loads((tmp_path / "aan" / "summary.json").read_text())
     assert saved["metrics"]["assistance_ratio"] == pytest.approx(b["assistance_ratio"])
+    # the measures and the person's and the controller's states are in the Rerun recording too
+    listing = subprocess.run([sys.executable, "-m", "rerun", "rrd", "print", str(tmp_path / "aan" / "run.rrd")],
+                             capture_output=True, text=True, timeout=120, check=True).stdout
+    for entity in ("/outcomes/sparc", "/outcomes/path_length_ratio", "/outcomes/time_to_target_s",
+                   "/outcomes/interaction_force_n", "/patient/capacity", "/controller/assist_stiffness", "/events"):
+        assert f"- {entity} -" in listing, entity
 
 
 def test_replay_needs_a_run_directory(tmp_path, capsys):
