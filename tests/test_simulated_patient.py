@@ -97,3 +97,15 @@ def test_assist_as_needed_drives_the_hit_round_trip_by_changing_the_controller()
     assert result.summary["safety"]["events"] == []
     assert m["reaches"] == 4 and m["reaches_completed"] == 4  # every via point, within 1 cm
     assert m["aan_stiffness_max"] > m["aan_stiffness_mean"] > 50  # it had to help, and not all the time
+
+
+def test_the_per_step_hand_force_is_the_least_squares_one(hit, lexos):
+    from rehabkit.rehab.run_outcomes import HandForce
+
+    rng = np.random.default_rng(2)
+    for robot in (hit, lexos):
+        hf, lim = HandForce(robot.model), robot.model.limits
+        qs = rng.uniform(lim.lower, lim.upper, (20, robot.model.dof))
+        taus = rng.normal(size=(20, robot.model.dof))
+        step = np.array([hf(q, tau) for q, tau in zip(qs, taus)])
+        assert np.allclose(step, hf.batch(qs, taus), atol=1e-8)

@@ -68,7 +68,7 @@ class SimulatedArmConfig(StrictModel):
 
     stiffness_nm_rad: PerJoint = Field(2.0, description="passive stiffness [N·m/rad]")
     damping_nms_rad: PerJoint = Field(0.3, description="passive damping [N·m·s/rad]")
-    rest_deg: list[float] | None = Field(None, description="rest posture (default: the middle of the active range)")
+    rest_deg: list[float] | None = Field(None, description="rest posture (default: where the arm is at the start)")
     spasticity: Spasticity = Spasticity()
     voluntary: Voluntary = Voluntary()
     fatigue: Fatigue = Fatigue()
@@ -106,12 +106,11 @@ class SimulatedArm(Patient):
             if rom is not None and rom.active_deg is not None:
                 lo[j], hi[j] = np.radians(rom.active_deg)
         self.active_lo, self.active_hi = lo, hi
+        self.rest: np.ndarray | None = None  # None: the posture of the first step (the person sits relaxed)
         if config.rest_deg is not None:
             if len(config.rest_deg) != n:
                 raise ValueError(f"simulated-arm: rest_deg needs {n} values")
             self.rest = np.radians(config.rest_deg)
-        else:
-            self.rest = (lo + hi) / 2
         self.cartesian = context.reference_space == "cartesian"
         if self.cartesian:
             self.pin_model = model.pin_model
@@ -140,6 +139,8 @@ class SimulatedArm(Patient):
         return w
 
     def torque(self, t, q, qd, goal):
+        if self.rest is None:
+            self.rest = q.copy()
         tau = -self.k * (q - self.rest) - self.b * qd
         slot = self.step % len(self.reflex)
         qd_late = self.reflex[slot].copy()  # the velocity one reflex delay ago

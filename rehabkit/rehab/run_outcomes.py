@@ -38,8 +38,12 @@ class HandForce:
         return pin.computeFrameJacobian(self.model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
 
     def __call__(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """Force [N] in the robot base frame's axes."""
-        return np.linalg.lstsq(self.jacobian(q).T, tau, rcond=None)[0]
+        """Force [N] in the robot base frame's axes (normal equations: a 3×3 solve each control step)."""
+        J = self.jacobian(q)
+        try:
+            return np.linalg.solve(J @ J.T, J @ tau)
+        except np.linalg.LinAlgError:  # a singular posture: the minimum-norm least-squares force
+            return np.linalg.lstsq(J.T, tau, rcond=None)[0]
 
     def batch(self, qs: np.ndarray, taus: np.ndarray) -> np.ndarray:
         return interaction_forces(np.stack([self.jacobian(q) for q in qs]), taus)
