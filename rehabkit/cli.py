@@ -120,6 +120,8 @@ def cmd_schema(args: argparse.Namespace) -> int:
     from rehabkit.core.scenario.models import scenario_model
 
     schema = scenario_model(default_registry()).model_json_schema()
+    # the loader inlines a profile given as a file path before validation
+    schema["properties"]["patient"]["anyOf"].append({"type": "string", "description": "a patient profile file"})
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "rehabkit scenario"
     print(json.dumps(schema, indent=2))

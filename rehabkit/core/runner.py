@@ -27,13 +27,12 @@ from rehabkit.core.metrics import Trace
 from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
 from rehabkit.core.results import RunResult, build_summary, collect_metrics
 from rehabkit.core.safety import SafetyLayer
-from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.core.targets import resolve_targets
-from rehabkit.rehab.admission import admit_targets
-from rehabkit.rehab.patient import effective_limits, interaction_force_limit, unknown_joints
-from rehabkit.rehab.run_outcomes import HandForce, Reach
+from rehabkit.rehab.admission import adapt_segments, admit_targets, hand_in_world, narrowed_limits
+from rehabkit.rehab.patient import interaction_force_limit
+from rehabkit.rehab.run_outcomes import HandForce, Reach, outcome_series
 
 SNAPSHOT = "scenario.yaml"  # the scenario as run, in the run's folder: what `rehabkit replay` starts from
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
@@ -87,11 +86,16 @@ class Runner:
         ctx = Context(self.loaded.directory, self.rng, 1.0 / sc.rates.control_hz, world=sc.world,
                       out_dir=self.out_dir, robot_spec=sc.robot.model_dump(mode="json"), seed=sc.seed,
                       safety=sc.safety, patient=profile)
-        self.robot = self._make("robot", self._adapted_robot(profile), ctx)
+        robot_cfg, self.segments = adapt_segments(sc.robot, profile, self.loaded.source)
+        self.robot = self._make("robot", robot_cfg, ctx)
         ctx.robot = self.robot
         # the patient's range and comfort and the envelope narrow the robot's limits before anything plans with them
         self.robot_limits = self.robot.model.limits
-        self.robot.model.limits = self._effective_limits(profile)
+        try:
+            self.robot.model.limits, self.limit_sources = narrowed_limits(self.robot.model, profile, sc.safety,
+                                                                          self.loaded.source)
+        except ValueError as exc:
+            raise SetupError(str(exc)) from exc
         # sensors before the backend: their instruments go into the scene it builds
         self.sensors = {name: self._make("sensor", cfg, ctx) for name, cfg in sc.sensors.items()}
         ctx.instruments = [i for s in self.sensors.values() for i in s.instruments()]
@@ -118,7 +122,7 @@ class Runner:
         self.hand_force = HandForce(self.robot.model) if force_limit is not None else None
         self.safety = SafetyLayer(self.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                                   gravity=self.robot.gravity_torque, dt=ctx.control_dt,
-                                  hand=self._hand_in_world() if sc.safety.keep_in is not None else None)
+                                  hand=hand_in_world(self.robot) if sc.safety.keep_in is not None else None)
         self._specs = {t.name: t for t in sc.task.targets}
         for t in sc.task.targets:
             if t.sensor and t.sensor not in self.sensors:
@@ -131,55 +135,6 @@ class Runner:
         self.replaced = admit_targets(self.targets, sc.task, self.robot, self.robot_limits, self.limit_sources,
                                       profile, self.loaded.source)
         self.schedule = self._schedule()
-
-    def _hand_in_world(self):
-        """The hand's world position from q, for a check every step: Pinocchio's where it agrees with the robot's
-        own kinematics (serial arms: ~2 µs instead of up to ~80 µs), else the robot's (parallel mechanisms)."""
-        robot, model = self.robot, self.robot.model
-        rot, pos = model.base_pose[:3, :3], model.base_pose[:3, 3]
-        data = model.new_pin_data()
-        samples = np.random.default_rng(0).uniform(model.limits.lower, model.limits.upper, (5, model.dof))
-        try:
-            agrees = all(np.allclose(robot.fk(q), model.ee_pose(q, data), atol=1e-9) for q in samples)
-        except Exception:  # noqa: BLE001 (no usable Pinocchio model: the robot's own kinematics it is)
-            agrees = False
-        if agrees:
-            return lambda q: rot @ model.ee_pose(q, data)[:3, 3] + pos
-        return lambda q: robot.ee_world(q[None])[0]
-
-    def _adapted_robot(self, profile):
-        """The robot section with the patient's segment lengths where the robot has a setting of that name."""
-        cfg = self.sc.robot
-        self.segments: dict[str, str] = {}
-        if profile is None:
-            return cfg
-        fields, update = type(cfg).model_fields, {}
-        for name, length in profile.segments.items():
-            if name not in fields:
-                self.segments[name] = f"robot '{cfg.type}' has no setting '{name}': not adapted"
-            elif ("robot", name) in self.loaded.source.value_marks:
-                self.segments[name] = f"robot.{name} = {getattr(cfg, name)} set in the scenario wins"
-            else:
-                update[name] = length
-                self.segments[name] = f"robot.{name} = {length} (from the profile)"
-        return cfg.model_copy(update=update)
-
-    def _effective_limits(self, profile):
-        """Robot ∩ patient ∩ envelope limits; unknown joint names refused where they are written."""
-        src, model = self.loaded.source, self.robot.model
-        problems = []
-        for section, names in (("patient", profile.joints if profile else {}), ("safety", self.sc.safety.joints)):
-            for name in names:
-                for msg in unknown_joints([name], model):
-                    path = (section, "joints", name)
-                    problems.append(Diagnostic(src.key_marks.get(path, src.value_marks[()]), ".".join(path), msg))
-        if problems:
-            raise ScenarioError(problems)
-        try:
-            limits, self.limit_sources = effective_limits(model, profile, self.sc.safety)
-        except ValueError as exc:
-            raise SetupError(str(exc)) from exc
-        return limits
 
     def _schedule(self) -> _Schedule:
         sc, dt = self.sc, self.backend.timestep
@@ -655,17 +610,9 @@ class Runner:
             levels = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN"}
             for ev in self.safety.interventions:
                 self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=levels.get(ev.rule, "ERROR"))
-            series = {**self.backend.series(), **getattr(self.controller, "series", dict)()}
-            if self.patient is not None:
-                series.update(self.patient.series())
-                every = self.schedule.log_every
-                series["outcomes/interaction_force_n"] = (trace.t[::every],
-                                                          self.outcome_details["interaction_force_n"][::every])
-            for reach in self.outcome_details["reaches"]:
-                for key in ("sparc", "path_length_ratio", "time_to_target_s"):
-                    series.setdefault(f"outcomes/{key}", ([], []))
-                    series[f"outcomes/{key}"][0].append(reach["t0_s"])
-                    series[f"outcomes/{key}"][1].append(reach[key])
+            series = {**self.backend.series(), **getattr(self.controller, "series", dict)(),
+                      **(self.patient.series() if self.patient is not None else {}),
+                      **outcome_series(trace.t, self.outcome_details, self.schedule.log_every)}
             for path, (t, values) in series.items():
                 self.log.series(path, np.asarray(t, float), np.asarray(values, float))
         summary = build_summary(self, metrics, per_joint)

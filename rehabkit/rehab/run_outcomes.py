@@ -120,3 +120,16 @@ def run_outcomes(trace: Trace, robot, reaches: list[Reach], dt: float, spec, int
     details = {"reaches": per_reach, "rom_deg": dict(zip(model.joint_names, np.round(rom, 4).tolist())),
                "interaction_force_n": magnitude}
     return metrics, details
+
+
+def outcome_series(t: np.ndarray, details: dict[str, Any], every: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Time series for the log: the interaction force at the log rate, each reach's measures at its start."""
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    force = details["interaction_force_n"]
+    if np.any(force):
+        out["outcomes/interaction_force_n"] = (t[::every], force[::every])
+    starts = np.array([r["t0_s"] for r in details["reaches"]], float)
+    for key in ("sparc", "path_length_ratio", "time_to_target_s"):
+        if len(starts):
+            out[f"outcomes/{key}"] = (starts, np.array([r[key] for r in details["reaches"]], float))
+    return out
