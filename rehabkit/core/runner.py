@@ -69,6 +69,7 @@ class Runner:
         self.out_dir, self.spawn, self.progress = out_dir, spawn, progress
         self.observations: dict[str, dict[str, Any]] = {}
         self.notes: list[dict[str, Any]] = []
+        self.log: RerunLog | None = None
 
     # -- construction -------------------------------------------------------
 
