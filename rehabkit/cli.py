@@ -129,13 +129,22 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
 
 def cmd_bridge(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from rehabkit.core.plugins import default_registry
     from rehabkit.hardware.bridge import Bridge, MujocoPlant
 
     registry = default_registry()
     info = registry.get("robot", args.robot)
     robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), None)
-    bridge = Bridge(MujocoPlant(robot, 1.0 / args.rate), args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3)
+    plant = MujocoPlant(robot, 1.0 / args.rate)
+    if args.effort is not None:
+        effort = np.asarray(json.loads(args.effort), float)
+        if effort.shape != plant.effort.shape or np.any(effort <= 0):
+            _err(f"error: --effort needs {len(plant.effort)} positive torques [N·m], got {args.effort}")
+            return EXIT_INVALID
+        plant.effort = np.minimum(plant.effort, effort)  # never above the robot's own
+    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
     bridge.serve(args.duration, parent=args.parent_pid)
     return EXIT_OK
@@ -187,6 +196,8 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--watchdog-ms", type=float, default=5.0, help="hold the robot without valid commands this long")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
     b.add_argument("--parent-pid", type=int, default=None, help="stop when this process (the host) is gone")
+    b.add_argument("--effort", default=None, metavar="JSON",
+                   help="torque limits per joint [N·m], tighter than the robot's (a safety envelope's)")
     b.set_defaults(func=cmd_bridge)
     return p
 

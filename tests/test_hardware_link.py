@@ -182,3 +182,31 @@ def test_a_safety_breach_logs_the_same_event_in_simulation_and_over_the_link(tmp
     assert abs(a[0]["t"] - b[0]["t"]) < 0.02 and abs(a[0]["value"] - b[0]["value"]) < 0.002
     assert a[0]["message"].split(": ")[1] == b[0]["message"].split(": ")[1] == "hand outside the keep-in box (z min)"
     assert sim.summary["safety"]["tripped"] and hw.summary["safety"]["tripped"]
+
+
+def test_the_bridge_clips_to_the_runs_torque_limits_not_only_the_robots():
+    """An envelope's torque limit reaches the robot side too: a command the host did not clip (here sent raw,
+    past the safety layer) is clipped by the bridge to the run's limit."""
+    from rehabkit_plugins.robots.hit import HitConfig, HitRobot
+
+    speeds = {}
+    for name, wrist_limit in (("robot's", None), ("envelope's", 0.03)):
+        robot = HitRobot(HitConfig())
+        if wrist_limit is not None:  # wrist_1: no gravity load at q0, so the torque alone turns it
+            robot.model.limits = robot.model.limits.override(4, effort=wrist_limit)
+        ctx = Context(Path("."), np.random.default_rng(0), 0.001, robot=robot, robot_spec={"type": "hit"})
+        backend = HardwareBackend(HardwareConfig(bridge_watchdog_ms=200), ctx)
+        try:
+            q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
+            backend.reset(q0)
+            for _ in range(30):
+                _, q, qd = backend.state()
+                tau = 100 * (q0 - q) - 5 * qd + robot.gravity_torque(q)
+                tau[4] = 0.3  # ten times the envelope's wrist limit, well within the robot's own 8 N·m
+                backend.command(tau)
+                backend.step(1)
+            speeds[name] = abs(backend.state()[2][4])
+        finally:
+            backend.close()
+    # 30 ms of 0.3 N·m against 30 ms of 0.03 N·m on the same wrist: about ten times the speed
+    assert speeds["robot's"] > 5 * speeds["envelope's"] > 0

@@ -84,10 +84,10 @@ class Runner:
         sc = self.sc
         profile = sc.patient
         self.rng = np.random.default_rng(sc.seed)
-        ctx = Context(self.loaded.directory, self.rng, 1.0 / sc.rates.control_hz, world=sc.world,
-                      out_dir=self.out_dir, robot_spec=sc.robot.model_dump(mode="json"), seed=sc.seed,
-                      safety=sc.safety, patient=profile)
         robot_cfg, self.segments = adapt_segments(sc.robot, profile, self.loaded.source)
+        ctx = Context(self.loaded.directory, self.rng, 1.0 / sc.rates.control_hz, world=sc.world,
+                      out_dir=self.out_dir, robot_spec=robot_cfg.model_dump(mode="json"), seed=sc.seed,
+                      safety=sc.safety, patient=profile)
         self.robot = self._make("robot", robot_cfg, ctx)
         ctx.robot = self.robot
         # the patient's range and comfort and the envelope narrow the robot's limits before anything plans with them

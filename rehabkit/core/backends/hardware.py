@@ -114,7 +114,9 @@ class HardwareBackend(Backend):
         spec = context.robot_spec
         cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
                "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
-               "--watchdog-ms", str(config.bridge_watchdog_ms), "--parent-pid", str(os.getpid())]
+               "--watchdog-ms", str(config.bridge_watchdog_ms), "--parent-pid", str(os.getpid()),
+               # the run's torque limits (the envelope's may be tighter than the robot's): the bridge clips to them
+               "--effort", json.dumps(context.robot.model.limits.effort.tolist())]
         # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
         log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
