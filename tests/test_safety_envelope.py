@@ -126,3 +126,10 @@ def test_the_patients_comfort_force_stops_a_session_that_presses_too_hard():
     assert np.linalg.norm(ev[0]["data"]["force_n"]) == pytest.approx(ev[0]["value"], abs=1e-2)
     assert 4.0 < ev[0]["t"] < 10.0  # during the first reach (the ball shows at 4 s)
     assert result.summary["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.5, abs=2e-3)
+
+
+def test_a_force_limit_without_a_force_source_is_refused():
+    from rehabkit.core.runner import SetupError
+
+    with pytest.raises(SetupError, match="needs a source of the force"):
+        run_scenario(HIT, {"safety": {"interaction_force_n": 50}})

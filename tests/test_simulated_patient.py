@@ -109,3 +109,17 @@ def test_the_per_step_hand_force_is_the_least_squares_one(hit, lexos):
         taus = rng.normal(size=(20, robot.model.dof))
         step = np.array([hf(q, tau) for q, tau in zip(qs, taus)])
         assert np.allclose(step, hf.batch(qs, taus), atol=1e-8)
+
+
+def test_no_voluntary_push_out_of_the_active_range(hit):
+    from rehabkit.rehab.patient import PatientBase
+
+    profile = PatientBase.model_validate({"id": "T2", "side": "right",
+                                         "joints": {"elbow_1": {"passive_deg": [20, 120], "active_deg": [40, 95]}}})
+    ctx = Context(Path("."), np.random.default_rng(0), DT, robot=hit, reference_space="joint", patient=profile)
+    arm = SimulatedArm(SimulatedArmConfig.model_validate(
+        {"stiffness_nm_rad": 0.0, "damping_nms_rad": 0.0, "voluntary": {"stiffness": 50.0, "noise": 0.0}}), ctx)
+    q = np.radians([0, 90, 95, 30, -90, 90])  # elbow_1 at the top of its active range
+    tau = arm.torque(0.0, q, np.zeros(6), q + np.radians(10))  # every joint's goal 10° further
+    assert tau[2] == 0.0 and np.all(np.delete(tau, 2) > 0)  # the elbow can't go further on its own; the rest push
+    assert arm.torque(0.001, q, np.zeros(6), q - np.radians(10))[2] < 0  # back into the range it can
