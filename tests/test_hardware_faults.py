@@ -37,22 +37,33 @@ def _over(port: int, out: Path | None = None):
     return run_scenario(HIT, {"backend": backend}, out_dir=out)
 
 
+def _impaired(impairment: list[str], out: Path):
+    """One run over a fresh bridge behind the impairment relay (a bridge serves one session)."""
+    bridge, bridge_port = _start([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--watchdog-ms", "200"],
+                                 "bridge:")
+    try:
+        netem, port = _start([sys.executable, str(ROOT / "tests" / "netem.py"), str(bridge_port), "--seed", "1",
+                              *impairment], "netem:")
+        try:
+            return _over(port, out)
+        finally:
+            netem.kill()
+            netem.wait()
+    finally:
+        bridge.kill()
+        bridge.wait()
+
+
 @pytest.mark.parametrize("impairment, dropped", [
     (["--loss", "0.05"], None),  # each way
     (["--loss", "0.20"], None),
     (["--delay-share", "0.2", "--delay-ms", "2", "8"], "states_dropped_out_of_order"),
     (["--forge-every", "50"], "states_dropped_robot"),
 ])
-def test_an_impaired_link_is_ridden_out_safely(bridge, impairment, dropped, tmp_path):
-    netem, port = _start([sys.executable, str(ROOT / "tests" / "netem.py"), str(bridge[1]), "--seed", "1",
-                          *impairment], "netem:")
-    try:
-        # run again if a stall of this VM left the last torque on a joint for tens of ms and the safety layer
-        # stopped the run (the bridge's known weakness, seen once in CI as a joint 16.8° past its range)
-        r = retry_stalls(lambda: _over(port, tmp_path))
-    finally:
-        netem.kill()
-        netem.wait()
+def test_an_impaired_link_is_ridden_out_safely(impairment, dropped, tmp_path):
+    # run again if a stall of this VM left the last torque on a joint for tens of ms and the safety layer
+    # stopped the run (the bridge's known weakness, seen once in CI as a joint 16.8° past its range)
+    r = retry_stalls(lambda: _impaired(impairment, tmp_path))
     m = r.metrics
     assert m["joint_limit_excess_deg"] == 0  # never beyond a joint range
     events = r.summary["safety"]["events"]
