@@ -28,13 +28,13 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from rehabkit.core.interfaces import StrictModel
-from rehabkit.models.robot_model import JointLimits, RobotModel
+from rehabkit.models.robot_model import RobotModel
 
 Vec3 = tuple[float, float, float]
 
 
 class JointEnvelope(StrictModel):
-    """Limits of one joint, tighter than the robot's (a wider value is refused: the robot's own limits hold)."""
+    """Limits of one joint, tighter than the robot's (a wider value changes nothing: the robot's own limits hold)."""
 
     range_deg: tuple[float, float] | None = Field(None, description="[lowest, highest] position")
     velocity_deg_s: float | None = Field(None, gt=0, description="largest speed")
@@ -114,14 +114,14 @@ def _blend(s: float) -> float:
 class SafetyLayer:
     """Checks every command; see the module docstring for the rules.
 
-    ``limits`` are the effective joint limits (default: the robot's); ``hand(q)`` gives the end
-    effector's world position, needed for a keep-in box; ``dt`` is the control period (it tells one
-    clipping episode from the next).
+    The limits are the robot model's (the runner narrows them to the patient's and the envelope's first);
+    ``hand(q)`` gives the end effector's world position, needed for a keep-in box; ``dt`` is the control
+    period (it tells one clipping episode from the next).
     """
 
-    def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None, limits: JointLimits | None = None,
+    def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None,
                  hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):
-        lim = limits or robot.limits
+        lim = robot.limits
         margin = math.radians(config.position_margin_deg)
         self.names = robot.joint_names
         self.lo, self.hi = lim.lower - margin, lim.upper + margin

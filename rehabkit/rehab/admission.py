@@ -20,7 +20,7 @@ from rehabkit.core.safety import SafetyConfig
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.models import TaskSpec
 from rehabkit.models.robot_model import JointLimits, RobotModel
-from rehabkit.rehab.patient import LimitSource, PatientBase, effective_limits, outside, unknown_joints
+from rehabkit.rehab.patient import LimitSource, PatientBase, effective_limits, outside, unknown_joint
 
 
 def adapt_segments(robot_cfg: StrictModel, profile: PatientBase | None, source) -> tuple[StrictModel, dict[str, str]]:
@@ -48,7 +48,8 @@ def narrowed_limits(model: RobotModel, profile: PatientBase | None, safety: Safe
     problems = []
     for section, names in (("patient", profile.joints if profile else {}), ("safety", safety.joints)):
         for name in names:
-            for msg in unknown_joints([name], model):
+            msg = unknown_joint(name, model)
+            if msg is not None:
                 path = (section, "joints", name)
                 problems.append(Diagnostic(source.key_marks.get(path, source.value_marks[()]), ".".join(path), msg))
     if problems:

@@ -85,10 +85,11 @@ class LimitSource:
                 self.by_joint.items()}
 
 
-def unknown_joints(names: list[str], robot: RobotModel) -> list[str]:
-    """Messages for joint names the robot doesn't have, with the closest ones."""
-    return [f"no joint '{n}' on robot '{robot.name}'{suggest(n, robot.joint_names)}" for n in names
-            if n not in robot.joint_names]
+def unknown_joint(name: str, robot: RobotModel) -> str | None:
+    """The message for a joint name the robot doesn't have, with the closest ones (``None`` if it has it)."""
+    if name in robot.joint_names:
+        return None
+    return f"no joint '{name}' on robot '{robot.name}'{suggest(name, robot.joint_names)}"
 
 
 def effective_limits(robot: RobotModel, patient: PatientBase | None, safety: SafetyConfig) -> tuple[JointLimits,
