@@ -144,7 +144,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
             _err(f"error: --effort needs {len(plant.effort)} positive torques [N·m], got {args.effort}")
             return EXIT_INVALID
         plant.effort = np.minimum(plant.effort, effort)  # never above the robot's own
-    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3)
+    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3, stale_s=args.stale_ms / 1e3)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
     bridge.serve(args.duration, parent=args.parent_pid)
     return EXIT_OK
@@ -194,6 +194,8 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
     b.add_argument("--robot-id", type=int, default=1)
     b.add_argument("--watchdog-ms", type=float, default=5.0, help="hold the robot without valid commands this long")
+    b.add_argument("--stale-ms", type=float, default=10.0,
+                   help="hold the posture after this long without a newer command, until the next one")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
     b.add_argument("--parent-pid", type=int, default=None, help="stop when this process (the host) is gone")
     b.add_argument("--effort", default=None, metavar="JSON",

@@ -52,8 +52,8 @@ LINK = {"backend": {"type": "hardware", "bridge_watchdog_ms": 200, "state_timeou
 
 
 def _over_the_link(path):
-    """The scenario over the link, run again if a stall of this VM left the last torque on a joint for tens of
-    ms and the safety layer stopped the run (``stalled_trip``: that is the bridge's known weakness, not parity)."""
+    """The scenario over the link, run again if a limit tripped during a stall of this VM (``stalled_trip``:
+    the VM's timing, not parity)."""
     return retry_stalls(lambda: run_scenario(path, LINK))
 
 

@@ -463,5 +463,10 @@ class Backend(ABC):
         """Time series only the backend knows, name → (times [s], values), for the log; default none."""
         return {}
 
+    def interventions(self) -> list:
+        """Safety events the robot side took on its own (``SafetyEvent``s, e.g. a hold through a gap in the
+        commands); default none."""
+        return []
+
     def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

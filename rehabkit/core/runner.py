@@ -606,9 +606,11 @@ class Runner:
 
     def _finish(self, trace: Trace, wall: float, setup: float, contact_steps: int) -> RunResult:
         """Metrics, verdicts, the summary; the log and summary written whole."""
+        if robot_side := self.backend.interventions():
+            self.safety.interventions = sorted(self.safety.interventions + robot_side, key=lambda e: e.t)
         metrics, per_joint = collect_metrics(self, trace, wall, setup, contact_steps)
         if self.log:
-            levels = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN"}
+            levels = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN", "stale-command": "WARN"}
             for ev in self.safety.interventions:
                 self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=levels.get(ev.rule, "ERROR"))
             series = {**self.backend.series(), **getattr(self.controller, "series", dict)(),

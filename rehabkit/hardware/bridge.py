@@ -2,10 +2,15 @@
 
 Each tick (the plant's rate, 1 kHz by default) it applies the newest valid command, steps
 the plant, and sends the state back with the echo of the command it used. Commands pass
-the protocol's checks (``protocol.Receiver``) and are clipped to the effort limits. If no
-valid command arrives for ``watchdog_s`` while running, or an e-stop command comes, the
-bridge holds the robot where it is (PD to that posture plus gravity) and says so in its
-status bits; a reset from the host re-enables it. Real drives plug in as another
+the protocol's checks (``protocol.Receiver``) and are clipped to the effort limits.
+
+A torque is only right for the state it was computed at, so the bridge never applies one
+open-loop for long: after ``stale_s`` of its own ticks without a newer command (a host
+stall, lost packets) it holds the posture it is at (PD to it plus gravity; status bit
+``STALE``) until the next command, which resumes torque control at once. Ticks, not wall
+time, count here, so a bridge catching up after a stall of its own holds too. If no valid
+command arrives for ``watchdog_s`` while running, or an e-stop command comes, the hold is
+latched (status ``HOLDING``) and only a reset from the host re-enables the robot. Real drives plug in as another
 :class:`Plant`; :class:`MujocoPlant` is the robot's MuJoCo model as the plant, for tests and
 hardware-in-the-loop rehearsal.
 """
@@ -31,6 +36,7 @@ from rehabkit.hardware.protocol import (
     ENABLED,
     ESTOPPED,
     HOLDING,
+    STALE,
     STATE,
     WATCHDOG,
     Receiver,
@@ -113,8 +119,12 @@ class Bridge:
     """Serves one host over UDP at the plant's rate, with a command watchdog and an e-stop."""
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
-                 watchdog_s: float = 0.005):
+                 watchdog_s: float = 0.005, stale_s: float = 0.010):
         self.plant, self.robot_id, self.watchdog_s = plant, robot_id, watchdog_s
+        self.stale_ticks = max(1, round(stale_s / plant.timestep))
+        self.since_command = 0  # plant ticks since the newest torque command
+        self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
+        self.held_ticks = 0  # since the reset, sent with each state
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((host, port))
         self.sock.setblocking(False)
@@ -131,11 +141,12 @@ class Bridge:
         self.waiting = False  # reset done, no torque command yet: holding the start posture
 
     def _hold(self, now: float, why: str, bit: int) -> None:
-        if self.hold_q is None or self.waiting:
-            self.waiting = False
-            self.hold_q = self.plant.read()[0]
+        if not self.status & HOLDING:
             self.trips.append((now, why))
-        self.status = (self.status | HOLDING | bit) & ~ENABLED
+            if self.hold_q is None or self.waiting:  # (a stale-command hold keeps its posture)
+                self.hold_q = self.plant.read()[0]
+            self.waiting = False
+        self.status = (self.status | HOLDING | bit) & ~(ENABLED | STALE)
 
     def _receive(self, now: float) -> None:
         while True:
@@ -151,14 +162,16 @@ class Bridge:
                 self.plant.reset(msg.values)
                 self.tau[:] = 0.0
                 self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED, np.inf
-                self.waiting = True
+                self.waiting, self.since_command, self.held_ticks = True, 0, 0
                 continue
             self.last_valid = now
             if msg.status & CMD_ESTOP:
                 self._hold(now, "e-stop", ESTOPPED)
             elif self.status & ENABLED:
-                if self.waiting:  # the host's loop has started: its torques take over from the start hold
+                if self.waiting or self.status & STALE:  # the host's torques take over (again) from the hold
                     self.hold_q, self.waiting = None, False
+                    self.status &= ~STALE
+                self.since_command = 0
                 self.tau = np.clip(msg.values, -self.plant.effort, self.plant.effort)
 
     def tick(self, now: float) -> None:
@@ -167,6 +180,16 @@ class Bridge:
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
+        if self.status & ENABLED and not self.waiting:
+            self.since_command += 1
+            if self.since_command > self.stale_ticks:
+                if not self.status & STALE:  # the last torque is too old to apply: hold here until a new one
+                    self.status |= STALE
+                    self.hold_q = q.copy()
+                    self.stale_holds.append((now, 0))
+                t0, ticks = self.stale_holds[-1]
+                self.stale_holds[-1] = (t0, ticks + 1)
+                self.held_ticks += 1
         tau = self.tau
         if self.hold_q is not None:
             tau = np.clip(HOLD_KP * (self.hold_q - q) - HOLD_KD * qd + self.plant.gravity(q),
@@ -177,7 +200,8 @@ class Bridge:
             q, qd = self.plant.read()
             self.seq += 1
             self.sock.sendto(encode(STATE, self.robot_id, self.seq, np.vstack([q, qd, tau]), echo=self.echo,
-                                    status=self.status, measured=self.plant.read_measured()), self.peer)
+                                    status=self.status, held=self.held_ticks,
+                                    measured=self.plant.read_measured()), self.peer)
 
     def serve(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given

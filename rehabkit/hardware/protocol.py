@@ -4,10 +4,14 @@ One datagram is one message, little-endian::
 
     header  magic 'RK' (2s) · version (B) · kind (B) · robot id (I) · sequence (I)
             · sent at (d, sender's monotonic clock [s]) · echo (d, the peer's last 'sent at' seen)
-            · joint count n (H) · measured-only joint count m (H) · status bits (H) · error bits (H)
+            · joint count n (H) · measured-only joint count m (H) · status bits (H) · held ticks (H)
     body    STATE:   q, q̇, τ (3 × n doubles), then the m measured-only joints' positions
             COMMAND: τ (n doubles; m = 0)
     trailer CRC-32 of everything before it (I)
+
+``held ticks`` (STATE only): the bridge's ticks spent holding the posture for want of a newer
+command since the last reset, modulo 2¹⁶ — so the host knows how long each such hold lasted
+even when the states sent meanwhile were lost or arrived too late to use.
 
 ``echo`` lets the host measure round trips without synchronised clocks. A receiver
 accepts a message only if it is well formed (length, magic, version, kind, robot,
@@ -29,13 +33,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 2  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE
+VERSION = 3  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks
 STATE, COMMAND = 1, 2
 HEADER = struct.Struct("<2sBBIIddHHHH")
 CRC = struct.Struct("<I")
 
 # status bits (bridge → host)
 ENABLED, HOLDING, ESTOPPED, WATCHDOG = 1, 2, 4, 8
+# the bridge bridges a gap in the commands by holding the posture itself (still enabled: the next command resumes)
+STALE = 16
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
 
@@ -50,7 +56,7 @@ class Message:
     sent_at: float
     echo: float
     status: int
-    errors: int
+    held: int  # STATE: ticks held for want of a command since the reset, mod 2**16
     values: np.ndarray  # STATE: (3, n) rows q, qd, tau; COMMAND: (n,) torques
     measured: np.ndarray = field(default_factory=lambda: np.zeros(0))  # STATE: measured-only joint positions
 
@@ -60,7 +66,7 @@ class Message:
 
 
 def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
-           status: int = 0, errors: int = 0, measured: np.ndarray | None = None) -> bytes:
+           status: int = 0, held: int = 0, measured: np.ndarray | None = None) -> bytes:
     """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND; ``measured``: STATE only)."""
     values = np.ascontiguousarray(values, dtype="<f8")
     extra = np.ascontiguousarray(np.zeros(0) if measured is None else measured, dtype="<f8").ravel()
@@ -70,7 +76,7 @@ def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float |
     if kind == COMMAND and len(extra):
         raise ValueError("commands carry no measured-only joints")
     head = HEADER.pack(MAGIC, VERSION, kind, robot, seq & 0xFFFFFFFF,
-                       time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, errors)
+                       time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, held & 0xFFFF)
     body = head + values.tobytes() + extra.tobytes()
     return body + CRC.pack(zlib.crc32(body))
 
@@ -120,7 +126,7 @@ class Receiver:
             return None, "length"
         if CRC.unpack_from(data, expected - CRC.size)[0] != zlib.crc32(data[: expected - CRC.size]):
             return None, "checksum"
-        magic, version, kind, robot, seq, sent_at, echo, n, m, status, errors = HEADER.unpack_from(data)
+        magic, version, kind, robot, seq, sent_at, echo, n, m, status, held = HEADER.unpack_from(data)
         if magic != MAGIC:
             return None, "magic"
         if version != VERSION:
@@ -136,4 +142,4 @@ class Receiver:
             return None, "non-finite"
         head = values[: per_joint * n]
         head = head.reshape(3, n) if self.kind == STATE else head
-        return Message(kind, robot, seq, sent_at, echo, status, errors, head.copy(), values[per_joint * n:].copy()), ""
+        return Message(kind, robot, seq, sent_at, echo, status, held, head.copy(), values[per_joint * n:].copy()), ""

@@ -3,7 +3,9 @@
 Each control tick the newest torque command goes out (after the safety layer), the loop
 sleeps to its deadline, and the newest valid state that came back is taken. Deadline
 misses (a tick that starts late), tick lateness (jitter) and round-trip latency (from the
-echo of each command in the bridge's state) are counted for ``summary.json``. If no valid
+echo of each command in the bridge's state) are counted for ``summary.json``, and so are the
+bridge's holds through gaps in the commands (``bridge_stale_ms``; see the bridge), each a
+``stale-command`` safety intervention. If no valid
 state arrives for ``state_timeout_s`` the link is lost: the run stops with that reason
 (:class:`LinkLostError`), the logs complete. With ``spawn_bridge`` the backend starts
 ``rehabkit bridge`` itself, driving the robot's MuJoCo model as the plant: the same
@@ -33,6 +35,7 @@ from rehabkit.core.backends.frame_server import FrameServer
 from rehabkit.core.backends.scene_view import SceneMirror, SceneView
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, BackendFaultError, BodyPoses, Context, GeomVisual, StrictModel
+from rehabkit.core.safety import SafetyEvent
 from rehabkit.hardware.clock import wait_until
 from rehabkit.hardware.protocol import (
     CMD_ESTOP,
@@ -40,6 +43,7 @@ from rehabkit.hardware.protocol import (
     COMMAND,
     ESTOPPED,
     HOLDING,
+    STALE,
     STATE,
     WATCHDOG,
     Receiver,
@@ -68,6 +72,8 @@ class HardwareConfig(StrictModel):
     state_timeout_s: float = Field(0.1, gt=0, description="host watchdog: no valid state for this long stops")
     max_age_s: float = Field(0.005, gt=0, description="older states are stale and dropped")
     bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
+    bridge_stale_ms: float = Field(10.0, gt=0, description="bridge holds the posture without a newer command this "
+                                   "long, until the next one (no torque is applied open-loop for longer)")
 
 
 class HardwareBackend(Backend):
@@ -104,6 +110,8 @@ class HardwareBackend(Backend):
         self.rtt: list[float] = []
         self.rtt_at: list[int] = []  # round trips measured before each tick, to place them on the timeline
         self.held_at: float | None = None  # when the bridge first reported holding the robot
+        self.stale_holds: list[list[float]] = []  # [start, ticks] of each gap in the commands the bridge held through
+        self._held, self._stale_open = 0, False
         self.silent_ticks = 0
         self._started = False
         self._estop_sent = False
@@ -114,7 +122,8 @@ class HardwareBackend(Backend):
         spec = context.robot_spec
         cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
                "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
-               "--watchdog-ms", str(config.bridge_watchdog_ms), "--parent-pid", str(os.getpid()),
+               "--watchdog-ms", str(config.bridge_watchdog_ms), "--stale-ms", str(config.bridge_stale_ms),
+               "--parent-pid", str(os.getpid()),
                # the run's torque limits (the envelope's may be tighter than the robot's): the bridge clips to them
                "--effort", json.dumps(context.robot.model.limits.effort.tolist())]
         # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
@@ -149,6 +158,8 @@ class HardwareBackend(Backend):
             self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
             self.measured, self._posed = msg.measured, False
             self.status, self.last_state, got = msg.status, now, True
+            if self._started:
+                self._note_stale(msg, now - self.t0)
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
@@ -158,6 +169,27 @@ class HardwareBackend(Backend):
                     self._fault = f"the bridge holds the robot ({why}) at t={self.held_at:.3f}s"
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
+
+    def _note_stale(self, msg, t: float) -> None:
+        """Holds through gaps in the commands, from the bridge's count of held ticks: exact even when the states
+        sent during a hold were lost or came too late (as after a stall of this host)."""
+        ticks, self._held = (msg.held - self._held) % 0x10000, msg.held
+        if ticks and not self._stale_open:
+            self.stale_holds.append([max(0.0, t - ticks * self.timestep), 0])
+        if ticks or self._stale_open:
+            self.stale_holds[-1][1] += ticks
+        self._stale_open = bool(msg.status & STALE)
+
+    def interventions(self) -> list[SafetyEvent]:
+        """The bridge's holds through gaps in the commands, as safety events."""
+        out = []
+        for start, ticks in self.stale_holds:
+            ms = 1e3 * ticks * self.timestep
+            out.append(SafetyEvent(start, "stale-command", None, ms, self.config.bridge_stale_ms,
+                                   f"t={start:.3f}s: no newer command for {self.config.bridge_stale_ms:g} ms: the "
+                                   f"bridge held the posture for {ms:.0f} ms, until the next one",
+                                   {"held_ticks": ticks}))
+        return out
 
     # -- Backend ----------------------------------------------------------------
 
@@ -175,6 +207,7 @@ class HardwareBackend(Backend):
         self.t0 = self.deadline = self.last_state = time.monotonic()
         self._started = False
         self.held_at, self._fault, self._estop_sent = None, None, False  # a reset re-enables the bridge
+        self.stale_holds, self._held, self._stale_open = [], 0, False
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         return self.deadline - self.t0, self.q, self.qd
@@ -270,6 +303,7 @@ class HardwareBackend(Backend):
                         "tick_lateness_max_ms": float(late.max())})
         if self.held_at is not None:
             out["bridge_hold_at_s"] = self.held_at
+        out["bridge_stale_holds"] = float(len(self.stale_holds))
         if len(rtt):
             out.update({"rtt_median_ms": float(np.median(rtt)), "rtt_p99_ms": float(np.percentile(rtt, 99))})
         return out

@@ -1,0 +1,114 @@
+"""The bridge never applies a torque open-loop for long: a gap in the commands is held through, on its own ticks."""
+
+import socket
+
+import numpy as np
+import pytest
+
+from rehabkit.hardware.bridge import Bridge, MujocoPlant
+from rehabkit.hardware.protocol import CMD_RESET, COMMAND, ENABLED, HOLDING, STALE, STATE, WATCHDOG, Receiver, encode
+
+Q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
+PUSH = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # on the wrist: alone, it spins the wrist in a few hundred ms
+
+
+class Host:
+    """The host end, by hand: commands out, states in; the bridge ticked on a clock this test sets."""
+
+    def __init__(self, bridge: Bridge):
+        self.bridge, self.seq, self.now = bridge, 0, 0.0
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.settimeout(1.0)
+        self.rx = Receiver(STATE, 1, bridge.plant.joints)
+
+    def send(self, values: np.ndarray, flags: int = 0) -> None:
+        self.seq += 1
+        self.sock.sendto(encode(COMMAND, 1, self.seq, values, status=flags), ("127.0.0.1", self.bridge.port))
+
+    def tick(self, advance: bool = True):
+        """One bridge tick (the clock moves a period, or stands still as in a bridge catching up); its state."""
+        self.now += self.bridge.plant.timestep if advance else 0.0
+        self.bridge.tick(self.now)
+        msg = self.rx.accept(self.sock.recv(65536))
+        return msg.values[0], msg.values[1], msg.values[2], msg.status
+
+    def hold_gravity(self, ticks: int):
+        for _ in range(ticks):
+            q, qd, *_ = self.state
+            self.send(100 * (Q0 - q) - 5 * qd + self.bridge.plant.gravity(q))
+            self.state = self.tick()
+        return self.state
+
+
+def _started(hit, stale_s: float) -> Host:
+    bridge = Bridge(MujocoPlant(hit), watchdog_s=1.0, stale_s=stale_s)
+    host = Host(bridge)
+    host.send(Q0, CMD_RESET)
+    host.state = host.tick()
+    host.hold_gravity(50)
+    return host
+
+
+def _push_then_silence(host: Host, ticks: int, advance: bool = True) -> tuple[np.ndarray, list[int]]:
+    q, qd, *_ = host.state
+    host.send(host.bridge.plant.gravity(q) + PUSH)  # the last command before the host goes quiet
+    wrist, status = [], []
+    for _ in range(ticks):
+        q, qd, tau, st = host.tick(advance)
+        wrist.append(q[5])
+        status.append(st)
+    return np.degrees(np.array(wrist) - Q0[5]), status
+
+
+@pytest.fixture
+def bridges(hit):
+    made = []
+
+    def make(stale_s):
+        made.append(_started(hit, stale_s))
+        return made[-1]
+
+    yield make
+    for host in made:
+        host.sock.close()
+        host.bridge.sock.close()
+
+
+def test_a_gap_in_the_commands_is_held_through_not_pushed_through(bridges):
+    held = bridges(0.010)
+    wrist, status = _push_then_silence(held, 200)
+    assert held.hold_gravity(1)[3] == ENABLED  # not latched: the next command resumes torque control at once
+    open_loop = bridges(10.0)  # the old behaviour: the last torque stays on until the watchdog (1 s here)
+    wrist_ol, _ = _push_then_silence(open_loop, 200)
+    # 10 ms of the push, then the bridge holds where the wrist is (0.3° here); the open-loop push spins it away (60°)
+    assert np.abs(wrist).max() < 2.0 and np.abs(wrist_ol).max() > 20 * np.abs(wrist).max()
+    stale = [bool(s & STALE) for s in status]
+    assert stale.index(True) == 10 and all(stale[10:])  # 10 ticks of the push, then held
+    assert not any(s & (HOLDING | WATCHDOG) for s in status) and all(s & ENABLED for s in status)
+    assert held.bridge.stale_holds[0][1] == 190 and held.bridge.trips == []
+
+
+def test_a_bridge_catching_up_after_its_own_stall_holds_too(bridges):
+    """Ticks, not wall time, count: a bridge ticking through a backlog without new commands holds as well."""
+    host = bridges(0.010)
+    wrist, status = _push_then_silence(host, 100, advance=False)
+    assert all(s & STALE for s in status[11:]) and np.abs(wrist).max() < 2.0
+
+
+def test_the_watchdog_still_latches_a_hold_after_a_long_silence(hit):
+    bridge = Bridge(MujocoPlant(hit), watchdog_s=0.050, stale_s=0.010)
+    host = Host(bridge)
+    try:
+        host.send(Q0, CMD_RESET)
+        host.state = host.tick()
+        host.hold_gravity(20)
+        _, status = _push_then_silence(host, 80)
+        first_latched = next(i for i, s in enumerate(status) if s & HOLDING)
+        assert 49 <= first_latched <= 52 and status[first_latched] & WATCHDOG and not status[first_latched] & STALE
+        assert len(bridge.trips) == 1 and not status[-1] & ENABLED
+        q_stale = bridge.hold_q.copy()
+        host.hold_gravity(5)  # commands again: ignored while latched, only a reset re-enables
+        assert host.state[3] & HOLDING and np.allclose(bridge.hold_q, q_stale)
+    finally:
+        host.sock.close()
+        bridge.sock.close()
