@@ -132,7 +132,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rehabkit.core.plugins import default_registry
-    from rehabkit.hardware.bridge import Bridge, MujocoPlant
+    from rehabkit.hardware.bridge import Bridge, BridgeLimits, MujocoPlant
 
     registry = default_registry()
     info = registry.get("robot", args.robot)
@@ -144,7 +144,20 @@ def cmd_bridge(args: argparse.Namespace) -> int:
             _err(f"error: --effort needs {len(plant.effort)} positive torques [N·m], got {args.effort}")
             return EXIT_INVALID
         plant.effort = np.minimum(plant.effort, effort)  # never above the robot's own
-    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3, stale_s=args.stale_ms / 1e3)
+    limits = robot.model.limits  # the robot's own, unless the host sends the run's (narrowed by patient, envelope)
+    lower, upper, velocity = limits.lower, limits.upper, limits.velocity
+    if args.limits is not None:
+        try:
+            given = json.loads(args.limits)
+            lower, upper, velocity = (np.asarray(given[k], float) for k in ("lower", "upper", "velocity"))
+            if not lower.shape == upper.shape == velocity.shape == (plant.joints,):
+                raise ValueError(f"each needs {plant.joints} values")
+        except (ValueError, KeyError, TypeError) as exc:
+            _err(f"error: --limits needs lower, upper and velocity per joint: {exc}")
+            return EXIT_INVALID
+    backstop = BridgeLimits(lower, upper, velocity, margin=np.radians(args.limit_margin_deg))
+    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3, stale_s=args.stale_ms / 1e3,
+                    limits=backstop)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
     bridge.serve(args.duration, parent=args.parent_pid)
     return EXIT_OK
@@ -196,6 +209,11 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--watchdog-ms", type=float, default=5.0, help="hold the robot without valid commands this long")
     b.add_argument("--stale-ms", type=float, default=10.0,
                    help="hold the posture after this long without a newer command, until the next one")
+    b.add_argument("--limits", default=None, metavar="JSON",
+                   help="the run's joint limits {lower, upper, velocity} (default: the robot's); beyond them by the "
+                        "margin, or 25%% too fast, the bridge holds the robot on its own")
+    b.add_argument("--limit-margin-deg", type=float, default=2.0,
+                   help="how far beyond a joint's range the bridge's own check trips (the host's trips at 0.5°)")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
     b.add_argument("--parent-pid", type=int, default=None, help="stop when this process (the host) is gone")
     b.add_argument("--effort", default=None, metavar="JSON",

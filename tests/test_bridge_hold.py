@@ -5,8 +5,19 @@ import socket
 import numpy as np
 import pytest
 
-from rehabkit.hardware.bridge import Bridge, MujocoPlant
-from rehabkit.hardware.protocol import CMD_RESET, COMMAND, ENABLED, HOLDING, STALE, STATE, WATCHDOG, Receiver, encode
+from rehabkit.hardware.bridge import Bridge, BridgeLimits, MujocoPlant
+from rehabkit.hardware.protocol import (
+    CMD_RESET,
+    COMMAND,
+    ENABLED,
+    HOLDING,
+    LIMIT,
+    STALE,
+    STATE,
+    WATCHDOG,
+    Receiver,
+    encode,
+)
 
 Q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
 PUSH = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # on the wrist: alone, it spins the wrist in a few hundred ms
@@ -109,6 +120,35 @@ def test_the_watchdog_still_latches_a_hold_after_a_long_silence(hit):
         q_stale = bridge.hold_q.copy()
         host.hold_gravity(5)  # commands again: ignored while latched, only a reset re-enables
         assert host.state[3] & HOLDING and np.allclose(bridge.hold_q, q_stale)
+    finally:
+        host.sock.close()
+        bridge.sock.close()
+
+
+def test_the_bridge_stops_a_joint_beyond_its_limits_whatever_the_host_sends(hit):
+    """Its own check, a margin wider than the host's safety layer: here nothing on the host checks the push."""
+    lim = hit.model.limits
+    bridge = Bridge(MujocoPlant(hit), watchdog_s=1.0, limits=BridgeLimits(lim.lower, lim.upper, lim.velocity))
+    host = Host(bridge)
+    try:
+        host.send(Q0, CMD_RESET)
+        host.state = host.tick()
+        host.hold_gravity(20)
+        speeds = []
+        for _ in range(500):  # gravity and a push on the wrist, a fresh command every tick
+            q, qd, _, status = host.state
+            host.send(bridge.plant.gravity(q) + PUSH)
+            host.state = host.tick()
+            speeds.append(host.state[1][5])
+            if host.state[3] & HOLDING:
+                break
+        assert host.state[3] & LIMIT and not host.state[3] & ENABLED
+        assert bridge.trips[0][1].startswith("joint 5 too fast")
+        assert 1.25 * lim.velocity[5] < abs(speeds[-2]) < 1.30 * lim.velocity[5]  # tripped at the first tick past
+        for _ in range(300):  # held: the pushes are ignored, the wrist is brought to rest
+            host.send(bridge.plant.gravity(host.state[0]) + PUSH)
+            host.state = host.tick()
+        assert abs(host.state[1][5]) < 0.05 and host.state[3] & HOLDING
     finally:
         host.sock.close()
         bridge.sock.close()

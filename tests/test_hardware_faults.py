@@ -69,7 +69,9 @@ def test_an_impaired_link_is_ridden_out_safely(impairment, dropped, tmp_path):
     assert m["joint_limit_excess_deg"] == 0  # never beyond a joint range
     events = r.summary["safety"]["events"]
     if events:  # a lossy link can make stiff gains ring: then the safety layer must have caught it and held
-        assert events[0]["rule"] in ("velocity", "torque") and "robot held" in events[0]["message"]
+        ev = events[0]  # on the host, or the bridge's own check if the states that showed it first were lost
+        assert (ev["rule"] in ("velocity", "torque") and "robot held" in ev["message"]
+                or ev["rule"] == "backend" and "its own limit check" in ev["message"]), ev
     else:  # or it rides it out: the whole run, and it still gets there
         assert m["link_ticks"] == 8500 and m["final_position_error_m"] < 0.01
     if dropped:  # late and forged states were seen and thrown away, never applied

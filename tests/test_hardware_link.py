@@ -210,3 +210,30 @@ def test_the_bridge_clips_to_the_runs_torque_limits_not_only_the_robots():
             backend.close()
     # 30 ms of 0.3 N·m against 30 ms of 0.03 N·m on the same wrist: about ten times the speed
     assert speeds["robot's"] > 5 * speeds["envelope's"] > 0
+
+
+def test_the_bridge_checks_the_runs_ranges_on_its_own():
+    """A backstop to the host's safety layer: the run's (here narrowed) range reaches the bridge, which holds
+    the robot when a joint goes past it by its margin, whatever the host sends (here raw, past the safety layer),
+    and the host says why."""
+    from rehabkit_plugins.robots.hit import HitConfig, HitRobot
+
+    robot = HitRobot(HitConfig())
+    robot.model.limits = robot.model.limits.override(5, upper=np.radians(100.0))  # wrist_2 starts at 90°
+    ctx = Context(Path("."), np.random.default_rng(0), 0.001, robot=robot, robot_spec={"type": "hit"})
+    backend = HardwareBackend(HardwareConfig(bridge_watchdog_ms=200), ctx)
+    try:
+        q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
+        backend.reset(q0)
+        with pytest.raises(BridgeHoldError, match=r"its own limit check: wrist_2 = 1\.7\d\d beyond its range "
+                                                  r"\(limit 1\.745\)"):
+            for _ in range(1000):
+                _, q, qd = backend.state()
+                tau = 100 * (q0 - q) - 5 * qd + robot.gravity_torque(q)
+                tau[5] = 0.2  # a slow push past 100°, well within the robot's own 170°
+                backend.command(tau)
+                backend.step(1)
+        held = np.degrees(backend.state()[1][5])
+        assert 102.0 < held < 103.0  # 2° past the range: the bridge's margin (the host's safety layer: 0.5°)
+    finally:
+        backend.close()

@@ -10,17 +10,22 @@ stall, lost packets) it holds the posture it is at (PD to it plus gravity; statu
 ``STALE``) until the next command, which resumes torque control at once. Ticks, not wall
 time, count here, so a bridge catching up after a stall of its own holds too. If no valid
 command arrives for ``watchdog_s`` while running, or an e-stop command comes, the hold is
-latched (status ``HOLDING``) and only a reset from the host re-enables the robot. Real drives plug in as another
+latched (status ``HOLDING``) and only a reset from the host re-enables the robot. Given the
+run's joint limits, the bridge is also a backstop to the host's safety layer: a joint beyond
+its range or speed by more than a margin (wider than the host's, which acts first) latches
+the hold too (status ``LIMIT``), whatever the host is doing. Real drives plug in as another
 :class:`Plant`; :class:`MujocoPlant` is the robot's MuJoCo model as the plant, for tests and
 hardware-in-the-loop rehearsal.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 import time
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -36,6 +41,7 @@ from rehabkit.hardware.protocol import (
     ENABLED,
     ESTOPPED,
     HOLDING,
+    LIMIT,
     STALE,
     STATE,
     WATCHDOG,
@@ -115,12 +121,38 @@ class MujocoPlant(Plant):
         return self.robot.gravity_torque(q)
 
 
+@dataclass
+class BridgeLimits:
+    """Where the bridge stops the robot on its own: the run's joint limits widened by a margin, so that the
+    host's safety layer (0.5° beyond the range by default) acts first and this only when it did not."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    margin: float = math.radians(2.0)  # beyond the range [rad, or m for a sliding joint]
+    speed_factor: float = 1.25  # beyond the speed limit
+
+    def breach(self, q: np.ndarray, qd: np.ndarray) -> str | None:
+        """Why the state is beyond the limits, or None."""
+        out = (q < self.lower - self.margin) | (q > self.upper + self.margin)
+        fast = np.abs(qd) > self.speed_factor * self.velocity
+        if not (out.any() or fast.any()):
+            return None
+        if out.any():
+            k = int(np.argmax(out))
+            side = "lower" if q[k] < self.lower[k] else "upper"
+            return f"joint {k} beyond its {side} limit: {q[k]:.4f} (limit {getattr(self, side)[k]:.4f})"
+        k = int(np.argmax(fast))
+        return f"joint {k} too fast: {qd[k]:.3f} (limit {self.velocity[k]:.3f})"
+
+
 class Bridge:
-    """Serves one host over UDP at the plant's rate, with a command watchdog and an e-stop."""
+    """Serves one host over UDP at the plant's rate, with a command watchdog, an e-stop, a hold through gaps in
+    the commands and (given ``limits``) its own limit check."""
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
-                 watchdog_s: float = 0.005, stale_s: float = 0.010):
-        self.plant, self.robot_id, self.watchdog_s = plant, robot_id, watchdog_s
+                 watchdog_s: float = 0.005, stale_s: float = 0.010, limits: BridgeLimits | None = None):
+        self.plant, self.robot_id, self.watchdog_s, self.limits = plant, robot_id, watchdog_s, limits
         self.stale_ticks = max(1, round(stale_s / plant.timestep))
         self.since_command = 0  # plant ticks since the newest torque command
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
@@ -180,6 +212,8 @@ class Bridge:
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
+        if self.limits is not None and self.status & ENABLED and (why := self.limits.breach(q, qd)):
+            self._hold(now, why, LIMIT)
         if self.status & ENABLED and not self.waiting:
             self.since_command += 1
             if self.since_command > self.stale_ticks:

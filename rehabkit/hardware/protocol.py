@@ -42,6 +42,8 @@ CRC = struct.Struct("<I")
 ENABLED, HOLDING, ESTOPPED, WATCHDOG = 1, 2, 4, 8
 # the bridge bridges a gap in the commands by holding the posture itself (still enabled: the next command resumes)
 STALE = 16
+# the bridge's own limit check tripped (a joint beyond its range or speed by more than the bridge's margin)
+LIMIT = 32
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
 

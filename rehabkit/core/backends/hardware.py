@@ -43,6 +43,7 @@ from rehabkit.hardware.protocol import (
     COMMAND,
     ESTOPPED,
     HOLDING,
+    LIMIT,
     STALE,
     STATE,
     WATCHDOG,
@@ -89,6 +90,7 @@ class HardwareBackend(Backend):
         self.config, self.timestep = config, config.timestep
         robot = context.robot
         self.n = robot.model.dof
+        self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
         self.mirror = SceneMirror(robot.model, context.world)
         self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
         self.measured = np.zeros(self.mirror.measured_count)
@@ -125,7 +127,10 @@ class HardwareBackend(Backend):
                "--watchdog-ms", str(config.bridge_watchdog_ms), "--stale-ms", str(config.bridge_stale_ms),
                "--parent-pid", str(os.getpid()),
                # the run's torque limits (the envelope's may be tighter than the robot's): the bridge clips to them
-               "--effort", json.dumps(context.robot.model.limits.effort.tolist())]
+               "--effort", json.dumps(context.robot.model.limits.effort.tolist()),
+               # and checks the run's ranges and speeds on its own, a margin wider than the host's safety layer
+               "--limits", json.dumps({k: getattr(context.robot.model.limits, k).tolist()
+                                       for k in ("lower", "upper", "velocity")})]
         # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
         log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
@@ -165,10 +170,20 @@ class HardwareBackend(Backend):
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
                     why = (f"its watchdog saw no valid command for {self.config.bridge_watchdog_ms:g} ms"
                            if msg.status & WATCHDOG else "an e-stop at the robot" if msg.status & ESTOPPED else
-                           "status holding")
+                           self._beyond() if msg.status & LIMIT else "status holding")
                     self._fault = f"the bridge holds the robot ({why}) at t={self.held_at:.3f}s"
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
+
+    def _beyond(self) -> str:
+        """What the bridge's own limit check saw, from the state it held at."""
+        lim, names = self.limits, self.joint_names
+        k = int(np.argmax(np.maximum(lim.lower - self.q, self.q - lim.upper)))
+        if self.q[k] < lim.lower[k] or self.q[k] > lim.upper[k]:
+            bound = lim.lower[k] if self.q[k] < lim.lower[k] else lim.upper[k]
+            return f"its own limit check: {names[k]} = {self.q[k]:.3f} beyond its range (limit {bound:.3f})"
+        k = int(np.argmax(np.abs(self.qd) / lim.velocity))
+        return f"its own limit check: {names[k]} at {self.qd[k]:.3f} too fast (limit {lim.velocity[k]:.3f})"
 
     def _note_stale(self, msg, t: float) -> None:
         """Holds through gaps in the commands, from the bridge's count of held ticks: exact even when the states
