@@ -109,13 +109,18 @@ def test_heartbeat_sets_the_links_timing(hit):
     from rehabkit.core.backends.hardware import HardwareBackend, HardwareConfig
     from rehabkit.core.interfaces import Context
 
-    safety = SafetyConfig.model_validate({"heartbeat": {"command_timeout_ms": 80, "state_timeout_ms": 150}})
+    safety = SafetyConfig.model_validate({"heartbeat": {"command_timeout_ms": 80, "state_timeout_ms": 150,
+                                                        "hold_after_ms": 4}})
     ctx = Context(Path("."), np.random.default_rng(0), 0.001, robot=hit, robot_spec={"type": "hit"}, safety=safety)
     backend = HardwareBackend(HardwareConfig(spawn_bridge=False, port=9), ctx)
     try:
         assert backend.config.bridge_watchdog_ms == 80 and backend.config.state_timeout_s == pytest.approx(0.15)
+        assert backend.config.bridge_stale_ms == 4
     finally:
         backend.close()
+    with pytest.raises(ValueError, match="hold_after_ms .50. must be below command_timeout_ms .20."):
+        SafetyConfig.model_validate({"heartbeat": {"command_timeout_ms": 20, "hold_after_ms": 50}})
+    assert SafetyConfig.model_validate({"heartbeat": {"command_timeout_ms": 6}}).heartbeat.hold_after == 3.0
 
 
 def test_the_patients_comfort_force_stops_a_session_that_presses_too_hard():

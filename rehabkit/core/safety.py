@@ -67,6 +67,21 @@ class Heartbeat(StrictModel):
     command_timeout_ms: float = Field(50.0, gt=0, description="the robot side holds the robot without a valid "
                                                                "command this long")
     state_timeout_ms: float = Field(100.0, gt=0, description="the host stops without a valid state this long")
+    hold_after_ms: float | None = Field(None, gt=0, description="the robot side holds the posture (not the last "
+                                        "torque) without a newer command this long, until the next one (default: "
+                                        "10 ms, or half the command timeout if that is shorter)")
+
+    @property
+    def hold_after(self) -> float:
+        """The hold's delay [ms], its default filled in."""
+        return self.hold_after_ms if self.hold_after_ms is not None else min(10.0, self.command_timeout_ms / 2)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Heartbeat:
+        if self.hold_after_ms is not None and self.hold_after_ms >= self.command_timeout_ms:
+            raise ValueError(f"hold_after_ms ({self.hold_after_ms:g}) must be below command_timeout_ms "
+                             f"({self.command_timeout_ms:g}): the hold bridges a gap before the watchdog latches")
+        return self
 
 
 class SafetyConfig(StrictModel):

@@ -86,7 +86,8 @@ class HardwareBackend(Backend):
         beat = getattr(context.safety, "heartbeat", None)
         if beat is not None:  # the scenario's safety envelope sets the link timing, over the backend's defaults
             config = config.model_copy(update={"bridge_watchdog_ms": beat.command_timeout_ms,
-                                               "state_timeout_s": beat.state_timeout_ms / 1e3})
+                                               "state_timeout_s": beat.state_timeout_ms / 1e3,
+                                               "bridge_stale_ms": beat.hold_after})
         self.config, self.timestep = config, config.timestep
         robot = context.robot
         self.n = robot.model.dof
