@@ -90,12 +90,28 @@ def cmd_validate(args: argparse.Namespace) -> int:
     status = EXIT_OK
     for path in args.scenarios:
         try:
-            load_scenario(path, args.set)
-            print(f"{path}: ok")
+            loaded = load_scenario(path, args.set)
+            print(f"{path}: ok{_admission(loaded)}")
         except ScenarioError as exc:
             _err(str(exc))
             status = EXIT_INVALID
+        except ValueError as exc:
+            _err(f"{path}: {exc}")
+            status = EXIT_INVALID
     return status
+
+
+def _admission(loaded) -> str:
+    """With a patient or envelope ranges: the targets checked against them, as the run's setup will."""
+    from rehabkit.rehab.admission import check_admission
+
+    if loaded.model.patient is None and not loaded.model.safety.joints:
+        return ""
+    whose, replaced = check_admission(loaded, default_registry())
+    if not replaced:
+        return f" (fixed targets within {whose}'s ranges)"
+    return "".join(f"\n  target '{r['target']}' outside the range of {', '.join(r['joints'])}: would be replaced by "
+                   f"the nearest admissible posture ({1e3 * r['moved_m']:.1f} mm away)" for r in replaced)
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:
@@ -191,7 +207,8 @@ def parser() -> argparse.ArgumentParser:
                     help="what to change, e.g. controller.type=assist-as-needed")
     rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>)")
     rp.set_defaults(func=cmd_replay)
-    v = sub.add_parser("validate", help="check scenario files without running them")
+    v = sub.add_parser("validate", help="check scenario files without running them (and their fixed targets "
+                                         "against a patient's ranges)")
     v.add_argument("scenarios", nargs="+")
     v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     v.set_defaults(func=cmd_validate)

@@ -44,6 +44,19 @@ def test_validate_reports_location_and_suggestion_and_exits_2(tmp_path):
     assert "Traceback" not in r.stderr
 
 
+def test_validate_checks_fixed_targets_against_the_patients_range():
+    """The run's setup refusal, before anything runs: located, the joint and the range named, the fix suggested."""
+    example = str(ROOT / "examples" / "patient_out_of_range.yaml")
+    r = cli("validate", example, str(SCENARIOS / "lexos_patient.yaml"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert ("hit_roundtrip.yaml:30:7: task.targets.0: target 'A': its joint values put elbow_1 at 90.0°, outside "
+            "patient P03's passive range [20.0, 80.0]°") in r.stderr and "outside_rom: nearest" in r.stderr
+    assert "lexos_patient.yaml: ok (fixed targets within patient P01's ranges)" in r.stdout
+    r = cli("validate", example, "--set", "patient.outside_rom=nearest")
+    assert r.returncode == 0
+    assert "target 'A' outside the range of elbow_1: would be replaced by the nearest admissible posture" in r.stdout
+
+
 def test_missing_file_and_setup_errors_are_messages_not_tracebacks(tmp_path):
     r = cli("run", str(tmp_path / "nope.yaml"))
     assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr

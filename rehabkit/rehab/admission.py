@@ -168,3 +168,31 @@ def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robo
             targets[spec.name] = Target(spec.name, q=None if orig.q is None else orig.q.copy(),
                                         pose=orig.pose.copy(), position_only=orig.position_only, same_as=tgt.same_as)
     return replaced
+
+
+def check_admission(loaded, registry) -> tuple[str, list[dict]]:
+    """What a run's setup would say of a scenario's fixed targets against its patient's (and envelope's) ranges,
+    without a backend, planner or anything else: the robot (with the profile's segment lengths), the narrowed
+    limits, the targets.
+
+    Returns:
+        Whose ranges were checked, and the replacements ``outside_rom: nearest`` would make.
+    Raises:
+        ScenarioError: as the run would (an unknown joint name, a target outside the narrowed ranges).
+        ValueError: the robot cannot be built from its section, or ranges that don't overlap.
+    """
+    from rehabkit.core.interfaces import PlanningError
+    from rehabkit.core.targets import resolve_targets
+
+    sc = loaded.model
+    robot_cfg, _ = adapt_segments(sc.robot, sc.patient, loaded.source)
+    robot = registry.get("robot", robot_cfg.type).factory(robot_cfg, None)
+    robot_limits = robot.model.limits
+    robot.model.limits, sources = narrowed_limits(robot.model, sc.patient, sc.safety, loaded.source)
+    try:
+        targets = resolve_targets(sc.task, robot, sc.seed)
+    except PlanningError as exc:
+        raise ValueError(f"task: {exc}") from exc
+    replaced = admit_targets(targets, sc.task, robot, robot_limits, sources, sc.patient, loaded.source)
+    whose = f"patient {sc.patient.id}" if sc.patient is not None else "the safety envelope"
+    return whose, replaced
