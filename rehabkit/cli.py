@@ -36,6 +36,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         value = "missing" if e["value"] is None else f"{e['value']:.6g}"
         print(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
               + (f"  — {e['reason']}" if e.get("reason") else ""))
+    for w in s["safety"].get("plan_warnings", []):
+        print(f"  PLAN    {w['message']}")
     for ev in s["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
     for r in (s.get("patient") or {}).get("replaced_targets", []):

@@ -87,6 +87,9 @@ def test_hand_leaving_the_box_stops_the_run_in_simulation(box_run, hit):
     assert speed[-1] < 0.3 * speed[k]  # held: slowing to a stop afterwards
     assert box_run.summary["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.3, abs=2e-3)
     assert box_run.metrics["safety_interventions"] == 1
+    # and it was said before moving: the plan's hand path, against the same box, leaves it where the hand did
+    (warning,) = box_run.summary["safety"]["plan_warnings"]
+    assert warning["t"] == 0.0 and abs(warning["at_s"] - ev[0]["t"]) < 0.02 and "(z min" in warning["message"]
 
 
 def test_ramp_in_starts_from_holding_and_ramp_out_ends_there():

@@ -69,6 +69,7 @@ class Runner:
         self.out_dir, self.spawn, self.progress = out_dir, spawn, progress
         self.observations: dict[str, dict[str, Any]] = {}
         self.notes: list[dict[str, Any]] = []
+        self.plan_warnings: list[dict[str, Any]] = []  # what a plan will run into (the keep-in box)
         self.log: RerunLog | None = None
 
     # -- construction -------------------------------------------------------
@@ -196,7 +197,23 @@ class Runner:
         if problem:
             self.safety.trip(t, q, "plan", f"{problem}; not executed")
             return None
+        self._check_box(t, plan)
         return self._accept(plan)
+
+    def _check_box(self, t: float, plan: Plan) -> None:
+        """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""
+        if not self.safety.watches_box:
+            return
+        ts = np.arange(0.0, plan.trajectory.duration + 1e-9, 0.005)
+        samples = plan.trajectory.sample(ts)[0]
+        hand = (self._to_world(samples[:, :3]) if self.planner.space == "cartesian"
+                else self.robot.ee_world(samples))
+        found = self.safety.box_exit(hand)
+        if found is not None:
+            k, a, side, bound = found
+            self.plan_warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "message": (
+                f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({'xyz'[a]} {side} {bound:g}) "
+                f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")})
 
     @staticmethod
     def _action_problem(plan: Plan) -> str | None:

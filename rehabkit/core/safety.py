@@ -273,15 +273,24 @@ class SafetyLayer:
         tau *= s
         tau += (1.0 - s) * hold
 
+    def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
+        """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
+        lo, hi = self._box
+        out = (points < lo) | (points > hi)
+        rows = np.flatnonzero(out.any(axis=1))
+        if not len(rows):
+            return None
+        k = int(rows[0])
+        a = int(np.argmax(out[k]))
+        below = bool(points[k, a] < lo[a])
+        return k, a, "min" if below else "max", float(lo[a] if below else hi[a])
+
     def _outside_box(self, t: float, q: np.ndarray) -> bool:
         x = self._hand(q)
-        lo, hi = self._box
-        below, above = x < lo, x > hi
-        if not (below.any() or above.any()):
+        found = self.box_exit(x[None])
+        if found is None:
             return False
-        a = int(np.argmax(below | above))
-        bound = float(lo[a] if below[a] else hi[a])
-        side = "min" if below[a] else "max"
+        _, a, side, bound = found
         self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
                    {"axis": AXES[a], "hand_m": np.round(x, 5).tolist()})
         return True
