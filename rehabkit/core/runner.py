@@ -26,7 +26,7 @@ from rehabkit.core.log import RerunLog, encode_images
 from rehabkit.core.metrics import Trace
 from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
 from rehabkit.core.results import RunResult, build_summary, collect_metrics
-from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.safety import AXES, SafetyLayer
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.core.targets import resolve_targets
@@ -212,7 +212,7 @@ class Runner:
         if found is not None:
             k, a, side, bound = found
             self.plan_warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "message": (
-                f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({'xyz'[a]} {side} {bound:g}) "
+                f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) "
                 f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")})
 
     @staticmethod

@@ -287,8 +287,11 @@ class SafetyLayer:
 
     def _outside_box(self, t: float, q: np.ndarray) -> bool:
         x = self._hand(q)
+        lo, hi = self._box
+        if (x >= lo).all() and (x <= hi).all():  # the every-step case, kept cheap
+            return False
         found = self.box_exit(x[None])
-        if found is None:
+        if found is None:  # NaN: the non-finite rule has it
             return False
         _, a, side, bound = found
         self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
