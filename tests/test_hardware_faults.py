@@ -100,8 +100,9 @@ def _stall_the_host(monkeypatch, at: float, seconds: float) -> None:
 
 def test_a_host_stall_mid_motion_is_held_through_not_pushed_through(bridge, monkeypatch, tmp_path):
     """No command for 100 ms while HIT moves (the host stalled): after 10 ms the bridge holds the posture, not the
-    last torque, and the run goes on. Before it did, such a stall left the torque on open-loop (measured: a 100 ms
-    host stall at t = 2 s tripped the speed limit of elbow_1 at 3.9 rad/s, 13.6° off the simulated path). A bridge
+    last torque; the host then skips the missed ticks (its timeline pauses) and the run goes on. Before the hold,
+    such a stall left the torque on open-loop (measured: a 100 ms host stall at t = 2 s tripped the speed limit of
+    elbow_1 at 3.9 rad/s, 13.6° off the simulated path). A bridge
     catching up on its own stall holds the same way (``test_bridge_hold``)."""
     _, port = bridge
     _stall_the_host(monkeypatch, 2.0, 0.100)
@@ -109,9 +110,10 @@ def test_a_host_stall_mid_motion_is_held_through_not_pushed_through(bridge, monk
     m = r.metrics
     assert m["safety_events"] == 0, r.summary["safety"]["events"]
     holds = [e for e in r.summary["safety"]["interventions"] if e["rule"] == "stale-command"]
-    longest = max(holds, key=lambda e: e["value"])
-    assert 80 <= longest["value"] <= 100  # the stall, less the 10 ms of the last torque
-    assert 2.005 <= longest["t"] <= 2.03 and m["tick_lateness_max_ms"] >= 90  # 10 ms after the stall began
+    at_stall = [e["value"] for e in holds if 1.995 <= e["t"] <= 2.03]  # (this VM may add stalls of its own)
+    assert at_stall and max(at_stall) >= 80  # the stall, less the 10 ms of the last torque
+    assert m["tick_lateness_max_ms"] >= 90
+    assert m["ticks_skipped_s"] >= 0.085  # the task's timeline paused through the stall, not rushed after it
     assert m["link_ticks"] == 8500 and m["final_position_error_m"] < 0.005
     assert m["tracking_max_deg"] < 3.0
     assert m["bridge_stale_holds"] == len(holds)

@@ -5,7 +5,10 @@ sleeps to its deadline, and the newest valid state that came back is taken. Dead
 misses (a tick that starts late), tick lateness (jitter) and round-trip latency (from the
 echo of each command in the bridge's state) are counted for ``summary.json``, and so are the
 bridge's holds through gaps in the commands (``bridge_stale_ms``; see the bridge), each a
-``stale-command`` safety intervention. If no valid
+``stale-command`` safety intervention. A stall of this host longer than that hold pauses the
+task's timeline (the missed ticks are skipped and counted, ``ticks_skipped_s``) rather than
+catching up: the bridge has held the robot meanwhile, and a burst of late commands would drive
+it toward a reference that ran ahead. If no valid
 state arrives for ``state_timeout_s`` the link is lost: the run stops with that reason
 (:class:`LinkLostError`), the logs complete. With ``spawn_bridge`` the backend starts
 ``rehabkit bridge`` itself, driving the robot's MuJoCo model as the plant: the same
@@ -21,6 +24,7 @@ pixels rendered in a process of their own (:mod:`~rehabkit.core.backends.frame_s
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import subprocess
@@ -114,8 +118,9 @@ class HardwareBackend(Backend):
         self.rtt_at: list[int] = []  # round trips measured before each tick, to place them on the timeline
         self.held_at: float | None = None  # when the bridge first reported holding the robot
         self.stale_holds: list[list[float]] = []  # [start, ticks] of each gap in the commands the bridge held through
-        self._held, self._stale_open = 0, False
+        self._held, self._stale_open, self._state_t = 0, False, 0.0
         self.silent_ticks = 0
+        self.resync_s, self.skipped_s = config.bridge_stale_ms / 1e3, 0.0
         self._started = False
         self._estop_sent = False
         self._fault: str | None = None
@@ -190,11 +195,11 @@ class HardwareBackend(Backend):
         """Holds through gaps in the commands, from the bridge's count of held ticks: exact even when the states
         sent during a hold were lost or came too late (as after a stall of this host)."""
         ticks, self._held = (msg.held - self._held) % 0x10000, msg.held
-        if ticks and not self._stale_open:
-            self.stale_holds.append([max(0.0, t - ticks * self.timestep), 0])
+        if ticks and not self._stale_open:  # (not before the state before it: a paused timeline is shorter)
+            self.stale_holds.append([max(self._state_t, t - ticks * self.timestep), 0])
         if ticks or self._stale_open:
             self.stale_holds[-1][1] += ticks
-        self._stale_open = bool(msg.status & STALE)
+        self._stale_open, self._state_t = bool(msg.status & STALE), t
 
     def interventions(self) -> list[SafetyEvent]:
         """The bridge's holds through gaps in the commands, as safety events."""
@@ -223,7 +228,7 @@ class HardwareBackend(Backend):
         self.t0 = self.deadline = self.last_state = time.monotonic()
         self._started = False
         self.held_at, self._fault, self._estop_sent = None, None, False  # a reset re-enables the bridge
-        self.stale_holds, self._held, self._stale_open = [], 0, False
+        self.stale_holds, self._held, self._stale_open, self._state_t = [], 0, False, 0.0
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         return self.deadline - self.t0, self.q, self.qd
@@ -243,6 +248,13 @@ class HardwareBackend(Backend):
             late = time.monotonic() - self.deadline
             self.ticks += 1
             self.lateness.append(late)
+            if late > self.resync_s:
+                # a stall longer than the bridge's hold: it has held the robot, so rushing through the missed ticks
+                # would drive it with a reference that ran ahead meanwhile; the task's timeline pauses instead
+                skipped = math.floor(late / self.timestep) * self.timestep
+                self.deadline += skipped
+                self.t0 += skipped
+                self.skipped_s += skipped
             self.rtt_at.append(len(self.rtt))
             if late > self.timestep:  # this tick starts after the next one was due
                 self.misses += 1
@@ -320,6 +332,7 @@ class HardwareBackend(Backend):
         if self.held_at is not None:
             out["bridge_hold_at_s"] = self.held_at
         out["bridge_stale_holds"] = float(len(self.stale_holds))
+        out["ticks_skipped_s"] = self.skipped_s
         if len(rtt):
             out.update({"rtt_median_ms": float(np.median(rtt)), "rtt_p99_ms": float(np.percentile(rtt, 99))})
         return out
