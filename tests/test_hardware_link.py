@@ -179,7 +179,10 @@ def test_a_safety_breach_logs_the_same_event_in_simulation_and_over_the_link(tmp
     assert len(a) == len(b) == 1
     assert {k: a[0][k] for k in ("rule", "joint", "limit")} == {k: b[0][k] for k in ("rule", "joint", "limit")}
     assert a[0]["rule"] == "keep-in" and a[0]["data"]["axis"] == b[0]["data"]["axis"] == "z"
-    assert abs(a[0]["t"] - b[0]["t"]) < 0.02 and abs(a[0]["value"] - b[0]["value"]) < 0.002
+    # the same time to 20 ms, give or take the longest stall of this VM in the run over the link (the timeline
+    # pauses through a stall while the robot coasts into the bridge's hold: seen in CI as 20-25 ms early)
+    slack = 0.02 + hw.metrics["tick_lateness_max_ms"] / 1e3
+    assert abs(a[0]["t"] - b[0]["t"]) < slack and abs(a[0]["value"] - b[0]["value"]) < 0.002
     assert a[0]["message"].split(": ")[1] == b[0]["message"].split(": ")[1] == "hand outside the keep-in box (z min)"
     assert sim.summary["safety"]["tripped"] and hw.summary["safety"]["tripped"]
 
