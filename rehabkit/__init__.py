@@ -8,8 +8,7 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and not os
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 from rehabkit.core.hookspecs import hookimpl  # noqa: E402
-
-__version__ = "0.1.0"
+from rehabkit.core.version import __version__  # noqa: E402
 
 
 def __getattr__(name: str):

@@ -14,6 +14,7 @@ import sys
 import traceback
 from pathlib import Path
 
+from rehabkit.core.errors import SetupError
 from rehabkit.core.plugins import PluginError, default_registry
 from rehabkit.core.scenario.errors import ScenarioError
 
@@ -97,23 +98,27 @@ def cmd_validate(args: argparse.Namespace) -> int:
         except ScenarioError as exc:
             _err(str(exc))
             status = EXIT_INVALID
-        except ValueError as exc:
+        except (ValueError, SetupError) as exc:
             _err(f"{path}: {exc}")
             status = EXIT_INVALID
     return status
 
 
 def _admission(loaded) -> str:
-    """With a patient or envelope ranges: the targets checked against them, as the run's setup will."""
-    from rehabkit.rehab.admission import check_admission
+    """The run's setup up to its targets (robot, narrowed limits, capabilities, admitted targets), as `run`
+    does it; with a patient or envelope ranges, what became of the fixed targets."""
+    from rehabkit.core.assembly import assemble
+    from rehabkit.core.lifecycle import default_extensions
 
-    if loaded.model.patient is None and not loaded.model.safety.joints:
+    setup = assemble(loaded, default_registry(), default_extensions(), upto="targets")
+    sc = loaded.model
+    if sc.patient is None and not sc.safety.joints:
         return ""
-    whose, replaced = check_admission(loaded, default_registry())
-    if not replaced:
+    whose = f"patient {sc.patient.id}" if sc.patient is not None else "the safety envelope"
+    if not setup.replaced:
         return f" (fixed targets within {whose}'s ranges)"
     return "".join(f"\n  target '{r['target']}' outside the range of {', '.join(r['joints'])}: would be replaced by "
-                   f"the nearest admissible posture ({1e3 * r['moved_m']:.1f} mm away)" for r in replaced)
+                   f"the nearest admissible posture ({1e3 * r['moved_m']:.1f} mm away)" for r in setup.replaced)
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:
@@ -261,8 +266,6 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
     except Exception as exc:  # the last line of defence: a message, and the traceback only on request
-        from rehabkit.core.runner import SetupError
-
         if isinstance(exc, SetupError):
             _err(f"error: {exc}")
             return EXIT_INVALID

@@ -49,8 +49,9 @@ def test_validate_checks_fixed_targets_against_the_patients_range():
     example = str(ROOT / "examples" / "patient_out_of_range.yaml")
     r = cli("validate", example, str(SCENARIOS / "lexos_patient.yaml"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert ("hit_roundtrip.yaml:30:7: task.targets.0: target 'A': its joint values put elbow_1 at 90.0°, outside "
-            "patient P03's passive range [20.0, 80.0]°") in r.stderr and "outside_rom: nearest" in r.stderr
+    assert ("hit_roundtrip.yaml:30:7: task.targets.0: target 'A': its joint values put elbow_1 beyond its position "
+            "limit (90.0°, limit 80.0°): patient P03's passive range is [20.0, 80.0]°") in r.stderr
+    assert "outside_rom: nearest" in r.stderr
     assert "lexos_patient.yaml: ok (fixed targets within patient P01's ranges)" in r.stdout
     r = cli("validate", example, "--set", "patient.outside_rom=nearest")
     assert r.returncode == 0

@@ -55,7 +55,8 @@ def test_a_joint_target_outside_the_patients_range_is_refused_with_its_place(tmp
     with pytest.raises(ScenarioError) as err:
         run_scenario(path)
     text = str(err.value)
-    assert "target 'A'" in text and "elbow_1 at 90.0°" in text and "patient P9's passive range [20.0, 80.0]°" in text
+    assert "target 'A'" in text and "elbow_1 beyond its position limit (90.0°, limit 80.0°)" in text
+    assert "patient P9's passive range is [20.0, 80.0]°" in text
     assert "outside_rom: nearest" in text
     assert f"{HIT.name}:" in text and ":" in text.split(HIT.name + ":")[1]  # file:line:col of the target
     line = int(text.split(HIT.name + ":")[1].split(":")[0])
@@ -71,7 +72,7 @@ def test_a_cartesian_target_whose_posture_leaves_the_range_is_refused(tmp_path):
     with pytest.raises(ScenarioError) as err:
         run_scenario(path)
     text = str(err.value)
-    assert "target 'B'" in text and "the posture the IK finds for it put shoulder_2" in text
+    assert "target 'B'" in text and "the posture the IK finds for it puts shoulder_2 beyond its position limit" in text
     assert "target 'A'" not in text
 
 
@@ -127,16 +128,19 @@ def test_the_lexos_adapts_its_segments_to_the_profile_unless_the_scenario_sets_t
     run = Runner(load_scenario(path))
     run.build()
     assert run.robot.lengths == (0.31, 0.31)  # upper_arm set in the scenario wins; forearm from the profile
-    assert "from the profile" in run.segments["forearm"] and "set in the scenario" in run.segments["upper_arm"]
-    assert "no setting 'hand'" in run.segments["hand"]
+    segments = run.setup.extras["segments"]  # what the rehab extension did, as summary.json's patient.segments
+    assert "from the profile" in segments["forearm"] and "set in the scenario" in segments["upper_arm"]
+    assert "no setting 'hand'" in segments["hand"]
 
 
 def test_a_plan_faster_than_the_patients_comfort_is_refused_before_it_runs(tmp_path):
     # the round trip's 2 s segments turn the wrist at ~35 °/s; this person is comfortable with 20 °/s
     path = _scenario(tmp_path, {"id": "P9", "side": "right", "comfort": {"max_speed_deg_s": 20}})
-    with pytest.raises(SetupError, match=r"breaks the velocity limit of wrist_1 at t\+0.250s \(\d+\.\d °/s, "
-                                         r"limit 20.0 °/s\)"):
+    with pytest.raises(SetupError, match="planned trajectory: wrist_1 beyond its velocity limit") as err:
         run_scenario(path, out_dir=tmp_path / "o")
+    breach = err.value.breach  # what the message says, as fields
+    assert (breach.quantity, breach.joint, breach.at_s) == ("velocity", "wrist_1", pytest.approx(0.25))
+    assert breach.limit == pytest.approx(np.radians(20.0)) and breach.value > breach.limit
     assert not (tmp_path / "o" / "summary.json").exists()
     slower = run_scenario(path, {"planner.segment_durations": [5, 5, 5, 5], "duration": 20.5})
     assert slower.summary["safety"]["events"] == [] and slower.metrics["final_position_error_m"] < 0.005

@@ -96,5 +96,6 @@ def test_a_crashing_run_is_recorded_with_its_error_and_the_others_complete(tmp_p
     assert len(result.records) == 4
     ok, crashed = result.records[:2], result.records[2:]
     assert all(r["error"] is None and r["passed"] for r in ok)
-    assert all("qp-stack needs a floating-base robot" in r["error"] and not r["passed"] for r in crashed)
+    assert all("controller 'qp-stack' needs a robot that has a floating base" in r["error"] and not r["passed"]
+               for r in crashed)
     assert [a["errors"] for a in result.aggregate] == [0, 2] and len(result.failed) == 2

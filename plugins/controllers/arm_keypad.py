@@ -22,6 +22,7 @@ from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S, ch
 from scipy.spatial.transform import Rotation
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import LiftArmGripper
 from rehabkit.core.interfaces import Context, Controller, PlanningError, StrictModel, Target
 from rehabkit.store.patches import Action, Patch, PatchStore, StoreError, default_path
 from rehabkit.workspace.trajectory import blend_weight
@@ -118,11 +119,10 @@ class ArmKeypad(Controller):
     """ARM keypad HMI: menus, jogs, fold/unfold, record and replay of patches, PD + gravity servo."""
 
     own_reference = True
+    requires = (LiftArmGripper,)
 
     def __init__(self, config: ArmKeypadConfig, context: Context):
         robot = context.robot
-        if not hasattr(robot, "gripper_index"):
-            raise ValueError("arm-keypad drives the 'arm' robot (lift, six joints, gripper)")
         self.config, self.robot, self.ctx = config, robot, context
         self.model = robot.model
         self.arm, self.lift, self.grip = robot.arm, robot.lift_index, robot.gripper_index

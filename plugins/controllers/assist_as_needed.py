@@ -25,6 +25,7 @@ from pydantic import Field, model_validator
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Controller, StrictModel
+from rehabkit.core.metric import Metric
 
 SERIES_EVERY = 10
 
@@ -58,6 +59,9 @@ class AssistAsNeededConfig(StrictModel):
 
 class AssistAsNeeded(Controller):
     """Impedance control whose stiffness follows the tracking error; see the module docstring."""
+
+    metrics = (Metric("aan_stiffness_mean", "N/m or N·m/rad", outcome=True, description="mean assisting stiffness"),
+               Metric("aan_stiffness_max", "N/m or N·m/rad", description="largest assisting stiffness"))
 
     def __init__(self, config: AssistAsNeededConfig, context: Context):
         robot = context.robot.model

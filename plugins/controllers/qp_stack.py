@@ -21,6 +21,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import FloatingBase
 from rehabkit.core.interfaces import Context, Controller, StrictModel
 from rehabkit.wholebody.stack import Level, compile_kernels, solve_cascade
 from rehabkit.wholebody.tasks import Constraints, ConstraintSpec, KinematicState, Task, TaskSpec
@@ -51,11 +52,10 @@ class QpStack(Controller):
     """Cascade of velocity-level QPs (strict priorities, soft weights within a level), PD servo."""
 
     reference = "cartesian"
+    requires = (FloatingBase,)
 
     def __init__(self, config: QpStackConfig, context: Context):
         robot = context.robot
-        if not getattr(robot.model, "floating", False) or not hasattr(robot, "floating_model"):
-            raise ValueError("qp-stack needs a floating-base robot with a 'floating_model' (e.g. 'coman')")
         self.config, self.robot, self.dt = config, robot, context.control_dt
         self.state = KinematicState(robot.floating_model)
         self.q_des = robot.pin_configuration(np.zeros(robot.model.dof))

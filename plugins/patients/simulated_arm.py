@@ -30,6 +30,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Patient, StrictModel
+from rehabkit.core.metric import Metric
 
 PerJoint = float | list[float]
 SERIES_EVERY = 10  # control steps between logged samples of the person's state
@@ -83,6 +84,9 @@ def _per_joint(value: PerJoint, n: int, name: str) -> np.ndarray:
 
 class SimulatedArm(Patient):
     """Passive tissue + delayed stretch reflex + noisy, fatiguing voluntary effort; see the module docstring."""
+
+    metrics = (Metric("patient_capacity_final", outcome=True, description="voluntary capacity left at the end"),
+               Metric("patient_voluntary_work_j", "J", outcome=True, description="the person's positive work"))
 
     def __init__(self, config: SimulatedArmConfig, context: Context):
         model = context.robot.model

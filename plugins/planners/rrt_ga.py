@@ -23,7 +23,9 @@ from pydantic import Field
 from scipy import ndimage
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import ClusterPoints
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.metric import Metric
 from rehabkit.core.targets import joint_waypoints
 from rehabkit.cspace.genetic import GAConfig, PathGA, resample
 from rehabkit.cspace.joint_matrix import JointMatrix, build_joint_matrix
@@ -60,21 +62,15 @@ class RrtGaConfig(StrictModel):
     seed: int | None = Field(None, description="default: the scenario's seed")
 
 
-def _cluster_robot(robot):
-    if not hasattr(robot, "cluster_points"):
-        raise ValueError(
-            f"rrt-ga needs a robot that describes itself by cluster points (e.g. capaman); "
-            f"'{robot.model.name}' does not"
-        )
-    return robot
-
-
 class RrtGaPlanner(Planner):
     """Joint-space paths around obstacles: joint matrix Θ, OMPL RRT-Connect population, genetic optimisation."""
 
+    requires = (ClusterPoints,)  # the collision map is built from points on the moving body
+    metrics = (Metric("joint_matrix_setup_s", "s", "wall", description="time to build the joint matrix"),)
+
     def __init__(self, config: RrtGaConfig, context: Context):
         self.config = config
-        self.robot = _cluster_robot(context.robot)
+        self.robot = context.robot
         self.seed = context.rng.integers(2**31) if config.seed is None else config.seed
         lim = self.robot.model.limits
         t0 = time.perf_counter()

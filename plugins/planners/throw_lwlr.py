@@ -23,6 +23,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import FloatingBase
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
@@ -126,7 +127,8 @@ class ThrowPlanner(Planner):
         t = np.arange(0.0, th.release_time + 1e-9, dt)
         p, _, _ = hand_path(th, self.shoulder, t)
         # from the robot's resting posture (a bent elbow): a straight arm is a singular start for the IK
-        q = np.array(getattr(self.robot, "standing", np.zeros(model.nq)), float)
+        rest = self.robot.standing if isinstance(self.robot, FloatingBase) else np.zeros(model.nq)
+        q = np.array(rest, float)
         idx = self.arm_idx
         for k in range(len(t)):
             q_prev = q.copy()

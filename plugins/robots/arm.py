@@ -26,6 +26,7 @@ from pydantic import Field
 from rehabkit_plugins.robots.arm_kinematics import arm_ik, elbow_up
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import LiftArmGripper
 from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
@@ -68,7 +69,7 @@ def _add_fingers(xml: str, gripper: float, lift: bool) -> str:
     return spec.to_xml()
 
 
-class ArmRobot(Robot):
+class ArmRobot(Robot, LiftArmGripper):
     """Exact Dynamics ARM: lift + 6-DoF PUMA-like arm (MDH from MANUS code) + gripper; elbow-up IK."""
 
     def __init__(self, config: ArmConfig, context: Context | None = None):

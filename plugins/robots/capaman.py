@@ -18,6 +18,7 @@ from pydantic import Field
 from scipy.optimize import least_squares
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import ClusterPoints, PassiveJoints
 from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import matrix_to_quat_wxyz
 from rehabkit.models.dh import PoseSpec
@@ -149,7 +150,7 @@ def build_capaman_mjcf(cfg: CapamanConfig, geo: CapamanGeometry) -> str:
     return spec.to_xml()
 
 
-class CapamanRobot(Robot):
+class CapamanRobot(Robot, PassiveJoints, ClusterPoints):
     """CaPaMan 3-DoF parallel manipulator: parallelogram legs, sliders, spherical joints, a tool on the plate."""
 
     ik_kind = "position"

@@ -20,6 +20,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import FloatingBase
 from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import matrix_to_quat_wxyz, rpy_to_matrix
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
@@ -43,7 +44,7 @@ class ComanConfig(StrictModel):
     safe_stop: SafeStop = "hold"
 
 
-class ComanRobot(Robot):
+class ComanRobot(Robot, FloatingBase):
     """COMAN humanoid: floating pelvis, 29 joints, primitive geometry, feet in flat floor contact."""
 
     def __init__(self, config: ComanConfig, context: Context | None = None):

@@ -26,6 +26,7 @@ import yaml
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import RandomReach, WorkspaceTable
 from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import KinematicChain, rot_x, trans
 from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
@@ -33,6 +34,7 @@ from rehabkit.models.mjcf_builder import build_chain_mjcf
 from rehabkit.models.robot_model import RobotModel, SafeStop
 from rehabkit.workspace.build import build_workspace
 from rehabkit.workspace.grid import VoxelWorkspace
+from rehabkit.workspace.sampling import random_inner, random_inner_not_straight
 
 UPPER_ARM, FOREARM = 0.30, 0.35  # [m], adult anthropometry (no public L-Exos figures)
 
@@ -129,7 +131,7 @@ def _joint_specs() -> tuple[list[JointSpec], list[JointSpec]]:
             [JointSpec.model_validate(j) for j in data.get("passive", [])])
 
 
-class LexosRobot(Robot):
+class LexosRobot(Robot, WorkspaceTable, RandomReach):
     """L-Exos 4-DoF arm exoskeleton: 3R shoulder + elbow, paper's joint ranges, concave workspace."""
 
     def __init__(self, config: LexosConfig, context: Context | None = None):
@@ -178,6 +180,13 @@ class LexosRobot(Robot):
         key = f"lexos|{self.lengths}|{lim.lower.round(9).tolist()}|{lim.upper.round(9).tolist()}|{len(self.swivel)}"
         return build_workspace(key, self.chain.fk_batch, self._reachability, lim.lower, lim.upper, resolution,
                                progress=progress, use_cache=use_cache)
+
+    def random_reach(self, rng: np.random.Generator, not_straight_from: np.ndarray | None = None) -> np.ndarray:
+        """An inner voxel of the workspace table, drawn uniformly (see :mod:`rehabkit.workspace.sampling`)."""
+        ws = self.workspace(progress=False)
+        if not_straight_from is None:
+            return random_inner(ws, rng)
+        return random_inner_not_straight(ws, rng, not_straight_from)
 
 
 @hookimpl

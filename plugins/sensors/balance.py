@@ -13,6 +13,7 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import FloatingBase
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
 
 
@@ -27,10 +28,10 @@ class BalanceConfig(SensorConfig):
 class Balance(Sensor):
     """CoM margin to the support polygon's edges, feet displacement and pelvis tilt, every reading."""
 
+    requires = (FloatingBase,)
+
     def __init__(self, config: BalanceConfig, context: Context):
         robot = context.robot
-        if not getattr(robot.model, "floating", False) or not hasattr(robot, "floating_model"):
-            raise ValueError("balance needs a floating-base robot with a 'floating_model' (e.g. 'coman')")
         self.robot, self.config, self.rate_hz = robot, config, config.rate_hz
         self.model = robot.floating_model
         self.data = self.model.createData()

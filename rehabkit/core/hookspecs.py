@@ -20,12 +20,20 @@ that made it.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import pluggy
 
-if TYPE_CHECKING:
-    from rehabkit.core.plugins import Registrar
+
+class Registrar(Protocol):
+    """What a registration hook receives (:class:`rehabkit.core.plugins.Registrar` implements it)."""
+
+    kind: str
+
+    def add(self, name: str, *, config: type, factory: Callable[..., Any], description: str | None = None) -> None:
+        """Register plugin ``name`` of this registrar's kind."""
+        ...
 
 PROJECT = "rehabkit"
 hookspec = pluggy.HookspecMarker(PROJECT)

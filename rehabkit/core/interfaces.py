@@ -1,4 +1,5 @@
-"""Base classes of the five plugin kinds and the small types they exchange."""
+"""Base classes of the six plugin kinds (robot, planner, controller, sensor, backend, patient) and the small
+types they exchange."""
 
 from __future__ import annotations
 
@@ -6,26 +7,19 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Literal, Protocol
+from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
 from rehabkit.models.robot_model import RobotModel
-
-if TYPE_CHECKING:
-    from rehabkit.core.scenario.models import World
+from rehabkit.models.strict import StrictModel
 
 
-class StrictModel(BaseModel):
-    """Base of every DSL model: unknown keys are errors, not silently ignored."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-@dataclass
+@dataclass(frozen=True)
 class Context:
-    """What every plugin factory receives besides its own config.
+    """What every plugin factory receives besides its own config (read-only: the run's setup makes a new one
+    as it learns more — the robot, the sensors' instruments, the planner's space).
 
     Attributes:
         scenario_dir: Folder of the scenario file; relative paths resolve from here.
@@ -44,7 +38,7 @@ class Context:
     rng: np.random.Generator
     control_dt: float
     robot: Robot | None = None
-    world: World | None = None
+    world: Any = None  # the scenario's world section (``rehabkit.core.scenario.models.World``)
     instruments: list[Instrument] = field(default_factory=list)
     out_dir: Path | None = None
     robot_spec: dict[str, Any] | None = None  # the scenario's robot section (type + settings), e.g. for a bridge
@@ -129,7 +123,8 @@ class Robot(ABC):
 
 
 class Trajectory(Protocol):
-    """A joint-space reference: ``sample`` is vectorised over times [s] from its start."""
+    """A reference in the planner's space (joint values, or hand positions in the robot base frame):
+    ``sample`` is vectorised over times [s] from its start."""
 
     duration: float
 
@@ -172,9 +167,9 @@ class Plan:
     """A planner's answer.
 
     Attributes:
-        trajectory: Joint reference starting at the request time.
+        trajectory: The reference in the planner's space (see :class:`Planner`), from the request time.
         diagnostics: Scalar figures merged into the run's metrics (e.g. continuity residuals).
-        waypoints: Joint values of the via points actually used, for logging.
+        waypoints: The via points actually used, in the planner's space (for the summary and the log).
         details: Non-scalar results for the summary (e.g. an optimiser's history).
         actions: Things to do to the scene while the plan runs: ``(t, "release" | "grasp", object)``,
             ``t`` from the plan's start (e.g. a throw lets go of the ball at its release instant).

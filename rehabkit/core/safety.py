@@ -27,8 +27,9 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from rehabkit.core.interfaces import StrictModel
+from rehabkit.core.limits import LimitBreach
 from rehabkit.models.robot_model import RobotModel
+from rehabkit.models.strict import StrictModel
 
 Vec3 = tuple[float, float, float]
 
@@ -139,6 +140,7 @@ class SafetyLayer:
         lim = robot.limits
         margin = math.radians(config.position_margin_deg)
         self.names = robot.joint_names
+        self._revolute = robot.revolute
         self.lo, self.hi = lim.lower - margin, lim.upper + margin
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
@@ -228,9 +230,8 @@ class SafetyLayer:
                         tau[:] = self._stop_torque(q, qd)
                     return tau
                 j = int(np.argmax(over))
-                self._trip(
-                    t, q, "torque", j, float(tau[j]), float(self.effort[j]), "commanded torque beyond effort limit"
-                )
+                self._breach(t, q, LimitBreach("torque", self.names[j], float(tau[j]), float(self.effort[j])),
+                             "commanded")
             else:
                 self._diagnose(t, q, qd, tau)
         tau[:] = self._stop_torque(q, qd)
@@ -325,17 +326,24 @@ class SafetyLayer:
         for j in range(len(q)):
             if q[j] < self.lo[j] or q[j] > self.hi[j]:
                 limit = self.lo[j] if q[j] < self.lo[j] else self.hi[j]
-                self._trip(t, q, "position", j, float(q[j]), float(limit), "joint outside its range")
+                self._breach(t, q, LimitBreach("position", self.names[j], float(q[j]), float(limit),
+                                               revolute=bool(self._revolute[j])), "measured")
                 return
         j = int(np.argmax(np.abs(qd) / self.vmax))
-        self._trip(t, q, "velocity", j, float(qd[j]), float(self.vmax[j]), "joint faster than its limit")
+        self._breach(t, q, LimitBreach("velocity", self.names[j], float(qd[j]), float(self.vmax[j]),
+                                       revolute=bool(self._revolute[j])), "measured")
 
-    def _trip(self, t, q, rule, joint, value, limit, message, data=None) -> None:
+    def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str) -> None:
+        """A limit rule's trip: the event's fields are the breach's, its message the breach's one wording."""
+        self._trip(t, q, breach.quantity, breach.joint, breach.value, breach.limit, f"{what}: {breach.describe()}",
+                   described=True)
+
+    def _trip(self, t, q, rule, joint, value, limit, message, data=None, described=False) -> None:
         name = self.names[joint] if isinstance(joint, int) else joint
         subject = f"{name} = " if name else ""
         digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
         text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
-                                            if value is not None else "")
+                                            if value is not None and not described else "")
         text += f"; robot {'held' if self.mode == 'hold' else 'set to zero torque'}"
         event = SafetyEvent(t, rule, name, value, limit, text, data or {})
         self.events.append(event)

@@ -6,10 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rehabkit.core.capabilities import RandomReach
 from rehabkit.core.interfaces import PlanningError, Robot, Target
 from rehabkit.core.scenario.models import TaskSpec
 from rehabkit.models.chain import rpy_to_matrix
-from rehabkit.workspace.sampling import random_inner, random_inner_not_straight
 
 
 def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Target]:
@@ -36,15 +36,17 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
                          pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only,
                          same_as=ref.same_as or ref.name)
         elif spec.random is not None:
-            ws = _workspace(robot, name)
+            if not isinstance(robot, RandomReach):
+                raise PlanningError(f"target '{name}': random targets need a robot that draws reachable points "
+                                    f"('{robot.model.name}' does not)")
             rng = np.random.default_rng([seed, index[name]])
+            start = None
             if spec.random.not_straight_from is not None:
                 ref = get(spec.random.not_straight_from, (*stack, name))
                 if ref.pose is None:
                     raise PlanningError(f"target '{name}': '{spec.random.not_straight_from}' has no position")
-                point = random_inner_not_straight(ws, rng, ref.pose[:3, 3])
-            else:
-                point = random_inner(ws, rng)
+                start = ref.pose[:3, 3]
+            point = robot.random_reach(rng, start)
             pose = np.eye(4)
             pose[:3, 3] = point
             tgt = Target(name, pose=pose, position_only=True)
@@ -73,13 +75,6 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
     for name in specs:
         get(name)
     return out
-
-
-def _workspace(robot: Robot, target: str):
-    if not hasattr(robot, "workspace"):
-        raise PlanningError(f"target '{target}': random targets need a robot with a workspace table "
-                            f"('{robot.model.name}' has none)")
-    return robot.workspace(progress=False)
 
 
 def angular_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:

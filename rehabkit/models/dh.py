@@ -15,10 +15,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from rehabkit.core.interfaces import StrictModel
 from rehabkit.models.chain import DHRow, KinematicChain, pose
 from rehabkit.models.mjcf_builder import LinkSpec, build_chain_mjcf
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
+from rehabkit.models.strict import StrictModel
 
 Vec3 = tuple[float, float, float]
 

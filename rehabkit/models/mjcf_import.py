@@ -17,9 +17,9 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
-from rehabkit.core.interfaces import StrictModel
 from rehabkit.models.dh import PoseSpec
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
+from rehabkit.models.strict import StrictModel
 
 _MOVABLE = {int(mujoco.mjtJoint.mjJNT_HINGE): "revolute", int(mujoco.mjtJoint.mjJNT_SLIDE): "prismatic"}
 

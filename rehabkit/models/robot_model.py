@@ -134,6 +134,13 @@ class RobotModel:
             raise ValueError(f"{self.name}: end-effector '{self.ee_site}' is not a frame; frames: {frames}")
         return model.getFrameId(self.ee_site)
 
+    @cached_property
+    def revolute(self) -> np.ndarray:
+        """Which joints turn (the others slide), in the order of ``q``."""
+        joints = self.pin_model.joints[1:]
+        return np.array(["Prismatic" not in j.shortname() and not j.shortname().startswith("JointModelP")
+                         for j in joints])
+
     def new_pin_data(self):
         """A fresh Pinocchio data object (one per user: they are scratch space)."""
         return self.pin_model.createData()
@@ -156,6 +163,11 @@ class RobotModel:
             pin.framesForwardKinematics(model, data, q)
             out[i] = data.oMf[fid].translation
         return out @ self.base_pose[:3, :3].T + self.base_pose[:3, 3]
+
+    def to_world(self, points: np.ndarray) -> np.ndarray:
+        """Base-frame points (n, 3) (or one point) in the world frame, (n, 3)."""
+        base = self.base_pose
+        return np.asarray(points, float).reshape(-1, 3) @ base[:3, :3].T + base[:3, 3]
 
     def __repr__(self) -> str:
         return f"RobotModel({self.name!r}, dof={self.dof}, ee={self.ee_site!r})"

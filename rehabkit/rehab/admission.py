@@ -16,11 +16,12 @@ from contextlib import contextmanager
 import numpy as np
 
 from rehabkit.core.interfaces import Robot, StrictModel, Target
-from rehabkit.core.safety import SafetyConfig
+from rehabkit.core.limits import LimitBreach, LimitSources, Narrowing, outside, unknown_joint
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.models import TaskSpec
+from rehabkit.core.scenario.patient import PatientBase
 from rehabkit.models.robot_model import JointLimits, RobotModel
-from rehabkit.rehab.patient import LimitSource, PatientBase, effective_limits, outside, unknown_joint
+from rehabkit.rehab.patient import patient_narrowings
 
 
 def adapt_segments(robot_cfg: StrictModel, profile: PatientBase | None, source) -> tuple[StrictModel, dict[str, str]]:
@@ -41,36 +42,18 @@ def adapt_segments(robot_cfg: StrictModel, profile: PatientBase | None, source) 
     return robot_cfg.model_copy(update=update), notes
 
 
-def narrowed_limits(model: RobotModel, profile: PatientBase | None, safety: SafetyConfig, source
-                    ) -> tuple[JointLimits, LimitSource]:
-    """Robot ∩ patient ∩ envelope limits (see :func:`effective_limits`); joint names the robot lacks are
-    refused where they are written (:class:`ScenarioError`), ranges that don't overlap with ``ValueError``."""
+def profile_narrowings(model: RobotModel, profile: PatientBase, source) -> list[Narrowing]:
+    """The profile's tighter limits; joint names the robot lacks are refused where they are written
+    (:class:`ScenarioError`)."""
     problems = []
-    for section, names in (("patient", profile.joints if profile else {}), ("safety", safety.joints)):
-        for name in names:
-            msg = unknown_joint(name, model)
-            if msg is not None:
-                path = (section, "joints", name)
-                problems.append(Diagnostic(source.key_marks.get(path, source.value_marks[()]), ".".join(path), msg))
+    for name in profile.joints:
+        msg = unknown_joint(name, model)
+        if msg is not None:
+            path = ("patient", "joints", name)
+            problems.append(Diagnostic(source.key_marks.get(path, source.value_marks[()]), ".".join(path), msg))
     if problems:
         raise ScenarioError(problems)
-    return effective_limits(model, profile, safety)
-
-
-def hand_in_world(robot: Robot):
-    """``hand(q)``: the hand's world position, for a check every control step. Pinocchio's where it agrees with
-    the robot's own kinematics (serial arms: ~2 µs instead of up to ~80 µs), else the robot's (parallel ones)."""
-    model = robot.model
-    rot, pos = model.base_pose[:3, :3], model.base_pose[:3, 3]
-    data = model.new_pin_data()
-    samples = np.random.default_rng(0).uniform(model.limits.lower, model.limits.upper, (5, model.dof))
-    try:
-        agrees = all(np.allclose(robot.fk(q), model.ee_pose(q, data), atol=1e-9) for q in samples)
-    except Exception:  # noqa: BLE001 (no usable Pinocchio model: the robot's own kinematics it is)
-        agrees = False
-    if agrees:
-        return lambda q: rot @ model.ee_pose(q, data)[:3, 3] + pos
-    return lambda q: robot.ee_world(q[None])[0]
+    return patient_narrowings(model, profile)
 
 
 @contextmanager
@@ -117,14 +100,14 @@ def _posture(target: Target, robot: Robot, robot_limits: JointLimits) -> np.ndar
 
 
 def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robot_limits: JointLimits,
-                  sources: LimitSource, profile: PatientBase | None, source) -> list[dict]:
+                  sources: LimitSources, profile: PatientBase | None, source) -> list[dict]:
     """Check (and where asked, replace) every fixed target; returns the replacements made.
 
     Raises:
         ScenarioError: a target outside the narrowed ranges, located at the target in the YAML.
     """
     limits, names = robot.model.limits, robot.model.joint_names
-    narrowed = [j for j, n in enumerate(names) if {"lower", "upper"} & set(sources.by_joint.get(n, {}))]
+    narrowed = [j for j, n in enumerate(names) if sources.range_narrowed(n)]
     if not narrowed:
         return []
     nearest = profile is not None and profile.outside_rom == "nearest"
@@ -154,9 +137,12 @@ def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robo
         for j in bad:
             who, _ = sources.by_joint[names[j]].get("upper" if q[j] > limits.upper[j] else "lower")
             whose = f"patient {profile.id}'s passive range" if who == "patient" else "the safety envelope's range"
-            how = "its joint values" if tgt.q is not None else "the posture the IK finds for it"
+            how = "its joint values put" if tgt.q is not None else "the posture the IK finds for it puts"
+            high = q[j] > limits.upper[j]
+            breach = LimitBreach("position", names[j], float(q[j]), float(limits.upper[j] if high else limits.lower[j]),
+                                 revolute=bool(robot.model.revolute[j]))
             problems.append(Diagnostic(mark, ".".join(map(str, path)), (
-                f"target '{spec.name}': {how} put {names[j]} at {math.degrees(q[j]):.1f}°, outside {whose} "
+                f"target '{spec.name}': {how} {breach.describe()}: {whose} is "
                 f"[{math.degrees(limits.lower[j]):.1f}, {math.degrees(limits.upper[j]):.1f}]°; move the target into "
                 "the range, or set patient.outside_rom: nearest to use the nearest admissible point")))
     if problems:
@@ -168,31 +154,3 @@ def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robo
             targets[spec.name] = Target(spec.name, q=None if orig.q is None else orig.q.copy(),
                                         pose=orig.pose.copy(), position_only=orig.position_only, same_as=tgt.same_as)
     return replaced
-
-
-def check_admission(loaded, registry) -> tuple[str, list[dict]]:
-    """What a run's setup would say of a scenario's fixed targets against its patient's (and envelope's) ranges,
-    without a backend, planner or anything else: the robot (with the profile's segment lengths), the narrowed
-    limits, the targets.
-
-    Returns:
-        Whose ranges were checked, and the replacements ``outside_rom: nearest`` would make.
-    Raises:
-        ScenarioError: as the run would (an unknown joint name, a target outside the narrowed ranges).
-        ValueError: the robot cannot be built from its section, or ranges that don't overlap.
-    """
-    from rehabkit.core.interfaces import PlanningError
-    from rehabkit.core.targets import resolve_targets
-
-    sc = loaded.model
-    robot_cfg, _ = adapt_segments(sc.robot, sc.patient, loaded.source)
-    robot = registry.get("robot", robot_cfg.type).factory(robot_cfg, None)
-    robot_limits = robot.model.limits
-    robot.model.limits, sources = narrowed_limits(robot.model, sc.patient, sc.safety, loaded.source)
-    try:
-        targets = resolve_targets(sc.task, robot, sc.seed)
-    except PlanningError as exc:
-        raise ValueError(f"task: {exc}") from exc
-    replaced = admit_targets(targets, sc.task, robot, robot_limits, sources, sc.patient, loaded.source)
-    whose = f"patient {sc.patient.id}" if sc.patient is not None else "the safety envelope"
-    return whose, replaced

@@ -24,10 +24,6 @@ from rehabkit.core.runner import SNAPSHOT, Runner
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 
-COMPARED = ("reaches", "reaches_completed", "sparc", "path_length_ratio", "time_to_target_s", "assistance_ratio",
-            "peak_interaction_force_n", "safety_interventions", "patient_capacity_final", "patient_voluntary_work_j",
-            "cartesian_tracking_rms_mm", "tracking_rms_deg", "aan_stiffness_mean")
-
 
 @dataclass
 class Replay:
@@ -38,10 +34,10 @@ class Replay:
     same_inputs: dict[str, bool]
 
     def rows(self) -> list[tuple[str, Any, Any]]:
-        """(metric, original, replay) for the outcome measures both runs have."""
+        """(metric, original, replay) for the outcome measures either run has (as their summaries describe them)."""
         a, b = self.original["metrics"], self.result.summary["metrics"]
-        keys = [k for k in COMPARED if k in a or k in b]
-        keys += sorted(k for k in b if k.startswith("rom_deg_"))
+        info = {**self.original.get("metric_info", {}), **self.result.summary.get("metric_info", {})}
+        keys = [k for k in dict.fromkeys([*a, *b]) if info.get(k, {}).get("outcome")]
         return [(k, a.get(k), b.get(k)) for k in keys]
 
     def table(self) -> str:

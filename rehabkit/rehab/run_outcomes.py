@@ -10,13 +10,13 @@ the hand, and the safety layer's interventions.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from rehabkit.core.metrics import Trace
+from rehabkit.core.record import Movement
+from rehabkit.models.hand_force import HandForce
 from rehabkit.models.robot_model import RobotModel
 from rehabkit.rehab.outcomes import (
     assistance_ratio,
@@ -28,39 +28,7 @@ from rehabkit.rehab.outcomes import (
 )
 
 
-class HandForce:
-    """The hand force equivalent to joint torques (Jᵀ F = τ, least squares), from the robot's Jacobian."""
-
-    def __init__(self, model: RobotModel):
-        self.model, self.data, self.frame = model.pin_model, model.pin_model.createData(), model.ee_frame_id
-
-    def jacobian(self, q: np.ndarray) -> np.ndarray:
-        return pin.computeFrameJacobian(self.model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-
-    def __call__(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """Force [N] in the robot base frame's axes (normal equations: a 3×3 solve each control step)."""
-        J = self.jacobian(q)
-        try:
-            return np.linalg.solve(J @ J.T, J @ tau)
-        except np.linalg.LinAlgError:  # a singular posture: the minimum-norm least-squares force
-            return np.linalg.lstsq(J.T, tau, rcond=None)[0]
-
-    def batch(self, qs: np.ndarray, taus: np.ndarray) -> np.ndarray:
-        return interaction_forces(np.stack([self.jacobian(q) for q in qs]), taus)
-
-
-@dataclass
-class Reach:
-    """One planned movement: control-step indices, the hand's goal (robot base frame) and the goal in the
-    planner's space (joint values or the same position)."""
-
-    k0: int
-    k1: int
-    goal: np.ndarray
-    target: np.ndarray
-
-
-def reach_outcomes(t: np.ndarray, hand: np.ndarray, reaches: list[Reach], dt: float, tolerance: float,
+def reach_outcomes(t: np.ndarray, hand: np.ndarray, reaches: list[Movement], dt: float, tolerance: float,
                    dwell: float, min_length: float) -> list[dict[str, Any]]:
     """Per-reach SPARC, path-length ratio and time to target; reaches shorter than ``min_length`` skipped."""
     out = []
@@ -85,7 +53,7 @@ def reach_outcomes(t: np.ndarray, hand: np.ndarray, reaches: list[Reach], dt: fl
     return out
 
 
-def run_outcomes(trace: Trace, robot, reaches: list[Reach], dt: float, spec, interventions: int
+def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, interventions: int
                  ) -> tuple[dict[str, float], dict[str, Any]]:
     """Outcome metrics of a run (scalars for ``metrics``) and the per-reach and per-joint details.
 
@@ -105,7 +73,8 @@ def run_outcomes(trace: Trace, robot, reaches: list[Reach], dt: float, spec, int
     if person:
         own_weight = np.array([robot.gravity_torque(q) for q in trace.q]).reshape(trace.tau.shape)
         assist = assistance_ratio(trace.tau - own_weight, trace.tau_h, trace.qd, dt)
-        magnitude = np.linalg.norm(HandForce(model).batch(trace.q, trace.tau_h), axis=1)
+        hf = HandForce(model)
+        magnitude = np.linalg.norm(interaction_forces(np.stack([hf.jacobian(q) for q in trace.q]), trace.tau_h), axis=1)
     else:  # nobody in the robot: whatever work was done, the robot did
         assist, magnitude = (1.0 if len(trace.t) else float("nan")), np.zeros(len(trace.t))
     metrics = {

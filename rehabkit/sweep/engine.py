@@ -4,7 +4,7 @@ Each finished run is saved at once, so a sweep that is killed resumes where it s
 Ray at most one run per CPU of the cluster is in flight, so a run's submission is its start:
 one that exceeds the timeout is cancelled (its worker killed) and recorded as failed. Rows
 are kept in grid order whatever order the runs finish in, so a sweep gives the same table
-serially and in parallel (wall-clock figures aside, see ``execute.WALL_CLOCK``).
+serially and in parallel (wall-clock figures aside: the ``wall.*`` columns).
 """
 
 from __future__ import annotations

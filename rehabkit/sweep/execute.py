@@ -6,25 +6,24 @@ raises for a failing run: the error becomes part of the row, and the sweep goes 
 
 from __future__ import annotations
 
-import re
 import signal
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+from rehabkit.core.metric import wall_clock
+
+
 # figures that measure the machine, not the run: they differ between any two executions
-WALL_CLOCK = re.compile(r"(_ms$|^wall_time_s$|^setup_time_s$|^real_time_factor$|^joint_matrix_setup_s$|"
-                        r"^deadline_|^link_|^states_dropped|^sensor_overruns_|^bridge_hold_at_s$)")
-
-
 class RunTimeoutError(BaseException):
     """A run took longer than the sweep allows (a BaseException: plugin-error handlers must not catch it)."""
 
 
 def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None) -> dict[str, Any]:
     """Run the scenario with ``overrides``; the row (never raises for the run's own failures)."""
-    from rehabkit.api import run_scenario  # in the worker: plugins load once per process
+    from rehabkit.core.runner import Runner  # in the worker: plugins load once per process
+    from rehabkit.core.scenario.loader import load_scenario
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"error": None}
@@ -35,12 +34,13 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
         previous = signal.signal(signal.SIGALRM, expire)
         signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
-        result = run_scenario(Path(path), overrides)
+        result = Runner(load_scenario(Path(path), overrides)).run()
         row["passed"] = result.passed
         # NaN (a measure with nothing to measure) as None, as the stored rows have it
         row["metrics"] = {k: None if v != v else float(v) for k, v in result.metrics.items()
                           if isinstance(v, (int, float))}
         row["expectations"] = {e["metric"]: bool(e["passed"]) for e in result.summary["expectations"]}
+        row["wall_clock"] = sorted(wall_clock(result.summary.get("metric_info", {})))  # as the run described them
     except (Exception, RunTimeoutError) as exc:  # noqa: BLE001 (recorded: the sweep goes on)
         row.update(passed=False, metrics={}, expectations={}, error=f"{type(exc).__name__}: {exc}")
     finally:

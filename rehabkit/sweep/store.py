@@ -3,7 +3,8 @@
     DIR/sweep.json          what the sweep is (scenario, grid, seeds)
     DIR/runs/<run id>.json  one row per finished run, written whole (temp file, then rename)
     DIR/results.parquet     all rows, in grid order (columnar: grid keys, seed, passed, error,
-                            wall_time_s, metric.<name>, expect.<metric>)
+                            wall_time_s, metric.<name>, wall.<name> for wall-clock metrics,
+                            expect.<metric>)
     DIR/aggregate.csv       per grid point: runs, failures, share passed, mean/std of each metric
 """
 

@@ -13,7 +13,6 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from rehabkit.core.io import atomic_write_text
-from rehabkit.sweep.execute import WALL_CLOCK
 from rehabkit.sweep.grid import RunSpec, point_label
 
 
@@ -25,7 +24,8 @@ def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dic
         rec: dict[str, Any] = {"run_id": spec.run_id, **point_label(spec.point), "seed": spec.seed,
                                "passed": bool(row["passed"]), "error": row["error"],
                                "wall_time_s": float(row["wall_time_s"])}
-        rec.update({f"metric.{k}": v for k, v in sorted(row["metrics"].items())})
+        wall = set(row.get("wall_clock", ()))  # wall-clock figures: columns of their own, not compared
+        rec.update({f"{'wall' if k in wall else 'metric'}.{k}": v for k, v in sorted(row["metrics"].items())})
         rec.update({f"expect.{k}": v for k, v in sorted(row["expectations"].items())})
         out.append(rec)
     return out
@@ -33,8 +33,7 @@ def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dic
 
 def reproducible(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The records without their wall-clock figures: what any two runs of the same sweep agree on."""
-    return [{k: v for k, v in r.items()
-             if k != "wall_time_s" and not (k.startswith("metric.") and WALL_CLOCK.search(k[7:]))} for r in records]
+    return [{k: v for k, v in r.items() if k != "wall_time_s" and not k.startswith("wall.")} for r in records]
 
 
 def write_parquet(path: Path, records: list[dict[str, Any]]) -> None:
@@ -63,7 +62,8 @@ def aggregate(records: list[dict[str, Any]], keys: list[str], metrics: list[str]
         row.update(runs=len(recs), errors=sum(r["error"] is not None for r in recs),
                    passed=float(np.mean([r["passed"] for r in recs])))
         for m in metrics:
-            vals = np.array([r.get(f"metric.{m}") for r in recs if r.get(f"metric.{m}") is not None], float)
+            got = (r.get(f"metric.{m}", r.get(f"wall.{m}")) for r in recs)
+            vals = np.array([v for v in got if v is not None], float)
             row[f"{m}.mean"] = float(vals.mean()) if len(vals) else math.nan
             row[f"{m}.std"] = float(vals.std()) if len(vals) else math.nan
             row[f"{m}.n"] = len(vals)

@@ -19,6 +19,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
+from rehabkit.core.capabilities import WorkspaceTable
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
 from rehabkit.workspace.grid import BOUNDARY, INNER, VoxelWorkspace
 from rehabkit.workspace.search import SearchFailedError, astar, decimate, path_length
@@ -45,12 +46,10 @@ class VoxelPlanner(Planner):
 
     space = "cartesian"
     name = "voxel"
+    requires = (WorkspaceTable,)
 
     def __init__(self, config: VoxelPlannerConfig, context: Context):
         robot = context.robot
-        if not hasattr(robot, "workspace"):
-            raise ValueError(f"{self.name} needs a robot with a workspace look-up table (e.g. lexos); "
-                             f"robot '{robot.model.name}' has none")
         self.config = config
         self.robot = robot
         self.ws: VoxelWorkspace = robot.workspace(config.resolution)

@@ -31,6 +31,8 @@ def _span(indices: np.ndarray) -> slice | np.ndarray:
 class MujocoBackend(SceneView, Backend):
     """MuJoCo physics: the robot's MJCF plus the scenario's world, driven by joint torques."""
 
+    scene_actions = ("release", "grasp")  # what a plan may do to held objects
+
     def __init__(self, config: MujocoConfig, context: Context):
         robot = context.robot.model
         self.robot = robot

@@ -1,0 +1,236 @@
+"""Putting a run together: robot, limits, plugins, safety layer, targets.
+
+One function, :func:`assemble`, for ``rehabkit run`` and ``rehabkit validate``: the
+latter stops after the targets (``upto="targets"``: no backend, planner or
+controller is built) and so refuses exactly what a run's setup would. The order:
+
+1. extensions adapt the robot's settings (``rehabkit_configure_robot``); the robot is built;
+2. its limits are narrowed by the envelope and the extensions (``rehabkit_narrow_limits``)
+   and set on the model, so everything built after plans and checks within them;
+3. the robot's declared capabilities are checked against what the other plugins require;
+4. targets are resolved and admitted (``rehabkit_admit_targets``);
+5. sensors (their instruments go into the scene), backend, planner, controller, patient,
+   the interaction-force limit (``rehabkit_force_limit``) and the safety layer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from rehabkit.core.capabilities import missing_capabilities
+from rehabkit.core.errors import SetupError
+from rehabkit.core.interfaces import (
+    Backend,
+    Context,
+    Controller,
+    Patient,
+    Planner,
+    PlanningError,
+    Robot,
+    Sensor,
+    Target,
+)
+from rehabkit.core.lifecycle import Extensions
+from rehabkit.core.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
+from rehabkit.core.names import suggest
+from rehabkit.core.plugins import PluginRegistry
+from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
+from rehabkit.core.scenario.loader import LoadedScenario
+from rehabkit.core.targets import resolve_targets
+from rehabkit.models.hand_force import HandForce, hand_in_world
+from rehabkit.models.robot_model import JointLimits
+
+REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The loop's timing, in control steps."""
+
+    control_dt: float
+    substeps: int
+    steps: int
+    log_every: int
+    reach_every: int
+    sensor_every: tuple[int, ...]
+
+
+@dataclass
+class Assembly:
+    """Everything a run is made of, built by :func:`assemble` (fields after ``robot`` only with ``upto="run"``).
+
+    ``robot_limits`` are the robot's own, ``limits`` the run's (narrowed; also set on ``robot.model``),
+    ``limit_sources`` who narrowed what. ``sections`` collects what extensions say for ``summary.json``,
+    ``extras`` what they keep between hooks.
+    """
+
+    loaded: LoadedScenario
+    registry: PluginRegistry
+    extensions: Extensions
+    out_dir: Path | None
+    robot_config: Any
+    context: Context
+    robot: Robot | None = None
+    robot_limits: JointLimits | None = None
+    limits: JointLimits | None = None
+    limit_sources: LimitSources = field(default_factory=LimitSources)
+    targets: dict[str, Target] = field(default_factory=dict)
+    replaced: list[dict] = field(default_factory=list)
+    sections: dict[str, Any] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)  # extensions' own state between their hooks
+    sensors: dict[str, Sensor] = field(default_factory=dict)
+    backend: Backend | None = None
+    planner: Planner | None = None
+    controller: Controller | None = None
+    patient: Patient | None = None
+    hand_force: HandForce | None = None
+    safety: SafetyLayer | None = None
+    schedule: Schedule | None = None
+
+    @property
+    def sc(self):
+        """The validated scenario."""
+        return self.loaded.model
+
+    def make(self, kind: str, config) -> Any:
+        """Build plugin ``config.type`` of ``kind``; its ``ValueError``/``PlanningError`` become a SetupError."""
+        info = self.registry.get(kind, config.type)
+        try:
+            return info.factory(config, self.context)
+        except (ValueError, PlanningError) as exc:
+            raise SetupError(f"{kind} '{config.type}': {exc}") from exc
+
+
+def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
+             upto: Literal["targets", "run"] = "run", plan: Callable | None = None,
+             note: Callable[[float, str], None] | None = None) -> Assembly:
+    """Build the run of ``loaded`` (see the module docstring); ``plan``/``note`` go to the controllers' context.
+
+    Raises:
+        ScenarioError: something the scenario got wrong, located in its file.
+        SetupError: the plugins can't be put together as configured.
+    """
+    sc = loaded.model
+    ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
+                  out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=sc.patient, plan=plan, note=note)
+    a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx)
+    extensions.hook.rehabkit_configure_robot(setup=a)
+    a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
+    a.robot = a.make("robot", a.robot_config)
+    a.context = replace(a.context, robot=a.robot)
+    _narrow_limits(a)
+    _check_capabilities(a)
+    try:
+        a.targets = resolve_targets(sc.task, a.robot, sc.seed)
+    except PlanningError as exc:
+        raise SetupError(f"task: {exc}") from exc
+    extensions.hook.rehabkit_admit_targets(setup=a)
+    if upto == "targets":
+        return a
+    # sensors before the backend: their instruments go into the scene it builds
+    a.sensors = {name: a.make("sensor", cfg) for name, cfg in sc.sensors.items()}
+    a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
+    a.backend = a.make("backend", sc.backend)
+    a.planner = a.make("planner", sc.planner)
+    a.context = replace(a.context, reference_space=a.planner.space)
+    a.controller = a.make("controller", sc.controller)
+    if a.planner.space != a.controller.reference:
+        raise SetupError(f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
+                         f"'{sc.controller.type}' takes {a.controller.reference} references; pick a matching pair")
+    _patient_and_safety(a)
+    for t in sc.task.targets:
+        if t.sensor and t.sensor not in a.sensors:
+            raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
+                             f"{suggest(t.sensor, a.sensors)}")
+    a.schedule = _schedule(a)
+    return a
+
+
+def _narrow_limits(a: Assembly) -> None:
+    """Robot ∩ extensions ∩ envelope, set on the robot model; joint names the robot lacks refused where written."""
+    sc, model, source = a.sc, a.robot.model, a.loaded.source
+    problems = [Diagnostic(source.key_marks.get(("safety", "joints", n), source.value_marks[()]),
+                           f"safety.joints.{n}", msg) for n in sc.safety.joints if (msg := unknown_joint(n, model))]
+    try:
+        asked = [nw for found in a.extensions.hook.rehabkit_narrow_limits(setup=a) for nw in found or ()]
+    except ScenarioError as exc:  # every misnamed joint at once, the extensions' and the envelope's
+        raise ScenarioError([*exc.diagnostics, *problems]) from None
+    if problems:
+        raise ScenarioError(problems)
+    a.robot_limits = model.limits
+    try:  # the extensions' first: a value both give is credited to the extension
+        a.limits, a.limit_sources = narrow(model, [*asked, *envelope_narrowings(sc.safety)])
+    except ValueError as exc:
+        raise SetupError(str(exc)) from exc
+    model.limits = a.limits
+
+
+def _check_capabilities(a: Assembly) -> None:
+    """Plugins that need something of the robot (a workspace table, a floating base, …) say so up front."""
+    sc = a.sc
+    named = [("planner", sc.planner), ("controller", sc.controller), *(("sensor", c) for c in sc.sensors.values())]
+    for kind, cfg in named:
+        missing = missing_capabilities(a.registry.get(kind, cfg.type).factory, a.robot)
+        if missing:
+            raise SetupError(f"{kind} '{cfg.type}' needs a robot that {' and '.join(missing)}; robot "
+                             f"'{sc.robot.type}' does not")
+
+
+def _patient_and_safety(a: Assembly) -> None:
+    sc = a.sc
+    model_cfg = getattr(sc.patient, "model", None) if sc.patient is not None else None
+    if model_cfg is not None:
+        if a.backend.realtime:  # a real robot has a real person in it
+            a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
+                                "backend: the person is real")
+        else:
+            a.patient = a.make("patient", model_cfg)
+    limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
+              if v is not None]
+    force_limit = min(limits) if limits else None
+    if force_limit is not None and a.patient is None:
+        raise SetupError(f"an interaction-force limit ({force_limit:g} N, from safety.interaction_force_n or "
+                         "patient.comfort) needs a source of the force: a simulated patient (patient.model); "
+                         f"backend '{sc.backend.type}' measures none")
+    a.hand_force = HandForce(a.robot.model) if force_limit is not None else None
+    a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
+                           gravity=a.robot.gravity_torque, dt=a.context.control_dt,
+                           hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
+
+
+def _schedule(a: Assembly) -> Schedule:
+    sc, dt = a.sc, a.backend.timestep
+    control_dt = 1.0 / sc.rates.control_hz
+    sub = control_dt / dt
+    if abs(sub - round(sub)) > 1e-6 or round(sub) < 1:
+        raise SetupError(f"rates.control_hz = {sc.rates.control_hz} gives a period of {control_dt} s, "
+                         f"not a whole multiple of the backend timestep {dt} s")
+    every = tuple(max(1, round(sc.rates.control_hz / s.rate_hz)) for s in a.sensors.values())
+    return Schedule(control_dt, round(sub), int(round(sc.duration / control_dt)),
+                    max(1, round(sc.rates.control_hz / sc.logging.rate_hz)),
+                    max(1, round(sc.rates.control_hz / REACH_CHECK_HZ)), every)
+
+
+def start_posture(a: Assembly) -> np.ndarray:
+    """The task's start: a joint target's values, or a Cartesian one's first IK solution within the ranges."""
+    task = a.sc.task
+    name = task.start or task.order()[0]
+    target = a.targets[name]
+    if target.q is not None:
+        return target.q.copy()
+    try:
+        solutions = a.robot.ik(target.pose) if target.pose is not None else []
+    except NotImplementedError:
+        solutions = []
+    lim = a.robot.model.limits
+    inside = [s for s in solutions if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
+    if not inside:
+        raise SetupError(f"task.start: target '{name}' is Cartesian and the robot's IK gives no configuration "
+                         "for it within the joint ranges; start from a joint-space target")
+    return inside[0]

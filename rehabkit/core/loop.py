@@ -1,0 +1,121 @@
+"""The control loop alone: state → (what is due) → controller → (person) → safety layer → backend.
+
+Each step's ``[q, qd, tau]`` is one row of the trace, written in place: the
+controller's torque goes into it and the safety layer overwrites it with what
+is sent. Everything that is not due every step (events, sensors, logging) is
+behind one integer comparison.
+"""
+
+from __future__ import annotations
+
+import gc
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from tqdm import tqdm
+
+from rehabkit.core.assembly import Assembly
+from rehabkit.core.interfaces import BackendFaultError
+from rehabkit.core.metrics import Trace
+from rehabkit.core.reference import ReferenceBuffer
+from rehabkit.core.run_view import LOG_FLUSH_SAMPLES, RunView
+from rehabkit.core.timeline import Timeline
+
+
+@dataclass(frozen=True)
+class LoopResult:
+    steps: int  # steps run
+    wall_s: float
+    contact_steps: int
+    started: float  # perf_counter at its first step
+
+
+def _idle(dof: int):
+    zero = np.zeros(dof)
+    return lambda *args: zero
+
+
+def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer, timeline: Timeline, view: RunView,
+             progress: bool = False) -> LoopResult:
+    """Run the control loop until the end, a stop event, or the safety layer's stop has run its course."""
+    sch, backend, safety, controller = a.schedule, a.backend, a.safety, a.controller
+    n, dof, dt, sub = sch.steps, a.robot.model.dof, sch.control_dt, sch.substeps
+    ref_q, ref_qd, ref_qdd = ref.views()
+    state, compute, check = backend.state, controller.compute, safety.check_row
+    command, step, contacts = backend.command, backend.step, backend.contacts
+    concat, log = np.concatenate, view.log
+    log_every = sch.log_every
+    next_log = 0 if log else -1
+    deferred_log = bool(log) and backend.realtime
+    if deferred_log:
+        log.deferred = True
+    cart = a.planner.space == "cartesian"
+    tx, tqr = trace.x, trace.q_ref
+    ee = a.robot.ee_world if backend.ee_position() is None else None
+    own_ref = controller.own_reference
+    person = a.patient.torque if a.patient is not None else None
+    late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
+    push, tau_h, hand_force, goal_at = backend.external_torque, trace.tau_h, a.hand_force, ref.goal_at
+    stop_after = a.sc.safety.stop_after_s
+    bar = tqdm(total=n, unit="step", delay=1.0, disable=not progress, leave=False)
+    # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
+    gc.collect()
+    gc.freeze()
+    contact_steps, due, k = 0, 0, 0
+    t_loop = time.perf_counter()
+    try:
+        for k in range(n):
+            t = k * dt
+            _, q, qd = state()
+            if k >= due:
+                due = timeline.due(k, t, q, qd)
+                if due < 0:
+                    break
+            row = packed[k]
+            try:
+                concat((q, qd, compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])), out=row)
+            except Exception as exc:  # a crashing controller must still leave the robot held
+                safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
+                compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
+                concat((q, qd, np.zeros(dof)), out=row)
+            if person is not None:
+                tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
+                if hand_force is not None:
+                    safety.check_force(t, q, hand_force(q, tau_h[k]))
+            tau = check(t, row)
+            if cart:
+                tx[k] = ee(q[None])[0] if ee is not None else backend.ee_position()  # world; base frame at the end
+                if controller.joint_reference is not None:
+                    tqr[k] = controller.joint_reference
+            elif own_ref:
+                tqr[k] = controller.joint_reference
+            try:
+                command(tau)
+                if person is not None:
+                    push(tau_h[k])
+                step(sub)
+            except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete
+                safety.trip(t, q, "backend", str(exc))
+                k += 1
+                break
+            if contacts():
+                contact_steps += 1
+            if k == next_log:
+                next_log += log_every
+                log.record(t, backend.body_poses(), ee(q[None])[0] if ee is not None else backend.ee_position())
+                if log.pending >= LOG_FLUSH_SAMPLES:
+                    view.flush(trace, k + 1)
+            if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
+                log.send_one()
+            if k % 1000 == 999:
+                bar.update(1000)
+            if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
+                k += 1
+                break
+        else:
+            k = n
+    finally:
+        gc.unfreeze()
+        bar.close()
+    return LoopResult(k, time.perf_counter() - t_loop, contact_steps, t_loop)

@@ -1,0 +1,15 @@
+"""Suggestions for misspelt names (plugins, fields, joints, metrics)."""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+def suggest(name: str, candidates: Iterable[str]) -> str:
+    """``"; did you mean 'x'?"`` for the closest candidates, or the list of choices."""
+    candidates = sorted(candidates)
+    close = difflib.get_close_matches(name, candidates, n=3, cutoff=0.5)
+    if close:
+        return "; did you mean " + " or ".join(f"'{c}'" for c in close) + "?"
+    return f"; choices: {', '.join(candidates)}" if candidates else ""

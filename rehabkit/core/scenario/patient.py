@@ -1,0 +1,67 @@
+"""The patient profile: the scenario's ``patient:`` section (the DSL only).
+
+A profile is pseudonymous (an id, never a name), says which side is treated,
+the segment lengths a robot can adapt to, each joint's range of motion (what the
+person moves on their own, ``active``, and what the joint can be moved through,
+``passive``), and comfort limits on speed and interaction force. What a run does
+with it (narrowed limits, admitted targets, adapted segments) is the rehab
+extension's (:mod:`rehabkit.rehab.extension`); the ``model`` section, when
+present, is a simulated-patient plugin.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from rehabkit.core.interfaces import StrictModel
+
+Range = tuple[float, float]
+
+
+class JointRom(StrictModel):
+    """Range of motion of one joint [deg] and its comfortable speed."""
+
+    passive_deg: Range = Field(description="range the joint can be moved through (a hard limit)")
+    active_deg: Range | None = Field(None, description="range the person reaches on their own")
+    max_speed_deg_s: float | None = Field(None, gt=0, description="comfortable speed of this joint")
+
+    @model_validator(mode="after")
+    def _nested(self) -> JointRom:
+        lo, hi = self.passive_deg
+        if lo >= hi:
+            raise ValueError(f"passive_deg must be [lowest, highest], got {list(self.passive_deg)}")
+        if self.active_deg is not None:
+            a, b = self.active_deg
+            if a >= b or a < lo or b > hi:
+                raise ValueError(f"active_deg {list(self.active_deg)} must be an interval inside passive_deg "
+                                 f"{list(self.passive_deg)}")
+        return self
+
+
+class Comfort(StrictModel):
+    """Limits for the whole arm."""
+
+    max_speed_deg_s: float | None = Field(None, gt=0, description="comfortable speed of every joint")
+    max_interaction_force_n: float | None = Field(None, gt=0, description="largest force at the hand")
+
+
+class PatientBase(StrictModel):
+    """The plugin-independent part of a patient profile."""
+
+    id: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", description="pseudonymous id (no names)")
+    side: Literal["left", "right"] = Field(description="treated side")
+    segments: dict[str, float] = Field({}, description="segment lengths [m] (e.g. upper_arm, forearm); robots "
+                                                        "with a setting of the same name adapt to them")
+    joints: dict[str, JointRom] = Field({}, description="range of motion per robot joint")
+    comfort: Comfort = Comfort()
+    outside_rom: Literal["refuse", "nearest"] = Field(
+        "refuse", description="a target outside the range: refuse the scenario, or use the nearest admissible point")
+
+    @model_validator(mode="after")
+    def _positive_segments(self) -> PatientBase:
+        bad = [k for k, v in self.segments.items() if not v > 0]
+        if bad:
+            raise ValueError(f"segment lengths must be > 0: {bad}")
+        return self

@@ -1,0 +1,60 @@
+"""Everything a plugin or an extension imports from rehabkit, in one module.
+
+A third-party package imports from here only (``from rehabkit.plugin import Planner, Plan, hookimpl``);
+what is not listed in ``__all__`` is internal and may change. The plugin kinds and what each
+returns are described in :mod:`rehabkit.core.hookspecs`; the run-lifecycle hooks an extension
+implements in :mod:`rehabkit.core.lifecycle`.
+"""
+
+from rehabkit.core.capabilities import (
+    ClusterPoints,
+    FloatingBase,
+    LiftArmGripper,
+    PassiveJoints,
+    RandomReach,
+    WorkspaceTable,
+)
+from rehabkit.core.errors import SetupError
+from rehabkit.core.hookspecs import hookimpl
+from rehabkit.core.interfaces import (
+    Backend,
+    BackendFaultError,
+    BodyPoses,
+    Contact,
+    Context,
+    Controller,
+    GeomVisual,
+    IKUnavailableError,
+    Instrument,
+    Patient,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    ReferenceSpace,
+    Robot,
+    Sensor,
+    SensorConfig,
+    StrictModel,
+    Target,
+    Trajectory,
+)
+from rehabkit.core.lifecycle import Contribution
+from rehabkit.core.limits import LimitBreach, Narrowing
+from rehabkit.core.metric import Metric
+from rehabkit.models.robot_model import JointLimits, RobotModel
+
+__all__ = [
+    # registering
+    "hookimpl",
+    # the plugin kinds and what they exchange
+    "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
+    "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "Backend", "BodyPoses", "Contact",
+    "GeomVisual", "Patient", "Context", "StrictModel",
+    # what a robot declares it can do, and a plugin ``requires``
+    "WorkspaceTable", "RandomReach", "PassiveJoints", "ClusterPoints", "FloatingBase", "LiftArmGripper",
+    # describing metrics; extensions' contributions and limits
+    "Metric", "Contribution", "Narrowing", "LimitBreach",
+    # errors
+    "PlanningError", "IKUnavailableError", "BackendFaultError", "SetupError",
+]
