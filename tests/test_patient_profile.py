@@ -11,9 +11,9 @@ import yaml
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
 from rehabkit.core.runner import Runner, SetupError
-from rehabkit.core.safety import SafetyConfig
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.rehab.patient import PatientBase, effective_limits
 from tests.conftest import SCENARIOS
 

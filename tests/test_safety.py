@@ -4,7 +4,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from rehabkit.core.safety import SafetyConfig, SafetyLayer
+from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.scenario.safety import SafetyConfig
 
 
 @pytest.fixture

@@ -7,9 +7,10 @@ import pytest
 import yaml
 
 from rehabkit.api import run_scenario
-from rehabkit.core.safety import SafetyConfig, SafetyLayer
+from rehabkit.core.safety import SafetyLayer
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.scenario.safety import SafetyConfig
 from tests.conftest import SCENARIOS
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"

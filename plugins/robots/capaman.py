@@ -202,13 +202,6 @@ class CapamanRobot(Robot, PassiveJoints, ClusterPoints):
         """Tool-tip pose in the base frame (numerical forward kinematics)."""
         return self.fk_batch(np.asarray(q, float)[None])[0]
 
-    def ik_plate(self, p: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """Crank angles for a plate pose (closed form); raises if the mechanism cannot take that pose."""
-        alpha, _, residual = inverse(self.geo, p, R)
-        if np.abs(residual).max() > 1e-6:
-            raise ValueError(f"capaman: plate pose off the mechanism's 3-DoF set by {np.abs(residual).max():.2e} m")
-        return alpha
-
     def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
         """Cranks within their range putting the tool tip at ``pose``'s position (orientation follows).
 

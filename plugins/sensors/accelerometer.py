@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import Instruments
 from rehabkit.core.interfaces import Backend, Context, Instrument, Sensor, SensorConfig
 from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank, rts_smooth
 from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
@@ -45,6 +46,8 @@ class AccelerometerArrayConfig(SensorConfig):
 
 class AccelerometerArraySensor(Sensor):
     """Triaxial accelerometers on a body + Kalman filtering + rigid-body reconstruction (a, ω)."""
+
+    requires = (Instruments,)
 
     def __init__(self, config: AccelerometerArrayConfig, context: Context):
         self.config, self.rate_hz = config, config.rate_hz

@@ -13,7 +13,7 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import FloatingBase
+from rehabkit.core.capabilities import BaseState, FloatingBase
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
 
 
@@ -28,7 +28,7 @@ class BalanceConfig(SensorConfig):
 class Balance(Sensor):
     """CoM margin to the support polygon's edges, feet displacement and pelvis tilt, every reading."""
 
-    requires = (FloatingBase,)
+    requires = (FloatingBase, BaseState)
 
     def __init__(self, config: BalanceConfig, context: Context):
         robot = context.robot

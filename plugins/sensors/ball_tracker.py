@@ -12,6 +12,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import SceneGeometry, SceneObjects
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
 from rehabkit.throwing.model import GRAVITY
 
@@ -31,6 +32,8 @@ class BallTrackerConfig(SensorConfig):
 
 class BallTracker(Sensor):
     """Object position in the robot's base frame; flights, catch-plane crossings and parabola fits per run."""
+
+    requires = (SceneGeometry, SceneObjects)
 
     def __init__(self, config: BallTrackerConfig, context: Context):
         self.config, self.rate_hz, self.rng = config, config.rate_hz, context.rng

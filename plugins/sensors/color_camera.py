@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
+from rehabkit.core.capabilities import Cameras
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
 
 HSV = tuple[int, int, int]
@@ -43,6 +44,8 @@ class ColorCameraConfig(SensorConfig):
 
 class ColorCamera(Sensor):
     """Overhead colour camera locating a ball: HSV mask, centroid, diameter → 3-D point in the robot frame."""
+
+    requires = (Cameras,)
 
     blocking = True  # a frame: ~70 ms of software rendering here, several ticks on any machine
 

@@ -22,7 +22,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rehabkit.core.capabilities import missing_capabilities
+from rehabkit.core.capabilities import ExternalTorques, SceneObjects, missing_capabilities
 from rehabkit.core.errors import SetupError
 from rehabkit.core.interfaces import (
     Backend,
@@ -172,14 +172,24 @@ def _narrow_limits(a: Assembly) -> None:
 
 
 def _check_capabilities(a: Assembly) -> None:
-    """Plugins that need something of the robot (a workspace table, a floating base, …) say so up front."""
+    """Plugins that need something of the robot or the backend (a workspace table, a floating base, cameras, …)
+    say so up front; so does the task (a simulated person, objects moved by events)."""
     sc = a.sc
+    backend = a.registry.get("backend", sc.backend.type).factory  # checked on the class: not built yet
     named = [("planner", sc.planner), ("controller", sc.controller), *(("sensor", c) for c in sc.sensors.values())]
+    problems = []
     for kind, cfg in named:
-        missing = missing_capabilities(a.registry.get(kind, cfg.type).factory, a.robot)
+        missing = missing_capabilities(a.registry.get(kind, cfg.type).factory, a.robot, backend)
         if missing:
-            raise SetupError(f"{kind} '{cfg.type}' needs a robot that {' and '.join(missing)}; robot "
-                             f"'{sc.robot.type}' does not")
+            problems.append(f"{kind} '{cfg.type}' needs {' and '.join(missing)}")
+    if any(e.action == "move" for e in sc.task.events) and not _has(backend, SceneObjects):
+        problems.append("task events that 'move' objects need a backend with scene objects")
+    if problems:
+        raise SetupError(f"{'; '.join(problems)} (robot '{sc.robot.type}', backend '{sc.backend.type}')")
+
+
+def _has(backend: Any, capability: type) -> bool:
+    return issubclass(backend, capability) if isinstance(backend, type) else isinstance(backend, capability)
 
 
 def _patient_and_safety(a: Assembly) -> None:
@@ -189,6 +199,9 @@ def _patient_and_safety(a: Assembly) -> None:
         if a.backend.realtime:  # a real robot has a real person in it
             a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
                                 "backend: the person is real")
+        elif not isinstance(a.backend, ExternalTorques):
+            raise SetupError(f"patient.model '{model_cfg.type}' needs a backend that applies a simulated person's "
+                             f"torques; backend '{sc.backend.type}' does not")
         else:
             a.patient = a.make("patient", model_cfg)
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))

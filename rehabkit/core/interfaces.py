@@ -367,7 +367,12 @@ class BackendFaultError(RuntimeError):
 
 
 class Backend(ABC):
-    """Where commands go and state comes from: a simulator or a robot link."""
+    """Where commands go and state comes from: a simulator or a robot link.
+
+    This is the stepping core every backend has. What only some backends can do — contacts, a scene to draw,
+    objects, cameras, instruments, a floating base, joints by name, external torques — are the protocols of
+    :mod:`rehabkit.core.capabilities` a backend derives from; plugins needing one list it in ``requires``.
+    """
 
     timestep: float
     realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
@@ -387,68 +392,6 @@ class Backend(ABC):
     @abstractmethod
     def step(self, n: int = 1) -> None:
         """Advance ``n`` timesteps."""
-
-    def external_torque(self, tau: np.ndarray) -> None:
-        """Joint torques from outside the robot (a simulated person), added to the command just sent."""
-        raise NotImplementedError(f"{type(self).__name__} cannot apply simulated external torques")
-
-    def contacts(self) -> list[Contact]:
-        """Current contacts involving the robot (support contacts of its feet excluded); default []."""
-        return []
-
-    def base_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """A floating robot's root: world position, quaternion (w, x, y, z), linear and angular velocity (world)."""
-        raise NotImplementedError(f"{type(self).__name__} has no floating base to report")
-
-    def body_poses(self) -> BodyPoses:
-        """World poses of the bodies that carry :meth:`visual_geoms`; default none."""
-        return BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
-
-    def ee_position(self) -> np.ndarray | None:
-        """World position of the robot's end effector if the backend tracks it (else the runner uses FK)."""
-        return None
-
-    def visual_geoms(self) -> list[GeomVisual]:
-        """Shapes to draw, fixed to bodies; default none."""
-        return []
-
-    # -- scene access for simulated sensors and scripted worlds (simulators implement these) --
-
-    def set_joints(self, values: dict[str, np.ndarray]) -> None:
-        """Set named joints (passive ones: closing a parallel mechanism consistently)."""
-        raise NotImplementedError(f"{type(self).__name__} cannot set joints by name")
-
-    def read_instrument(self, name: str) -> np.ndarray:
-        """The current value of an instrument a sensor asked for."""
-        raise NotImplementedError(f"{type(self).__name__} has no simulated instruments")
-
-    def joint_positions(self, names: list[str]) -> np.ndarray:
-        """Positions of named joints, passive ones included."""
-        raise NotImplementedError(f"{type(self).__name__} cannot read joints by name")
-
-    def move_object(self, name: str, position: np.ndarray) -> None:
-        """Put a kinematic (mocap) object at a world position."""
-        raise NotImplementedError(f"{type(self).__name__} cannot move scene objects")
-
-    def grasp(self, name: str) -> None:
-        """Put a held object (``held_by``) back at its holder, at rest, and hold it there."""
-        raise NotImplementedError(f"{type(self).__name__} cannot hold objects")
-
-    def release(self, name: str) -> None:
-        """Let go of a held object: from now on it moves freely."""
-        raise NotImplementedError(f"{type(self).__name__} cannot hold objects")
-
-    def object_position(self, name: str) -> np.ndarray:
-        """Ground-truth world position of a scene object."""
-        raise NotImplementedError(f"{type(self).__name__} has no ground truth of scene objects")
-
-    def render(self, camera: str, width: int, height: int) -> np.ndarray:
-        """An RGB image (height, width, 3) uint8 from a scene camera."""
-        raise NotImplementedError(f"{type(self).__name__} has no cameras to render")
-
-    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
-        """World position, world rotation (OpenCV axes: x right, y down, z forward) and vertical FOV [rad]."""
-        raise NotImplementedError(f"{type(self).__name__} has no cameras")
 
     def run_metrics(self) -> dict[str, float]:
         """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""

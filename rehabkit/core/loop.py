@@ -16,11 +16,14 @@ import numpy as np
 from tqdm import tqdm
 
 from rehabkit.core.assembly import Assembly
-from rehabkit.core.interfaces import BackendFaultError
+from rehabkit.core.capabilities import Contacts, SceneGeometry
+from rehabkit.core.interfaces import BackendFaultError, BodyPoses
 from rehabkit.core.metrics import Trace
 from rehabkit.core.reference import ReferenceBuffer
 from rehabkit.core.run_view import LOG_FLUSH_SAMPLES, RunView
 from rehabkit.core.timeline import Timeline
+
+NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
 
 
 @dataclass(frozen=True)
@@ -43,7 +46,8 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     n, dof, dt, sub = sch.steps, a.robot.model.dof, sch.control_dt, sch.substeps
     ref_q, ref_qd, ref_qdd = ref.views()
     state, compute, check = backend.state, controller.compute, safety.check_row
-    command, step, contacts = backend.command, backend.step, backend.contacts
+    command, step = backend.command, backend.step
+    contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
     concat, log = np.concatenate, view.log
     log_every = sch.log_every
     next_log = 0 if log else -1
@@ -52,11 +56,13 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
         log.deferred = True
     cart = a.planner.space == "cartesian"
     tx, tqr = trace.x, trace.q_ref
-    ee = a.robot.ee_world if backend.ee_position() is None else None
+    drawn = isinstance(backend, SceneGeometry)
+    ee = None if drawn else a.robot.ee_world  # the hand where the backend tracks it, else by the robot's FK
     own_ref = controller.own_reference
     person = a.patient.torque if a.patient is not None else None
     late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
-    push, tau_h, hand_force, goal_at = backend.external_torque, trace.tau_h, a.hand_force, ref.goal_at
+    push = backend.external_torque if person is not None else None  # the setup made sure the backend can
+    tau_h, hand_force, goal_at = trace.tau_h, a.hand_force, ref.goal_at
     stop_after = a.sc.safety.stop_after_s
     bar = tqdm(total=n, unit="step", delay=1.0, disable=not progress, leave=False)
     # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
@@ -103,7 +109,10 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                 contact_steps += 1
             if k == next_log:
                 next_log += log_every
-                log.record(t, backend.body_poses(), ee(q[None])[0] if ee is not None else backend.ee_position())
+                if drawn:
+                    log.record(t, backend.body_poses(), backend.ee_position())
+                else:
+                    log.record(t, NO_BODIES, ee(q[None])[0])
                 if log.pending >= LOG_FLUSH_SAMPLES:
                     view.flush(trace, k + 1)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rehabkit.core.capabilities import HeldObjects
 from rehabkit.core.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.limits import LimitBreach, first_breach
 from rehabkit.core.metric import MetricCatalogue, combine
@@ -24,7 +25,7 @@ class PlanGate:
     def __init__(self, setup, catalogue: MetricCatalogue):
         self.planner, self.robot, self.safety = setup.planner, setup.robot, setup.safety
         self.cartesian = setup.planner.space == "cartesian"
-        self.scene_actions = tuple(getattr(setup.backend, "scene_actions", ()))
+        self.scene_actions = ("grasp", "release") if isinstance(setup.backend, HeldObjects) else ()
         self.catalogue = catalogue
         self.metrics: dict[str, float] = {}
         self.warnings: list[dict] = []

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from rehabkit.core.assembly import Assembly
+from rehabkit.core.capabilities import SceneGeometry
 from rehabkit.core.interfaces import Plan
 from rehabkit.core.log import RerunLog
 from rehabkit.core.metrics import Trace
@@ -32,7 +33,8 @@ class RunView:
         out.mkdir(parents=True, exist_ok=True)
         model = setup.robot.model
         log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn)
-        log.scene(setup.backend.visual_geoms())
+        if isinstance(setup.backend, SceneGeometry):
+            log.scene(setup.backend.visual_geoms())
         named = [(n, t) for n, t in setup.targets.items() if t.pose is not None]
         log.targets(0.0, [n for n, _ in named], model.to_world([t.pose[:3, 3] for _, t in named]))
         for name, points in setup.planner.joint_space_visuals().items():

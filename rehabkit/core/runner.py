@@ -17,7 +17,7 @@ import numpy as np
 import yaml
 
 from rehabkit.core.assembly import Assembly, SetupError, assemble, start_posture
-from rehabkit.core.capabilities import PassiveJoints
+from rehabkit.core.capabilities import NamedJoints, PassiveJoints
 from rehabkit.core.interfaces import BackendFaultError, Plan, PlanningError, Target
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.lifecycle import Extensions, default_extensions
@@ -123,7 +123,8 @@ class Runner:
             a.backend.reset(q0)
         except BackendFaultError as exc:
             raise SetupError(f"backend '{sc.backend.type}': {exc}") from exc
-        if isinstance(a.robot, PassiveJoints):  # parallel mechanisms: assemble the passive joints too
+        if isinstance(a.robot, PassiveJoints) and isinstance(a.backend, NamedJoints):
+            # parallel mechanisms: the passive joints assembled too, where the backend sets joints by name
             a.backend.set_joints(a.robot.passive_state(q0))
         cart = a.planner.space == "cartesian"
         start = a.robot.fk(q0)[:3, 3] if cart else q0  # Cartesian references are in the robot base frame

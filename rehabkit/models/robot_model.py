@@ -136,10 +136,12 @@ class RobotModel:
 
     @cached_property
     def revolute(self) -> np.ndarray:
-        """Which joints turn (the others slide), in the order of ``q``."""
-        joints = self.pin_model.joints[1:]
-        return np.array(["Prismatic" not in j.shortname() and not j.shortname().startswith("JointModelP")
-                         for j in joints])
+        """Which joints turn (MJCF ``hinge``, the default) rather than slide, in the order of ``q``; read from the
+        MJCF itself, so robots Pinocchio can't load (closed loops) have it too."""
+        import xml.etree.ElementTree as ET
+
+        kinds = {j.get("name"): j.get("type", "hinge") for j in ET.fromstring(self.mjcf).iter("joint")}
+        return np.array([kinds.get(n, "hinge") != "slide" for n in self.joint_names])
 
     def new_pin_data(self):
         """A fresh Pinocchio data object (one per user: they are scratch space)."""
@@ -152,17 +154,6 @@ class RobotModel:
         data = data if data is not None else self.new_pin_data()
         pin.framesForwardKinematics(self.pin_model, data, q)
         return data.oMf[self.ee_frame_id].homogeneous.copy()
-
-    def ee_positions_world(self, qs: np.ndarray) -> np.ndarray:
-        """World positions of the end effector for each row of ``qs``."""
-        import pinocchio as pin
-
-        model, data, fid = self.pin_model, self.new_pin_data(), self.ee_frame_id
-        out = np.empty((len(qs), 3))
-        for i, q in enumerate(qs):
-            pin.framesForwardKinematics(model, data, q)
-            out[i] = data.oMf[fid].translation
-        return out @ self.base_pose[:3, :3].T + self.base_pose[:3, 3]
 
     def to_world(self, points: np.ndarray) -> np.ndarray:
         """Base-frame points (n, 3) (or one point) in the world frame, (n, 3)."""

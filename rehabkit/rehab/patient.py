@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 
 from rehabkit.core.limits import LimitSources, Narrowing, envelope_narrowings, narrow
-from rehabkit.core.safety import SafetyConfig
 from rehabkit.core.scenario.patient import Comfort, JointRom, PatientBase
+from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 __all__ = ["Comfort", "JointRom", "PatientBase", "effective_limits", "interaction_force_limit",

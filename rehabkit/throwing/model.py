@@ -107,11 +107,6 @@ def on_arc(th: Throw, shoulder: np.ndarray, phi, dphi, ddphi) -> tuple[np.ndarra
     return p, v, a
 
 
-def release_state(th: Throw, shoulder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    p, v, _ = hand_path(th, shoulder, np.array([th.release_time]))
-    return p[0], v[0]
-
-
 def plane_crossing(p0: np.ndarray, v0: np.ndarray, plane_x: float) -> tuple[np.ndarray, float] | None:
     """Where and when a ball thrown from p0 with v0 crosses the vertical plane x = plane_x (no drag)."""
     if v0[0] <= 1e-9 or plane_x <= p0[0]:

@@ -10,6 +10,17 @@ from pydantic import Field
 
 from rehabkit.core.backends.scene import INTEGRATORS, add_instruments, build_scene
 from rehabkit.core.backends.scene_view import SceneView
+from rehabkit.core.capabilities import (
+    BaseState,
+    Cameras,
+    Contacts,
+    ExternalTorques,
+    HeldObjects,
+    Instruments,
+    NamedJoints,
+    SceneGeometry,
+    SceneObjects,
+)
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, Contact, Context, StrictModel
 
@@ -28,10 +39,9 @@ def _span(indices: np.ndarray) -> slice | np.ndarray:
     return indices
 
 
-class MujocoBackend(SceneView, Backend):
+class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, HeldObjects, Cameras, Instruments,
+                    BaseState, NamedJoints, ExternalTorques):
     """MuJoCo physics: the robot's MJCF plus the scenario's world, driven by joint torques."""
-
-    scene_actions = ("release", "grasp")  # what a plan may do to held objects
 
     def __init__(self, config: MujocoConfig, context: Context):
         robot = context.robot.model

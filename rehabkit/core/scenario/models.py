@@ -15,8 +15,8 @@ from pydantic import Field, create_model, model_validator
 
 from rehabkit.core.interfaces import StrictModel
 from rehabkit.core.plugins import PluginRegistry
-from rehabkit.core.safety import SafetyConfig
 from rehabkit.core.scenario.patient import PatientBase
+from rehabkit.core.scenario.safety import SafetyConfig
 
 Vec3 = tuple[float, float, float]
 

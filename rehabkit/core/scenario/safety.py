@@ -1,0 +1,81 @@
+"""The scenario's ``safety:`` section: the envelope every command passes (the DSL; the layer enforcing it is
+:mod:`rehabkit.core.safety`)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from rehabkit.models.strict import StrictModel
+
+Vec3 = tuple[float, float, float]
+
+
+class JointEnvelope(StrictModel):
+    """Limits of one joint, tighter than the robot's (a wider value changes nothing: the robot's own limits hold)."""
+
+    range_deg: tuple[float, float] | None = Field(None, description="[lowest, highest] position")
+    velocity_deg_s: float | None = Field(None, gt=0, description="largest speed")
+    torque_nm: float | None = Field(None, gt=0, description="largest torque")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> JointEnvelope:
+        if self.range_deg is not None and self.range_deg[0] >= self.range_deg[1]:
+            raise ValueError(f"range_deg must be [lowest, highest], got {list(self.range_deg)}")
+        return self
+
+
+class KeepInBox(StrictModel):
+    """An axis-aligned box the hand (end effector) must stay in."""
+
+    min: Vec3 = Field(description="lowest corner [m]")
+    max: Vec3 = Field(description="highest corner [m]")
+    frame: Literal["world", "base"] = Field("world", description="frame of the corners: world or robot base")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> KeepInBox:
+        if any(a >= b for a, b in zip(self.min, self.max)):
+            raise ValueError(f"keep_in: min {list(self.min)} must be below max {list(self.max)} on every axis")
+        return self
+
+
+class Heartbeat(StrictModel):
+    """Link timing for backends with a link (a hardware bridge); a simulator has none to watch."""
+
+    command_timeout_ms: float = Field(50.0, gt=0, description="the robot side holds the robot without a valid "
+                                                               "command this long")
+    state_timeout_ms: float = Field(100.0, gt=0, description="the host stops without a valid state this long")
+    hold_after_ms: float | None = Field(None, gt=0, description="the robot side holds the posture (not the last "
+                                        "torque) without a newer command this long, until the next one (default: "
+                                        "10 ms, or half the command timeout if that is shorter)")
+
+    @property
+    def hold_after(self) -> float:
+        """The hold's delay [ms], its default filled in."""
+        return self.hold_after_ms if self.hold_after_ms is not None else min(10.0, self.command_timeout_ms / 2)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Heartbeat:
+        if self.hold_after_ms is not None and self.hold_after_ms >= self.command_timeout_ms:
+            raise ValueError(f"hold_after_ms ({self.hold_after_ms:g}) must be below command_timeout_ms "
+                             f"({self.command_timeout_ms:g}): the hold bridges a gap before the watchdog latches")
+        return self
+
+
+class SafetyConfig(StrictModel):
+    """Safety-layer settings of a scenario: the envelope every command passes."""
+
+    position_margin_deg: float = Field(0.5, ge=0, description="tolerance beyond a joint's range before tripping")
+    velocity_factor: float = Field(1.0, gt=0, description="trip above this multiple of the velocity limit")
+    torque_policy: Literal["clip", "stop"] = "clip"
+    hold_kp: float = Field(60.0, gt=0, description="hold stiffness after a trip [N·m/rad]")
+    hold_kd: float = Field(6.0, gt=0, description="hold damping after a trip [N·m·s/rad]")
+    stop_after_s: float = Field(0.5, ge=0, description="keep simulating this long after a trip, then end the run")
+    joints: dict[str, JointEnvelope] = Field({}, description="per-joint limits tighter than the robot's")
+    keep_in: KeepInBox | None = Field(None, description="box the hand must stay in")
+    interaction_force_n: float | None = Field(None, gt=0, description="largest force between person and robot "
+                                                                       "at the hand")
+    ramp_in_s: float = Field(0.0, ge=0, description="soft start: blend from holding the start posture")
+    ramp_out_s: float = Field(0.0, ge=0, description="soft stop: blend to holding the posture, before the end")
+    heartbeat: Heartbeat | None = Field(None, description="link timing (hardware backends)")
