@@ -1,5 +1,6 @@
-"""Base classes of the six plugin kinds (robot, planner, controller, sensor, backend, patient) and the small
-types they exchange."""
+"""Base classes of the plugin kinds (robot, planner, controller, patient; sensor and backend in
+:mod:`rehabkit.core.sensing` and :mod:`rehabkit.core.backend`, re-exported here) and the small types they
+exchange. Third parties import all of them from :mod:`rehabkit.plugin`."""
 
 from __future__ import annotations
 
@@ -10,8 +11,9 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
-from pydantic import Field
 
+from rehabkit.core.backend import Backend, BackendFaultError, BodyPoses, Contact, GeomVisual
+from rehabkit.core.sensing import Instrument, Sensor, SensorConfig
 from rehabkit.models.robot_model import RobotModel
 from rehabkit.models.strict import StrictModel
 
@@ -268,143 +270,8 @@ class Controller(ABC):
         """Joint torques [N·m]; called in the hot loop, so keep it allocation-light."""
 
 
-@dataclass(frozen=True)
-class Instrument:
-    """A physical sensing element a sensor plugin needs in the simulated scene.
-
-    Attributes:
-        name: Unique name (the backend reads it back by this name).
-        kind: ``accelerometer`` (specific force, site frame [m/s²]) or ``gyro`` (angular velocity [rad/s]).
-        body: Body it is fixed to.
-        position: Where on that body (body frame) [m]; axes aligned with the body's.
-    """
-
-    name: str
-    kind: Literal["accelerometer", "gyro"]
-    body: str
-    position: tuple[float, float, float]
-
-
-class SensorConfig(StrictModel):
-    """Base of every sensor plugin's config: each sensor runs at its own rate."""
-
-    rate_hz: float = Field(100.0, gt=0, description="sampling rate [Hz]")
-
-
-class Sensor(ABC):
-    """Reads something at its own rate; readings go to the log and to ``Runner.observations``."""
-
-    rate_hz: float
-    blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time
-    #                         backend it is read in a thread of its own (``rehabkit.core.sensor_threads``)
-
-    @abstractmethod
-    def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, Any]:
-        """One reading: name → value (arrays, scalars, or an image as ``HxWx3`` uint8).
-
-        A sensor that locates a task target reports it as ``target_position``
-        (robot base frame, [m]); ``None`` when it sees nothing.
-        """
-
-    def run_metrics(self, trace: Any = None) -> dict[str, float]:
-        """Figures about the whole run (e.g. estimation error), given the run's trace; default none."""
-        return {}
-
-    def report(self, metrics: dict[str, float]) -> str | None:
-        """A short text report for people (printed by ``rehabkit run``, kept in summary.json); default none."""
-        return None
-
-    def instruments(self) -> list[Instrument]:
-        """Sensing elements to put in the simulated scene (read with ``backend.read_instrument``)."""
-        return []
-
-
-@dataclass
-class Contact:
-    """A contact between the robot (or an object) and something else."""
-
-    geom1: str
-    geom2: str
-    position: np.ndarray
-    depth: float
-
-
-@dataclass(frozen=True)
-class GeomVisual:
-    """A primitive shape fixed to a body, for drawing.
-
-    Attributes:
-        body: Body name (its pose comes from :meth:`Backend.body_poses`).
-        name: Geom name.
-        shape: ``box`` (half-extents), ``sphere`` (radius), ``capsule``/``cylinder``
-            (radius, half-length along local z), ``plane`` (half-sizes x, y).
-        size: Shape parameters [m].
-        position: Offset in the body frame [m].
-        quat_wxyz: Orientation in the body frame.
-        rgba: Colour, 0..1.
-    """
-
-    body: str
-    name: str
-    shape: str
-    size: tuple[float, ...]
-    position: tuple[float, float, float]
-    quat_wxyz: tuple[float, float, float, float]
-    rgba: tuple[float, float, float, float]
-
-
-@dataclass
-class BodyPoses:
-    """World poses of the drawn bodies: names, positions (n, 3), quaternions (n, 4) w-x-y-z."""
-
-    names: list[str]
-    positions: np.ndarray
-    quats_wxyz: np.ndarray
-
-
-class BackendFaultError(RuntimeError):
-    """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason."""
-
-
-class Backend(ABC):
-    """Where commands go and state comes from: a simulator or a robot link.
-
-    This is the stepping core every backend has. What only some backends can do — contacts, a scene to draw,
-    objects, cameras, instruments, a floating base, joints by name, external torques — are the protocols of
-    :mod:`rehabkit.core.capabilities` a backend derives from; plugins needing one list it in ``requires``.
-    """
-
-    timestep: float
-    realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
-
-    @abstractmethod
-    def reset(self, q0: np.ndarray) -> None:
-        """Put the robot at rest at ``q0``."""
-
-    @abstractmethod
-    def state(self) -> tuple[float, np.ndarray, np.ndarray]:
-        """Time [s], joint positions, joint velocities. Arrays may be views: copy to keep."""
-
-    @abstractmethod
-    def command(self, tau: np.ndarray) -> None:
-        """Set joint torques for the next steps (already checked by the safety layer)."""
-
-    @abstractmethod
-    def step(self, n: int = 1) -> None:
-        """Advance ``n`` timesteps."""
-
-    def run_metrics(self) -> dict[str, float]:
-        """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""
-        return {}
-
-    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Time series only the backend knows, name → (times [s], values), for the log; default none."""
-        return {}
-
-    def interventions(self) -> list:
-        """Safety events the robot side took on its own (``SafetyEvent``s, e.g. a hold through a gap in the
-        commands); default none."""
-        return []
-
-    def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
-        """Release resources."""
+__all__ = [  # the backend and sensor kinds live in modules of their own; importable from here as before
+    "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "GeomVisual", "IKUnavailableError",
+    "Instrument", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest", "ReferenceSpace", "Robot", "Sensor",
+    "SensorConfig", "StrictModel", "Target", "Trajectory",
+]

@@ -1,0 +1,74 @@
+"""Declared capabilities: what plugins require of the robot and the backend is refused by name, by `validate`
+before anything is built, and by the run's setup."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rehabkit.cli import main
+from rehabkit.core.capabilities import (
+    Cameras,
+    ClusterPoints,
+    Contacts,
+    ExternalTorques,
+    FloatingBase,
+    Instruments,
+    WorkspaceTable,
+    missing_capabilities,
+)
+from rehabkit.core.errors import SetupError
+from rehabkit.core.runner import Runner
+from rehabkit.core.scenario.loader import load_scenario
+from tests.conftest import SCENARIOS
+
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+
+
+def test_validate_refuses_a_controller_the_robot_cannot_serve(capsys):
+    code = main(["validate", str(HIT), "--set", "controller={type: qp-stack, levels: [{tasks: [{type: com}]}]}"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "controller 'qp-stack' needs a robot that has a floating base" in err and "robot 'hit'" in err
+
+
+def test_validate_refuses_a_sensor_the_backend_cannot_serve(capsys, tmp_path):
+    # a hardware link reads no simulated accelerometers: refused before a bridge is started
+    code = main(["validate", str(HIT), "--set", "backend.type=hardware", "--set",
+                 "sensors.imu={type: accelerometer-array, body: elbow_2_link}"])
+    err = capsys.readouterr().err
+    assert code == 2 and "sensor 'accelerometer-array' needs a backend that reads simulated instruments" in err
+
+
+def test_several_missing_capabilities_are_named_together():
+    sc = load_scenario(HIT, {"planner": {"type": "voxel-astar"}, "controller": {"type": "clik-pd"},
+                             "sensors": {"b": {"type": "balance", "support_frames": ["a", "b", "c"]}}})
+    with pytest.raises(SetupError) as err:
+        Runner(sc).build()
+    text = str(err.value)
+    assert "planner 'voxel-astar' needs a robot that has a workspace look-up table" in text
+    assert "sensor 'balance' needs a robot that has a floating base" in text
+
+
+def test_the_built_in_robots_and_backends_declare_what_they_have(hit, lexos):
+    from rehabkit_plugins.robots.capaman import CapamanConfig, CapamanRobot
+
+    from rehabkit.core.backends.mujoco import MujocoBackend
+
+    assert isinstance(lexos, WorkspaceTable) and not isinstance(hit, WorkspaceTable)
+    assert isinstance(CapamanRobot(CapamanConfig()), ClusterPoints) and not isinstance(hit, FloatingBase)
+    for cap in (Contacts, Cameras, Instruments, ExternalTorques):
+        assert issubclass(MujocoBackend, cap)
+
+
+def test_a_third_party_robot_states_a_capability_by_deriving_from_it(hit):
+    class Planner:
+        requires = (WorkspaceTable,)
+
+    class TableArm(type(hit), WorkspaceTable):
+        def workspace(self, resolution=0.01, progress=True, use_cache=True):
+            return np.zeros((2, 2, 2))
+
+    arm = TableArm.__new__(TableArm)
+    assert missing_capabilities(Planner, arm) == []
+    assert missing_capabilities(Planner, hit) == ["a robot that has a workspace look-up table (robot.workspace)"]
