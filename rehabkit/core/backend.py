@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
+
+from rehabkit.core.metric import Metric
 
 
 @dataclass
@@ -64,6 +67,7 @@ class Backend(ABC):
     """
 
     timestep: float
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
 
     @abstractmethod

@@ -13,6 +13,7 @@ from typing import Any, ClassVar, Literal, Protocol
 import numpy as np
 
 from rehabkit.core.backend import Backend, BackendFaultError, BodyPoses, Contact, GeomVisual
+from rehabkit.core.metric import Metric
 from rehabkit.core.sensing import Instrument, Sensor, SensorConfig
 from rehabkit.models.robot_model import RobotModel
 from rehabkit.models.strict import StrictModel
@@ -202,6 +203,7 @@ class Planner(ABC):
     """
 
     space: ClassVar[ReferenceSpace] = "joint"
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of its diagnostics and run_metrics
 
     @abstractmethod
     def plan(self, request: PlanRequest) -> Plan:
@@ -229,6 +231,7 @@ class Patient(ABC):
     """
 
     delay_s: float = 0.0
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
 
     @abstractmethod
     def torque(self, t: float, q: np.ndarray, qd: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -258,9 +261,14 @@ class Controller(ABC):
     reference: ClassVar[ReferenceSpace] = "joint"
     joint_reference: np.ndarray | None = None
     own_reference: ClassVar[bool] = False  # it makes its own joint reference (e.g. an HMI), ignoring the runner's
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
 
     def run_metrics(self, trace: Any) -> dict[str, float]:
         """Figures about the executed run only this controller can judge (default none)."""
+        return {}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Internal states over time for the log, name → (times [s], values); default none."""
         return {}
 
     @abstractmethod

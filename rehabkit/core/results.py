@@ -114,7 +114,7 @@ def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[
         metrics.update(c.metrics)
         sections.update(c.sections)
     if view is not None and view.log:
-        series = {**a.backend.series(), **getattr(a.controller, "series", dict)(),
+        series = {**a.backend.series(), **a.controller.series(),
                   **(a.patient.series() if a.patient is not None else {})}
         for c in contributions:
             series.update(c.series)

@@ -84,7 +84,7 @@ class Runner:
             catalogue = MetricCatalogue(CORE_METRICS)
             catalogue.add(self.extensions.metrics())
             for plugin in (a.planner, a.controller, a.backend, a.patient, *a.sensors.values()):
-                catalogue.add(getattr(plugin, "metrics", ()))
+                catalogue.add(plugin.metrics if plugin is not None else ())
             self.gate = PlanGate(a, catalogue)
             trace, packed = self._start()
             if a.backend.realtime and any(s.blocking for s in a.sensors.values()):

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field
 
+from rehabkit.core.metric import Metric
 from rehabkit.models.strict import StrictModel
 
 
@@ -39,6 +40,7 @@ class Sensor(ABC):
     """Reads something at its own rate; readings go to the log and to ``Runner.observations``."""
 
     rate_hz: float
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time
     #                         backend it is read in a thread of its own (``rehabkit.core.sensor_threads``)
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from rehabkit.core.backends.scene import build_scene
 from rehabkit.core.backends.scene_view import measured_joints
+from rehabkit.core.capabilities import PassiveJoints
 from rehabkit.core.scenario.models import World
 from rehabkit.hardware.clock import wait_until
 from rehabkit.hardware.protocol import (
@@ -98,7 +99,7 @@ class MujocoPlant(Plant):
     def reset(self, q0):
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self._q] = q0
-        if hasattr(self.robot, "passive_state"):  # a parallel mechanism: its passive joints close the loops
+        if isinstance(self.robot, PassiveJoints):  # a parallel mechanism: its passive joints close the loops
             for name, value in self.robot.passive_state(q0).items():
                 adr = self.model.jnt_qposadr[self.model.joint(name).id]
                 value = np.atleast_1d(value)

@@ -157,7 +157,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
 
     def base_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         if self._root_joint is None:
-            return super().base_state()
+            raise NotImplementedError(f"robot '{self.robot.name}' has no floating base to report")
         qa, va = self.model.jnt_qposadr[self._root_joint], self.model.jnt_dofadr[self._root_joint]
         d = self.data
         rot = d.xmat[self.model.jnt_bodyid[self._root_joint]].reshape(3, 3)
