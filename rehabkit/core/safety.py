@@ -104,6 +104,7 @@ class SafetyLayer:
         self._centre = np.concatenate([(self.lo + self.hi) / 2, np.zeros(2 * n)])
         self._bound = np.concatenate([(self.hi - self.lo) / 2, self.vmax, self.effort])
         self._buf = np.empty(3 * n)
+        self._width = 3 * n
         self._ok = np.empty(3 * n, dtype=bool)
 
     @property
@@ -127,7 +128,7 @@ class SafetyLayer:
         if self.tripped_at is None:
             b = np.subtract(row, self._centre, out=self._buf)
             np.abs(b, out=b)
-            if np.less_equal(b, self._bound, out=self._ok).all():
+            if np.count_nonzero(np.less_equal(b, self._bound, out=self._ok)) == self._width:  # (all(): 2 µs more)
                 tau = row[2 * n :]
                 if self._box is not None and self._outside_box(t, row[:n]):
                     tau[:] = self._stop_torque(row[:n], row[n : 2 * n])
