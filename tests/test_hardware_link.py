@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from rehabkit.api import run_scenario
-from rehabkit.core.backends.hardware import BridgeHoldError, HardwareBackend, HardwareConfig
 from rehabkit.core.interfaces import Context
+from rehabkit.hardware.backend import BridgeHoldError, HardwareBackend, HardwareConfig
 from rehabkit.hardware.protocol import COMMAND, ESTOPPED, WATCHDOG, encode
 from tests.conftest import SCENARIOS, retry_stalls
 
@@ -228,8 +228,8 @@ def test_the_bridge_checks_the_runs_ranges_on_its_own():
     try:
         q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
         backend.reset(q0)
-        with pytest.raises(BridgeHoldError, match=r"its own limit check: wrist_2 = 1\.7\d\d beyond its range "
-                                                  r"\(limit 1\.745\)"):
+        with pytest.raises(BridgeHoldError, match=r"its own limit check: wrist_2 beyond its position limit "
+                                                  r"\(10[23]\.\d°, limit 100\.0°\)"):
             for _ in range(1000):
                 _, q, qd = backend.state()
                 tau = 100 * (q0 - q) - 5 * qd + robot.gravity_torque(q)

@@ -110,8 +110,8 @@ def test_ramp_in_starts_from_holding_and_ramp_out_ends_there():
 def test_heartbeat_sets_the_links_timing(hit):
     from pathlib import Path
 
-    from rehabkit.core.backends.hardware import HardwareBackend, HardwareConfig
     from rehabkit.core.interfaces import Context
+    from rehabkit.hardware.backend import HardwareBackend, HardwareConfig
 
     safety = SafetyConfig.model_validate({"heartbeat": {"command_timeout_ms": 80, "state_timeout_ms": 150,
                                                         "hold_after_ms": 4}})

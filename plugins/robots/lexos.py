@@ -151,6 +151,9 @@ class LexosRobot(Robot, WorkspaceTable, RandomReach):
     def fk(self, q: np.ndarray) -> np.ndarray:
         return self.chain.fk(q)
 
+    def fk_batch(self, qs: np.ndarray) -> np.ndarray:
+        return self.chain.fk_batch(qs)
+
     def position_ik(self, p: np.ndarray) -> np.ndarray:
         """(N, swivel_samples, 4) joint values for hand positions ``p`` (base frame)."""
         return position_ik(p, self.swivel, *self.lengths)

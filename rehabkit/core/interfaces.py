@@ -85,7 +85,10 @@ class Robot(ABC):
         return self.model.ee_pose(np.asarray(q, dtype=float), self._data())
 
     def fk_batch(self, qs: np.ndarray) -> np.ndarray:
-        """End-effector poses (N, 4, 4) for many configurations."""
+        """End-effector poses (N, 4, 4) for many configurations. Default: Pinocchio's model, vectorised over the
+        batch; a robot with kinematics of its own (an overridden :meth:`fk`) overrides this too, vectorised."""
+        if type(self).fk is Robot.fk:
+            return self.model.batch_fk(qs)
         return np.array([self.fk(q) for q in np.atleast_2d(qs)])
 
     def ee_world(self, qs: np.ndarray) -> np.ndarray:

@@ -143,6 +143,14 @@ class RobotModel:
         kinds = {j.get("name"): j.get("type", "hinge") for j in ET.fromstring(self.mjcf).iter("joint")}
         return np.array([kinds.get(n, "hinge") != "slide" for n in self.joint_names])
 
+    @cached_property
+    def batch_fk(self):
+        """``batch_fk(qs) -> (N, 4, 4)``: end-effector poses in the base frame, vectorised over the batch
+        (:class:`rehabkit.models.batch_fk.BatchFK`)."""
+        from rehabkit.models.batch_fk import BatchFK
+
+        return BatchFK(self.pin_model, self.ee_frame_id)
+
     def new_pin_data(self):
         """A fresh Pinocchio data object (one per user: they are scratch space)."""
         return self.pin_model.createData()

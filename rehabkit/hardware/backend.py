@@ -18,29 +18,28 @@ The scenario's scene is mirrored on the host, posed from the measured joints
 (:class:`~rehabkit.core.backends.scene_view.SceneMirror`): the log draws the whole robot,
 the scripted world objects live there, and a simulated camera looks at it — from a sensor
 thread, since the backend is ``realtime`` and a frame takes longer than a tick, with the
-pixels rendered in a process of their own (:mod:`~rehabkit.core.backends.frame_server`).
+pixels rendered in a process of their own (:mod:`~rehabkit.hardware.frame_server`).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import socket
-import subprocess
-import sys
-import tempfile
 import time
 
 import numpy as np
 from pydantic import Field
 
-from rehabkit.core.backends.frame_server import FrameServer
 from rehabkit.core.backends.scene_view import SceneMirror, SceneView
+from rehabkit.core.capabilities import Cameras, NamedJoints, SceneGeometry, SceneObjects
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, BackendFaultError, BodyPoses, Context, GeomVisual, StrictModel
+from rehabkit.core.limits import first_breach
 from rehabkit.core.safety import SafetyEvent
+from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
 from rehabkit.hardware.clock import wait_until
+from rehabkit.hardware.frame_server import FrameServer
+from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series
 from rehabkit.hardware.protocol import (
     CMD_ESTOP,
     CMD_RESET,
@@ -81,10 +80,12 @@ class HardwareConfig(StrictModel):
                                    "long, until the next one (no torque is applied open-loop for longer)")
 
 
-class HardwareBackend(Backend):
-    """The robot over UDP (a bridge in front of its drives, or of a MuJoCo plant)."""
+class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints):
+    """The robot over UDP (a bridge in front of its drives, or of a MuJoCo plant); the scene mirrored on the host
+    from the measured joints (drawn, scripted objects, cameras rendered in a process of their own)."""
 
     realtime = True
+    metrics = METRICS
 
     def __init__(self, config: HardwareConfig, context: Context):
         beat = getattr(context.safety, "heartbeat", None)
@@ -96,6 +97,7 @@ class HardwareBackend(Backend):
         robot = context.robot
         self.n = robot.model.dof
         self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
+        self.revolute = robot.model.revolute
         self.mirror = SceneMirror(robot.model, context.world)
         self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
         self.measured = np.zeros(self.mirror.measured_count)
@@ -103,7 +105,7 @@ class HardwareBackend(Backend):
         self.process = None
         port = config.port
         if config.spawn_bridge:
-            self.process, port = self._spawn(context, config)
+            self.process, port = spawn_bridge(context, config)
         self.addr = (config.host, port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
@@ -124,28 +126,6 @@ class HardwareBackend(Backend):
         self._started = False
         self._estop_sent = False
         self._fault: str | None = None
-
-    @staticmethod
-    def _spawn(context: Context, config: HardwareConfig) -> tuple[subprocess.Popen, int]:
-        spec = context.robot_spec
-        cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
-               "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
-               "--watchdog-ms", str(config.bridge_watchdog_ms), "--stale-ms", str(config.bridge_stale_ms),
-               "--parent-pid", str(os.getpid()),
-               # the run's torque limits (the envelope's may be tighter than the robot's): the bridge clips to them
-               "--effort", json.dumps(context.robot.model.limits.effort.tolist()),
-               # and checks the run's ranges and speeds on its own, a margin wider than the host's safety layer
-               "--limits", json.dumps({k: getattr(context.robot.model.limits, k).tolist()
-                                       for k in ("lower", "upper", "velocity")})]
-        # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
-        log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-        line = proc.stdout.readline()  # "bridge: <robot> on udp://host:port"
-        if not line.startswith("bridge:"):
-            proc.kill()
-            log.seek(0)
-            raise ValueError(f"the bridge did not start: {line.strip() or log.read().strip()[-2000:]}")
-        return proc, int(line.rsplit(":", 1)[1])
 
     # -- link ------------------------------------------------------------------
 
@@ -182,14 +162,9 @@ class HardwareBackend(Backend):
                 self.rtt.append(now - msg.echo)
 
     def _beyond(self) -> str:
-        """What the bridge's own limit check saw, from the state it held at."""
-        lim, names = self.limits, self.joint_names
-        k = int(np.argmax(np.maximum(lim.lower - self.q, self.q - lim.upper)))
-        if self.q[k] < lim.lower[k] or self.q[k] > lim.upper[k]:
-            bound = lim.lower[k] if self.q[k] < lim.lower[k] else lim.upper[k]
-            return f"its own limit check: {names[k]} = {self.q[k]:.3f} beyond its range (limit {bound:.3f})"
-        k = int(np.argmax(np.abs(self.qd) / lim.velocity))
-        return f"its own limit check: {names[k]} at {self.qd[k]:.3f} too fast (limit {lim.velocity[k]:.3f})"
+        """What the bridge's own limit check saw, from the state it held at (its margin is wider than the host's)."""
+        breach = first_breach(self.limits, self.joint_names, self.q, self.qd, tol=0.0, revolute=self.revolute)
+        return f"its own limit check: {breach.describe()}" if breach else "its own limit check"
 
     def _note_stale(self, msg, t: float) -> None:
         """Holds through gaps in the commands, from the bridge's count of held ticks: exact even when the states
@@ -319,41 +294,15 @@ class HardwareBackend(Backend):
         return bool(self.status & HOLDING)
 
     def run_metrics(self) -> dict[str, float]:
-        late = np.array(self.lateness) * 1e3
-        rtt = np.array(self.rtt) * 1e3
-        out = {"link_ticks": float(self.ticks), "deadline_misses": float(self.misses),
-               "deadline_miss_rate": self.misses / max(1, self.ticks),
-               "states_dropped": float(sum(self.rx.dropped.values())),
-               **{f"states_dropped_{why.replace('-', '_')}": float(n) for why, n in self.rx.dropped.items()}}
-        if len(late):
-            out.update({"tick_lateness_median_ms": float(np.median(late)),
-                        "tick_lateness_p99_ms": float(np.percentile(late, 99)),
-                        "tick_lateness_max_ms": float(late.max())})
-        if self.held_at is not None:
-            out["bridge_hold_at_s"] = self.held_at
-        out["bridge_stale_holds"] = float(len(self.stale_holds))
-        out["ticks_skipped_s"] = self.skipped_s
-        if len(rtt):
-            out.update({"rtt_median_ms": float(np.median(rtt)), "rtt_p99_ms": float(np.percentile(rtt, 99))})
-        return out
+        return link_metrics(self)
 
     def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per tick: lateness of the loop, and the newest round trip measured by then [ms]."""
-        ticks = np.arange(len(self.lateness)) * self.timestep
-        out = {"link/tick_lateness_ms": (ticks, np.array(self.lateness) * 1e3)}
-        if self.rtt:
-            idx = np.clip(np.array(self.rtt_at) - 1, 0, len(self.rtt) - 1)
-            out["link/round_trip_ms"] = (ticks, np.array(self.rtt)[idx] * 1e3)
-        return out
+        return link_series(self)
 
     def close(self) -> None:
         try:
-            if self.process is not None:  # the bridge first: nothing below may leave it running
-                self.process.terminate()
-                try:
-                    self.process.wait(timeout=2)
-                except subprocess.TimeoutExpired:
-                    self.process.kill()
+            stop_bridge(self.process)  # the bridge first: nothing below may leave it running
         finally:
             self.sock.close()
             if self.frames is not None:

@@ -2,7 +2,7 @@
 
 Software rendering holds the interpreter for the whole frame (~70 ms at 640x480 here):
 in the host process it would stall a real-time control loop by as much, whatever thread
-asks for it. The server (``python -m rehabkit.core.backends.frame_server``, started by
+asks for it. The server (``python -m rehabkit.hardware.frame_server``, started by
 :class:`FrameServer`) gets the scene's compiled model once; a frame request sends the pose
 (``qpos`` and the kinematic objects) and waits for the pixels on a pipe, so the loop runs
 meanwhile. Requests are serialised by a lock. The server runs as an idle-priority task with one

@@ -1,0 +1,47 @@
+"""The robot-side bridge as a process of the host's: started for a rehearsal on the robot's MuJoCo model, stopped
+with the run."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+from rehabkit.core.interfaces import Context
+
+
+def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
+    """Start ``rehabkit bridge`` for the run's robot (its MuJoCo model as the plant), with the run's limits;
+    returns the process and the UDP port it serves on."""
+    spec = context.robot_spec
+    cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
+           "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
+           "--watchdog-ms", str(config.bridge_watchdog_ms), "--stale-ms", str(config.bridge_stale_ms),
+           "--parent-pid", str(os.getpid()),
+           # the run's torque limits (the envelope's may be tighter than the robot's): the bridge clips to them
+           "--effort", json.dumps(context.robot.model.limits.effort.tolist()),
+           # and checks the run's ranges and speeds on its own, a margin wider than the host's safety layer
+           "--limits", json.dumps({k: getattr(context.robot.model.limits, k).tolist()
+                                   for k in ("lower", "upper", "velocity")})]
+    # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
+    log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    line = proc.stdout.readline()  # "bridge: <robot> on udp://host:port"
+    if not line.startswith("bridge:"):
+        proc.kill()
+        log.seek(0)
+        raise ValueError(f"the bridge did not start: {line.strip() or log.read().strip()[-2000:]}")
+    return proc, int(line.rsplit(":", 1)[1])
+
+
+def stop_bridge(process: subprocess.Popen | None) -> None:
+    """Terminate the bridge (killed if it does not stop within 2 s)."""
+    if process is None:
+        return
+    process.terminate()
+    try:
+        process.wait(timeout=2)
+    except subprocess.TimeoutExpired:
+        process.kill()

@@ -1,0 +1,48 @@
+"""What the host measured of the robot link: deadline misses, tick lateness, round trips, dropped states, holds."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rehabkit.core.metric import Metric
+
+METRICS = (
+    Metric("link_ticks", clock="wall", description="ticks the loop ran over the link"),
+    Metric("deadline_*", clock="wall", description="ticks started after the next was due"),
+    Metric("states_dropped*", clock="wall", description="states refused (late, out of order, forged, …)"),
+    Metric("bridge_hold_at_s", "s", "wall", description="when the bridge held the robot on its own"),
+    Metric("bridge_stale_holds", clock="wall", description="gaps in the commands the bridge held through"),
+    Metric("ticks_skipped_s", "s", "wall", description="timeline paused after host stalls"),
+    Metric("rtt_*", "ms", "wall", description="round trip of a command and its state"),
+)
+
+
+def link_metrics(link) -> dict[str, float]:
+    """The link's figures over the run (all wall-clock: they measure this host and network)."""
+    late = np.array(link.lateness) * 1e3
+    rtt = np.array(link.rtt) * 1e3
+    out = {"link_ticks": float(link.ticks), "deadline_misses": float(link.misses),
+           "deadline_miss_rate": link.misses / max(1, link.ticks),
+           "states_dropped": float(sum(link.rx.dropped.values())),
+           **{f"states_dropped_{why.replace('-', '_')}": float(n) for why, n in link.rx.dropped.items()}}
+    if len(late):
+        out.update({"tick_lateness_median_ms": float(np.median(late)),
+                    "tick_lateness_p99_ms": float(np.percentile(late, 99)),
+                    "tick_lateness_max_ms": float(late.max())})
+    if link.held_at is not None:
+        out["bridge_hold_at_s"] = link.held_at
+    out["bridge_stale_holds"] = float(len(link.stale_holds))
+    out["ticks_skipped_s"] = link.skipped_s
+    if len(rtt):
+        out.update({"rtt_median_ms": float(np.median(rtt)), "rtt_p99_ms": float(np.percentile(rtt, 99))})
+    return out
+
+
+def link_series(link) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per tick: lateness of the loop, and the newest round trip measured by then [ms]."""
+    ticks = np.arange(len(link.lateness)) * link.timestep
+    out = {"link/tick_lateness_ms": (ticks, np.array(link.lateness) * 1e3)}
+    if link.rtt:
+        idx = np.clip(np.array(link.rtt_at) - 1, 0, len(link.rtt) - 1)
+        out["link/round_trip_ms"] = (ticks, np.array(link.rtt)[idx] * 1e3)
+    return out
