@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rehabkit.core.plugins import PluginRegistry
 from rehabkit.core.runner import Runner, RunResult
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
-from rehabkit.sweep.engine import SweepResult, run_sweep
+
+if TYPE_CHECKING:
+    from rehabkit.sweep.engine import SweepResult, run_sweep
 
 
 def run_scenario(
@@ -38,6 +40,15 @@ def run_scenario(
     loaded: LoadedScenario = load_scenario(path, overrides, registry)
     out = Path(out_dir) if out_dir is not None else None
     return Runner(loaded, registry, out, spawn=spawn, progress=progress).run()
+
+
+def __getattr__(name: str):
+    # sweeps (Ray, Parquet, a progress bar) load when a sweep is asked for, not with every run
+    if name in ("run_sweep", "SweepResult"):
+        from rehabkit.sweep import engine
+
+        return getattr(engine, name)
+    raise AttributeError(f"module 'rehabkit.api' has no attribute {name!r}")
 
 
 __all__ = ["LoadedScenario", "RunResult", "SweepResult", "load_scenario", "run_scenario", "run_sweep"]

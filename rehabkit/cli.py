@@ -123,6 +123,7 @@ def _admission(loaded) -> str:
 
 def cmd_plugins(args: argparse.Namespace) -> int:
     reg = default_registry()
+    conflicts = reg.load_all()  # listing them is the one place every plugin is imported
     if args.json:
         print(json.dumps([
             {"kind": p.kind, "name": p.name, "package": p.provider.package, "version": p.provider.version,
@@ -136,13 +137,17 @@ def cmd_plugins(args: argparse.Namespace) -> int:
             print(f"{'':<12}{name}: {typ} = {default}")
     for b in reg.broken:
         print(f"BROKEN     {b.provider.entry_point:<16} {b.provider.package} {b.provider.version}  — {b.error}")
+    for text in conflicts:
+        print(f"CONFLICT   {text}")
     return EXIT_OK
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
     from rehabkit.core.scenario.models import scenario_model
 
-    schema = scenario_model(default_registry()).model_json_schema()
+    registry = default_registry()
+    registry.load_all()
+    schema = scenario_model(registry).model_json_schema()
     # the loader inlines a profile given as a file path before validation
     schema["properties"]["patient"]["anyOf"].append({"type": "string", "description": "a patient profile file"})
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"

@@ -42,6 +42,7 @@ from rehabkit.core.interfaces import (
 from rehabkit.core.lifecycle import Contribution
 from rehabkit.core.limits import LimitBreach, Narrowing
 from rehabkit.core.metric import Metric
+from rehabkit.core.targets import JointWaypoints, joint_waypoints
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 __all__ = [
@@ -51,6 +52,8 @@ __all__ = [
     "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "Backend", "BodyPoses", "Contact",
     "GeomVisual", "Patient", "Context", "StrictModel",
+    # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked)
+    "joint_waypoints", "JointWaypoints",
     # what a robot declares it can do, and a plugin ``requires``
     "WorkspaceTable", "RandomReach", "PassiveJoints", "ClusterPoints", "FloatingBase", "LiftArmGripper",
     # describing metrics; extensions' contributions and limits

@@ -1,5 +1,6 @@
 """Installed distributions (dist-info on sys.path): a broken one, a conflicting one."""
 
+import json
 import os
 import subprocess
 import sys
@@ -7,11 +8,11 @@ import sys
 from tests.conftest import SCENARIOS
 
 
-def fake_dist(site, name, entry_name, module, source):
+def fake_dist(site, name, group, entry_name, module, source):
     info = site / f"{name.replace('-', '_')}-1.2.3.dist-info"
     info.mkdir(parents=True)
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 1.2.3\n")
-    (info / "entry_points.txt").write_text(f"[rehabkit]\n{entry_name} = {module}\n")
+    (info / "entry_points.txt").write_text(f"[{group}]\n{entry_name} = {module}\n")
     (site / f"{module}.py").write_text(source)
 
 
@@ -22,7 +23,7 @@ def rehabkit(site, *args):
 
 def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path):
     site = tmp_path / "site"
-    fake_dist(site, "rehabkit-exo-driver", "exo", "exo_driver", "import not_a_real_module_xyz\n")
+    fake_dist(site, "rehabkit-exo-driver", "rehabkit.robots", "exo", "exo_driver", "import not_a_real_module_xyz\n")
     listed = rehabkit(site, "plugins")
     assert listed.returncode == 0
     broken = [line for line in listed.stdout.splitlines() if line.startswith("BROKEN")]
@@ -31,11 +32,33 @@ def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path):
     run = rehabkit(site, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path / "out"),
                    "--set", "duration=0.5", "--set", "expect={}")
     assert run.returncode == 0, run.stderr
+    # naming it is a located refusal with its cause, before anything runs
+    named = rehabkit(site, "validate", str(SCENARIOS / "hit_roundtrip.yaml"), "--set", "robot.type=exo")
+    assert named.returncode == 2 and "Traceback" not in named.stderr
+    assert "<--set robot.type>" in named.stderr and "robot plugin 'exo' can't be used" in named.stderr
+    assert "not_a_real_module_xyz" in named.stderr and "rehabkit-exo-driver 1.2.3" in named.stderr
+
+
+def test_a_run_imports_only_the_plugins_it_names(tmp_path):
+    """Discovery reads metadata; the HIT round trip imports its robot, planner, controller, sensor and backend,
+    and none of the engines other plugins need."""
+    code = ("import sys, json; from rehabkit.api import run_scenario; "
+            f"run_scenario({str(SCENARIOS / 'hit_roundtrip.yaml')!r}, ['duration=0.2', 'expect={{}}']); "
+            "print(json.dumps(sorted(sys.modules)))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    loaded = set(json.loads(done.stdout.splitlines()[-1]))
+    plugins = {m for m in loaded if m.count(".") == 2 and m.startswith("rehabkit_plugins.")}  # modules, not packages
+    assert plugins == {"rehabkit_plugins.robots.hit", "rehabkit_plugins.planners.multi_cubic",
+                       "rehabkit_plugins.controllers.joint_pd", "rehabkit_plugins.sensors.joint_encoder"}, plugins
+    for heavy in ("ompl", "cv2", "numba", "qpsolvers", "proxsuite", "daqp", "scipy.spatial", "ray",
+                  "rehabkit.sweep.engine", "rehabkit.hardware.backend"):
+        assert heavy not in loaded, heavy
 
 
 def test_conflicting_distribution_names_both_packages(tmp_path):
     site = tmp_path / "site"
-    fake_dist(site, "fancy-planners", "cubic", "fancy_planners", """\
+    fake_dist(site, "fancy-planners", "rehabkit.planners", "multi-cubic", "fancy_planners", """\
 from pydantic import BaseModel
 from rehabkit import hookimpl
 

@@ -1,13 +1,16 @@
 """Every hook a rehabkit plugin can implement.
 
-A plugin is a module registered under the ``rehabkit`` entry-point group. It
-implements one or more of the hooks below; each receives a *registrar* for one
-plugin kind and calls ``registry.add(name, config=Model, factory=Class)``.
-Built-in plugins are loaded the same way as third-party ones.
+A plugin is a module named by an entry point in the group of its kind
+(``rehabkit.robots``, ``rehabkit.planners``, ``rehabkit.controllers``,
+``rehabkit.sensors``, ``rehabkit.backends``, ``rehabkit.patients``), the entry
+point's name being the plugin's; it is imported when a scenario names it. It
+implements the hook of its kind below, which receives a *registrar* and calls
+``registry.add(name, config=Model, factory=Class)``. Built-in plugins are
+loaded the same way as third-party ones.
 
 Minimal plugin module::
 
-    from rehabkit import hookimpl
+    from rehabkit.plugin import hookimpl
 
     @hookimpl
     def rehabkit_register_planners(registry):

@@ -13,7 +13,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from tqdm import tqdm
 
 from rehabkit.core.assembly import Assembly
 from rehabkit.core.capabilities import Contacts, SceneGeometry
@@ -32,6 +31,12 @@ class LoopResult:
     wall_s: float
     contact_steps: int
     started: float  # perf_counter at its first step
+
+
+def _progress_bar(steps: int):
+    from tqdm import tqdm  # a terminal's run only
+
+    return tqdm(total=steps, unit="step", delay=1.0, leave=False)
 
 
 def _idle(dof: int):
@@ -64,7 +69,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     push = backend.external_torque if person is not None else None  # the setup made sure the backend can
     tau_h, hand_force, goal_at = trace.tau_h, a.hand_force, ref.goal_at
     stop_after = a.sc.safety.stop_after_s
-    bar = tqdm(total=n, unit="step", delay=1.0, disable=not progress, leave=False)
+    bar = _progress_bar(n) if progress else None
     # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
     # (a full collection first would cost ~0.1 s of every run's start: only the youngest generation is swept)
     gc.collect(0)
@@ -118,7 +123,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                     view.flush(trace, k + 1)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
                 log.send_one()
-            if k % 1000 == 999:
+            if bar is not None and k % 1000 == 999:
                 bar.update(1000)
             if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
                 k += 1
@@ -127,5 +132,6 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             k = n
     finally:
         gc.unfreeze()
-        bar.close()
+        if bar is not None:
+            bar.close()
     return LoopResult(k, time.perf_counter() - t_loop, contact_steps, t_loop)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabkit.core.plugins import suggest
+from rehabkit.core.names import suggest
 from rehabkit.core.scenario.models import Bound
 from rehabkit.models.robot_model import RobotModel
 

@@ -10,9 +10,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.core.interfaces import Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.targets import joint_waypoints
+from rehabkit.plugin import Plan, Planner, PlanningError, PlanRequest, StrictModel, hookimpl, joint_waypoints
 
 
 class MinJerkConfig(StrictModel):

@@ -23,9 +23,12 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from rehabkit.core.plugins import PluginRegistry, default_registry, suggest
+from rehabkit.core.names import suggest
+from rehabkit.core.plugins import PluginError, PluginRegistry, default_registry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.models import PLUGIN_SECTIONS, ScenarioBase, scenario_model
+
+REQUIRED_PLUGIN_SECTIONS = ("robot", "planner", "controller")  # (backend: mujoco by default)
 
 KeyPath = tuple[Any, ...]
 
@@ -247,7 +250,7 @@ def _fit_new_types(src: Source, overrides: Iterable[str] | Mapping[str, Any], re
     for key, value in items:
         parts = key.split(".") if isinstance(key, str) else list(key)
         kind = _plugin_kind(parts[:-1]) if parts[-1:] == ["type"] else None
-        info = registry.plugins.get(kind, {}).get(value) if kind else None
+        info = registry.find(kind, value) if kind and isinstance(value, str) else None
         node: Any = src.data
         for part in parts[:-1]:
             node = node.get(part) if isinstance(node, dict) else None
@@ -324,8 +327,14 @@ def _describe(err: dict[str, Any]) -> str:
 
 
 def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnostic]:
-    """Unknown or missing plugin ``type`` values, with the closest installed names."""
+    """Unknown or missing plugin ``type`` values, with the closest installed names; the named plugins imported
+    (only those: the scenario's model is built from them), a broken or conflicting one reported where named."""
     problems: list[Diagnostic] = []
+    if not isinstance(src.data.get("backend"), dict):  # the default backend
+        registry.find("backend", "mujoco")
+    for section in REQUIRED_PLUGIN_SECTIONS:
+        if section not in src.data:
+            problems.append(Diagnostic(src.value_marks[()], section, f"missing required field '{section}'"))
     sections: list[tuple[KeyPath, str]] = [((s,), k) for s, k in PLUGIN_SECTIONS.items()]
     sensors = src.data.get("sensors")
     if isinstance(sensors, dict):
@@ -362,6 +371,13 @@ def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnosti
                     f"unknown {kind} plugin '{node['type']}'{suggest(str(node['type']), names)}",
                 )
             )
+        else:
+            try:
+                registry.get(kind, node["type"])
+            except PluginError as exc:
+                tpath = (*path, "type")
+                problems.append(Diagnostic(src.value_marks.get(tpath, src.value_marks[()]), _dotted(tpath),
+                                           f"{kind} plugin '{node['type']}' can't be used: {exc}"))
     return problems
 
 
