@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from rehabkit.cspace.cache import cached_array, key_of
 from rehabkit.cspace.occupancy import OccupancyGrid
 
 
@@ -51,7 +52,15 @@ def build_joint_matrix(points: Callable[[np.ndarray], np.ndarray], psi: Occupanc
     """Θ for cluster points ``points(q (N, n)) -> (N, P, 3)`` (robot base frame) against Ψ."""
     axes = [np.arange(lo, hi + 1e-9, step) for lo, hi in zip(lower, upper)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
-    free = np.empty(len(grid), bool)
-    for i in range(0, len(grid), chunk):
-        free[i : i + chunk] = ~psi.hits(points(grid[i : i + chunk])).any(axis=1)
-    return JointMatrix(np.asarray(lower, float), step, free.reshape([len(a) for a in axes]))
+
+    def build() -> np.ndarray:
+        free = np.empty(len(grid), bool)
+        for i in range(0, len(grid), chunk):
+            free[i : i + chunk] = ~psi.hits(points(grid[i : i + chunk])).any(axis=1)
+        return free.reshape([len(a) for a in axes])
+
+    # the robot enters the key as its cluster points at a spread of configurations: other geometry, other Θ
+    probe = grid[:: max(1, len(grid) // 64)]
+    key = key_of("theta-v1", psi.occupied, psi.origin, float(psi.resolution), np.asarray(lower, float),
+                 np.asarray(upper, float), float(step), points(probe))
+    return JointMatrix(np.asarray(lower, float), step, cached_array("theta", key, build))

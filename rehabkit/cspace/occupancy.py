@@ -13,6 +13,7 @@ import numpy as np
 from scipy import ndimage
 
 from rehabkit.core.scenario.models import WorldObject
+from rehabkit.cspace.cache import cached_array, key_of
 from rehabkit.models.chain import inv_se3, rpy_to_matrix
 
 
@@ -60,16 +61,21 @@ def rasterise(objects: list[WorldObject], base_pose: np.ndarray, lower: np.ndarr
     """Ψ over the box [lower, upper] (robot base frame) for the static obstacles among ``objects``."""
     origin = np.asarray(lower, float)
     shape = tuple(int(n) for n in np.ceil((np.asarray(upper) - origin) / resolution).astype(int) + 1)
-    centres = origin + np.indices(shape).reshape(3, -1).T * resolution
-    to_base = inv_se3(base_pose)
-    occupied = np.zeros(len(centres), bool)
-    for obj in objects:
-        if obj.dynamic or obj.mocap:
-            continue  # moving objects are not part of the static map
-        pose = np.eye(4)
-        pose[:3, :3] = rpy_to_matrix(np.radians(obj.pose.rpy_deg))
-        pose[:3, 3] = obj.pose.position
-        in_obj = inv_se3(to_base @ pose)  # base frame → object frame
-        local = centres @ in_obj[:3, :3].T + in_obj[:3, 3]
-        occupied |= _inside(obj, local, inflate)
-    return OccupancyGrid(origin, resolution, occupied.reshape(shape))
+    static = [obj for obj in objects if not (obj.dynamic or obj.mocap)]  # moving ones are not in the static map
+
+    def build() -> np.ndarray:
+        centres = origin + np.indices(shape).reshape(3, -1).T * resolution
+        to_base = inv_se3(base_pose)
+        occupied = np.zeros(len(centres), bool)
+        for obj in static:
+            pose = np.eye(4)
+            pose[:3, :3] = rpy_to_matrix(np.radians(obj.pose.rpy_deg))
+            pose[:3, 3] = obj.pose.position
+            in_obj = inv_se3(to_base @ pose)  # base frame → object frame
+            local = centres @ in_obj[:3, :3].T + in_obj[:3, 3]
+            occupied |= _inside(obj, local, inflate)
+        return occupied.reshape(shape)
+
+    key = key_of("psi-v1", [o.model_dump(mode="json") for o in static], np.asarray(base_pose, float), origin,
+                 shape, float(resolution), float(inflate))
+    return OccupancyGrid(origin, resolution, cached_array("psi", key, build))

@@ -81,8 +81,10 @@ class AngularVelocityEKF:
         h = np.array([x * x, y * y, zz * zz, x * y, y * zz, x * zz])
         H = np.array([[2 * x, 0, 0], [0, 2 * y, 0], [0, 0, 2 * zz], [y, x, 0], [0, zz, y], [zz, 0, x]])
         S = H @ P @ H.T + z_cov[6:12, 6:12]
-        # S is singular at rest (H = 0) with near-noiseless readings: the pseudo-inverse gives K = 0 there
-        K = P @ H.T @ np.linalg.pinv(S, hermitian=True)
+        try:
+            K = P @ H.T @ np.linalg.inv(S)
+        except np.linalg.LinAlgError:  # singular at rest (H = 0) with near-noiseless readings: K = 0 there
+            K = P @ H.T @ np.linalg.pinv(S, hermitian=True)
         self.w = w + K @ (z[6:12] - h)
         self.P = (np.eye(3) - K @ H) @ P
         return self.w.copy()
