@@ -283,8 +283,8 @@ def scenario_model(registry: PluginRegistry) -> type[ScenarioBase]:
         else:
             fields[section] = (union, ...)
     sensor_union = _union(registry, "sensor")
-    if sensor_union is not None:
-        fields["sensors"] = (dict[str, sensor_union], {})
+    # no sensor plugin loaded: the scenario names none (a named one is loaded, or refused as unknown first)
+    fields["sensors"] = (dict[str, sensor_union] if sensor_union is not None else dict[str, Any], {})
     patient_union = _union(registry, "patient")
     if patient_union is not None:
         profile = create_model("Patient", __base__=PatientBase,
