@@ -11,7 +11,6 @@ mapped back to the longest key path the YAML actually has.
 
 from __future__ import annotations
 
-import copy
 import types
 import typing
 import warnings
@@ -20,27 +19,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ValidationError
 
 from rehabkit.core.names import suggest
 from rehabkit.core.plugins import PluginError, PluginRegistry, default_registry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.models import PLUGIN_SECTIONS, ScenarioBase, scenario_model
+from rehabkit.core.scenario.source import (  # noqa: F401 (deep_merge: part of this module's API)
+    KeyPath,
+    Source,
+    _dotted,
+    _with_extends,
+    _with_profile,
+    apply_overrides,
+    deep_merge,
+    parse_override,
+)
 
 REQUIRED_PLUGIN_SECTIONS = ("robot", "planner", "controller")  # (backend: mujoco by default)
-
-KeyPath = tuple[Any, ...]
-
-
-@dataclass
-class Source:
-    """Raw scenario data and where each key path came from."""
-
-    data: dict[str, Any]
-    key_marks: dict[KeyPath, Mark]
-    value_marks: dict[KeyPath, Mark]
-    files: list[Path]
 
 
 @dataclass
@@ -54,183 +50,6 @@ class LoadedScenario:
     @property
     def directory(self) -> Path:
         return self.path.parent
-
-
-def _mark(file: str, m: yaml.Mark) -> Mark:
-    return Mark(file, m.line + 1, m.column + 1)
-
-
-def read_yaml(path: Path) -> Source:
-    """Parse one YAML file, keeping the position of every key and value."""
-    name = str(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ScenarioError([Diagnostic(Mark(name, 0, 0), "", f"cannot read file: {exc.strerror}")]) from None
-    loader = yaml.SafeLoader(text)
-    try:
-        node = loader.get_single_node()
-        if node is None:
-            raise ScenarioError([Diagnostic(Mark(name, 1, 1), "", "the file is empty")])
-        data = loader.construct_document(node)
-    except yaml.MarkedYAMLError as exc:
-        mark = _mark(name, exc.problem_mark) if exc.problem_mark else Mark(name, 0, 0)
-        raise ScenarioError([Diagnostic(mark, "", f"YAML syntax: {exc.problem}")]) from None
-    finally:
-        loader.dispose()
-    if not isinstance(data, dict):
-        raise ScenarioError([Diagnostic(_mark(name, node.start_mark), "", "a scenario must be a mapping of sections")])
-
-    key_marks: dict[KeyPath, Mark] = {}
-    value_marks: dict[KeyPath, Mark] = {(): _mark(name, node.start_mark)}
-    problems: list[Diagnostic] = []
-
-    def walk(n: yaml.Node, path: KeyPath) -> None:
-        if isinstance(n, yaml.MappingNode):
-            seen: set[Any] = set()
-            for k, v in n.value:
-                key = k.value if isinstance(k, yaml.ScalarNode) else str(k.value)
-                sub = (*path, key)
-                if key in seen:
-                    problems.append(
-                        Diagnostic(
-                            _mark(name, k.start_mark), _dotted(sub), "duplicate key (the later one would silently win)"
-                        )
-                    )
-                seen.add(key)
-                key_marks[sub] = _mark(name, k.start_mark)
-                value_marks[sub] = _mark(name, v.start_mark)
-                walk(v, sub)
-        elif isinstance(n, yaml.SequenceNode):
-            for i, v in enumerate(n.value):
-                key_marks[(*path, i)] = value_marks[(*path, i)] = _mark(name, v.start_mark)
-                walk(v, (*path, i))
-
-    walk(node, ())
-    if problems:
-        raise ScenarioError(problems)
-    return Source(data, key_marks, value_marks, [path])
-
-
-def _dotted(path: Iterable[Any]) -> str:
-    return ".".join(str(p) for p in path)
-
-
-def deep_merge(base: Any, over: Any) -> Any:
-    """``over`` on top of ``base``: mappings merge, everything else is replaced.
-
-    A mapping whose ``type`` differs from the base's is a different plugin, so it
-    replaces the base section instead of inheriting its keys. A key set to
-    ``null`` in ``over`` removes the base's key.
-    """
-    if not (isinstance(base, dict) and isinstance(over, dict)):
-        return copy.deepcopy(over)
-    if "type" in over and base.get("type") not in (None, over["type"]):
-        return copy.deepcopy(over)
-    out = copy.deepcopy(base)
-    for key, value in over.items():
-        if value is None and key in out:
-            del out[key]
-        else:
-            out[key] = deep_merge(out[key], value) if key in out else copy.deepcopy(value)
-    return out
-
-
-def _with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
-    path = path.resolve()
-    if path in chain:
-        cycle = " -> ".join(str(p) for p in (*chain, path))
-        raise ScenarioError([Diagnostic(Mark(str(path), 0, 0), "extends", f"circular extends: {cycle}")])
-    src = read_yaml(path)
-    parents = src.data.pop("extends", None)
-    if parents is None:
-        return src
-    if isinstance(parents, str):
-        parents = [parents]
-    if not (isinstance(parents, list) and all(isinstance(p, str) for p in parents)):
-        raise ScenarioError(
-            [Diagnostic(src.value_marks[("extends",)], "extends", "expected a file path or a list of them")]
-        )
-    merged_data: dict[str, Any] = {}
-    keys: dict[KeyPath, Mark] = {}
-    values: dict[KeyPath, Mark] = {}
-    files: list[Path] = []
-    for i, parent in enumerate(parents):
-        ppath = (path.parent / parent).resolve()
-        if not ppath.exists():
-            mark = src.value_marks.get(("extends", i), src.value_marks[("extends",)])
-            raise ScenarioError([Diagnostic(mark, "extends", f"file not found: {ppath}")])
-        base = _with_extends(ppath, (*chain, path))
-        merged_data = deep_merge(merged_data, base.data)
-        keys.update(base.key_marks)
-        values.update(base.value_marks)
-        files += base.files
-    keys = {k: v for k, v in keys.items() if k != ("extends",)}
-    keys.update(src.key_marks)
-    values.update(src.value_marks)
-    return Source(deep_merge(merged_data, src.data), keys, values, [*files, path])
-
-
-def _with_profile(src: Source, path: Path) -> None:
-    """``patient: some/profile.yaml`` → that file's mapping, its marks kept (errors point into the profile)."""
-    ref = src.data.get("patient")
-    if not isinstance(ref, str):
-        return
-    ppath = (path.parent / ref).resolve()
-    if not ppath.exists():
-        raise ScenarioError([Diagnostic(src.value_marks[("patient",)], "patient", f"profile not found: {ppath}")])
-    prof = read_yaml(ppath)
-    src.data["patient"] = prof.data
-    for marks, theirs in ((src.key_marks, prof.key_marks), (src.value_marks, prof.value_marks)):
-        marks.update({("patient", *k): m for k, m in theirs.items()})
-    src.files.append(ppath)
-
-
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """``"a.b.c=value"`` → (["a", "b", "c"], value parsed as YAML)."""
-    if "=" not in text:
-        raise ValueError(f"--set '{text}': expected key.path=value")
-    key, _, raw = text.partition("=")
-    parts = [p for p in key.strip().split(".") if p]
-    if not parts:
-        raise ValueError(f"--set '{text}': empty key")
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
-    except yaml.YAMLError as exc:
-        raise ValueError(f"--set '{text}': value is not valid YAML ({exc})") from None
-    return parts, value
-
-
-def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -> None:
-    """Apply ``--set`` style overrides in place; list items are addressed by index."""
-    items = overrides.items() if isinstance(overrides, Mapping) else (parse_override(o) for o in overrides)
-    for key, value in items:
-        parts = key.split(".") if isinstance(key, str) else list(key)
-        mark = Mark(f"<--set {'.'.join(parts)}>", 0, 0)
-        node: Any = src.data
-        path: KeyPath = ()
-        for i, part in enumerate(parts):
-            last = i == len(parts) - 1
-            if isinstance(node, list):
-                if not (part.isdigit() and int(part) < len(node)):
-                    raise ScenarioError(
-                        [Diagnostic(mark, _dotted(parts), f"'{part}' is not an index of a list of {len(node)}")]
-                    )
-                part = int(part)
-            elif not isinstance(node, dict):
-                raise ScenarioError([Diagnostic(mark, _dotted(parts), f"'{_dotted(path)}' is not a mapping")])
-            path = (*path, part)
-            if last:
-                node[part] = (
-                    copy.deepcopy(value)
-                    if not isinstance(node, dict) or not isinstance(node.get(part), dict)
-                    else deep_merge(node[part], value)
-                )
-            else:
-                if isinstance(node, dict) and part not in node:
-                    node[part] = {}
-                node = node[part]
-            src.key_marks[path] = src.value_marks[path] = mark
 
 
 def _plugin_kind(path: list[str]) -> str | None:
