@@ -12,6 +12,15 @@
 
   Keyword overrides use ``__`` for dots; ``overrides={"a.b": 1}`` works too.
   Outputs go to the test's ``tmp_path``.
+* The ``scenario_run`` fixture gives the run of a scenario file as written (no overrides), made once per test
+  session and shared with that file's scenario test: tests that examine the scenario's own run in detail don't
+  run it again, and neither does the scenario test after them::
+
+      def test_the_round_trip_is_smooth(scenario_run):
+          result = scenario_run("scenarios/hit_roundtrip.yaml")  # written to result.out_dir
+          assert result.metrics["sparc"] > -2.0
+
+  The result is shared: read it, don't change it.
 """
 
 from __future__ import annotations
@@ -22,6 +31,20 @@ from typing import Any
 
 import pytest
 import yaml
+
+_RUNS = pytest.StashKey[dict[Path, Any]]()
+
+
+def shared_run(config: pytest.Config, path: str | Path):
+    """The session's run of scenario ``path`` as written, made now if nobody has asked for it yet."""
+    from rehabkit.api import run_scenario
+
+    path = Path(path).resolve()
+    runs = config.stash.setdefault(_RUNS, {})
+    if path not in runs:
+        out = Path(config._tmp_path_factory.mktemp(path.stem))  # type: ignore[attr-defined]
+        runs[path] = run_scenario(path, out_dir=out)
+    return runs[path]
 
 
 def _is_scenario(path: Path) -> bool:
@@ -54,10 +77,7 @@ class ScenarioItem(pytest.Item):
     """One scenario run; fails with the unmet expectations and safety events."""
 
     def runtest(self) -> None:
-        from rehabkit.api import run_scenario
-
-        out = Path(self.config._tmp_path_factory.mktemp(self.path.stem))  # type: ignore[attr-defined]
-        result = run_scenario(self.path, out_dir=out)
+        result = shared_run(self.config, self.path)  # once per session: a test may have examined it already
         self.user_properties.append(("real_time_factor", result.summary["real_time_factor"]))
         if not result.passed:
             raise ScenarioFailedError(result)
@@ -117,6 +137,13 @@ def run_sweep(tmp_path: Path) -> Callable[..., Any]:
         return _sweep(path, grid, seeds, tmp_path / f"sweep{next(counter)}", **kw)
 
     return sweep
+
+
+@pytest.fixture(scope="session")
+def scenario_run(pytestconfig: pytest.Config) -> Callable[[str | Path], Any]:
+    """The run of a scenario file as written, once per session (shared with its scenario test); a
+    :class:`rehabkit.core.runner.RunResult` with its outputs in ``out_dir``."""
+    return lambda path: shared_run(pytestconfig, path)
 
 
 @pytest.fixture

@@ -81,16 +81,13 @@ def test_adaptive_filter_follows_fast_changes_and_smooths_slow_ones():
 
 
 @pytest.fixture(scope="module")
-def capaman_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("capaman")
-    r = subprocess.run([sys.executable, "-m", "rehabkit.cli", "run", str(CAPAMAN), "--out", str(out)],
-                       capture_output=True, text=True, cwd=ROOT)
-    return r, json.loads((out / "summary.json").read_text())
+def capaman_run(scenario_run):
+    return scenario_run(CAPAMAN)  # the scenario's own run (its scenario test reads the same one)
 
 
 def test_obstacle_run_is_collision_free_both_ways_and_the_ga_improves(capaman_run):
-    proc, summary = capaman_run
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    summary = capaman_run.summary
+    assert capaman_run.passed, capaman_run.failures
     m, plan = summary["metrics"], summary["plans"][0]
     assert m["contact_steps"] == 0 and m["executed_colliding_configurations"] == 0
     assert plan["direct_motion_collides"] == 1  # the obstacle stands between the task points
@@ -102,34 +99,34 @@ def test_obstacle_run_is_collision_free_both_ways_and_the_ga_improves(capaman_ru
 
 
 def test_validation_report_compares_with_truth_and_plan(capaman_run):
-    proc, summary = capaman_run
-    m = summary["metrics"]
-    assert "vs planned motion" in proc.stdout and "vs MuJoCo truth" in proc.stdout
-    assert summary["reports"]["imu"].count("\n") >= 6
+    summary = capaman_run.summary
+    m, report = summary["metrics"], summary["reports"]["imu"]
+    assert "vs planned motion" in report and "vs MuJoCo truth" in report  # (the CLI prints it: see below)
+    assert report.count("\n") >= 6
     # the planned motion is what MuJoCo executed, closely: the comparison measures the sensors, not the tracking
     assert m["accel_rms_true_vs_planned_m_s2"] < 0.02 and m["omega_rms_true_vs_planned_rad_s"] < 0.005
     assert m["accel_rms_raw_vs_planned_m_s2"] > 3 * m["accel_rms_filtered_vs_planned_m_s2"]
 
 
-def test_joint_space_is_in_the_log(capaman_run, tmp_path):
+def test_joint_space_is_in_the_log(capaman_run):
     import shutil
 
-    proc, _ = capaman_run
-    rrd = [line.split(" and ")[-1] for line in proc.stdout.splitlines() if line.startswith("wrote ")][0]
-    text = subprocess.run([shutil.which("rerun"), "rrd", "print", rrd], capture_output=True, text=True,
-                          timeout=120).stdout
+    text = subprocess.run([shutil.which("rerun"), "rrd", "print", str(capaman_run.out_dir / "run.rrd")],
+                          capture_output=True, text=True, timeout=120).stdout
     for entity in ("/joint_space/colliding_region", "/joint_space/plan", "/joint_space/executed",
                    "/sensors/imu/acc_filtered", "/sensors/imu/acc_true", "/world/scene/obstacle"):
         assert entity in text, entity
 
 
 def test_planning_is_deterministic_across_processes(capaman_run, tmp_path):
-    _, first = capaman_run
+    """A fresh process plans what this one did (after whatever it planned before), and the CLI prints the
+    validation report."""
     r = subprocess.run([sys.executable, "-m", "rehabkit.cli", "run", str(CAPAMAN), "--out", str(tmp_path),
                         "--set", "duration=0.5", "--set", "expect={}"], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     again = json.loads((tmp_path / "summary.json").read_text())
-    assert again["plans"][0]["waypoints_deg"] == first["plans"][0]["waypoints_deg"]
+    assert again["plans"][0]["waypoints_deg"] == capaman_run.summary["plans"][0]["waypoints_deg"]
+    assert "imu:\n" in r.stdout and "vs planned motion" in r.stdout and "vs MuJoCo truth" in r.stdout
 
 
 @pytest.mark.parametrize("interval", [0.09, 0.9])

@@ -18,8 +18,8 @@ HIT = SCENARIOS / "hit_roundtrip.yaml"
 
 
 @pytest.fixture(scope="module")
-def hit_run(tmp_path_factory):
-    return run_scenario(HIT, out_dir=tmp_path_factory.mktemp("hit"))
+def hit_run(scenario_run):
+    return scenario_run(HIT)  # the scenario's own run (its scenario test reads the same one)
 
 
 def test_hit_round_trip_tracks_and_reaches_every_via_point(hit_run, hit):

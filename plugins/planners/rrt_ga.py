@@ -33,16 +33,22 @@ from rehabkit.cspace.occupancy import rasterise
 
 from .multi_cubic import MultiCubicTrajectory, solve_multi_cubic
 
-_OMPL_SEED: int | None = None
-
 
 def _seed_ompl(seed: int) -> int:
-    """OMPL takes one seed per process, before its first random number; later plans continue that stream."""
-    global _OMPL_SEED
-    if _OMPL_SEED is None:
-        ou.RNG.setSeed(int(seed))
-        _OMPL_SEED = int(seed)
-    return _OMPL_SEED
+    """Reseed OMPL's process-wide seed generator; returns the seed used (OMPL ignores 0).
+
+    Each OMPL sampler takes its seed from that generator when it is made, and a plan makes all of its own, so a
+    plan reseeded first draws the same numbers whatever this process planned before (a serial sweep's later runs,
+    a test after another), as in a fresh process. OMPL logs an error for a reseed after its first draw, meant for
+    generators made earlier (they keep their streams): none of those takes part in a plan, so it is silenced.
+    """
+    seed = int(seed) % 2**32 or 2**31
+    ou.setLogLevel(ou.LogLevel.LOG_NONE)
+    try:
+        ou.RNG.setSeed(seed)
+    finally:
+        ou.setLogLevel(ou.LogLevel.LOG_WARN)
+    return seed
 
 
 class RrtGaConfig(StrictModel):
@@ -100,10 +106,11 @@ class RrtGaPlanner(Planner):
         self.setup_time = time.perf_counter() - t0
         self.ga_config = GAConfig(config.population, config.generations, config.beta, np.radians(config.delta_deg))
         self.last_path: np.ndarray | None = None
+        self.plans = 0  # plans made so far: each plan's RRT streams are seeded by the seed and this count
 
     # -- RRT -------------------------------------------------------------------
 
-    def _rrt_paths(self, a: np.ndarray, b: np.ndarray, runs: int, seed: int) -> list[np.ndarray]:
+    def _rrt_paths(self, a: np.ndarray, b: np.ndarray, runs: int) -> list[np.ndarray]:
         n = len(a)
         space = ob.RealVectorStateSpace(n)
         bounds = ob.RealVectorBounds(n)
@@ -152,15 +159,15 @@ class RrtGaPlanner(Planner):
 
     def plan(self, request: PlanRequest) -> Plan:
         t0 = time.perf_counter()
-        ou.setLogLevel(ou.LogLevel.LOG_WARN)
-        ompl_seed = _seed_ompl(self.seed)
+        ompl_seed = _seed_ompl(int(self.seed) + 7919 * self.plans)  # the first plan: the seed itself
+        self.plans += 1
         wp = joint_waypoints(request.targets, request.robot, request.q).q
         if not self.theta.is_free(wp).all():
             raise PlanningError("rrt-ga: a task point itself collides with the obstacles")
         rng = np.random.default_rng(self.seed)
         legs = []
         for k in range(len(wp) - 1):
-            found = self._rrt_paths(wp[k], wp[k + 1], self.config.rrt_paths_per_leg, int(self.seed) + 1000 * k)
+            found = self._rrt_paths(wp[k], wp[k + 1], self.config.rrt_paths_per_leg)
             if not found:
                 raise PlanningError(
                     f"rrt-ga: RRT-Connect found no path for leg {k + 1} in "
