@@ -40,7 +40,9 @@ def test_a_bad_grid_value_is_refused_before_any_run_with_its_place(tmp_path):
 def test_serial_and_ray_give_the_same_rows_and_a_second_call_runs_nothing(tmp_path):
     grid = ["planner.type=voxel-astar,voxel-beam"]
     serial = run_sweep(TRIAL, grid, 3, tmp_path / "serial", serial=True)
+    running = "ray" in sys.modules and sys.modules["ray"].is_initialized()  # (not when run in file order)
     ray = run_sweep(TRIAL, grid, 3, tmp_path / "ray", workers=2)
+    assert sys.modules["ray"].is_initialized() == running  # a sweep stops the Ray it started, and only that
     assert serial.executed == ray.executed == 6 and not serial.failed and not ray.failed
     assert reproducible(serial.records) == reproducible(ray.records)
     # different start/goal pairs per seed; the same pairs for both planners; A* never longer than beam
@@ -76,8 +78,29 @@ def test_a_killed_sweep_resumes_without_redoing_finished_runs(tmp_path):
     assert reproducible(resumed.records) == reproducible(fresh.records)
 
 
+@pytest.fixture(scope="module")
+def running_ray():
+    """One local Ray for the module's later Ray sweeps (its start-up and shut-down take seconds each), started
+    as a sweep starts it; sweeps use a running Ray and leave it running. The serial-against-Ray test above
+    starts and stops its own. Both workers have run a short HIT run first: a worker's first run also imports
+    the plugins, which on this loaded VM took the 0.5 s run past the hanging-run test's 5 s timeout."""
+    import ray
+
+    from rehabkit.sweep.engine import start_ray
+    from rehabkit.sweep.execute import execute
+
+    start_ray(workers=2)
+    warm = ray.remote(num_cpus=1)(execute)
+    assert all(row["error"] is None for row in ray.get(
+        [warm.remote(str(HIT), {"duration": 0.05, "logging.rrd": False}) for _ in range(2)]))
+    yield
+    ray.shutdown()
+
+
 @pytest.mark.parametrize("mode", ["serial", "ray"])
-def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode):
+def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode, request):
+    if mode == "ray":
+        request.getfixturevalue("running_ray")
     # 300 s of simulated HIT take far longer than the 5 s allowed; the 0.5 s run finishes
     result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=5)
     by = {r["duration"]: r for r in result.records}
@@ -88,7 +111,9 @@ def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, m
 
 
 @pytest.mark.parametrize("mode", ["serial", "ray"])
-def test_a_crashing_run_is_recorded_with_its_error_and_the_others_complete(tmp_path, mode):
+def test_a_crashing_run_is_recorded_with_its_error_and_the_others_complete(tmp_path, mode, request):
+    if mode == "ray":
+        request.getfixturevalue("running_ray")
     # a whole-body controller on an arm: valid settings, but the run cannot be put together
     grid = {"controller": [{"type": "clik-pd"}, {"type": "qp-stack", "levels": [{"tasks": [{"type": "com"}]}]}]}
     result = run_sweep(TRIAL, {"planner.type": ["voxel-astar"], **grid}, 2, tmp_path, serial=mode == "serial",

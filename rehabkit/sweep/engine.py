@@ -58,7 +58,8 @@ def run_sweep(scenario: str | Path, grid: Mapping[str, list[Any]] | Iterable[str
         grid: key path → values, or ``--grid`` strings (``"planner.type=a,b"``).
         seeds: runs per grid point (scenario seeds 0..seeds-1).
         out_dir: the sweep's directory (default ``out/sweep_<scenario name>``); finished runs there are skipped.
-        address: an existing Ray cluster (``ray://host:10001``); default: a local Ray started for the sweep.
+        address: an existing Ray cluster (``ray://host:10001``); default: the Ray this process runs
+            (:func:`start_ray`), or a local one started for the sweep.
         workers: CPUs of the local Ray (default: all).
         serial: run in this process, one after the other (no Ray).
         timeout_s: a run taking longer is stopped and recorded as failed.
@@ -107,17 +108,28 @@ def _points(grid: Mapping[str, list[Any]]) -> list[dict[str, Any]]:
     return [{key: value} for key, values in grid.items() for value in values]
 
 
+def start_ray(address: str | None = None, workers: int | None = None) -> None:
+    """Connect to the Ray cluster at ``address``, or start a local one with ``workers`` CPUs (default: all).
+
+    A sweep started while Ray runs uses it and leaves it running (a notebook's several sweeps, or a test
+    module's, pay Ray's start-up of several seconds once); otherwise the sweep starts it and stops it after.
+    """
+    import ray
+
+    if address:
+        ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+    else:
+        ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False,
+                 logging_level=logging.WARNING, object_store_memory=256 * 1024**2)
+
+
 def _on_ray(todo: list[RunSpec], path: str, timeout_s: float, address: str | None, workers: int | None,
             record: Callable[[RunSpec, dict[str, Any]], None]) -> None:
     import ray
 
     started = not ray.is_initialized()
     if started:
-        if address:
-            ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
-        else:
-            ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False,
-                     logging_level=logging.WARNING, object_store_memory=256 * 1024**2)
+        start_ray(address, workers)
     try:
         slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
         remote = ray.remote(num_cpus=1, max_retries=0)(execute)
