@@ -24,15 +24,22 @@ def test_original_pose_is_inverse_of_inverted_chain(rng):
         np.testing.assert_allclose(fk(q), inv_se3(t), atol=1e-12)
 
 
-def test_ik_round_trip_over_thousands_of_random_poses(rng):
-    worst, counts = 0.0, []
-    for _ in range(3000):
-        q = rng.uniform(-np.pi, np.pi, 6)
-        target = fk(q)
-        sols = ik(target)
-        counts.append(len(sols))
-        worst = max(worst, max(np.abs(fk(s) - target).max() for s in sols))
-        assert min(np.abs(_wrapdiff(s, q)).max() for s in sols) < 1e-6
+def test_the_robots_batch_kinematics_is_the_papers_fk(hit, rng):
+    qs = rng.uniform(-np.pi, np.pi, (2000, 6))
+    np.testing.assert_allclose(hit.fk_batch(qs), np.stack([fk(q) for q in qs]), atol=1e-12)
+
+
+def test_ik_round_trip_over_thousands_of_random_poses(hit, rng):
+    qs = rng.uniform(-np.pi, np.pi, (3000, 6))
+    targets = hit.fk_batch(qs)  # the paper's fk, vectorised (the test above)
+    sols, owner, counts = [], [], []
+    for i, (q, target) in enumerate(zip(qs, targets)):
+        found = ik(target)
+        counts.append(len(found))
+        assert min(np.abs(_wrapdiff(s, q)).max() for s in found) < 1e-6  # the original posture is among them
+        sols += found
+        owner += [i] * len(found)
+    worst = np.abs(hit.fk_batch(np.array(sols)) - targets[owner]).max()  # every solution reaches its pose
     assert worst < 1e-10
     assert np.median(counts) == 8  # generic poses: 2 (θ1) × 2 (θ3) × 2 (wrist flip)
 

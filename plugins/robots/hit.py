@@ -23,6 +23,7 @@ Link masses, radii and joint limits are not in the paper; the values in
 
 from __future__ import annotations
 
+from functools import lru_cache
 from importlib import resources
 
 import numpy as np
@@ -55,6 +56,22 @@ def fk(q: np.ndarray, l1: float = L1, l2: float = L2, l3: float = L3) -> np.ndar
     for row, th in zip(mdh_rows(l1, l2, l3), theta):
         t = t @ mdh_transform(row, th)
     return inv_se3(t)
+
+
+@lru_cache(maxsize=8)
+def _inverted_chain(l1: float, l2: float, l3: float) -> KinematicChain:
+    return KinematicChain.from_dh(mdh_rows(l1, l2, l3), "modified")
+
+
+def fk_many(qs: np.ndarray, l1: float = L1, l2: float = L2, l3: float = L3) -> np.ndarray:
+    """:func:`fk` for many joint vectors (N, 6) at once: the inverted chain vectorised over the batch, inverted."""
+    t = _inverted_chain(l1, l2, l3).fk_batch(-np.atleast_2d(np.asarray(qs, float))[:, ::-1])
+    out = np.zeros_like(t)
+    rot = np.transpose(t[:, :3, :3], (0, 2, 1))
+    out[:, :3, :3] = rot
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", rot, t[:, :3, 3])
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def ik_inverted(T: np.ndarray, l1: float = L1, l2: float = L2, l3: float = L3, tol: float = 1e-9) -> list[np.ndarray]:
@@ -103,12 +120,14 @@ def ik(A: np.ndarray, l1: float = L1, l2: float = L2, l3: float = L3, tol: float
     are dropped, and duplicates removed.
     """
     A = np.asarray(A, dtype=float)
+    thetas = ik_inverted(inv_se3(A), l1, l2, l3)
+    if not thetas:
+        return []
+    qs = _wrap(-np.array(thetas)[:, ::-1])
+    reach = np.abs(fk_many(qs, l1, l2, l3) - A).max(axis=(1, 2))  # every branch checked in one batch
     sols: list[np.ndarray] = []
-    for theta in ik_inverted(inv_se3(A), l1, l2, l3):
-        q = _wrap(-theta[::-1])
-        if np.abs(fk(q, l1, l2, l3) - A).max() > tol:
-            continue
-        if all(np.abs(_wrap(q - s)).max() > 1e-6 for s in sols):
+    for q, err in zip(qs, reach):
+        if err <= tol and all(np.abs(_wrap(q - s)).max() > 1e-6 for s in sols):
             sols.append(q)
     return sols
 

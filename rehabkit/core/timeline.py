@@ -43,6 +43,9 @@ class Timeline:
         self._ramp_steps = int(round(sc.safety.ramp_out_s / sch.control_dt))
         self._ramp_out_at = n - self._ramp_steps if self._ramp_steps else None
         self._sensor_due = [0] * len(setup.sensors)
+        # (index, name, sensor, every, read in a thread): fixed for the run, so each reading costs no lookups
+        self._sensors = [(j, name, sensor, every, threads is not None and name in threads)
+                         for j, ((name, sensor), every) in enumerate(zip(setup.sensors.items(), sch.sensor_every))]
 
     def schedule_actions(self, k0: int, actions: list[tuple[float, str, str]]) -> None:
         """A plan's scene actions (a throw's release), from step ``k0``; they replace the previous plan's."""
@@ -83,28 +86,29 @@ class Timeline:
             self._read_sensors(k, t, q, qd)
         except Exception as exc:
             a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
-        upcoming = [self.stop_at, *self._sensor_due]
+        nxt = min(self._sensor_due, default=self.stop_at)
+        nxt = min(nxt, self.stop_at)
         if self._ramp_out_at is not None:
-            upcoming.append(self._ramp_out_at)
+            nxt = min(nxt, self._ramp_out_at)
         if self._timed:
-            upcoming.append(self._timed[0][0])
+            nxt = min(nxt, self._timed[0][0])
         if self.actions:
-            upcoming.append(self.actions[0][0])
+            nxt = min(nxt, self.actions[0][0])
         if self._waiting:
-            upcoming.append(self._next_reach)
+            nxt = min(nxt, self._next_reach)
         if self.threads is not None and self.threads.busy:
-            upcoming.append(k + 1)  # a sensor thread's reading is taken at the first tick after it is done
-        return max(k + 1, min(upcoming))
+            return k + 1  # a sensor thread's reading is taken at the first tick after it is done
+        return max(k + 1, nxt)
 
     def _read_sensors(self, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
-        a, threads = self.setup, self.threads
-        for j, ((name, sensor), every) in enumerate(zip(a.sensors.items(), a.schedule.sensor_every)):
-            if k >= self._sensor_due[j]:
-                self._sensor_due[j] = k + every
-                if threads is not None and name in threads:
-                    threads.start(name, sensor, t, q, qd, a.backend)
+        backend, threads, due = self.setup.backend, self.threads, self._sensor_due
+        for j, name, sensor, every, threaded in self._sensors:
+            if k >= due[j]:
+                due[j] = k + every
+                if threaded:
+                    threads.start(name, sensor, t, q, qd, backend)
                 else:
-                    self._take(name, t, sensor.read(t, q, qd, a.backend), k, t, q, qd)
+                    self._take(name, t, sensor.read(t, q, qd, backend), k, t, q, qd)
         if threads is not None:
             for name, t_read, reading in threads.finished():
                 self._take(name, t_read, reading, k, t, q, qd)
@@ -117,6 +121,8 @@ class Timeline:
             if reading.get("target_position") is not None:
                 self.log.points(f"world/sensed/{name}", self.setup.robot.model.to_world(reading["target_position"]),
                                 (40, 220, 40), 0.02, t_read)
+        if not self._watch:
+            return
         for i, state in self._watch.items():
             ev = self.events[i]
             if self.specs[ev.moved].sensor != name:
