@@ -93,7 +93,7 @@ def test_hand_leaving_the_box_stops_the_run_in_simulation(box_run, hit):
     assert warning["t"] == 0.0 and abs(warning["at_s"] - ev[0]["t"]) < 0.02 and "(z min" in warning["message"]
 
 
-def test_ramp_in_starts_from_holding_and_ramp_out_ends_there():
+def test_ramp_in_starts_from_holding_and_ramp_out_ends_there(scenario_run):
     result = run_scenario(HIT, {"safety": {"ramp_in_s": 0.5, "ramp_out_s": 0.5}})
     iv = result.summary["safety"]["interventions"]
     assert [e["rule"] for e in iv] == ["ramp-in", "ramp-out"] and iv[1]["t"] == pytest.approx(8.0)
@@ -101,7 +101,7 @@ def test_ramp_in_starts_from_holding_and_ramp_out_ends_there():
     # the plan starts moving at once: during the ramp the arm lags (a scenario starts moving after its ramp-in)
     assert result.metrics["tracking_max_deg"] < 5.0 and result.metrics["final_position_error_m"] < 0.005
     tau = result.trace.tau
-    plain = run_scenario(HIT).trace.tau
+    plain = scenario_run(HIT).trace.tau  # the round trip as written (its scenario test's run)
     assert np.abs(tau[400] - plain[400]).max() > 1e-3  # still blending at 0.4 s
     assert np.abs(tau[600] - plain[600]).max() < 0.5  # at most small after-effects of the ramp after it
     assert np.abs(np.diff(tau[:700], axis=0)).max() < 1.0  # no jump anywhere in the ramp [N·m per ms]
