@@ -144,9 +144,10 @@ def test_a_foreign_store_is_refused_and_left_untouched(tmp_path):
     assert bad.read_bytes() == before
 
 
-def test_fold_and_unfold_are_preprogrammed_and_any_key_stops_a_motion():
+def test_fold_and_unfold_are_preprogrammed_and_any_key_stops_a_motion(tmp_path):
     keys = [{"at": 0.5, "key": "fold"}, {"at": 20.0, "key": "unfold"}, {"at": 22.0, "key": "J"}]
-    r = run_scenario(SCENARIO, {"controller.keys": keys, "world.objects": [], "duration": 25.0})
+    r = run_scenario(SCENARIO, {"controller.keys": keys, "world.objects": [], "duration": 25.0,
+                                "controller.store": str(tmp_path / "patches.sqlite")})  # not ./out (runs here share it)
     q = r.trace.q
     k_folded = int(19.5 / 0.002)
     np.testing.assert_allclose(np.degrees(q[k_folded, 1:7]), [0.0, -170.0, 150.0, 0.0, 20.0, 0.0], atol=0.1)
@@ -158,10 +159,11 @@ def test_fold_and_unfold_are_preprogrammed_and_any_key_stops_a_motion():
     assert r.metrics["max_velocity_ratio"] < 1.0
 
 
-def test_cartesian_mode_moves_along_the_axes_and_keeps_the_gripper_orientation(arm):
+def test_cartesian_mode_moves_along_the_axes_and_keeps_the_gripper_orientation(arm, tmp_path):
     keys = [{"at": 0.2, "key": "C"}, {"at": 0.5, "key": "y-", "hold_s": 2.0}, {"at": 3.0, "key": "z-", "hold_s": 2.0},
             {"at": 5.5, "key": "yaw+", "hold_s": 2.0}, {"at": 8.0, "key": "x+", "hold_s": 6.0}]
-    r = run_scenario(SCENARIO, {"controller.keys": keys, "duration": 14.5})
+    r = run_scenario(SCENARIO, {"controller.keys": keys, "duration": 14.5,
+                                "controller.store": str(tmp_path / "patches.sqlite")})
     assert not r.summary["safety"]["events"] and r.metrics["max_velocity_ratio"] < 0.95  # jogs slow, never trip
     poses = arm.fk_batch(r.trace.q)
     k = lambda t: int(t / 0.002)  # noqa: E731
