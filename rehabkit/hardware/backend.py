@@ -112,6 +112,7 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
         self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured), max_age=config.max_age_s)
         self.seq, self.tau = 0, np.zeros(self.n)
         self.q, self.qd = np.zeros(self.n), np.zeros(self.n)
+        self.applied = np.zeros(self.n)
         self.status = 0
         self.t0 = self.deadline = self.last_state = 0.0
         self.misses, self.ticks = 0, 0
@@ -147,6 +148,7 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
             if msg is None:
                 continue
             self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
+            self.applied = msg.values[2].copy()  # the torque the robot side applied (after its own clipping)
             self.measured, self._posed = msg.measured, False
             self.status, self.last_state, got = msg.status, now, True
             if self._started:
