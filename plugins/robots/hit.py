@@ -165,16 +165,15 @@ class HitRobot(Robot):
         )
         self.model = build_dh_robot(self.spec)
         self._lengths = (config.l1, config.l2, config.l3)
-        self._chain = self.spec.chain()
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """⁰₆A for joints ``q`` [rad], in the shoulder frame (the batch form: ~10x faster than the product of
         4x4s in :func:`fk`, which stays as the paper's formulation)."""
-        return self._chain.fk_batch(np.asarray(q, float)[None])[0]
+        return fk_many(np.asarray(q, float)[None], *self._lengths)[0]
 
     def fk_batch(self, qs: np.ndarray) -> np.ndarray:
         """⁰₆A for many joint vectors (N, 6) at once: the same chain, vectorised over the batch."""
-        return self._chain.fk_batch(qs)
+        return fk_many(qs, *self._lengths)
 
     def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
         """All joint solutions for hand pose ``pose`` (4x4, shoulder frame)."""

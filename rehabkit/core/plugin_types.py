@@ -29,8 +29,6 @@ class UnknownPluginError(PluginError):
         super().__init__(f"unknown {kind} '{name}'{suggest(name, available)}")
 
 
-
-
 @dataclass(frozen=True)
 class Provider:
     """The distribution that installed a plugin module."""
