@@ -5,7 +5,9 @@ machine's baseline: how often a process that only sleeps to its deadlines wakes 
 tick late), then the scenario over the link to a spawned bridge (``backend.type=hardware``),
 then the same scenario in simulation for the tracking comparison. Printed per run: deadline-miss
 rate of the baseline and of the link loop, round-trip median/p99, tick lateness p99,
-expectations met, and tracking against the simulation. Repeat with ``--repeats``.
+expectations met, and tracking against the simulation. Repeat with ``--repeats``. Then the
+same scenario over the lock-step link (``backend.clock=lockstep``): its loop's wall time against
+the simulation's and the real-time link's, and its largest deviation from the simulated path.
 
     python benchmarks/link_loop.py [--repeats N] [--scenarios hit_roundtrip lexos_reaching]
 """
@@ -63,6 +65,13 @@ def main() -> None:
             print(f"{name:16s} {base_miss:13.2%} {miss:9.2%} {miss / max(base_miss, 1e-4):6.1f} "
                   f"{m['tick_lateness_p99_ms']:8.2f}  {m['rtt_median_ms']:8.2f} {m['rtt_p99_ms']:8.2f} "
                   f"{met:>3d}/{len(hw.summary['expectations']):<3d} {rms:>10s}")
+        ls = run_scenario(path, ["backend.type=hardware", "backend.clock=lockstep"])
+        wall = {k: r.summary["wall_time_s"] for k, r in (("sim", sim), ("lockstep", ls), ("realtime", hw))}
+        dev = np.degrees(np.abs(sim.trace.q - ls.trace.q).max()) if len(sim.trace.q) == len(ls.trace.q) else np.nan
+        print(f"{name:16s} lock-step loop {wall['lockstep']:.2f} s = {wall['lockstep'] / wall['sim']:.1f}x the "
+              f"simulation's, {wall['lockstep'] / wall['realtime']:.2f}x the real-time link's; "
+              f"{1e6 * wall['lockstep'] / len(ls.trace.q):.0f} us a tick; max deviation from the simulation "
+              f"{dev:.2g} deg")
 
 
 if __name__ == "__main__":

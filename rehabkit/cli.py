@@ -187,7 +187,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3, stale_s=args.stale_ms / 1e3,
                     limits=backstop)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
-    bridge.serve(args.duration, parent=args.parent_pid)
+    (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
     return EXIT_OK
 
 
@@ -244,6 +244,8 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--limit-margin-deg", type=float, default=2.0,
                    help="how far beyond a joint's range the bridge's own check trips (the host's trips at 0.5°)")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
+    b.add_argument("--lockstep", action="store_true",
+                   help="tick once per host tick, on the host's clock (backend.clock: lockstep), not the wall's")
     b.add_argument("--parent-pid", type=int, default=None, help="stop when this process (the host) is gone")
     b.add_argument("--effort", default=None, metavar="JSON",
                    help="torque limits per joint [N·m], tighter than the robot's (a safety envelope's)")

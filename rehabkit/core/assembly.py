@@ -196,7 +196,7 @@ def _patient_and_safety(a: Assembly) -> None:
     sc = a.sc
     model_cfg = getattr(sc.patient, "model", None) if sc.patient is not None else None
     if model_cfg is not None:
-        if a.backend.realtime:  # a real robot has a real person in it
+        if a.backend.real_person:
             a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
                                 "backend: the person is real")
         elif not isinstance(a.backend, ExternalTorques):

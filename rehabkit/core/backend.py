@@ -69,6 +69,7 @@ class Backend(ABC):
     timestep: float
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
+    real_person: bool = False  # drives a real robot (or its stand-in over the link): a person in it is not simulated
 
     @abstractmethod
     def reset(self, q0: np.ndarray) -> None:

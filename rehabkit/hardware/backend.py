@@ -26,33 +26,37 @@ from __future__ import annotations
 import math
 import socket
 import time
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
-from rehabkit.core.backends.scene_view import SceneMirror, SceneView
-from rehabkit.core.capabilities import Cameras, NamedJoints, SceneGeometry, SceneObjects
+from rehabkit.core.backends.scene_view import SceneMirror
 from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import Backend, BackendFaultError, BodyPoses, Context, GeomVisual, StrictModel
+from rehabkit.core.interfaces import Backend, BackendFaultError, Context, StrictModel
 from rehabkit.core.limits import first_breach
 from rehabkit.core.safety import SafetyEvent
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
-from rehabkit.hardware.clock import wait_until
+from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.frame_server import FrameServer
-from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series
+from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
+from rehabkit.hardware.mirrored_scene import MirroredScene
 from rehabkit.hardware.protocol import (
+    CLOCK,
     CMD_ESTOP,
     CMD_RESET,
     COMMAND,
     ESTOPPED,
     HOLDING,
     LIMIT,
-    STALE,
     STATE,
     WATCHDOG,
     Receiver,
+    clock_time,
     encode,
 )
+
+LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
 
 
 class LinkLostError(BackendFaultError):
@@ -69,6 +73,10 @@ class HardwareConfig(StrictModel):
     host: str = "127.0.0.1"
     port: int = Field(0, ge=0, le=65535, description="bridge UDP port (0 with spawn_bridge: any free one)")
     spawn_bridge: bool = Field(True, description="start 'rehabkit bridge' with the robot's MuJoCo model as plant")
+    clock: Literal["realtime", "lockstep"] = Field(
+        "realtime", description="realtime: both ends tick on the wall clock, as a robot's drives do; lockstep: "
+        "the bridge ticks once per host tick, on the host's clock (a simulated plant only: deterministic and "
+        "faster than real time, for tests and rehearsals; the bridge must be started with --lockstep)")
     robot_id: int = Field(1, ge=0)
     timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
     # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
@@ -80,12 +88,12 @@ class HardwareConfig(StrictModel):
                                    "long, until the next one (no torque is applied open-loop for longer)")
 
 
-class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints):
+class HardwareBackend(MirroredScene, Backend):
     """The robot over UDP (a bridge in front of its drives, or of a MuJoCo plant); the scene mirrored on the host
     from the measured joints (drawn, scripted objects, cameras rendered in a process of their own)."""
 
-    realtime = True
     metrics = METRICS
+    real_person = True
 
     def __init__(self, config: HardwareConfig, context: Context):
         beat = getattr(context.safety, "heartbeat", None)
@@ -94,6 +102,8 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
                                                "state_timeout_s": beat.state_timeout_ms / 1e3,
                                                "bridge_stale_ms": beat.hold_after})
         self.config, self.timestep = config, config.timestep
+        self.realtime = config.clock == "realtime"  # else the link's clock is the count of ticks, self.clock
+        self.clock, self._clock_seq, self._answered = 0, 0, -1.0
         robot = context.robot
         self.n = robot.model.dof
         self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
@@ -122,7 +132,7 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
         self.held_at: float | None = None  # when the bridge first reported holding the robot
         self.stale_holds: list[list[float]] = []  # [start, ticks] of each gap in the commands the bridge held through
         self._held, self._stale_open, self._state_t = 0, False, 0.0
-        self.silent_ticks = 0
+        self.silent_ticks, self._got = 0, False
         self.resync_s, self.skipped_s = config.bridge_stale_ms / 1e3, 0.0
         self._started = False
         self._estop_sent = False
@@ -130,29 +140,48 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
 
     # -- link ------------------------------------------------------------------
 
+    def _now(self) -> float:
+        return time.monotonic() if self.realtime else self.clock * self.timestep
+
     def _send(self, values: np.ndarray, flags: int = 0) -> float:
         self.seq += 1
-        sent = time.monotonic()
+        sent = self._now()
         self.sock.sendto(encode(COMMAND, self.config.robot_id, self.seq, values, sent_at=sent, status=flags), self.addr)
         return sent
 
-    def _receive(self) -> bool:
-        got = False
+    def _tick_lockstep(self, timeout: float = LOCKSTEP_REPLY_S) -> bool:
+        """Lock-step: tell the bridge to tick at the link's time, wait (in wall time) until it says it has, taking
+        the states that came meanwhile; the clock advances one tick. False if it did not answer in ``timeout``."""
+        t = self.clock * self.timestep
+        self._clock_seq += 1
+        self.sock.sendto(encode(CLOCK, self.config.robot_id, self._clock_seq, np.zeros(0), t), self.addr)
+        self.clock += 1
+        until = time.monotonic() + timeout
+        while self._answered != t:
+            if not wait_readable(self.sock, until - time.monotonic()):
+                return False
+            self._receive()
+        return True
+
+    def _receive(self) -> None:
         while True:
             try:
                 data = self.sock.recv(65536)
             except (BlockingIOError, ConnectionRefusedError):
-                return got
-            now = time.monotonic()
+                return
+            now = self._now()
+            if not self.realtime and (t := clock_time(data, self.config.robot_id)) is not None:
+                self._answered = t
+                continue
             msg = self.rx.accept(data, now)
             if msg is None:
                 continue
             self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
             self.applied = msg.values[2].copy()  # the torque the robot side applied (after its own clipping)
             self.measured, self._posed = msg.measured, False
-            self.status, self.last_state, got = msg.status, now, True
+            self.status, self.last_state, self._got = msg.status, now, True
             if self._started:
-                self._note_stale(msg, now - self.t0)
+                note_stale(self, msg, now - self.t0)
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
@@ -168,26 +197,9 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
         breach = first_breach(self.limits, self.joint_names, self.q, self.qd, tol=0.0, revolute=self.revolute)
         return f"its own limit check: {breach.describe()}" if breach else "its own limit check"
 
-    def _note_stale(self, msg, t: float) -> None:
-        """Holds through gaps in the commands, from the bridge's count of held ticks: exact even when the states
-        sent during a hold were lost or came too late (as after a stall of this host)."""
-        ticks, self._held = (msg.held - self._held) % 0x10000, msg.held
-        if ticks and not self._stale_open:  # (not before the state before it: a paused timeline is shorter)
-            self.stale_holds.append([max(self._state_t, t - ticks * self.timestep), 0])
-        if ticks or self._stale_open:
-            self.stale_holds[-1][1] += ticks
-        self._stale_open, self._state_t = bool(msg.status & STALE), t
-
     def interventions(self) -> list[SafetyEvent]:
         """The bridge's holds through gaps in the commands, as safety events."""
-        out = []
-        for start, ticks in self.stale_holds:
-            ms = 1e3 * ticks * self.timestep
-            out.append(SafetyEvent(start, "stale-command", None, ms, self.config.bridge_stale_ms,
-                                   f"t={start:.3f}s: no newer command for {self.config.bridge_stale_ms:g} ms: the "
-                                   f"bridge held the posture for {ms:.0f} ms, until the next one",
-                                   {"held_ticks": ticks}))
-        return out
+        return stale_interventions(self)
 
     # -- Backend ----------------------------------------------------------------
 
@@ -197,12 +209,18 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
         limit = time.monotonic() + 5.0
         while time.monotonic() < limit:  # the bridge may still be starting: ask until it answers from q0
             self._send(np.asarray(q0, float), CMD_RESET)
-            time.sleep(0.005)
-            if self._receive() and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
+            self._got = False
+            if self.realtime:
+                time.sleep(0.005)
+                self._receive()
+            else:
+                self._tick_lockstep(0.2)
+            if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
         else:
-            raise LinkLostError(f"the bridge at udp://{self.addr[0]}:{self.addr[1]} does not answer")
-        self.t0 = self.deadline = self.last_state = time.monotonic()
+            raise LinkLostError(f"the bridge at udp://{self.addr[0]}:{self.addr[1]} does not answer"
+                                + ("" if self.realtime else " (was it started with --lockstep?)"))
+        self.t0 = self.deadline = self.last_state = self._now()
         self._started = False
         self.held_at, self._fault, self._estop_sent = None, None, False  # a reset re-enables the bridge
         self.stale_holds, self._held, self._stale_open, self._state_t = [], 0, False, 0.0
@@ -216,13 +234,12 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
     def step(self, n: int = 1) -> None:
         if not self._started:  # the timeline starts with the loop, not at the reset (setup work comes between)
             self._started = True
-            self.deadline = self.last_state = time.monotonic()
-            self.t0 = self.deadline
+            self.deadline = self.last_state = self.t0 = self._now()
         for _ in range(n):
             self._send(self.tau)
             self.deadline += self.timestep
-            wait_until(self.deadline)
-            late = time.monotonic() - self.deadline
+            self._got = False
+            late = self._pace()
             self.ticks += 1
             self.lateness.append(late)
             if late > self.resync_s:
@@ -236,55 +253,25 @@ class HardwareBackend(Backend, SceneGeometry, SceneObjects, Cameras, NamedJoints
             if late > self.timestep:  # this tick starts after the next one was due
                 self.misses += 1
             # silence counted in our own ticks too: after a stall of this host, states still in flight get a chance
-            self.silent_ticks = 0 if self._receive() else self.silent_ticks + 1
+            self._receive()
+            self.silent_ticks = 0 if self._got else self.silent_ticks + 1
             if self._fault is not None:
                 fault, self._fault = self._fault, None
                 raise BridgeHoldError(fault)
-            silent = time.monotonic() - self.last_state
+            silent = self._now() - self.last_state
             if silent > self.config.state_timeout_s and self.silent_ticks * self.timestep > self.config.state_timeout_s:
                 raise LinkLostError(f"no valid state from the bridge for {1e3 * silent:.0f} ms "
                                     f"(dropped: {dict(self.rx.dropped) or 'none'})")
 
-    # -- the mirrored scene (log, scripted objects, simulated sensors) -----------
-
-    def _view(self) -> SceneView:
-        if not self._posed:
-            self.mirror.pose(self.q, self.measured)
-            self._posed = True
-        return self.mirror
-
-    def body_poses(self) -> BodyPoses:
-        return self._view().body_poses()
-
-    def visual_geoms(self) -> list[GeomVisual]:
-        return self.mirror.visual_geoms()
-
-    def ee_position(self) -> np.ndarray:
-        return self._view().ee_position()
-
-    def joint_positions(self, names: list[str]) -> np.ndarray:
-        return self._view().joint_positions(names)
-
-    def set_joints(self, values: dict[str, np.ndarray]) -> None:
-        """The mechanism assembles itself (its passive joints are measured): nothing to send."""
-
-    def move_object(self, name: str, position: np.ndarray) -> None:
-        self.mirror.move_object(name, position)
-
-    def object_position(self, name: str) -> np.ndarray:
-        """Where a scene object is in the frame last rendered (a sensor thread's question)."""
-        return self.mirror.frame_view.object_position(name)
-
-    def render(self, camera: str, width: int, height: int) -> np.ndarray:
-        """A frame of the mirrored scene at the newest measured state (from a sensor thread; another process
-        renders it)."""
-        if self.frames is None:
-            raise RuntimeError("this hardware backend renders no frames (the scenario has no cameras)")
-        view = self.mirror.frame(self.q, self.measured)
-        return self.frames.render(view.data, camera, width, height)
-
-    def camera_pose(self, camera: str) -> tuple[np.ndarray, np.ndarray, float]:
-        return self.mirror.frame_view.camera_pose(camera)
+    def _pace(self) -> float:
+        """Wait for this tick's deadline; how late it came [s]. Lock-step: until the bridge has ticked (never late)."""
+        if self.realtime:
+            wait_until(self.deadline)
+            return time.monotonic() - self.deadline
+        if not self._tick_lockstep():
+            raise LinkLostError(f"no valid state from the bridge: it did not answer tick {self.clock - 1} of the "
+                                f"lock-step clock within {LOCKSTEP_REPLY_S:g} s of wall time")
+        return 0.0
 
     def estop(self) -> None:
         """Tell the bridge to hold the robot now."""

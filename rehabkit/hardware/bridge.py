@@ -34,8 +34,9 @@ from rehabkit.core.backends.scene import build_scene
 from rehabkit.core.backends.scene_view import measured_joints
 from rehabkit.core.capabilities import PassiveJoints
 from rehabkit.core.scenario.models import World
-from rehabkit.hardware.clock import wait_until
+from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.protocol import (
+    CLOCK,
     CMD_ESTOP,
     CMD_RESET,
     COMMAND,
@@ -47,6 +48,7 @@ from rehabkit.hardware.protocol import (
     STATE,
     WATCHDOG,
     Receiver,
+    clock_time,
     encode,
 )
 
@@ -172,6 +174,7 @@ class Bridge:
         self.seq = 0
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
         self.waiting = False  # reset done, no torque command yet: holding the start posture
+        self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
 
     def _hold(self, now: float, why: str, bit: int) -> None:
         if not self.status & HOLDING:
@@ -181,12 +184,16 @@ class Bridge:
             self.waiting = False
         self.status = (self.status | HOLDING | bit) & ~(ENABLED | STALE)
 
-    def _receive(self, now: float) -> None:
+    def _arrived(self) -> list[tuple[bytes, tuple]]:
+        out = []
         while True:
             try:
-                data, addr = self.sock.recvfrom(65536)
+                out.append(self.sock.recvfrom(65536))
             except BlockingIOError:
-                return
+                return out
+
+    def _receive(self, now: float, inbox: list[tuple[bytes, tuple]]) -> None:
+        for data, addr in inbox:
             msg = self.rx.accept(data, now)
             if msg is None:
                 continue
@@ -207,9 +214,10 @@ class Bridge:
                 self.since_command = 0
                 self.tau = np.clip(msg.values, -self.plant.effort, self.plant.effort)
 
-    def tick(self, now: float) -> None:
-        """One cycle: commands in, watchdog, torques, plant step, state out."""
-        self._receive(now)
+    def tick(self, now: float, inbox: list[tuple[bytes, tuple]] | None = None) -> None:
+        """One cycle: commands in (what arrived, or ``inbox``: those a lock-step clock gathered), watchdog, torques,
+        plant step, state out."""
+        self._receive(now, self._arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
@@ -234,7 +242,8 @@ class Bridge:
         if self.peer is not None:
             q, qd = self.plant.read()
             self.seq += 1
-            self.sock.sendto(encode(STATE, self.robot_id, self.seq, np.vstack([q, qd, tau]), echo=self.echo,
+            sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
+            self.sock.sendto(encode(STATE, self.robot_id, self.seq, np.vstack([q, qd, tau]), sent, echo=self.echo,
                                     status=self.status, held=self.held_ticks,
                                     measured=self.plant.read_measured()), self.peer)
 
@@ -253,5 +262,32 @@ class Bridge:
                 self.tick(time.monotonic())
                 deadline += period
                 wait_until(deadline)
+        finally:
+            self.sock.close()
+
+    def serve_lockstep(self, duration: float | None = None, parent: int | None = None) -> None:
+        """Tick when the host's clock says so, not the wall's: each CLOCK datagram from the host is one tick at the
+        time it carries (with the commands that arrived before it), answered by the state and a CLOCK back. A
+        simulation's clock, for tests and rehearsals: deterministic, as fast as both ends compute. ``duration`` is
+        link time; with ``parent`` the bridge stops once that process is gone."""
+        self.lockstep = True
+        inbox: list[tuple[bytes, tuple]] = []
+        try:
+            while True:
+                if not wait_readable(self.sock, 0.5):
+                    if parent is not None and os.getppid() != parent:
+                        return
+                    continue
+                data, addr = self.sock.recvfrom(65536)
+                now = clock_time(data, self.robot_id)
+                if now is None:
+                    inbox.append((data, addr))
+                    continue
+                if duration is not None and now >= duration:
+                    return
+                self.tick(now, inbox)
+                inbox = []
+                self.seq += 1
+                self.sock.sendto(encode(CLOCK, self.robot_id, self.seq, np.zeros(0), now), addr)
         finally:
             self.sock.close()

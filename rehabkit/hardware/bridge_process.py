@@ -19,7 +19,7 @@ def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
     cmd = [sys.executable, "-m", "rehabkit.cli", "bridge", spec["type"], "--config", json.dumps(spec),
            "--port", str(config.port), "--rate", str(1.0 / config.timestep), "--robot-id", str(config.robot_id),
            "--watchdog-ms", str(config.bridge_watchdog_ms), "--stale-ms", str(config.bridge_stale_ms),
-           "--parent-pid", str(os.getpid()),
+           "--parent-pid", str(os.getpid()), *(["--lockstep"] if config.clock == "lockstep" else []),
            # the run's torque limits (the envelope's may be tighter than the robot's): the bridge clips to them
            "--effort", json.dumps(context.robot.model.limits.effort.tolist()),
            # and checks the run's ranges and speeds on its own, a margin wider than the host's safety layer

@@ -1,10 +1,13 @@
-"""What the host measured of the robot link: deadline misses, tick lateness, round trips, dropped states, holds."""
+"""What the host measured of the robot link: deadline misses, tick lateness, round trips, dropped states, and the
+bridge's holds through gaps in the commands."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from rehabkit.core.metric import Metric
+from rehabkit.core.safety import SafetyEvent
+from rehabkit.hardware.protocol import STALE
 
 METRICS = (
     Metric("link_ticks", clock="wall", description="ticks the loop ran over the link"),
@@ -45,4 +48,26 @@ def link_series(link) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     if link.rtt:
         idx = np.clip(np.array(link.rtt_at) - 1, 0, len(link.rtt) - 1)
         out["link/round_trip_ms"] = (ticks, np.array(link.rtt)[idx] * 1e3)
+    return out
+
+
+def note_stale(link, msg, t: float) -> None:
+    """Holds through gaps in the commands, from the bridge's count of held ticks in a state received at task time
+    ``t``: exact even when the states sent during a hold were lost or came too late (as after a stall of the host)."""
+    ticks, link._held = (msg.held - link._held) % 0x10000, msg.held
+    if ticks and not link._stale_open:  # (not before the state before it: a paused timeline is shorter)
+        link.stale_holds.append([max(link._state_t, t - ticks * link.timestep), 0])
+    if ticks or link._stale_open:
+        link.stale_holds[-1][1] += ticks
+    link._stale_open, link._state_t = bool(msg.status & STALE), t
+
+
+def stale_interventions(link) -> list[SafetyEvent]:
+    """The bridge's holds through gaps in the commands, as safety events."""
+    out = []
+    for start, ticks in link.stale_holds:
+        ms = 1e3 * ticks * link.timestep
+        out.append(SafetyEvent(start, "stale-command", None, ms, link.config.bridge_stale_ms,
+                               f"t={start:.3f}s: no newer command for {link.config.bridge_stale_ms:g} ms: the "
+                               f"bridge held the posture for {ms:.0f} ms, until the next one", {"held_ticks": ticks}))
     return out

@@ -7,6 +7,8 @@ One datagram is one message, little-endian::
             · joint count n (H) · measured-only joint count m (H) · status bits (H) · held ticks (H)
     body    STATE:   q, q̇, τ (3 × n doubles), then the m measured-only joints' positions
             COMMAND: τ (n doubles; m = 0)
+            CLOCK:   nothing (n = m = 0): in lock-step, the host's "advance to 'sent at'" and the bridge's
+                     "done"; never applied, never dropped by a link impairment relay (it is the clock, not data)
     trailer CRC-32 of everything before it (I)
 
 ``held ticks`` (STATE only): the bridge's ticks spent holding the posture for want of a newer
@@ -33,8 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 3  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks
-STATE, COMMAND = 1, 2
+VERSION = 4  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK
+STATE, COMMAND, CLOCK = 1, 2, 3
 HEADER = struct.Struct("<2sBBIIddHHHH")
 CRC = struct.Struct("<I")
 
@@ -73,7 +75,9 @@ def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float |
     values = np.ascontiguousarray(values, dtype="<f8")
     extra = np.ascontiguousarray(np.zeros(0) if measured is None else measured, dtype="<f8").ravel()
     n = values.shape[-1]
-    if kind == STATE and values.shape != (3, n) or kind == COMMAND and values.shape != (n,):
+    if kind == CLOCK:
+        values = values.reshape(0)
+    elif kind == STATE and values.shape != (3, n) or kind == COMMAND and values.shape != (n,):
         raise ValueError(f"kind {kind} takes {'(3, n)' if kind == STATE else '(n,)'} values, got {values.shape}")
     if kind == COMMAND and len(extra):
         raise ValueError("commands carry no measured-only joints")
@@ -81,6 +85,15 @@ def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float |
                        time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, held & 0xFFFF)
     body = head + values.tobytes() + extra.tobytes()
     return body + CRC.pack(zlib.crc32(body))
+
+
+def clock_time(data: bytes, robot: int) -> float | None:
+    """The time a well-formed CLOCK datagram of ``robot`` carries, else None (any other datagram)."""
+    if len(data) != HEADER.size + CRC.size or CRC.unpack_from(data, HEADER.size)[0] != zlib.crc32(data[: HEADER.size]):
+        return None
+    magic, version, kind, rid, _seq, sent_at, *_ = HEADER.unpack_from(data)
+    ok = magic == MAGIC and version == VERSION and kind == CLOCK and rid == robot and math.isfinite(sent_at)
+    return sent_at if ok else None
 
 
 def newer(seq: int, last: int) -> bool:
