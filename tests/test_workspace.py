@@ -16,7 +16,7 @@ def lexos():
 
 @pytest.fixture(scope="module")
 def ws(lexos):
-    return lexos.workspace(progress=False)  # built once (~20 s on 2 cores), then cached on disk
+    return lexos.workspace(progress=False)  # the table shipped beside the plugin (built here: ~30 s on 2 cores)
 
 
 def test_swivel_ik_reproduces_the_hand_position(lexos, rng):
@@ -47,6 +47,29 @@ def test_table_labels_are_consistent(ws, lexos, rng):
         sample = np.argwhere(lab == label)[:: max(1, (lab == label).sum() // 500)]
         for i, j, k in sample:
             assert (lab[i - 1 : i + 2, j - 1 : j + 2, k - 1 : k + 2] == UNREACHABLE).any() == touches
+
+
+def test_a_table_is_built_from_the_ik_when_none_is_cached_or_shipped(tmp_path, monkeypatch, rng):
+    """The build itself (the shipped 1 cm table spares it at 1 cm, coarser here): bounding box, labels from the IK in
+    worker processes, erosion into inner and boundary, written to the cache and read back. Then a patient's ranges
+    within the arm's own: a voxel out of reach with the wider ranges is out of reach with these, so only the own
+    table's reachable voxels are tested; the verdicts are the IK's with the narrower ranges."""
+    from rehabkit_plugins.robots.lexos import LexosConfig, LexosRobot
+
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path))
+    robot = LexosRobot(LexosConfig())
+    assert robot.workspace(progress=False).labels.size > 10**6 and not list(tmp_path.glob("*.npz"))  # shipped
+    own = robot.workspace(resolution=0.04, progress=False)
+    lab = own.labels
+    idx = np.argwhere(np.ones(lab.shape, bool))
+    np.testing.assert_array_equal(robot.reachable(own.centre(idx)), lab[tuple(idx.T)] >= BOUNDARY)
+    assert set(np.unique(lab)) == {UNREACHABLE, BOUNDARY, INNER} and len(list(tmp_path.glob("workspace-*.npz"))) == 1
+    np.testing.assert_array_equal(robot.workspace(resolution=0.04, progress=False).labels, lab)  # from the cache
+    robot.model.limits = robot.model.limits.override(1, lower=np.radians(-20.0)).override(3, upper=np.radians(-30.0))
+    narrow = robot.workspace(resolution=0.04, progress=False)
+    assert narrow.labels.shape == lab.shape and np.all(narrow.labels[lab == UNREACHABLE] == UNREACHABLE)
+    np.testing.assert_array_equal(robot.reachable(narrow.centre(idx)), narrow.labels[tuple(idx.T)] >= BOUNDARY)
+    assert 0.2 < (narrow.labels >= BOUNDARY).sum() / (lab >= BOUNDARY).sum() < 0.95  # narrower, not empty
 
 
 def test_workspace_is_concave(ws, rng):

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -147,6 +148,7 @@ class LexosRobot(Robot, WorkspaceTable, RandomReach):
                                 base_pose=config.base.matrix(), safe_stop=config.safe_stop,
                                 passive_joints=[j.name for j in passive])
         self.swivel = np.linspace(-np.pi, np.pi, config.swivel_samples, endpoint=False)
+        self._own = (limits.lower.copy(), limits.upper.copy())  # before a patient's ranges narrow them
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         return self.chain.fk(q)
@@ -170,19 +172,27 @@ class LexosRobot(Robot, WorkspaceTable, RandomReach):
 
     def reachable(self, p: np.ndarray) -> np.ndarray:
         """Whether some elbow swivel puts the hand at each ``p`` within every joint range."""
-        return self._reachability(p)
+        return self._reachability(self.model.limits.lower, self.model.limits.upper)(p)
 
-    @property
-    def _reachability(self) -> SwivelReachability:
-        lim = self.model.limits
-        return SwivelReachability(*self.lengths, lim.lower, lim.upper, self.swivel)
+    def _reachability(self, lower: np.ndarray, upper: np.ndarray) -> SwivelReachability:
+        return SwivelReachability(*self.lengths, lower, upper, self.swivel)
 
     def workspace(self, resolution: float = 0.01, progress: bool = True, use_cache: bool = True) -> VoxelWorkspace:
-        """The voxel look-up table of the hand's workspace (base frame), cached on disk."""
+        """The voxel look-up table of the hand's workspace (base frame), cached on disk (the default arm's at 1 cm
+        ships beside this module: ``lexos_workspace.npz``, a copy of the cache file built by this method). With
+        ranges narrowed within the arm's own (a patient's), only the voxels its own table reaches are tested."""
         lim = self.model.limits
-        key = f"lexos|{self.lengths}|{lim.lower.round(9).tolist()}|{lim.upper.round(9).tolist()}|{len(self.swivel)}"
-        return build_workspace(key, self.chain.fk_batch, self._reachability, lim.lower, lim.upper, resolution,
-                               progress=progress, use_cache=use_cache)
+        superset = None
+        if (np.any(lim.lower != self._own[0]) or np.any(lim.upper != self._own[1])) and \
+                np.all(lim.lower >= self._own[0]) and np.all(lim.upper <= self._own[1]):
+            superset = self._table(*self._own, resolution, progress, use_cache)
+        return self._table(lim.lower, lim.upper, resolution, progress, use_cache, superset)
+
+    def _table(self, lower, upper, resolution, progress, use_cache, superset=None) -> VoxelWorkspace:
+        key = f"lexos|{self.lengths}|{lower.round(9).tolist()}|{upper.round(9).tolist()}|{len(self.swivel)}"
+        return build_workspace(key, self.chain.fk_batch, self._reachability(lower, upper), lower, upper, resolution,
+                               progress=progress, use_cache=use_cache, superset=superset,
+                               shipped=Path(str(resources.files(__package__).joinpath("lexos_workspace.npz"))))
 
     def random_reach(self, rng: np.random.Generator, not_straight_from: np.ndarray | None = None) -> np.ndarray:
         """An inner voxel of the workspace table, drawn uniformly (see :mod:`rehabkit.workspace.sampling`)."""
