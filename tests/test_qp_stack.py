@@ -133,3 +133,35 @@ def test_a_misspelt_frame_names_the_closest_ones():
     cfg["levels"][0]["tasks"][0]["frame"] = "l_soel"
     with pytest.raises(ValueError, match="no frame 'l_soel' in the model; did you mean 'l_sole'"):
         QpStack(QpStackConfig.model_validate(cfg), ctx)
+
+
+def test_tasks_fill_the_stacks_rows_as_they_give_them():
+    """The per-cycle path (rows written in place) and the plain one agree, weights included, away from the start."""
+    from pydantic import TypeAdapter
+
+    from rehabkit.wholebody.tasks import KinematicState, Task, TaskSpec
+
+    robot = ComanRobot(ComanConfig())
+    state = KinematicState(robot.floating_model)
+    q = robot.pin_configuration(np.asarray(robot.standing, float))
+    state.update(q)
+    specs = [{"type": "frame", "frame": "l_sole", "gain": 50, "weight": 2.0},
+             {"type": "frame", "frame": "r_hand", "position_only": True, "gain": 30},
+             {"type": "orientation", "frame": "Waist", "axes": ["x", "y"], "gain": 10, "weight": 0.5},
+             {"type": "posture", "joints": ARM, "gain": 1, "weight": 0.1},
+             {"type": "com", "axes": ["x", "y"], "gain": 5}]
+    tasks = [Task(TypeAdapter(TaskSpec).validate_python(s), state, robot.model.joint_names) for s in specs]
+    moved = q.copy()
+    moved[7:] += np.random.default_rng(3).normal(0, 0.1, len(q) - 7)
+    moved[3:7] = pin.Quaternion(pin.exp3(np.array([0.05, -0.03, 0.02]))).coeffs()  # the pelvis tilted too
+    state.update(moved)
+    ref = (np.array([0.3, -0.2, 0.4]), np.array([0.1, 0.0, -0.2]))
+    for task in tasks:
+        A, b = task.rows(state, ref)
+        fa, fb = np.full_like(A, np.nan), np.full_like(b, np.nan)
+        if task.spec.type == "posture":
+            fa[:] = A  # constant: the stack writes it once
+        task.fill(state, ref, fa, fb)
+        np.testing.assert_allclose(fa, A, atol=1e-15)
+        np.testing.assert_allclose(fb, b, atol=1e-15)
+        assert np.abs(b).max() > 1e-3  # an error to correct: the rows are not trivially equal

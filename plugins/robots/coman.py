@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 from pydantic import Field
+from scipy.linalg.lapack import dgesv
 
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import FloatingBase
@@ -91,8 +92,11 @@ class ComanRobot(Robot, FloatingBase):
                           base_quat_wxyz: np.ndarray | None = None) -> np.ndarray:
         """Full Pinocchio configuration from the joints and a pelvis pose (default: where it starts)."""
         pos = self.model.base_pose[:3, 3] if base_position is None else base_position
-        wxyz = matrix_to_quat_wxyz(self.model.base_pose[:3, :3]) if base_quat_wxyz is None else base_quat_wxyz
-        return np.concatenate([pos, wxyz[1:], wxyz[:1], q])
+        if base_quat_wxyz is None:
+            if getattr(self, "_start_wxyz", None) is None:
+                self._start_wxyz = matrix_to_quat_wxyz(self.model.base_pose[:3, :3])
+            base_quat_wxyz = self._start_wxyz
+        return np.concatenate([pos, base_quat_wxyz[1:], base_quat_wxyz[:1], q])
 
     def support_torque(self, q_full: np.ndarray) -> np.ndarray:
         """Joint torques holding the whole robot still on both feet (weight shared by min-norm wrenches)."""
@@ -101,20 +105,21 @@ class ComanRobot(Robot, FloatingBase):
         tau = pin.computeGeneralizedGravity(model, data, q_full)  # RNEA(q, 0, 0)
         pin.computeJointJacobians(model, data, q_full)
         pin.updateFramePlacements(model, data)
-        jc = np.vstack([pin.getFrameJacobian(model, data, i, pin.LOCAL_WORLD_ALIGNED) for i in self._feet_ids])
+        jc = self._jc
+        for k, i in enumerate(self._feet_ids):
+            jc[6 * k : 6 * k + 6] = pin.getFrameJacobian(model, data, i, pin.LOCAL_WORLD_ALIGNED)
         # the unactuated pelvis rows must balance: J_c,baseᵀ f = τ_base; the minimum-norm wrenches by the normal
         # equations (two flat feet give a well-conditioned 6×6 system; lstsq's SVD cost 3x as much every cycle)
         a = jc[:, :6].T
-        try:
-            f = a.T @ np.linalg.solve(a @ a.T, tau[:6])
-        except np.linalg.LinAlgError:
-            f = np.linalg.lstsq(a, tau[:6], rcond=None)[0]
-        return (tau - jc.T @ f)[6:]
+        _, _, x, info = dgesv(a @ a.T, tau[:6])  # LAPACK directly: numpy's solve costs 3x as much at 6x6
+        f = a.T @ x if info == 0 else np.linalg.lstsq(a, tau[:6], rcond=None)[0]
+        return tau[6:] - jc[:, 6:].T @ f
 
     def _support_data(self):
         if getattr(self, "_sdata", None) is None:
             self._sdata = self.floating_model.createData()
             self._feet_ids = [self.floating_model.getFrameId(f) for f in FEET]
+            self._jc = np.zeros((6 * len(FEET), self.floating_model.nv))
         return self._sdata
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:

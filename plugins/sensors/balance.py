@@ -7,6 +7,8 @@ The support polygon is the convex hull of the foot-corner frames at the first re
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 from pydantic import Field
@@ -41,6 +43,7 @@ class Balance(Sensor):
         self._corners = [self.model.getFrameId(f) for f in config.support_frames]
         self._feet = [self.model.getFrameId(f) for f in config.feet]
         self._polygon = None
+        self._feet_xyz = np.zeros((len(self._feet), 3))
         self.margin_min, self.slip_max, self.tilt_max = np.inf, 0.0, 0.0
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, float]:
@@ -48,17 +51,19 @@ class Balance(Sensor):
         qf = self.robot.pin_configuration(np.asarray(q, float), pos, quat)
         com = pin.centerOfMass(self.model, self.data, qf)
         pin.updateFramePlacements(self.model, self.data)
-        feet = np.array([self.data.oMf[f].translation for f in self._feet])
+        feet = self._feet_xyz
+        for k, f in enumerate(self._feet):
+            feet[k] = self.data.oMf[f].translation
         if self._polygon is None:
             pts = np.array([self.data.oMf[f].translation[:2] for f in self._corners])
             hull = ConvexHull(pts)
             self._polygon = (hull.equations[:, :2], -hull.equations[:, 2])
             self._feet0 = feet.copy()
         normals, offsets = self._polygon
-        margin = float(np.min(offsets - normals @ com[:2]))
+        margin = float((offsets - normals @ com[:2]).min())
         slip = float(np.abs(feet - self._feet0).max())
-        up = self.data.oMi[1].rotation[:, 2]  # the pelvis' z axis
-        tilt = float(np.degrees(np.arccos(np.clip(up[2], -1.0, 1.0))))
+        up_z = self.data.oMi[1].rotation[2, 2]  # the pelvis' z axis, its world z component
+        tilt = math.degrees(math.acos(min(1.0, max(-1.0, up_z))))
         self.margin_min = min(self.margin_min, margin)
         self.slip_max, self.tilt_max = max(self.slip_max, slip), max(self.tilt_max, tilt)
         return {"com_margin_m": margin, "feet_slip_mm": slip * 1e3, "pelvis_tilt_deg": tilt}

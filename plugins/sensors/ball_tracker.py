@@ -8,6 +8,8 @@ it followed the analytic parabola fitted to its first instants (drag-free ballis
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydantic import Field
 
@@ -47,7 +49,8 @@ class BallTracker(Sensor):
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict:
         world = backend.object_position(self.config.object)
         hand = backend.ee_position()
-        free = hand is None or float(np.linalg.norm(world - hand)) > self.config.free_distance_m
+        d = world - hand if hand is not None else None
+        free = d is None or math.sqrt(d @ d) > self.config.free_distance_m
         p = (world - self._origin) @ self._rot
         if self.config.noise_m:
             p = p + self.rng.normal(0.0, self.config.noise_m, 3)

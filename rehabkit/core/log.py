@@ -177,6 +177,9 @@ class RerunLog:
         for key, value in reading.items():
             if value is None:
                 continue
+            if type(value) is float:  # the common case, read at the control rate: kept as is until the flush
+                numbers[key] = value
+                continue
             if isinstance(value, rr.EncodedImage) or is_image(value):
                 self.rec.set_time(TIMELINE, duration=t)
                 self.rec.log(f"sensors/{sensor}/{key}", value if isinstance(value, rr.EncodedImage) else
@@ -203,7 +206,8 @@ class RerunLog:
         for sensor, srows in self._sensor_rows.items():
             for key in {k for _, numbers in srows for k in numbers}:  # readings may lack a key (no detection)
                 rows = [(t, numbers[key]) for t, numbers in srows if key in numbers]
-                values = np.array([v for _, v in rows])
+                values = np.array([v for _, v in rows], float)
+                values = values[:, None] if values.ndim == 1 else values  # floats kept as such: one column
                 self._send(f"sensors/{sensor}/{key}", np.array([t for t, _ in rows]),
                            lambda v=values: rr.Scalars.columns(scalars=v))
         self._sensor_rows = {}

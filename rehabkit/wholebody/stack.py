@@ -10,6 +10,7 @@ go to ``qpsolvers`` (daqp or proxqp), warm-started from the previous cycle.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,6 +79,13 @@ def _qp(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None = None,
     return _solver(P, q, ineq, E, e, solver, init, stats)
 
 
+@functools.cache
+def _eye(n: int) -> np.ndarray:
+    """The identity, shared by every cycle (nothing writes to a metric; left writable so that the compiled
+    cascade has one signature for it and for an inertia matrix)."""
+    return np.eye(n)
+
+
 def _solver(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None):
     if stats is not None:
         stats["solver"] = stats.get("solver", 0) + 1
@@ -87,7 +95,8 @@ def _solver(P, q, ineq: Inequalities, E, e, solver, init, stats: dict | None):
 
 def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, solver: str = "daqp",
                   warm: list[np.ndarray | None] | None = None, metric: np.ndarray | None = None,
-                  stats: dict | None = None) -> StackResult:
+                  stats: dict | None = None, stacked: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                  ) -> StackResult:
     """Lexicographic solution of ``levels`` (first = highest priority) under ``ineq``.
 
     Level k minimises its own residual (plus a small damping ½ε‖v‖² that keeps the problem
@@ -97,13 +106,17 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
     joint-space inertia matrix that is the kinetic energy of the paper's eq. (1), so the heavy
     pelvis is not moved for the sake of a light arm (identity: the minimum-norm solution).
     A step whose QP fails (e.g. its equalities became numerically inconsistent) is skipped
-    and reported.
+    and reported. ``stacked``: every level's rows already in one array, in order (the levels views of it), and
+    the index of each level's last row + 1.
     """
     n = len(ineq.lb)
-    H = np.eye(n) if metric is None else metric
-    A, b = np.vstack([lv.A for lv in levels]), np.concatenate([lv.b for lv in levels])
-    sizes = np.array([len(lv.b) for lv in levels])
-    ends = np.cumsum(sizes)
+    H = _eye(n) if metric is None else metric
+    if stacked is None:
+        A, b = np.vstack([lv.A for lv in levels]), np.concatenate([lv.b for lv in levels])
+        ends = np.cumsum([len(lv.b) for lv in levels])
+    else:
+        A, b, ends = stacked
+    starts = np.concatenate([[0], ends[:-1]])
     freedom_left = bool(ends[-1] < n)  # else the levels leave nothing to choose (generically)
     # the common case first: every step's equality-constrained optimum, in one compiled call
     V, done = equality_cascade(A, b, ends, reg, H, freedom_left, ineq.lb, ineq.ub, ineq.G, ineq.h)
@@ -113,7 +126,7 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
         if warm is not None:
             warm[:] = list(V)
         r = A @ V[-1] - b
-        return StackResult(V[-1], np.sqrt(np.add.reduceat(r * r, ends - sizes)).tolist())  # ‖A_k v − b_k‖
+        return StackResult(V[-1], np.sqrt(np.add.reduceat(r * r, starts)).tolist())  # ‖A_k v − b_k‖
     steps: list[Level | None] = [*levels, *([None] if freedom_left else [])]  # None: the least kinetic energy
     v = np.zeros(n)
     rows: list[np.ndarray] = []

@@ -10,6 +10,7 @@ the support polygon (also as a damper).
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 import numpy as np
@@ -92,7 +93,7 @@ class KinematicState:
         self.q = q
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
-        self.com_jacobian = pin.jacobianCenterOfMass(self.model, self.data, q, False)
+        self.com_jacobian = pin.jacobianCenterOfMass(self.model, self.data, True)  # from the kinematics just done
         self.com = self.data.com[0]
 
     def frame_id(self, name: str) -> int:
@@ -107,17 +108,16 @@ class KinematicState:
         return pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)
 
 
-def orientation_error(current: np.ndarray, desired: tuple[float, float, float, float]) -> np.ndarray:
-    """Quaternion error (Yuan; the paper's eq. 15, sign chosen so ω = λ·e converges), world axes.
+def orientation_error(current: np.ndarray, desired: np.ndarray) -> np.ndarray:
+    """Quaternion error (Yuan; the paper's eq. 15), world axes: ``current`` and ``desired`` rotation matrices.
 
-    ``current`` is a rotation matrix, ``desired`` the quaternion (x, y, z, w) it should reach.
+    The error η ε_d − η_d ε − ε_d × ε is the vector part of q_d ⊗ q⁻¹, the quaternion of R_d Rᵀ, taken here
+    with its scalar part positive (the shorter way round, so ω = λ·e converges) straight from that matrix:
+    building two quaternions through Pinocchio cost ~10 us a call.
     """
-    x, y, z, w = pin.Quaternion(current).coeffs()
-    xd, yd, zd, wd = desired
-    # η ε_d − η_d ε − ε_d × ε, written out: np.cross costs ~30 us a call at this size
-    return np.array([w * xd - wd * x - (yd * z - zd * y),
-                     w * yd - wd * y - (zd * x - xd * z),
-                     w * zd - wd * z - (xd * y - yd * x)])
+    m = desired @ current.T
+    w2 = 2.0 * math.sqrt(max(1.0 + m[0, 0] + m[1, 1] + m[2, 2], 1e-12))  # 4η
+    return np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]]) / w2
 
 
 class Task:
@@ -130,10 +130,11 @@ class Task:
         if spec.type in ("frame", "orientation"):
             self.fid = state.frame_id(spec.frame)
             self.start = state.placement(self.fid).copy()
-            self.start_quat = tuple(float(c) for c in pin.Quaternion(self.start.rotation).coeffs())
+            self.start_rot = self.start.rotation.copy()
             self.start_p = self.start.translation.copy()
         if spec.type == "orientation":
             self.axes = [AXIS[a] for a in spec.axes]
+            self._axes = np.array(self.axes)
         if spec.type == "posture":
             unknown = [n for n in (spec.joints or []) + spec.exclude if n not in joint_names]
             names = [n for n in (spec.joints or joint_names) if n not in spec.exclude]
@@ -145,7 +146,7 @@ class Task:
                 raise ValueError(f"posture task: {len(spec.target_deg)} targets for {len(names)} joints")
             self.target = np.radians(spec.target_deg) if spec.target_deg is not None else state.q[self.qidx].copy()
             self.A = np.zeros((len(names), nv))
-            self.A[np.arange(len(names)), self.idx] = 1.0
+            self.A[np.arange(len(names)), self.idx] = spec.weight  # constant: weighted once
         if spec.type == "com":
             self.axes = [AXIS[a] for a in spec.axes]
             self.start_com = state.com.copy()
@@ -159,16 +160,47 @@ class Task:
             linear = ff + s.gain * (goal_p - now.translation)
             if s.position_only:
                 return (J[:3], linear) if s.weight == 1.0 else (s.weight * J[:3], s.weight * linear)
-            b = np.concatenate([linear, s.rotation_gain * orientation_error(now.rotation, self.start_quat)])
+            b = np.concatenate([linear, s.rotation_gain * orientation_error(now.rotation, self.start_rot)])
             return (J, b) if s.weight == 1.0 else (s.weight * J, s.weight * b)
         if s.type == "orientation":
             J = st.jacobian(self.fid)[3:][self.axes]
-            err = orientation_error(st.placement(self.fid).rotation, self.start_quat)[self.axes]
+            err = orientation_error(st.placement(self.fid).rotation, self.start_rot)[self.axes]
             return s.weight * J, s.weight * s.gain * err
         if s.type == "posture":
-            return s.weight * self.A, s.weight * s.gain * (self.target - st.q[self.qidx])
+            return self.A, (s.weight * s.gain) * (self.target - st.q[self.qidx])
         J = st.com_jacobian[self.axes]
         return s.weight * J, s.weight * s.gain * (self.start_com[self.axes] - st.com[self.axes])
+
+
+    def fill(self, st: KinematicState, ref: tuple[np.ndarray, np.ndarray] | None, A: np.ndarray,
+             b: np.ndarray) -> None:
+        """:meth:`rows` written into ``A`` and ``b`` (views of the stack's rows: no arrays made per cycle). A
+        posture task's ``A`` is constant: written once by the caller, only ``b`` here."""
+        s = self.spec
+        if s.type == "posture":
+            np.subtract(self.target, st.q[self.qidx], out=b)
+            b *= s.weight * s.gain
+            return
+        if s.type == "frame":
+            now = st.placement(self.fid)
+            goal_p, ff = (self.start_p, 0.0) if ref is None else ref
+            b[:3] = ff + s.gain * (goal_p - now.translation)
+            if s.position_only:
+                A[:] = st.jacobian(self.fid)[:3]
+            else:
+                A[:] = st.jacobian(self.fid)
+                b[3:] = s.rotation_gain * orientation_error(now.rotation, self.start_rot)
+            if s.weight != 1.0:
+                A *= s.weight
+                b *= s.weight
+            return
+        if s.type == "orientation":
+            A[:] = st.jacobian(self.fid)[3 + self._axes]
+            b[:] = orientation_error(st.placement(self.fid).rotation, self.start_rot)[self._axes]
+            A *= s.weight
+            b *= s.weight * s.gain
+            return
+        A[:], b[:] = self.rows(st, ref)
 
 
 class Constraints:
@@ -185,25 +217,27 @@ class Constraints:
             # outward normals n and offsets d of the edges: n·p ≤ d inside; shrunk by the margin
             self.polygon = (hull.equations[:, :2], -hull.equations[:, 2] - spec.support_margin_m)
             self.hull_points = pts[hull.vertices]
+        self.rows = (2 if spec.com_height_m is not None else 0) + (0 if self.polygon is None else len(self.polygon[1]))
 
     def build(self, st: KinematicState) -> Inequalities:
+        """This cycle's inequalities (new arrays: a caller may keep them)."""
         s, nv = self.spec, st.model.nv
         qj = st.q[7:]
         lb = np.full(nv, -FREE)
         ub = np.full(nv, FREE)
         lb[6:] = np.maximum(-self.vmax, s.joint_damper_mu * (self.lower - qj))
         ub[6:] = np.maximum(np.minimum(self.vmax, s.joint_damper_mu * (self.upper - qj)), lb[6:])  # never empty
-        rows, h = [], []
+        G, h = np.empty((self.rows, nv)), np.empty(self.rows)
+        k = 0
         if s.com_height_m is not None:
-            jz = st.com_jacobian[2]
-            rows += [jz, -jz]
-            h += [s.com_gain * (s.com_height_m[1] - st.com[2]), -s.com_gain * (s.com_height_m[0] - st.com[2])]
+            G[0], G[1] = st.com_jacobian[2], -st.com_jacobian[2]
+            h[0], h[1] = s.com_gain * (s.com_height_m[1] - st.com[2]), -s.com_gain * (s.com_height_m[0] - st.com[2])
+            k = 2
         if self.polygon is not None:
             normals, offsets = self.polygon
-            rows.extend(normals @ st.com_jacobian[:2])
-            h.extend(s.com_gain * (offsets - normals @ st.com[:2]))
-        G = np.array(rows).reshape(-1, nv)
-        return Inequalities(G, np.array(h, float), lb, ub)
+            G[k:] = normals @ st.com_jacobian[:2]
+            h[k:] = s.com_gain * (offsets - normals @ st.com[:2])
+        return Inequalities(G, h, lb, ub)
 
     def com_margin(self, com_xy: np.ndarray) -> float:
         """Distance of a point inside the (unshrunk) support polygon to its nearest edge (negative outside)."""

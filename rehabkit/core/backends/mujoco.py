@@ -74,6 +74,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self._support = np.zeros(self.model.ngeom, dtype=bool)
         self._support[[self.model.geom(g).id for g in robot.support_geoms]] = True
         self._floor = np.zeros(self.model.ngeom, dtype=bool)
+        self._quiet_pairs = b""  # contact geom pairs last seen with nothing to count
         self._floor[floor] = True
         self._root_joint = None
         if robot.floating:
@@ -148,10 +149,14 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         if n == 0:  # the common case, and slicing d.contact costs ~0.1 ms even when empty
             return []
         geoms = d.contact.geom[:n]
+        pairs = geoms.tobytes()
+        if pairs == self._quiet_pairs:  # the same geoms touching as last time, none of them counted (feet on the floor)
+            return []
         robot = self._robot_body[m.geom_bodyid[geoms]]
         support = (self._support[geoms[:, 0]] & self._floor[geoms[:, 1]]) | (
             self._support[geoms[:, 1]] & self._floor[geoms[:, 0]])
         hits = np.flatnonzero((robot[:, 0] != robot[:, 1]) & ~support)
+        self._quiet_pairs = b"" if len(hits) else pairs
         return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
 
