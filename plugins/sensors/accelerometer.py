@@ -67,6 +67,8 @@ class AccelerometerArraySensor(Sensor):
         )
         self.ekf = AngularVelocityEKF()
         self.prefix = f"acc_{config.body}"
+        self._names = [f"{self.prefix}_{i}" for i in range(len(config.points))]
+        self._noise_std = np.asarray(config.noise_std, float)
         self.errors: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered")}
         self.moving: list[bool] = []
         self.times: list[float] = []
@@ -88,17 +90,13 @@ class AccelerometerArraySensor(Sensor):
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
         n = len(self.config.points)
-        true = np.array([backend.read_instrument(f"{self.prefix}_{i}") for i in range(n)])
-        raw = true + self.offsets + self.rng.normal(0.0, 1.0, true.shape) * np.asarray(self.config.noise_std)
+        true = np.array([backend.read_instrument(name) for name in self._names])
+        raw = true + self.offsets + self.rng.normal(0.0, 1.0, true.shape) * self._noise_std
         filtered = self.bank.step(raw)
-        var = (
-            self.bank.P[:, 0::2, 0::2].diagonal(axis1=1, axis2=2)
-            if self.bank.started
-            else np.tile(np.square(self.config.noise_std), (n, 1))
-        )
+        var = self.bank.value_variance if self.bank.started else np.tile(np.square(self.config.noise_std), (n, 1))
         z_raw = self.raw_array.solve(raw, self.offsets)
         z_f = self.array.solve(filtered, self.offsets)
-        cov_f = self.array.M_pinv @ np.diag(var.ravel()) @ self.array.M_pinv.T
+        cov_f = (self.array.M_pinv * var.ravel()) @ self.array.M_pinv.T  # M⁺ diag(var) M⁺ᵀ
         self.recording.append(raw)
         self.variances.append(var.ravel())
         w_raw = self.raw_array.omega(z_raw, self.dt)
@@ -181,10 +179,9 @@ class AccelerometerArraySensor(Sensor):
         """Offline estimates (RTS-smoothed readings → a, and ω by the EKF) for every sample."""
         readings = rts_smooth(self.model, np.array(self.recording), self.config.adaptive)
         z = (readings.reshape(len(readings), -1) - self.offsets.ravel()) @ self.array.M_pinv.T
-        ekf, omega = AngularVelocityEKF(), []
-        for zk, var in zip(z, self.variances):
-            omega.append(ekf.step(zk, self.array.M_pinv @ np.diag(var) @ self.array.M_pinv.T, self.dt))
-        return z[:, :3], np.array(omega)
+        M = self.array.M_pinv
+        covs = np.einsum("ij,tj,kj->tik", M, np.array(self.variances), M)  # M⁺ diag(var) M⁺ᵀ per sample
+        return z[:, :3], AngularVelocityEKF().run(z, covs, self.dt)
 
     def run_metrics(self, trace=None) -> dict[str, float]:
         if not self.errors["a_raw"]:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rehabkit.estimation.recursions import ekf_omega
+
 
 def design_row(axis: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Coefficients of z in one axis reading."""
@@ -75,16 +77,9 @@ class AngularVelocityEKF:
 
     def step(self, z: np.ndarray, z_cov: np.ndarray, dt: float) -> np.ndarray:
         """Advance with one estimate ``z`` (12,) of covariance ``z_cov`` (12, 12); returns ω."""
-        w = self.w + z[3:6] * dt
-        P = self.P + z_cov[3:6, 3:6] * dt * dt
-        x, y, zz = w
-        h = np.array([x * x, y * y, zz * zz, x * y, y * zz, x * zz])
-        H = np.array([[2 * x, 0, 0], [0, 2 * y, 0], [0, 0, 2 * zz], [y, x, 0], [0, zz, y], [zz, 0, x]])
-        S = H @ P @ H.T + z_cov[6:12, 6:12]
-        try:
-            K = P @ H.T @ np.linalg.inv(S)
-        except np.linalg.LinAlgError:  # singular at rest (H = 0) with near-noiseless readings: K = 0 there
-            K = P @ H.T @ np.linalg.pinv(S, hermitian=True)
-        self.w = w + K @ (z[6:12] - h)
-        self.P = (np.eye(3) - K @ H) @ P
-        return self.w.copy()
+        return ekf_omega(np.asarray(z, float)[None], np.asarray(z_cov, float)[None], dt, self.w, self.P)[0]
+
+    def run(self, zs: np.ndarray, covs: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`step` over a recording: estimates (T, 12), covariances (T, 12, 12); ω after each (T, 3)."""
+        return ekf_omega(np.ascontiguousarray(zs, dtype=float), np.ascontiguousarray(covs, dtype=float), dt,
+                         self.w, self.P)

@@ -75,6 +75,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self._support[[self.model.geom(g).id for g in robot.support_geoms]] = True
         self._floor = np.zeros(self.model.ngeom, dtype=bool)
         self._quiet_pairs = b""  # contact geom pairs last seen with nothing to count
+        self._instruments: dict[str, slice] = {}
         self._floor[floor] = True
         self._root_joint = None
         if robot.floating:
@@ -171,8 +172,11 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
             rot @ d.qvel[va + 3 : va + 6]
 
     def read_instrument(self, name: str) -> np.ndarray:
-        s = self.model.sensor(name)
-        return self.data.sensordata[s.adr[0] : s.adr[0] + s.dim[0]].copy()
+        span = self._instruments.get(name)
+        if span is None:  # looked up once: a by-name lookup costs a few us, read at the control rate
+            s = self.model.sensor(name)
+            span = self._instruments[name] = slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
+        return self.data.sensordata[span].copy()
 
     def close(self) -> None:
         self.close_view()

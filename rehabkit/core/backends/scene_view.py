@@ -38,6 +38,15 @@ def measured_joints(model: mujoco.MjModel, robot: RobotModel) -> np.ndarray:
     return np.array(out, int)
 
 
+def camera_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
+    """An offscreen renderer for a simulated camera's frames, for colour detection: no shadows or reflections,
+    which cost two thirds of a frame rendered in software (640x480 here: 38 ms with them, 13 ms without)."""
+    renderer = mujoco.Renderer(model, height, width)
+    renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
+    renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+    return renderer
+
+
 class SceneView:
     """Read-outs of ``self.model`` / ``self.data`` (set by the subclass before :meth:`_init_view`)."""
 
@@ -77,7 +86,7 @@ class SceneView:
         key = (width, height)
         if self._renderers.get(key) is None:
             try:
-                self._renderers[key] = mujoco.Renderer(self.model, height, width)
+                self._renderers[key] = camera_renderer(self.model, width, height)
             except mujoco.FatalError as exc:  # typically: MuJoCo chose GLFW and there is no display
                 raise RuntimeError(
                     f"cannot render camera '{camera}' offscreen ({exc}); without a display set MUJOCO_GL=egl "
