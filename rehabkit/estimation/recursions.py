@@ -1,11 +1,14 @@
-"""The estimators' sequential recursions compiled: one implementation, stepped one sample at a time online and
-run over a whole recording offline (the RTS smoother's passes, the EKF over smoothed readings), where a Python
-loop per sample cost ~2 s of a CaPaMan run's finishing (19,000 samples)."""
+"""The Kalman bank's recursions compiled: one implementation, stepped one sample at a time online and run over a
+whole recording offline (the RTS smoother's passes, the angular-velocity EKF over smoothed readings), where a
+Python loop per sample cost ~2 s of a CaPaMan run's finishing (19,000 samples). Scalar loops only: they compile
+in about a second on first use, where numba's array operations and LAPACK bindings took ~10 s for the EKF."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from rehabkit.numerics import backward_solve, cholesky, forward_solve
 
 
 @njit(cache=True, nogil=True)
@@ -67,27 +70,49 @@ def rts_backward(filt, pred, dt):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def ekf_omega(zs, covs, dt, w, P):  # pragma: no cover - compiled
-    """The angular-velocity EKF over estimates ``zs`` (T, 12) of covariances ``covs`` (T, 12, 12), from ω ``w``
-    and its covariance ``P`` (updated in place); ω after each (T, 3)."""
+    """The angular-velocity EKF (:class:`~rehabkit.estimation.rigid_body.AngularVelocityEKF`) over estimates
+    ``zs`` (T, 12) of covariances ``covs`` (T, 12, 12), from ω ``w`` and its covariance ``P`` (both updated in
+    place); ω after each (T, 3). K = P Hᵀ S⁻¹ through S's Cholesky factor; a singular S (at rest, H = 0, with
+    noiseless readings: the gain is 0 there) is solved with a tiny ridge, as a pseudo-inverse would."""
     out = np.empty((zs.shape[0], 3))
     H = np.zeros((6, 3))
     h = np.empty(6)
+    HP = np.empty((6, 3))
+    S = np.empty((6, 6))
     for t in range(zs.shape[0]):
-        z, cov = zs[t], covs[t]
-        for j in range(3):
-            w[j] += z[3 + j] * dt
-        P += cov[3:6, 3:6] * (dt * dt)
+        for i in range(3):
+            w[i] += zs[t, 3 + i] * dt
+            for j in range(3):
+                P[i, j] += covs[t, 3 + i, 3 + j] * dt * dt
         x, y, c = w[0], w[1], w[2]
         h[0], h[1], h[2], h[3], h[4], h[5] = x * x, y * y, c * c, x * y, y * c, x * c
         H[0, 0], H[1, 1], H[2, 2] = 2 * x, 2 * y, 2 * c
         H[3, 0], H[3, 1], H[4, 1], H[4, 2], H[5, 0], H[5, 2] = y, x, c, y, c, x
-        S = H @ P @ H.T + cov[6:12, 6:12]
-        try:
-            Si = np.linalg.inv(S)
-        except Exception:  # singular at rest (H = 0) with near-noiseless readings: K = 0 there
-            Si = np.linalg.pinv(S)
-        K = P @ H.T @ Si
-        w += K @ (z[6:12] - h)
-        P[:] = (np.eye(3) - K @ H) @ P
+        for i in range(6):
+            for j in range(3):
+                HP[i, j] = H[i, 0] * P[0, j] + H[i, 1] * P[1, j] + H[i, 2] * P[2, j]
+        for i in range(6):
+            for j in range(6):
+                S[i, j] = HP[i, 0] * H[j, 0] + HP[i, 1] * H[j, 1] + HP[i, 2] * H[j, 2] + covs[t, 6 + i, 6 + j]
+        L = cholesky(S)
+        if L.shape[0] == 0:
+            ridge = 1e-12 * (1.0 + S[0, 0] + S[1, 1] + S[2, 2] + S[3, 3] + S[4, 4] + S[5, 5])
+            for i in range(6):
+                S[i, i] += ridge
+            L = cholesky(S)
+        X = forward_solve(L, HP)  # S⁻¹ H P column by column; K = (S⁻¹ H P)ᵀ, S and P symmetric
+        for j in range(3):
+            X[:, j] = backward_solve(L, X[:, j].copy())
+        for j in range(3):  # w += K (z − h)
+            acc = 0.0
+            for i in range(6):
+                acc += X[i, j] * (zs[t, 6 + i] - h[i])
+            w[j] += acc
+        for i in range(3):  # P −= K H P
+            for j in range(3):
+                acc = 0.0
+                for k in range(6):
+                    acc += X[k, i] * HP[k, j]
+                P[i, j] -= acc
         out[t] = w
     return out

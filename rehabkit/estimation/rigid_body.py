@@ -77,7 +77,7 @@ class AngularVelocityEKF:
 
     def step(self, z: np.ndarray, z_cov: np.ndarray, dt: float) -> np.ndarray:
         """Advance with one estimate ``z`` (12,) of covariance ``z_cov`` (12, 12); returns ω."""
-        return ekf_omega(np.asarray(z, float)[None], np.asarray(z_cov, float)[None], dt, self.w, self.P)[0]
+        return self.run(np.asarray(z, float)[None], np.asarray(z_cov, float)[None], dt)[0]
 
     def run(self, zs: np.ndarray, covs: np.ndarray, dt: float) -> np.ndarray:
         """:meth:`step` over a recording: estimates (T, 12), covariances (T, 12, 12); ω after each (T, 3)."""

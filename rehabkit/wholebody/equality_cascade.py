@@ -14,55 +14,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from rehabkit.numerics import backward_solve, cholesky, forward_solve
+
 FEASIBLE_TOL = 1e-9
 CONSISTENT_TOL = 1e-7
-
-
-@njit(cache=True, nogil=True)
-def _cholesky(M):  # pragma: no cover - compiled
-    """Lower factor L of a symmetric positive definite M (L Lᵀ = M), or an empty array if M is not."""
-    n = M.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
-        d = M[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if d <= 1e-300:
-            return np.zeros((0, 0))
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, n):
-            s = M[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    return L
-
-
-@njit(cache=True, nogil=True)
-def _forward(L, B):  # pragma: no cover - compiled
-    """L⁻¹ B for lower-triangular L, B (n, c)."""
-    n, c = B.shape
-    X = B.copy()
-    for i in range(n):
-        for k in range(i):
-            lik = L[i, k]
-            for j in range(c):
-                X[i, j] -= lik * X[k, j]
-        for j in range(c):
-            X[i, j] /= L[i, i]
-    return X
-
-
-@njit(cache=True, nogil=True)
-def _backward(L, y):  # pragma: no cover - compiled
-    """L⁻ᵀ y for lower-triangular L."""
-    n = len(y)
-    x = y.copy()
-    for i in range(n - 1, -1, -1):
-        for k in range(i + 1, n):
-            x[i] -= L[k, i] * x[k]
-        x[i] /= L[i, i]
-    return x
 
 
 @njit(cache=True, nogil=True)
@@ -97,22 +52,22 @@ def equality_cascade(A, b, ends, reg, metric, use_metric, lb, ub, G, h):  # prag
             stop = start
             P = metric.copy()
             q = np.zeros(n)
-        L = _cholesky(P)
+        L = cholesky(P)
         if L.shape[0] == 0:  # not positive definite: the QP solver handles it
             return V, k
         rhs = np.empty((n, m + 1))
         rhs[:, :m] = A[:m].T
         rhs[:, m] = q
-        Z = _forward(L, rhs)  # [Y | y]
+        Z = forward_solve(L, rhs)  # [Y | y]
         y = np.ascontiguousarray(Z[:, m])
         if m:
             Y = np.ascontiguousarray(Z[:, :m])
-            Ls = _cholesky(Y.T @ Y)
+            Ls = cholesky(Y.T @ Y)
             if Ls.shape[0] == 0:  # the rows above are (numerically) dependent: the QP solver
                 return V, k
-            lam = _backward(Ls, _forward(Ls, (Y.T @ y - e[:m]).reshape(m, 1))[:, 0])
+            lam = backward_solve(Ls, forward_solve(Ls, (Y.T @ y - e[:m]).reshape(m, 1))[:, 0])
             y -= Y @ lam
-        v = _backward(L, y)
+        v = backward_solve(L, y)
         if m and np.max(np.abs(A[:m] @ v - e[:m])) > CONSISTENT_TOL:
             return V, k
         for i in range(n):
