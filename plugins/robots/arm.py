@@ -119,18 +119,18 @@ class ArmRobot(Robot, LiftArmGripper):
         lift = ref[self.lift_index] if self.lift_index is not None else 0.0
         wrist = np.asarray(pose, float).copy()
         wrist[:3, 3] -= wrist[:3, 2] * self.config.gripper + np.array([0.0, 0.0, lift])
-        found = []
-        for arm in arm_ik(wrist):
-            if not elbow_up(*arm[:3]):
-                continue
-            q = ref.copy()
-            lo, hi, r = lim.lower[self.arm], lim.upper[self.arm], ref[self.arm]
-            arm = arm + 2 * np.pi * np.round((r - arm) / (2 * np.pi))  # the turn nearest the reference
-            arm = np.where(arm > hi, arm - 2 * np.pi, np.where(arm < lo, arm + 2 * np.pi, arm))
-            if np.all(arm >= lo - 1e-12) and np.all(arm <= hi + 1e-12):
-                q[self.arm] = np.clip(arm, lo, hi)
-                found.append(q)
-        return sorted(found, key=lambda s: float(np.abs(s - ref).max()))
+        arms = arm_ik(wrist, elbow_up_only=True)
+        if not arms:
+            return []
+        arm = np.array(arms)  # (branches, 6), all at once
+        lo, hi, r = lim.lower[self.arm], lim.upper[self.arm], ref[self.arm]
+        arm = arm + 2 * np.pi * np.round((r - arm) / (2 * np.pi))  # the turn nearest the reference
+        arm = np.where(arm > hi, arm - 2 * np.pi, np.where(arm < lo, arm + 2 * np.pi, arm))
+        ok = np.all((arm >= lo - 1e-12) & (arm <= hi + 1e-12), axis=1)
+        q = np.tile(ref, (int(ok.sum()), 1))
+        q[:, self.arm] = np.clip(arm[ok], lo, hi)
+        order = np.argsort(np.abs(q - ref).max(axis=1), kind="stable")  # nearest first, ties as the branches came
+        return list(q[order])
 
 
 @hookimpl

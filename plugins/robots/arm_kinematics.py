@@ -83,10 +83,13 @@ def elbow_up(q1: float, q2: float, q3: float) -> bool:
     return bool(cross > 0) if wrist_u >= 0 else bool(cross < 0)
 
 
-def arm_ik(wrist_pose: np.ndarray) -> list[np.ndarray]:
-    """All 6-joint solutions placing frame 6 at ``wrist_pose`` (4x4, arm frame), angles in (−π, π]."""
+def arm_ik(wrist_pose: np.ndarray, elbow_up_only: bool = False) -> list[np.ndarray]:
+    """All 6-joint solutions placing frame 6 at ``wrist_pose`` (4x4, arm frame), angles in (−π, π]; with
+    ``elbow_up_only`` those of the elbow-up branches (the wrist is not solved for the others)."""
     sols = []
     for q1, q2, q3 in wrist_centre_joints(wrist_pose[:3, 3]):
+        if elbow_up_only and not elbow_up(q1, q2, q3):
+            continue
         r36 = _rot03(q1, q2, q3).T @ wrist_pose[:3, :3]
         for q4, q5, q6 in wrist_joints(r36):
             sols.append(np.array([q1, q2, q3, q4, q5, q6]))
