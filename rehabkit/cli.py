@@ -187,7 +187,10 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3, stale_s=args.stale_ms / 1e3,
                     limits=backstop)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
-    (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
+        (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
     return EXIT_OK
 
 

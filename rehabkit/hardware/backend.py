@@ -253,7 +253,8 @@ class HardwareBackend(MirroredScene, Backend):
             if late > self.timestep:  # this tick starts after the next one was due
                 self.misses += 1
             # silence counted in our own ticks too: after a stall of this host, states still in flight get a chance
-            self._receive()
+            if self.realtime:  # (lock-step: all that came before the bridge's answer is in)
+                self._receive()
             self.silent_ticks = 0 if self._got else self.silent_ticks + 1
             if self._fault is not None:
                 fault, self._fault = self._fault, None

@@ -135,11 +135,15 @@ class BridgeLimits:
     margin: float = math.radians(2.0)  # beyond the range [rad, or m for a sliding joint]
     speed_factor: float = 1.25  # beyond the speed limit
 
+    def __post_init__(self) -> None:
+        self._low, self._high = self.lower - self.margin, self.upper + self.margin
+        self._fast = self.speed_factor * self.velocity
+
     def breach(self, q: np.ndarray, qd: np.ndarray) -> str | None:
         """Why the state is beyond the limits, or None."""
-        out = (q < self.lower - self.margin) | (q > self.upper + self.margin)
-        fast = np.abs(qd) > self.speed_factor * self.velocity
-        if not (out.any() or fast.any()):
+        out = (q < self._low) | (q > self._high)
+        fast = np.abs(qd) > self._fast
+        if not (out | fast).any():  # every tick: one test
             return None
         if out.any():
             k = int(np.argmax(out))
@@ -175,6 +179,8 @@ class Bridge:
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
+        self._after_step: tuple[np.ndarray, np.ndarray] | None = None  # the plant's state after the last step
+        self._state = np.zeros((3, plant.joints))  # the STATE message's rows, reused
 
     def _hold(self, now: float, why: str, bit: int) -> None:
         if not self.status & HOLDING:
@@ -200,6 +206,7 @@ class Bridge:
             self.peer, self.echo = addr, msg.sent_at
             if msg.status & CMD_RESET:  # also the way back from a hold: held at q0 until the first command
                 self.plant.reset(msg.values)
+                self._after_step = None
                 self.tau[:] = 0.0
                 self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED, np.inf
                 self.waiting, self.since_command, self.held_ticks = True, 0, 0
@@ -220,7 +227,7 @@ class Bridge:
         self._receive(now, self._arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
-        q, qd = self.plant.read()
+        q, qd = self.plant.read() if self._after_step is None else self._after_step
         if self.limits is not None and self.status & ENABLED and (why := self.limits.breach(q, qd)):
             self._hold(now, why, LIMIT)
         if self.status & ENABLED and not self.waiting:
@@ -239,11 +246,13 @@ class Bridge:
                           -self.plant.effort, self.plant.effort)
         self.plant.apply(tau)
         self.plant.advance()
+        self._after_step = q, qd = self.plant.read()  # (also the next tick's state, unless a reset comes first)
         if self.peer is not None:
-            q, qd = self.plant.read()
             self.seq += 1
             sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
-            self.sock.sendto(encode(STATE, self.robot_id, self.seq, np.vstack([q, qd, tau]), sent, echo=self.echo,
+            state = self._state
+            state[0], state[1], state[2] = q, qd, tau
+            self.sock.sendto(encode(STATE, self.robot_id, self.seq, state, sent, echo=self.echo,
                                     status=self.status, held=self.held_ticks,
                                     measured=self.plant.read_measured()), self.peer)
 

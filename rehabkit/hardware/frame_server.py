@@ -19,6 +19,7 @@ import threading
 
 import mujoco
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from rehabkit.core.backends.scene_view import camera_renderer
 
@@ -29,6 +30,7 @@ def _serve(inp, out) -> None:  # pragma: no cover - runs in the server process
     except (AttributeError, OSError):  # not Linux: the next best thing
         os.nice(10)
     os.environ.setdefault("LP_NUM_THREADS", "1")  # read when the first GL context is made, below
+    threadpool_limits(limits=1, user_api="blas")  # nothing here is BLAS work worth a spinning thread
     model: mujoco.MjModel = pickle.load(inp)
     data = mujoco.MjData(model)
     renderers: dict[tuple[int, int], mujoco.Renderer] = {}
