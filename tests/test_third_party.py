@@ -12,8 +12,9 @@ EXAMPLE = ROOT / "examples" / "third_party_plugin"
 
 def test_third_party_plugin_installs_and_runs_in_a_scenario(tmp_path):
     target = tmp_path / "site"
-    pip = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target),
-                          str(EXAMPLE)], capture_output=True, text=True)
+    # (no build isolation: the installed setuptools builds it, 1.6 s; an isolated build environment took 6 s)
+    pip = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+                          "--target", str(target), str(EXAMPLE)], capture_output=True, text=True)
     assert pip.returncode == 0, pip.stderr
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(target), os.environ.get("PYTHONPATH", "")])}
 

@@ -31,6 +31,7 @@ from rehabkit.workspace.grid import BOUNDARY, INNER, UNREACHABLE, VoxelWorkspace
 
 FORMAT_VERSION = 1
 CHUNK = 20_000
+SERIAL_BELOW = 200_000  # voxels: fewer are labelled in this process
 
 
 def cache_dir() -> Path:
@@ -102,7 +103,8 @@ def build_workspace(
         idx = np.indices(shape).reshape(3, -1).T
     centres = origin + idx * resolution
     chunks = [centres[i : i + CHUNK] for i in range(0, len(centres), CHUNK)]
-    workers = workers or os.cpu_count() or 1
+    # worker processes pay for their start-up (~1.5 s here) only on large tables
+    workers = workers or (os.cpu_count() or 1 if len(centres) > SERIAL_BELOW else 1)
     bar = tqdm(total=len(centres), unit="voxel", unit_scale=True, disable=not progress, desc="workspace",
                leave=False)
     results = []
