@@ -83,7 +83,7 @@ def running_ray():
     """One local Ray for the module's later Ray sweeps (its start-up and shut-down take seconds each), started
     as a sweep starts it; sweeps use a running Ray and leave it running. The serial-against-Ray test above
     starts and stops its own. Both workers have run a short HIT run first: a worker's first run also imports
-    the plugins, which on this loaded VM took the 0.5 s run past the hanging-run test's 5 s timeout."""
+    the plugins, which on this loaded VM took the 0.5 s run past the hanging-run test's timeout (then 5 s)."""
     import ray
 
     from rehabkit.sweep.engine import start_ray
@@ -101,8 +101,8 @@ def running_ray():
 def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode, request):
     if mode == "ray":
         request.getfixturevalue("running_ray")
-    # 300 s of simulated HIT take far longer than the 5 s allowed; the 0.5 s run finishes
-    result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=5)
+    # 300 s of simulated HIT take far longer than the 3 s allowed; the 0.5 s run finishes (in ~0.5 s)
+    result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=3)
     by = {r["duration"]: r for r in result.records}
     assert by["0.5"]["error"] is None and by["0.5"]["metric.sim_time_s"] == pytest.approx(0.5)
     assert by["300"]["error"].startswith("RunTimeoutError") and not by["300"]["passed"]
