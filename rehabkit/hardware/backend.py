@@ -80,7 +80,7 @@ class HardwareConfig(StrictModel):
     robot_id: int = Field(1, ge=0)
     timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
     # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
-    # and then; with an RT kernel both can be far tighter (the fault tests run the bridge's at 5 ms)
+    # and then; with an RT kernel both can be far tighter (the watchdog tests run the bridge's at 5 ms)
     state_timeout_s: float = Field(0.1, gt=0, description="host watchdog: no valid state for this long stops")
     max_age_s: float = Field(0.005, gt=0, description="older states are stale and dropped")
     bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
