@@ -39,9 +39,15 @@ def measured_joints(model: mujoco.MjModel, robot: RobotModel) -> np.ndarray:
 
 
 def camera_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Renderer:
-    """An offscreen renderer for a simulated camera's frames, for colour detection: no shadows or reflections,
-    which cost two thirds of a frame rendered in software (640x480 here: 38 ms with them, 13 ms without)."""
-    renderer = mujoco.Renderer(model, height, width)
+    """An offscreen renderer for a simulated camera's frames, for colour detection: no shadows, reflections or
+    multisampling, which a detector needs none of and which cost most of a frame rendered in software (640x480
+    here: 38 ms with them, 13 ms without shadows and reflections, 5.6 ms without multisampling too; mean pixel
+    difference of the last 0.07 of 255)."""
+    samples, model.vis.quality.offsamples = model.vis.quality.offsamples, 0  # read when the context is made
+    try:
+        renderer = mujoco.Renderer(model, height, width)
+    finally:
+        model.vis.quality.offsamples = samples
     renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = 0
     renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
     return renderer
