@@ -36,7 +36,7 @@ class LoopResult:
 def _progress_bar(steps: int):
     from tqdm import tqdm  # a terminal's run only
 
-    return tqdm(total=steps, unit="step", delay=1.0, leave=False)
+    return tqdm(total=steps, unit="step", leave=False)
 
 
 def _idle(dof: int):
@@ -69,7 +69,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     push = backend.external_torque if person is not None else None  # the setup made sure the backend can
     tau_h, hand_force, goal_at = trace.tau_h, a.hand_force, ref.goal_at
     stop_after = a.sc.safety.stop_after_s
-    bar = _progress_bar(n) if progress else None
+    bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
     # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
     # (a full collection first would cost ~0.1 s of every run's start: only the youngest generation is swept)
     gc.collect(0)
@@ -123,8 +123,12 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                     view.flush(trace, k + 1)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
                 log.send_one()
-            if bar is not None and k % 1000 == 999:
-                bar.update(1000)
+            if progress and k % 1000 == 999:
+                if bar is not None:
+                    bar.update(1000)
+                elif time.perf_counter() - t_loop > 1.0:
+                    bar = _progress_bar(n)
+                    bar.update(k + 1)
             if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
                 k += 1
                 break
