@@ -75,22 +75,18 @@ class QpStack(Controller):
         self.state.update(q_full)
         names = self.robot.model.joint_names
         self.levels = [[Task(t, self.state, names) for t in lv.tasks] for lv in self.config.levels]
-        # every task's rows filled in place each cycle, the levels views of one array (np.vstack of the tasks'
-        # rows, then of the levels', cost ~50 us a cycle)
-        sizes = [[t.rows(self.state, None)[1].size for t in tasks] for tasks in self.levels]
-        cuts = np.cumsum([0, *(n for level in sizes for n in level)])
-        self._A, self._b = np.zeros((cuts[-1], self.state.model.nv)), np.zeros(cuts[-1])
-        self._task_rows = list(zip([t for tasks in self.levels for t in tasks],
-                                   [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]))
-        ends = np.cumsum([0, *(sum(level) for level in sizes)])
-        self._levels = [Level(self._A[a:b], self._b[a:b]) for a, b in zip(ends[:-1], ends[1:])]
-        self._ends = ends[1:]
-        self._task_rows = [(t, self._A[r], self._b[r]) for t, r in self._task_rows]
-        for task, A, b in self._task_rows:
-            A[:], b[:] = task.rows(self.state, None)  # (a posture task's rows are constant: only b changes)
+        # every task's rows are filled in place each cycle into one array the levels are views of (np.vstack of
+        # the tasks' rows, then of the levels', cost ~50 us a cycle); a posture task's rows are constant: only b
+        rows = [[t.rows(self.state, None) for t in tasks] for tasks in self.levels]
+        self._A = np.vstack([A for level in rows for A, _ in level])
+        self._b = np.concatenate([b for level in rows for _, b in level])
+        self._ends = np.cumsum([sum(len(b) for _, b in level) for level in rows])
+        self._levels = [Level(self._A[a:e], self._b[a:e]) for a, e in zip([0, *self._ends[:-1]], self._ends)]
+        cuts = np.cumsum([0, *(len(b) for level in rows for _, b in level)])
+        self._task_rows = [(t, self._A[a:e], self._b[a:e])
+                           for t, a, e in zip([t for tasks in self.levels for t in tasks], cuts[:-1], cuts[1:])]
         # the kinetic-energy choice only matters if the levels leave some velocity free (generically)
-        self._freedom_left = sum(sum(t.rows(self.state, None)[1].size for t in lv) for lv in self.levels) \
-            < self.state.model.nv
+        self._freedom_left = len(self._b) < self.state.model.nv
         lim = self.robot.model.limits
         self.constraints = Constraints(self.config.constraints, self.state, lim.lower, lim.upper, lim.velocity)
         self.base_pose = pin.SE3(self.robot.model.base_pose[:3, :3], self.robot.model.base_pose[:3, 3])

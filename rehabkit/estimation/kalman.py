@@ -4,7 +4,7 @@ Each measured axis has a value and its rate of change: state [a_x, ȧ_x, a_y,
 ȧ_y, a_z, ȧ_z], A = blocks of [[1, Δt], [0, 1]], B = 0, G = I, process noise
 Q = blocks of [[μ1², μ1μ2], [μ1μ2, μ2²]], observation C picking the values,
 R = diag(σ²). The filter here runs many such sensors at once (one state row
-each); the model matrices are shared.
+each), all with the same model parameters.
 
 With ``adaptive`` each sensor's process noise is scaled to keep the filter
 consistent: the normalised innovation squared (NIS) has mean 3 (three axes)
@@ -41,18 +41,6 @@ class ConstantRateModel:
     sigma: tuple[float, ...] = (0.5, 0.5, 0.5)
     axes: int = 3
 
-    def matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """A, Q, C, R."""
-        n = self.axes
-        block = np.array([[1.0, self.dt], [0.0, 1.0]])
-        q = np.array([[self.mu_value**2, self.mu_value * self.mu_rate],
-                      [self.mu_value * self.mu_rate, self.mu_rate**2]])
-        A, Q = np.kron(np.eye(n), block), np.kron(np.eye(n), q)
-        C = np.zeros((n, 2 * n))
-        C[np.arange(n), 2 * np.arange(n)] = 1.0
-        R = np.diag(np.asarray(self.sigma, float) ** 2)
-        return A, Q, C, R
-
 
 class KalmanBank:
     """``count`` independent filters of one model, stepped together.
@@ -67,7 +55,6 @@ class KalmanBank:
     def __init__(self, model: ConstantRateModel, count: int, adaptive: bool = False, gain: float = 0.05,
                  max_scale: float = 1e6):
         self.model = model
-        self.A, self.Q, self.C, self.R = model.matrices()
         axes = model.axes
         self.value, self.rate = np.zeros((count, axes)), np.zeros((count, axes))
         # per axis [[p11, p12], [p12, p22]]; vague prior: the first samples dominate

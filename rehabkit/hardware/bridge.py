@@ -179,7 +179,6 @@ class Bridge:
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
-        self._after_step: tuple[np.ndarray, np.ndarray] | None = None  # the plant's state after the last step
         self._state = np.zeros((3, plant.joints))  # the STATE message's rows, reused
 
     def _hold(self, now: float, why: str, bit: int) -> None:
@@ -206,7 +205,6 @@ class Bridge:
             self.peer, self.echo = addr, msg.sent_at
             if msg.status & CMD_RESET:  # also the way back from a hold: held at q0 until the first command
                 self.plant.reset(msg.values)
-                self._after_step = None
                 self.tau[:] = 0.0
                 self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED, np.inf
                 self.waiting, self.since_command, self.held_ticks = True, 0, 0
@@ -227,7 +225,7 @@ class Bridge:
         self._receive(now, self._arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
-        q, qd = self.plant.read() if self._after_step is None else self._after_step
+        q, qd = self.plant.read()
         if self.limits is not None and self.status & ENABLED and (why := self.limits.breach(q, qd)):
             self._hold(now, why, LIMIT)
         if self.status & ENABLED and not self.waiting:
@@ -246,8 +244,8 @@ class Bridge:
                           -self.plant.effort, self.plant.effort)
         self.plant.apply(tau)
         self.plant.advance()
-        self._after_step = q, qd = self.plant.read()  # (also the next tick's state, unless a reset comes first)
         if self.peer is not None:
+            q, qd = self.plant.read()
             self.seq += 1
             sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
             state = self._state

@@ -74,9 +74,9 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self._support = np.zeros(self.model.ngeom, dtype=bool)
         self._support[[self.model.geom(g).id for g in robot.support_geoms]] = True
         self._floor = np.zeros(self.model.ngeom, dtype=bool)
+        self._floor[floor] = True
         self._quiet_pairs = b""  # contact geom pairs last seen with nothing to count
         self._instruments: dict[str, slice] = {}
-        self._floor[floor] = True
         self._root_joint = None
         if robot.floating:
             root_body = self.model.body(self.spec.worldbody.first_body().name)
