@@ -71,6 +71,31 @@ def encode_images(reading: dict[str, Any]) -> dict[str, Any]:
     return {k: encode_image(v) if is_image(v) else v for k, v in reading.items()}
 
 
+class _Column:
+    """One sensor value's readings, appended in place (no per-sample list to convert at the flush)."""
+
+    def __init__(self, width: int, what: str):
+        self.t, self.values, self.n, self.what = np.empty(256), np.empty((256, width)), 0, what
+
+    def append(self, t: float, value) -> None:
+        n = self.n
+        if n == len(self.t):
+            self.t = np.resize(self.t, 2 * n)
+            self.values = np.resize(self.values, (2 * n, self.values.shape[1]))
+        try:
+            self.values[n] = value
+        except ValueError:
+            raise ValueError(f"{self.what}: {np.size(value)} values, {self.values.shape[1]} in its earlier "
+                             "readings (a reading's arrays keep their size; log a changing set as points)") from None
+        self.t[n] = t
+        self.n = n + 1
+
+    def take(self) -> tuple[np.ndarray, np.ndarray]:
+        """The buffered (times, values), copied; the buffer starts over."""
+        n, self.n = self.n, 0
+        return self.t[:n].copy(), self.values[:n].copy()
+
+
 class RerunLog:
     """Buffers a run's data and writes it to ``path`` (optionally also to a spawned viewer)."""
 
@@ -96,7 +121,7 @@ class RerunLog:
         self._queue: deque[Callable[[], None]] = deque()
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
-        self._sensor_rows: dict[str, list[tuple[float, dict]]] = {}
+        self._sensor_columns: dict[tuple[str, str], _Column] = {}
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for series in ("position_deg", "reference_deg", "velocity_deg_s", "torque_nm", "tracking_error_deg"):
@@ -172,23 +197,21 @@ class RerunLog:
             self._send(path, np.array(t, float), lambda: rr.Scalars.columns(scalars=values))
 
     def sensor(self, t: float, sensor: str, reading: dict) -> None:
-        """A sensor reading: images are logged at once, numbers buffered."""
-        numbers = {}
+        """A sensor reading: images are logged at once, numbers buffered in columns."""
         for key, value in reading.items():
             if value is None:
                 continue
-            if type(value) is float:  # the common case, read at the control rate: kept as is until the flush
-                numbers[key] = value
-                continue
-            if isinstance(value, rr.EncodedImage) or is_image(value):
-                self.rec.set_time(TIMELINE, duration=t)
-                self.rec.log(f"sensors/{sensor}/{key}", value if isinstance(value, rr.EncodedImage) else
-                             encode_image(value))
-                continue
-            arr = np.asarray(value)
-            numbers[key] = arr.astype(float).ravel()
-        if numbers:
-            self._sensor_rows.setdefault(sensor, []).append((t, numbers))
+            if type(value) is not float and not (type(value) is np.ndarray and value.ndim == 1):
+                if isinstance(value, rr.EncodedImage) or is_image(value):
+                    self.rec.set_time(TIMELINE, duration=t)
+                    self.rec.log(f"sensors/{sensor}/{key}", value if isinstance(value, rr.EncodedImage) else
+                                 encode_image(value))
+                    continue
+                value = np.ravel(np.asarray(value, float))
+            column = self._sensor_columns.get((sensor, key))
+            if column is None:
+                column = self._sensor_columns[(sensor, key)] = _Column(np.size(value), f"sensor '{sensor}' {key}")
+            column.append(t, value)
 
     def flush(self) -> None:
         """Send buffered poses and sensor readings as columns."""
@@ -203,14 +226,10 @@ class RerunLog:
                            lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
             ee = np.array(self._ee_path[-len(rows):])
             self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))
-        for sensor, srows in self._sensor_rows.items():
-            for key in {k for _, numbers in srows for k in numbers}:  # readings may lack a key (no detection)
-                rows = [(t, numbers[key]) for t, numbers in srows if key in numbers]
-                values = np.array([v for _, v in rows], float)
-                values = values[:, None] if values.ndim == 1 else values  # floats kept as such: one column
-                self._send(f"sensors/{sensor}/{key}", np.array([t for t, _ in rows]),
-                           lambda v=values: rr.Scalars.columns(scalars=v))
-        self._sensor_rows = {}
+        for (sensor, key), column in self._sensor_columns.items():
+            if column.n:
+                t, values = column.take()
+                self._send(f"sensors/{sensor}/{key}", t, lambda v=values: rr.Scalars.columns(scalars=v))
 
     def _send(self, path: str, t: np.ndarray, columns: Callable[[], Any]) -> None:
         """Send one entity's columns now, or queue it in deferred mode (``columns`` builds them then)."""

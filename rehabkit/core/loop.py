@@ -19,7 +19,7 @@ from rehabkit.core.capabilities import Contacts, SceneGeometry
 from rehabkit.core.interfaces import BackendFaultError, BodyPoses
 from rehabkit.core.metrics import Trace
 from rehabkit.core.reference import ReferenceBuffer
-from rehabkit.core.run_view import LOG_FLUSH_SAMPLES, RunView
+from rehabkit.core.run_view import RunView
 from rehabkit.core.timeline import Timeline
 
 NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
@@ -54,7 +54,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     command, step = backend.command, backend.step
     contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
     concat, log = np.concatenate, view.log
-    log_every = sch.log_every
+    log_every, flush_samples = sch.log_every, view.flush_samples
     next_log = 0 if log else -1
     deferred_log = bool(log) and backend.realtime
     if deferred_log:
@@ -119,7 +119,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                     log.record(t, backend.body_poses(), backend.ee_position())
                 else:
                     log.record(t, NO_BODIES, ee(q[None])[0])
-                if log.pending >= LOG_FLUSH_SAMPLES:
+                if log.pending >= flush_samples:
                     view.flush(trace, k + 1)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
                 log.send_one()

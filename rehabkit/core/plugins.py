@@ -242,11 +242,19 @@ def _conflict(kind: str, name: str, providers: list[Provider]) -> str:
     return f"{kind} '{name}' is registered twice: by {who}; uninstall one of them or rename its plugin"
 
 
+_DISTRIBUTIONS: dict[str, tuple[str, str]] = {}
+
+
 def _provider(ep: metadata.EntryPoint) -> Provider:
     dist = getattr(ep, "dist", None)
     if dist is None:
         return Provider("?", "?", ep.name)
-    return Provider(dist.metadata["Name"], dist.version, ep.name)
+    # each entry point has its own Distribution object, and each metadata read parses the whole file (~1 ms)
+    key = str(getattr(dist, "_path", id(dist)))
+    if key not in _DISTRIBUTIONS:
+        meta = dist.metadata
+        _DISTRIBUTIONS[key] = (meta["Name"], meta["Version"])
+    return Provider(*_DISTRIBUTIONS[key], ep.name)
 
 
 def installed_entries() -> list[Entry]:

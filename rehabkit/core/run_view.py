@@ -1,7 +1,8 @@
 """What a run draws in its Rerun recording: the scene, targets, plans, the joint series, the safety events.
 
-The joint series are sent in columns, ``LOG_FLUSH_SAMPLES`` at a time, at the
-scenario's log rate; a planner whose joint space is worth looking at (it returns
+The joint series are sent in columns at the scenario's log rate, ``flush_samples``
+at a time (a send costs ~0.5 ms whatever its length: a file takes big batches, a
+live viewer ones small enough to follow the run); a planner whose joint space is worth looking at (it returns
 ``joint_space_visuals``: a 3-DoF robot's collision map) gets that space drawn too,
 with every plan and the executed path in it.
 """
@@ -16,7 +17,8 @@ from rehabkit.core.interfaces import Plan
 from rehabkit.core.log import RerunLog
 from rehabkit.core.metrics import Trace
 
-LOG_FLUSH_SAMPLES = 500  # log-rate samples buffered between column sends
+LOG_FLUSH_SAMPLES = 2000  # log-rate samples buffered between column sends to a file
+LIVE_FLUSH_SAMPLES = 500  # ... and when a viewer shows the run as it goes
 LEVELS = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN", "stale-command": "WARN"}
 
 
@@ -25,6 +27,7 @@ class RunView:
 
     def __init__(self, setup: Assembly, spawn: bool = False):
         self.setup, self.log = setup, None
+        self.flush_samples = LIVE_FLUSH_SAMPLES if spawn else LOG_FLUSH_SAMPLES
         self._upto = 0
         self._joint_space = False
         sc, out = setup.sc, setup.out_dir

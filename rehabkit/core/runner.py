@@ -36,6 +36,7 @@ from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.core.timeline import Timeline
 
+_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml's emitter where installed
 SNAPSHOT = "scenario.yaml"  # the scenario as run, in the run's folder: what `rehabkit replay` starts from
 
 __all__ = ["SNAPSHOT", "Runner", "RunResult", "SetupError"]
@@ -238,7 +239,7 @@ class Runner:
             summary.setdefault("outputs", {})["scenario"] = SNAPSHOT
             atomic_write_text(self.out_dir / SNAPSHOT, f"# {self.loaded.path} as this run used it (extends merged, "
                               "profile inlined, --set applied); `rehabkit replay` reads it\n"
-                              + yaml.safe_dump(self.loaded.source.data, sort_keys=False))
+                              + yaml.dump(self.loaded.source.data, Dumper=_DUMPER, sort_keys=False))
             atomic_write_json(self.out_dir / "summary.json", summary)
         a.backend.close()
         return RunResult(summary, trace, self.out_dir)

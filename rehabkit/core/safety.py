@@ -29,6 +29,9 @@ from rehabkit.core.limits import LimitBreach
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.models.robot_model import RobotModel
 
+# numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
+_count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
+
 
 @dataclass
 class SafetyEvent:
@@ -128,7 +131,7 @@ class SafetyLayer:
         if self.tripped_at is None:
             b = np.subtract(row, self._centre, out=self._buf)
             np.abs(b, out=b)
-            if np.count_nonzero(np.less_equal(b, self._bound, out=self._ok)) == self._width:  # (all(): 2 µs more)
+            if _count_nonzero(np.less_equal(b, self._bound, out=self._ok)) == self._width:  # (all(): 2 µs more)
                 tau = row[2 * n :]
                 if self._box is not None and self._outside_box(t, row[:n]):
                     tau[:] = self._stop_torque(row[:n], row[n : 2 * n])

@@ -26,6 +26,9 @@ class Source:
     files: list[Path]
 
 
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser: ~10x faster, the same marks
+
+
 def _mark(file: str, m: yaml.Mark) -> Mark:
     return Mark(file, m.line + 1, m.column + 1)
 
@@ -37,7 +40,7 @@ def read_yaml(path: Path) -> Source:
         text = path.read_text()
     except OSError as exc:
         raise ScenarioError([Diagnostic(Mark(name, 0, 0), "", f"cannot read file: {exc.strerror}")]) from None
-    loader = yaml.SafeLoader(text)
+    loader = _LOADER(text)
     try:
         node = loader.get_single_node()
         if node is None:
