@@ -160,7 +160,8 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rehabkit.core.plugins import default_registry
-    from rehabkit.hardware.bridge import Bridge, BridgeLimits, MujocoPlant
+    from rehabkit.hardware.bridge import Bridge, BridgeLimits
+    from rehabkit.hardware.plant import MujocoPlant
 
     registry = default_registry()
     info = registry.get("robot", args.robot)

@@ -5,7 +5,8 @@ import socket
 import numpy as np
 import pytest
 
-from rehabkit.hardware.bridge import Bridge, BridgeLimits, MujocoPlant
+from rehabkit.hardware.bridge import Bridge, BridgeLimits
+from rehabkit.hardware.plant import MujocoPlant
 from rehabkit.hardware.protocol import (
     CMD_RESET,
     COMMAND,

@@ -13,24 +13,19 @@ servoed by PD with gravity compensation.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from pydantic import Field, ValidationError, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
+from rehabkit_plugins.controllers.arm_keypad_jog import Jog, Jogger, Quintic
 from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S, check_timeline
-from scipy.spatial.transform import Rotation
 
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import LiftArmGripper
 from rehabkit.core.interfaces import Context, Controller, PlanningError, StrictModel, Target
-from rehabkit.store.patches import Action, Patch, PatchStore, StoreError, default_path
-from rehabkit.workspace.trajectory import blend_weight
+from rehabkit.store.patches import Action, Patch, open_store
 
-AXES = {"x": 0, "y": 1, "z": 2, "roll": 0, "pitch": 1, "yaw": 2}
 SETTLE_S = 1.0  # after a replay ends, the error to the stored target is measured this much later
-SOFT_LIMIT_FRACTION = 0.002
-JOINT_SPEED_FRACTION = 0.9  # Cartesian jogs slow down so no joint passes this share of its speed limit
 
 
 class KeyPress(StrictModel):
@@ -76,14 +71,6 @@ class ArmKeypadConfig(StrictModel):
 
 
 @dataclass
-class _Jog:
-    key: str
-    release_at: float
-    factor: float = 0.0
-    pose: np.ndarray | None = None  # Cartesian jogs: the gripper pose being moved
-
-
-@dataclass
 class _Auto:
     what: str
     trajectory: object
@@ -104,17 +91,6 @@ class _Stats:
     failures: int = 0
 
 
-class _Quintic:
-    """Rest-to-rest joint motion with a minimum-jerk profile."""
-
-    def __init__(self, q0: np.ndarray, q1: np.ndarray, duration: float):
-        self.q0, self.dq, self.duration = q0, q1 - q0, max(duration, 1e-3)
-
-    def sample(self, t):
-        s, ds, dds = (w[:, None] for w in blend_weight(np.atleast_1d(t) / self.duration))
-        return self.q0 + s * self.dq, ds / self.duration * self.dq, dds / self.duration**2 * self.dq
-
-
 class ArmKeypad(Controller):
     """ARM keypad HMI: menus, jogs, fold/unfold, record and replay of patches, PD + gravity servo."""
 
@@ -132,13 +108,11 @@ class ArmKeypad(Controller):
         self.kp[self.grip], self.kd[self.grip] = config.kp_gripper, config.kd_gripper
         if self.lift is not None:
             self.kp[self.lift], self.kd[self.lift] = config.kp_lift, config.kd_lift
-        self.store = self._open_store(config.store, context)
-        lim = self.model.limits  # jogs stop a little inside the hard limits, so the servo never leans on a stop
-        inset = SOFT_LIMIT_FRACTION * (lim.upper - lim.lower)
-        self.soft_lower, self.soft_upper = lim.lower + inset, lim.upper - inset
+        self.store = open_store(config.store, context.out_dir, context.scenario_dir)
+        self.jogger = Jogger(robot, config)
         self.keys = sorted(config.keys, key=lambda k: k.at)
         self.menu, self.selected = "MAIN", None
-        self.jog: _Jog | None = None
+        self.jog: Jog | None = None
         self.auto: _Auto | None = None
         self.store_at: float | None = None
         self.recording: list[Action] | None = None
@@ -151,23 +125,6 @@ class ArmKeypad(Controller):
         self.q_ref: np.ndarray | None = None
         self.qd_ref = np.zeros(n)
         self.joint_reference = None
-
-    # -- setup ------------------------------------------------------------------
-
-    @staticmethod
-    def _open_store(where: str, ctx: Context) -> PatchStore:
-        if where == "user":
-            path = default_path()
-        elif where == "run":
-            path = (ctx.out_dir or Path.cwd() / "out") / "patches.sqlite"
-            if path.exists():
-                path.unlink()  # 'run' is a fresh store for this run only
-        else:
-            path = ctx.resolve(where)
-        try:
-            return PatchStore(path)
-        except StoreError as exc:
-            raise ValueError(str(exc)) from None
 
     def _note(self, t: float, text: str) -> None:
         if self.ctx.note is not None:
@@ -207,9 +164,7 @@ class ArmKeypad(Controller):
             self._play(t, int(key), q, qd)
 
     def _start_jog(self, t: float, key: str, release_at: float) -> None:
-        self.jog = _Jog(key, release_at)
-        if key[:-1] in AXES:
-            self.jog.pose = self.robot.fk(self.q_ref)
+        self.jog = self.jogger.start(key, release_at, self.q_ref)
 
     def _stop_recording(self, t: float, q: np.ndarray) -> None:
         actions = [a for a in self.recording if a.command != "wait" or a.duration_s > 0]
@@ -235,7 +190,7 @@ class ArmKeypad(Controller):
         goal[self.arm] = np.radians(self.config.fold_deg if which == "fold" else self.config.unfold_deg)
         v = self.model.limits.velocity * 0.8
         duration = float(np.max(1.875 * np.abs(goal - self.q_ref) / v))
-        self.auto = _Auto(which, _Quintic(self.q_ref.copy(), goal, duration), t)
+        self.auto = _Auto(which, Quintic(self.q_ref.copy(), goal, duration), t)
         self._note(t, f"{which}: {duration:.1f} s")
 
     def _play(self, t: float, slot: int, q: np.ndarray, qd: np.ndarray) -> None:
@@ -275,57 +230,6 @@ class ArmKeypad(Controller):
                       + (f", path {length:.3f} m" if length is not None else ""))
 
     # -- reference --------------------------------------------------------------
-
-    def _advance_jog(self, t: float, dt: float) -> None:
-        jog, cfg = self.jog, self.config
-        rate = dt / cfg.ramp_s
-        jog.factor = min(1.0, jog.factor + rate) if t < jog.release_at else jog.factor - rate
-        if jog.factor <= 0:
-            self.jog, self.qd_ref = None, np.zeros_like(self.qd_ref)
-            return
-        name, sign = jog.key[:-1], (1.0 if jog.key[-1] == "+" else -1.0)
-        lim = self.model.limits
-        new = self.q_ref.copy()
-        if jog.key in ("open", "close") or name == "lift" or name.startswith("j"):
-            if jog.key in ("open", "close"):
-                j, sign = self.grip, (1.0 if jog.key == "open" else -1.0)
-            else:
-                j = self.lift if name == "lift" else self.arm.start + int(name[1:]) - 1
-            new[j] += sign * jog.factor * cfg.jog_joint_fraction * lim.velocity[j] * dt
-        else:
-            new = self._cartesian_step(t, jog, name, sign, dt)
-            if new is None:
-                self._note(t, f"'{jog.key}': the arm can go no further (reach, joint limit or singularity)")
-                self.jog, self.qd_ref = None, np.zeros_like(self.qd_ref)
-                return
-        new = np.clip(new, self.soft_lower, self.soft_upper)
-        self.qd_ref = (new - self.q_ref) / dt
-        self.q_ref = new
-
-    def _cartesian_step(self, t: float, jog: _Jog, name: str, sign: float, dt: float) -> np.ndarray | None:
-        """Joint values one step further along a Cartesian jog, slowed where a joint would pass its speed limit."""
-        cap = self.model.limits.velocity * dt * JOINT_SPEED_FRACTION
-        scale = 1.0
-        for _ in range(3):  # the joint step is nearly linear in the Cartesian step: rescale, check again
-            pose = jog.pose.copy()
-            amount = sign * jog.factor * scale * dt
-            if name in ("x", "y", "z"):
-                pose[AXES[name], 3] += amount * self.config.jog_speed_m_s
-            else:
-                turn = np.zeros(3)
-                turn[AXES[name]] = amount * np.radians(self.config.jog_turn_deg_s)
-                pose[:3, :3] = pose[:3, :3] @ Rotation.from_rotvec(turn).as_matrix()
-            sols = self.robot.ik(pose, reference=self.q_ref)
-            if not sols:
-                return None
-            ratio = float(np.max(np.abs(sols[0] - self.q_ref) / cap))
-            if ratio <= 1.0:
-                jog.pose = pose
-                return sols[0]
-            if ratio > 50.0:  # a branch jump, not a slow joint: a singularity or the edge of the workspace
-                return None
-            scale /= ratio * 1.02
-        return None
 
     def _advance_auto(self, t: float, q: np.ndarray) -> None:
         auto = self.auto
@@ -367,7 +271,13 @@ class ArmKeypad(Controller):
         if self.auto is not None:
             self._advance_auto(t, q)
         elif self.jog is not None:
-            self._advance_jog(t, dt)
+            new = self.jogger.advance(self.jog, t, dt, self.q_ref)
+            if new is self.q_ref:
+                self._note(t, f"'{self.jog.key}': the arm can go no further (reach, joint limit or singularity)")
+            if new is None or new is self.q_ref:
+                self.jog, self.qd_ref = None, np.zeros_like(self.qd_ref)
+            else:
+                self.qd_ref, self.q_ref = (new - self.q_ref) / dt, new
         self._checks(t, q)
         self.joint_reference = self.q_ref
         return self.kp * (self.q_ref - q) + self.kd * (self.qd_ref - qd) + self.robot.gravity_torque(q)

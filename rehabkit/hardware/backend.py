@@ -26,18 +26,17 @@ from __future__ import annotations
 import math
 import socket
 import time
-from typing import Literal
 
 import numpy as np
-from pydantic import Field
 
 from rehabkit.core.backends.scene_view import SceneMirror
 from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import Backend, BackendFaultError, Context, StrictModel
+from rehabkit.core.interfaces import Backend, Context
 from rehabkit.core.limits import first_breach
 from rehabkit.core.safety import SafetyEvent
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
 from rehabkit.hardware.clock import wait_readable, wait_until
+from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
 from rehabkit.hardware.mirrored_scene import MirroredScene
@@ -57,35 +56,6 @@ from rehabkit.hardware.protocol import (
 )
 
 LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
-
-
-class LinkLostError(BackendFaultError):
-    """No valid state from the robot for longer than allowed."""
-
-
-class BridgeHoldError(BackendFaultError):
-    """The bridge stopped the robot on its own (its command watchdog, or an e-stop at the robot)."""
-
-
-class HardwareConfig(StrictModel):
-    """Where the bridge is, the loop rate and the host watchdog."""
-
-    host: str = "127.0.0.1"
-    port: int = Field(0, ge=0, le=65535, description="bridge UDP port (0 with spawn_bridge: any free one)")
-    spawn_bridge: bool = Field(True, description="start 'rehabkit bridge' with the robot's MuJoCo model as plant")
-    clock: Literal["realtime", "lockstep"] = Field(
-        "realtime", description="realtime: both ends tick on the wall clock, as a robot's drives do; lockstep: "
-        "the bridge ticks once per host tick, on the host's clock (a simulated plant only: deterministic and "
-        "faster than real time, for tests and rehearsals; the bridge must be started with --lockstep)")
-    robot_id: int = Field(1, ge=0)
-    timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
-    # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
-    # and then; with an RT kernel both can be far tighter (the watchdog tests run the bridge's at 5 ms)
-    state_timeout_s: float = Field(0.1, gt=0, description="host watchdog: no valid state for this long stops")
-    max_age_s: float = Field(0.005, gt=0, description="older states are stale and dropped")
-    bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
-    bridge_stale_ms: float = Field(10.0, gt=0, description="bridge holds the posture without a newer command this "
-                                   "long, until the next one (no torque is applied open-loop for longer)")
 
 
 class HardwareBackend(MirroredScene, Backend):

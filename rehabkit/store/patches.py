@@ -147,3 +147,20 @@ class PatchStore:
 
     def close(self) -> None:
         self.db.close()
+
+
+def open_store(where: str, out_dir: Path | None, scenario_dir: Path) -> PatchStore:
+    """``where``: 'user' (:func:`default_path`), 'run' (a fresh store in the run's folder, ``out_dir`` or
+    ./out) or a path (relative to the scenario). A store that can't be opened raises ``ValueError``."""
+    if where == "user":
+        path = default_path()
+    elif where == "run":
+        path = (out_dir or Path.cwd() / "out") / "patches.sqlite"
+        path.unlink(missing_ok=True)
+    else:
+        path = Path(where).expanduser()
+        path = path if path.is_absolute() else (scenario_dir / path).resolve()
+    try:
+        return PatchStore(path)
+    except StoreError as exc:
+        raise ValueError(str(exc)) from None

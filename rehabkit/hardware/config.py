@@ -1,0 +1,38 @@
+"""The hardware backend's settings (the ``backend:`` section of a scenario run over the link) and its faults."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from rehabkit.core.interfaces import BackendFaultError, StrictModel
+
+
+class LinkLostError(BackendFaultError):
+    """No valid state from the robot for longer than allowed."""
+
+
+class BridgeHoldError(BackendFaultError):
+    """The bridge stopped the robot on its own (its command watchdog, or an e-stop at the robot)."""
+
+
+class HardwareConfig(StrictModel):
+    """Where the bridge is, the loop rate and the host watchdog."""
+
+    host: str = "127.0.0.1"
+    port: int = Field(0, ge=0, le=65535, description="bridge UDP port (0 with spawn_bridge: any free one)")
+    spawn_bridge: bool = Field(True, description="start 'rehabkit bridge' with the robot's MuJoCo model as plant")
+    clock: Literal["realtime", "lockstep"] = Field(
+        "realtime", description="realtime: both ends tick on the wall clock, as a robot's drives do; lockstep: "
+        "the bridge ticks once per host tick, on the host's clock (a simulated plant only: deterministic and "
+        "faster than real time, for tests and rehearsals; the bridge must be started with --lockstep)")
+    robot_id: int = Field(1, ge=0)
+    timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
+    # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
+    # and then; with an RT kernel both can be far tighter (the watchdog tests run the bridge's at 5 ms)
+    state_timeout_s: float = Field(0.1, gt=0, description="host watchdog: no valid state for this long stops")
+    max_age_s: float = Field(0.005, gt=0, description="older states are stale and dropped")
+    bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
+    bridge_stale_ms: float = Field(10.0, gt=0, description="bridge holds the posture without a newer command this "
+                                   "long, until the next one (no torque is applied open-loop for longer)")
