@@ -85,7 +85,8 @@ class Registrar:
         )
         typed.model_config = ConfigDict(**{**config.model_config, "extra": "forbid"})
         typed.model_rebuild(force=True)
-        self._registry._stage(PluginInfo(self.kind, name, typed, factory, description.strip(), self._registry._current))
+        self._registry._staged.append(PluginInfo(self.kind, name, typed, factory, description.strip(),
+                                                 self._registry._current))
 
 
 @dataclass(frozen=True)
@@ -125,9 +126,6 @@ class PluginRegistry:
                 kwargs={"registry": Registrar(self, kind)})
 
     # -- registration ---------------------------------------------------------
-
-    def _stage(self, info: PluginInfo) -> None:
-        self._staged.append(info)
 
     def _commit(self) -> list[PluginInfo]:
         staged, self._staged = self._staged, []
@@ -242,25 +240,22 @@ def _conflict(kind: str, name: str, providers: list[Provider]) -> str:
     return f"{kind} '{name}' is registered twice: by {who}; uninstall one of them or rename its plugin"
 
 
-_DISTRIBUTIONS: dict[str, tuple[str, str]] = {}
+_DISTRIBUTIONS: dict[str, tuple[str, str]] = {}  # (name, version) by dist-info folder
 
 
 def _provider(ep: metadata.EntryPoint) -> Provider:
     dist = getattr(ep, "dist", None)
     if dist is None:
         return Provider("?", "?", ep.name)
-    # each entry point has its own Distribution object, and each metadata read parses the whole file (~1 ms)
-    key = str(getattr(dist, "_path", id(dist)))
-    if key not in _DISTRIBUTIONS:
-        meta = dist.metadata
-        _DISTRIBUTIONS[key] = (meta["Name"], meta["Version"])
-    return Provider(*_DISTRIBUTIONS[key], ep.name)
+    key = str(getattr(dist, "_path", id(dist)))  # one Distribution per entry point; each read parses its file
+    known = _DISTRIBUTIONS.get(key) or _DISTRIBUTIONS.setdefault(key, (dist.metadata["Name"], dist.version))
+    return Provider(*known, ep.name)
 
 
 def installed_entries() -> list[Entry]:
     """Every plugin installed under the groups ``rehabkit.robots``, ``rehabkit.planners``, … (metadata only)."""
     out, seen = [], set()
-    installed = metadata.entry_points()  # one scan of the installed distributions (~30 ms each)
+    installed = metadata.entry_points()  # one scan of the installed distributions
     for kind in KINDS:
         for ep in installed.select(group=group(kind)):
             key = (kind, ep.name, ep.value)
