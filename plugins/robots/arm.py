@@ -21,13 +21,13 @@ from importlib import resources
 
 import mujoco
 import numpy as np
-import yaml
 from pydantic import Field
 from rehabkit_plugins.robots.arm_kinematics import arm_ik, elbow_up
 
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import LiftArmGripper
 from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.core.io import load_yaml
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
@@ -73,7 +73,7 @@ class ArmRobot(Robot, LiftArmGripper):
     """Exact Dynamics ARM: lift + 6-DoF PUMA-like arm (MDH from MANUS code) + gripper; elbow-up IK."""
 
     def __init__(self, config: ArmConfig, context: Context | None = None):
-        data = yaml.safe_load(resources.files(__package__).joinpath("arm_joints.yaml").read_text())
+        data = load_yaml(resources.files(__package__).joinpath("arm_joints.yaml").read_text())
         joints = [JointSpec.model_validate(j) for j in data["joints"]]
         table = [DHRowSpec(a=a / 1000, alpha_deg=alpha, d=d / 1000) for alpha, a, d in TABLE_MM]
         if config.lift:

@@ -27,11 +27,11 @@ from functools import lru_cache
 from importlib import resources
 
 import numpy as np
-import yaml
 from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.core.io import load_yaml
 from rehabkit.models.chain import DHRow, KinematicChain, inv_se3, mdh_transform
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.robot_model import SafeStop
@@ -147,7 +147,7 @@ class HitConfig(StrictModel):
 
 def _joint_specs() -> list[JointSpec]:
     text = resources.files(__package__).joinpath("hit_joints.yaml").read_text()
-    return [JointSpec.model_validate(j) for j in yaml.safe_load(text)["joints"]]
+    return [JointSpec.model_validate(j) for j in load_yaml(text)["joints"]]
 
 
 class HitRobot(Robot):

@@ -23,12 +23,12 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
 from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import RandomReach, WorkspaceTable
 from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.core.io import load_yaml
 from rehabkit.models.chain import KinematicChain, rot_x, trans
 from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
 from rehabkit.models.mjcf_builder import build_chain_mjcf
@@ -127,7 +127,7 @@ class LexosConfig(StrictModel):
 
 
 def _joint_specs() -> tuple[list[JointSpec], list[JointSpec]]:
-    data = yaml.safe_load(resources.files(__package__).joinpath("lexos_joints.yaml").read_text())
+    data = load_yaml(resources.files(__package__).joinpath("lexos_joints.yaml").read_text())
     return ([JointSpec.model_validate(j) for j in data["joints"]],
             [JointSpec.model_validate(j) for j in data.get("passive", [])])
 

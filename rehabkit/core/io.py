@@ -1,4 +1,4 @@
-"""Writing outputs whole or not at all."""
+"""Writing outputs whole or not at all; reading YAML data files fast."""
 
 from __future__ import annotations
 
@@ -7,6 +7,15 @@ import os
 import tempfile
 from pathlib import Path
 from typing import Any
+
+import yaml
+
+YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where installed: ~10x the pure-Python parser
+
+
+def load_yaml(text: str) -> Any:
+    """``yaml.safe_load`` by libyaml (a robot's joint table: ~1 ms instead of ~10)."""
+    return yaml.load(text, Loader=YAML_LOADER)
 
 
 def atomic_write_text(path: Path, text: str) -> None:

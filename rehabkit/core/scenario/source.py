@@ -11,6 +11,7 @@ from typing import Any
 
 import yaml
 
+from rehabkit.core.io import YAML_LOADER
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 
 KeyPath = tuple[Any, ...]
@@ -26,9 +27,6 @@ class Source:
     files: list[Path]
 
 
-_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser: ~10x faster, the same marks
-
-
 def _mark(file: str, m: yaml.Mark) -> Mark:
     return Mark(file, m.line + 1, m.column + 1)
 
@@ -40,7 +38,7 @@ def read_yaml(path: Path) -> Source:
         text = path.read_text()
     except OSError as exc:
         raise ScenarioError([Diagnostic(Mark(name, 0, 0), "", f"cannot read file: {exc.strerror}")]) from None
-    loader = _LOADER(text)
+    loader = YAML_LOADER(text)  # libyaml's parser where installed: the same marks
     try:
         node = loader.get_single_node()
         if node is None:
