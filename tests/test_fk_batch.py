@@ -49,3 +49,29 @@ def test_the_default_batch_is_pinocchio_vectorised(kind, settings):
     assert robot.model.batch_fk.vectorised
     pin_each = np.stack([robot.model.ee_pose(q) for q in qs])
     assert np.abs(robot.fk_batch(qs) - pin_each).max() < 1e-12
+
+
+@pytest.mark.parametrize(("name", "settings"), [("hit", {}), ("lexos", {}), ("arm", {}),
+                                                ("urdf", {"file": str(DATA / "arm2.urdf"), "ee_frame": "l2"})])
+def test_batch_jacobians_and_gravity_equal_pinocchio_sample_by_sample(name, settings):
+    """The outcome measures' hand forces and own-weight torques over a run: batched, the same numbers."""
+    import pinocchio as pin
+
+    from rehabkit.models.hand_force import HandForce
+
+    robot = _robot(name, settings)
+    qs = _samples(robot)
+    m, f = robot.model.pin_model, robot.model.ee_frame_id
+    data = m.createData()
+    each = np.stack([pin.computeFrameJacobian(m, data, q, f, pin.LOCAL_WORLD_ALIGNED)[:3] for q in qs])
+    assert np.abs(HandForce(robot.model).jacobians(qs) - each).max() < 1e-12
+    gravity = np.stack([robot.gravity_torque(q) for q in qs])
+    assert np.abs(robot.gravity_torques(qs) - gravity).max() < 1e-9 * max(1.0, np.abs(gravity).max())
+
+
+def test_capaman_gravity_batch_is_its_table_vectorised():
+    robot = _robot("capaman", {})
+    qs = _samples(robot, 500)
+    assert np.abs(robot.gravity_torques(qs) - np.stack([robot.gravity_torque(q) for q in qs])).max() < 1e-12
+    # and the table is close to the exact potential gradient (5° grid, trilinear)
+    assert np.abs(robot.gravity_torques(qs) - robot.gravity_torque_exact(qs)).max() < 1e-3  # of up to ~0.28 N·m

@@ -111,6 +111,17 @@ class Robot(ABC):
         zero = np.zeros(self.model.dof)
         return pin.rnea(self.model.pin_model, self._data(), np.asarray(q, float), zero, zero)
 
+    def gravity_torques(self, qs: np.ndarray) -> np.ndarray:
+        """:meth:`gravity_torque` for the rows of ``qs`` (N, dof). Default: Pinocchio's RNEA over the batch (in
+        C++); a robot with a gravity model of its own (an overridden :meth:`gravity_torque`) overrides this too."""
+        qs = np.atleast_2d(np.asarray(qs, float))
+        if type(self).gravity_torque is not Robot.gravity_torque:
+            return np.array([self.gravity_torque(q) for q in qs]).reshape(len(qs), -1)
+        import pinocchio as pin
+
+        m, zero = self.model.pin_model, np.zeros((self.model.dof, len(qs)))
+        return pin.rneaInParallel(1, pin.ModelPool(m, 1), np.ascontiguousarray(qs.T), zero, zero).T
+
     def _data(self):
         if getattr(self, "_pin_data", None) is None:
             self._pin_data = self.model.new_pin_data()

@@ -5,7 +5,8 @@ samples for the outcome measures, a plan checked every 5 ms) the Python loop
 around it dominates. Here the chain from the root to the frame is read from the
 model once — each joint's placement in its parent and its motion (a rotation
 about, or a translation along, a fixed axis) — and evaluated for all samples
-with numpy: one batched 4×4 product per joint.
+with numpy: one batched 4×4 product per joint. The frame's position Jacobians
+come from the same pass: each joint's axis and origin in the root frame.
 """
 
 from __future__ import annotations
@@ -40,24 +41,43 @@ class BatchFK:
         while j > 0:
             chain.append(j)
             j = model.parents[j]
-        self.steps: list[tuple[np.ndarray, str, np.ndarray, int]] = []
+        self.steps: list[tuple[np.ndarray, str, np.ndarray, int, int]] = []
         self.vectorised = True
         for j in reversed(chain):
             kind = _motion_kind(model.joints[j])
             if kind is None:
                 self.vectorised = False
                 break
-            self.steps.append((model.jointPlacements[j].homogeneous, kind[0], kind[1], model.joints[j].idx_q))
+            joint = model.joints[j]
+            self.steps.append((model.jointPlacements[j].homogeneous, kind[0], kind[1], joint.idx_q, joint.idx_v))
         self.tip = frame.placement.homogeneous
 
     def __call__(self, qs: np.ndarray) -> np.ndarray:
         qs = np.atleast_2d(np.asarray(qs, float))
         if not self.vectorised:
             return self._each(qs)
+        return self._chain(qs)[0]
+
+    def jacobian(self, qs: np.ndarray) -> np.ndarray:
+        """Position Jacobians (N, 3, nv) of the frame, in the root frame's axes (the linear rows of Pinocchio's
+        ``LOCAL_WORLD_ALIGNED`` frame Jacobian)."""
+        qs = np.atleast_2d(np.asarray(qs, float))
+        if not self.vectorised:
+            return self._each_jacobian(qs)
+        tip, joints = self._chain(qs)
+        out = np.zeros((len(qs), 3, self.model.nv))
+        for (_, kind, _, _, iv), (origin, axis) in zip(self.steps, joints):
+            out[:, :, iv] = np.cross(axis, tip[:, :3, 3] - origin) if kind == "R" else axis
+        return out
+
+    def _chain(self, qs: np.ndarray) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+        """The frame's poses (N, 4, 4), and each joint's origin and axis (N, 3) in the root frame."""
         n = len(qs)
         t = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-        for placement, kind, axis, iq in self.steps:
+        joints = []
+        for placement, kind, axis, iq, _ in self.steps:
             t = t @ placement
+            joints.append((t[:, :3, 3], t[:, :3, :3] @ axis))  # a joint's own motion leaves its axis in place
             m = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
             v = qs[:, iq]
             if kind == "R":  # Rodrigues: R = I + sin θ K + (1 − cos θ) K²
@@ -66,7 +86,7 @@ class BatchFK:
             else:
                 m[:, :3, 3] = v[:, None] * axis
             t = t @ m
-        return t @ self.tip
+        return t @ self.tip, joints
 
     def _each(self, qs: np.ndarray) -> np.ndarray:
         import pinocchio as pin
@@ -77,3 +97,10 @@ class BatchFK:
             pin.framesForwardKinematics(self.model, data, q)
             out[i] = data.oMf[self.frame_id].homogeneous
         return out
+
+    def _each_jacobian(self, qs: np.ndarray) -> np.ndarray:
+        import pinocchio as pin
+
+        data = self.model.createData()
+        return np.stack([pin.computeFrameJacobian(self.model, data, q, self.frame_id, pin.LOCAL_WORLD_ALIGNED)[:3]
+                         for q in qs])

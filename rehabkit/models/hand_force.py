@@ -17,10 +17,15 @@ class HandForce:
 
         self._pin = pin
         self.model, self.data, self.frame = model.pin_model, model.pin_model.createData(), model.ee_frame_id
+        self.batch = model.batch_fk
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         pin = self._pin
         return pin.computeFrameJacobian(self.model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+
+    def jacobians(self, qs: np.ndarray) -> np.ndarray:
+        """Position Jacobians (N, 3, dof) for the rows of ``qs``, vectorised over the batch."""
+        return self.batch.jacobian(qs)
 
     def __call__(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Force [N] in the robot base frame's axes (normal equations: a 3×3 solve each control step)."""

@@ -71,10 +71,10 @@ def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, 
     rom = np.degrees(range_of_motion(trace.q)) if len(trace.q) else np.zeros(model.dof)
     person = trace.tau_h is not None and len(trace.t) and np.any(trace.tau_h)
     if person:
-        own_weight = np.array([robot.gravity_torque(q) for q in trace.q]).reshape(trace.tau.shape)
+        own_weight = robot.gravity_torques(trace.q).reshape(trace.tau.shape)
         assist = assistance_ratio(trace.tau - own_weight, trace.tau_h, trace.qd, dt)
         hf = HandForce(model)
-        magnitude = np.linalg.norm(interaction_forces(np.stack([hf.jacobian(q) for q in trace.q]), trace.tau_h), axis=1)
+        magnitude = np.linalg.norm(interaction_forces(hf.jacobians(trace.q), trace.tau_h), axis=1)
     else:  # nobody in the robot: whatever work was done, the robot did
         assist, magnitude = (1.0 if len(trace.t) else float("nan")), np.zeros(len(trace.t))
     metrics = {
