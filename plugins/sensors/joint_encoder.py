@@ -23,6 +23,7 @@ class JointEncoder(Sensor):
     def __init__(self, config: JointEncoderConfig, context: Context):
         self.rate_hz = config.rate_hz
         self.step = 2 * np.pi / config.counts_per_rev
+        self.per_rad = config.counts_per_rev / (2 * np.pi)
         self.noise = config.noise_counts
         self.rng = context.rng
         self.joints = config.joints
@@ -36,10 +37,11 @@ class JointEncoder(Sensor):
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
         if self.joints:
             q = backend.joint_positions(self.joints)
-        counts = (q / self.step).round()  # the method: np.round's dispatch costs more than the rounding
+        counts = np.rint(q * self.per_rad)  # a new array each reading: readings are kept
         if self.noise:
-            counts += self.rng.normal(0.0, self.noise, size=q.shape).round()
-        return {"position_rad": counts * self.step}
+            counts += np.rint(self.rng.normal(0.0, self.noise, size=q.shape))
+        counts *= self.step
+        return {"position_rad": counts}
 
 
 @hookimpl

@@ -121,7 +121,7 @@ class RerunLog:
         self._queue: deque[Callable[[], None]] = deque()
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
-        self._sensor_columns: dict[tuple[str, str], _Column] = {}
+        self._sensor_columns: dict[str, dict[str, _Column]] = {}  # sensor -> reading key -> its column
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for series in ("position_deg", "reference_deg", "velocity_deg_s", "torque_nm", "tracking_error_deg"):
@@ -198,6 +198,9 @@ class RerunLog:
 
     def sensor(self, t: float, sensor: str, reading: dict) -> None:
         """A sensor reading: images are logged at once, numbers buffered in columns."""
+        columns = self._sensor_columns.get(sensor)
+        if columns is None:
+            columns = self._sensor_columns[sensor] = {}
         for key, value in reading.items():
             if value is None:
                 continue
@@ -208,9 +211,9 @@ class RerunLog:
                                  encode_image(value))
                     continue
                 value = np.ravel(np.asarray(value, float))
-            column = self._sensor_columns.get((sensor, key))
+            column = columns.get(key)
             if column is None:
-                column = self._sensor_columns[(sensor, key)] = _Column(np.size(value), f"sensor '{sensor}' {key}")
+                column = columns[key] = _Column(np.size(value), f"sensor '{sensor}' {key}")
             column.append(t, value)
 
     def flush(self) -> None:
@@ -226,10 +229,11 @@ class RerunLog:
                            lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
             ee = np.array(self._ee_path[-len(rows):])
             self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))
-        for (sensor, key), column in self._sensor_columns.items():
-            if column.n:
-                t, values = column.take()
-                self._send(f"sensors/{sensor}/{key}", t, lambda v=values: rr.Scalars.columns(scalars=v))
+        for sensor, columns in self._sensor_columns.items():
+            for key, column in columns.items():
+                if column.n:
+                    t, values = column.take()
+                    self._send(f"sensors/{sensor}/{key}", t, lambda v=values: rr.Scalars.columns(scalars=v))
 
     def _send(self, path: str, t: np.ndarray, columns: Callable[[], Any]) -> None:
         """Send one entity's columns now, or queue it in deferred mode (``columns`` builds them then)."""

@@ -86,19 +86,21 @@ class Timeline:
             self._read_sensors(k, t, q, qd)
         except Exception as exc:
             a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
-        nxt = min(self._sensor_due, default=self.stop_at)
-        nxt = min(nxt, self.stop_at)
-        if self._ramp_out_at is not None:
-            nxt = min(nxt, self._ramp_out_at)
-        if self._timed:
-            nxt = min(nxt, self._timed[0][0])
-        if self.actions:
-            nxt = min(nxt, self.actions[0][0])
-        if self._waiting:
-            nxt = min(nxt, self._next_reach)
+        nxt = self.stop_at
+        for d in self._sensor_due:
+            if d < nxt:
+                nxt = d
+        if self._ramp_out_at is not None and self._ramp_out_at < nxt:
+            nxt = self._ramp_out_at
+        if self._timed and self._timed[0][0] < nxt:
+            nxt = self._timed[0][0]
+        if self.actions and self.actions[0][0] < nxt:
+            nxt = self.actions[0][0]
+        if self._waiting and self._next_reach < nxt:
+            nxt = self._next_reach
         if self.threads is not None and self.threads.busy:
             return k + 1  # a sensor thread's reading is taken at the first tick after it is done
-        return max(k + 1, nxt)
+        return nxt if nxt > k else k + 1
 
     def _read_sensors(self, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         backend, threads, due = self.setup.backend, self.threads, self._sensor_due
