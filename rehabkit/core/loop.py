@@ -53,7 +53,8 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     state, compute, check = backend.state, controller.compute, safety.check_row
     command, step = backend.command, backend.step
     contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
-    concat, log = np.concatenate, view.log
+    log = view.log
+    tq, tqd, ttau = trace.q, trace.qd, trace.tau  # column views of ``packed``
     log_every, flush_samples = sch.log_every, view.flush_samples
     next_log = 0 if log else -1
     deferred_log = bool(log) and backend.realtime
@@ -84,13 +85,14 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                 due = timeline.due(k, t, q, qd)
                 if due < 0:
                     break
-            row = packed[k]
+            tq[k], tqd[k] = q, qd  # the row's columns, written one by one: cheaper than a concatenation
             try:
-                concat((q, qd, compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])), out=row)
+                ttau[k] = compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
             except Exception as exc:  # a crashing controller must still leave the robot held
                 safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
                 compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
-                concat((q, qd, np.zeros(dof)), out=row)
+                ttau[k] = 0.0
+            row = packed[k]
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
                 if hand_force is not None:

@@ -106,9 +106,9 @@ class SafetyLayer:
         self._n = n
         self._centre = np.concatenate([(self.lo + self.hi) / 2, np.zeros(2 * n)])
         self._bound = np.concatenate([(self.hi - self.lo) / 2, self.vmax, self.effort])
-        self._buf = np.empty(3 * n)
-        self._width = 3 * n
-        self._ok = np.empty(3 * n, dtype=bool)
+        self._fast = (np.empty(3 * n), self._centre, self._bound, np.empty(3 * n, dtype=bool), 3 * n,
+                      slice(2 * n, None))
+        self._plain = False  # set once the start is behind and no box or ramp needs a look each step
 
     @property
     def tripped(self) -> bool:
@@ -127,12 +127,16 @@ class SafetyLayer:
 
         The runner records rows straight into its trace, so checking costs no copy.
         """
-        n = self._n
         if self.tripped_at is None:
-            b = np.subtract(row, self._centre, out=self._buf)
-            np.abs(b, out=b)
-            if _count_nonzero(np.less_equal(b, self._bound, out=self._ok)) == self._width:  # (all(): 2 µs more)
-                tau = row[2 * n :]
+            buf, centre, bound, ok, width, torque = self._fast
+            np.abs(np.subtract(row, centre, out=buf), out=buf)
+            if _count_nonzero(np.less_equal(buf, bound, out=ok)) == width:  # (all(): 2 µs more)
+                tau = row[torque]
+                if self._plain:  # no keep-in box, started, ramp-in over, no ramp-out: nothing else to do
+                    return tau
+                n = self._n
+                self._plain = (self._box is None and self._start_q is not None and self._ramp_from is None
+                               and t >= self._ramp_in)
                 if self._box is not None and self._outside_box(t, row[:n]):
                     tau[:] = self._stop_torque(row[:n], row[n : 2 * n])
                     return tau
@@ -141,6 +145,7 @@ class SafetyLayer:
                 if t < self._ramp_in or self._ramp_from is not None:
                     self._ramp(t, row[:n], row[n : 2 * n], tau)
                 return tau
+        n = self._n
         q, qd, tau = row[:n], row[n : 2 * n], row[2 * n :]
         if self.tripped_at is None:
             # slow path: find out what went wrong
@@ -186,6 +191,7 @@ class SafetyLayer:
         """Start the soft stop: over ``ramp_out_s`` the torque blends into holding posture ``q``."""
         if self._ramp_from is None and self.config.ramp_out_s > 0 and self.tripped_at is None:
             self._ramp_from = (t, self.config.ramp_out_s, np.array(q, float))
+            self._plain = False
             self._note(SafetyEvent(t, "ramp-out", None, None, None,
                                    f"t={t:.3f}s: ramp-out over {self.config.ramp_out_s:g} s to holding the posture",
                                    {"duration_s": self.config.ramp_out_s}))
