@@ -8,6 +8,7 @@ messages, never as bare tracebacks (``REHABKIT_DEBUG=1`` shows them).
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import sys
@@ -286,5 +287,15 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_FAILED
 
 
+def entry() -> None:
+    """The ``rehabkit`` command: :func:`main`, then the exit, without the interpreter's last collections."""
+    code = main()
+    # the heap now holds every object the engines made (Rerun, pyarrow, pydantic, Pinocchio), and the collections
+    # at interpreter exit walk it all: ~0.2 s of a 1.3 s run. Frozen, it is left to the OS; atexit handlers (Ray,
+    # Rerun) still run, and every output was written whole and closed before this point.
+    gc.freeze()
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
