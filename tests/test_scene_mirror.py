@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from rehabkit.core.backends.mujoco import MujocoBackend, MujocoConfig
-from rehabkit.core.backends.scene_view import SceneMirror
 from rehabkit.core.interfaces import Context, Sensor
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.hardware.frame_server import FrameServer
+from rehabkit.hardware.mirrored_scene import SceneMirror
 from tests.conftest import SCENARIOS
 
 

@@ -15,7 +15,7 @@ state arrives for ``state_timeout_s`` the link is lost: the run stops with that 
 scenario runs against the link with only ``backend:`` changed.
 
 The scenario's scene is mirrored on the host, posed from the measured joints
-(:class:`~rehabkit.core.backends.scene_view.SceneMirror`): the log draws the whole robot,
+(:class:`~rehabkit.hardware.mirrored_scene.SceneMirror`): the log draws the whole robot,
 the scripted world objects live there, and a simulated camera looks at it — from a sensor
 thread, since the backend is ``realtime`` and a frame takes longer than a tick, with the
 pixels rendered in a process of their own (:mod:`~rehabkit.hardware.frame_server`).
@@ -29,7 +29,6 @@ import time
 
 import numpy as np
 
-from rehabkit.core.backends.scene_view import SceneMirror
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, Context
 from rehabkit.core.limits import first_breach
@@ -39,7 +38,7 @@ from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
-from rehabkit.hardware.mirrored_scene import MirroredScene
+from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 from rehabkit.hardware.protocol import (
     CLOCK,
     CMD_ESTOP,

@@ -1,22 +1,17 @@
-"""What sensors, scripted worlds and the log read from a compiled MuJoCo scene, and the scene mirror.
+"""What sensors, scripted worlds and the log read from a compiled MuJoCo scene.
 
 :class:`SceneView` holds those read-outs for any ``(model, data)`` pair: the simulation
-backend is one; :class:`SceneMirror` is another, the scenario's scene on the host of a
-hardware run, posed from the robot's measured joints. With it a hardware run logs the
-whole robot and a simulated camera can look at the rehearsal scene (its world objects
-are moved by the scenario's events, as a therapist moves the real ones).
+backend is one; the hardware layer's scene mirror (:mod:`rehabkit.hardware.mirrored_scene`)
+is another, the scenario's scene on the host of a hardware run, posed from the robot's
+measured joints.
 """
 
 from __future__ import annotations
 
-import threading
-
 import mujoco
 import numpy as np
 
-from rehabkit.core.backends.scene import build_scene
 from rehabkit.core.interfaces import BodyPoses, GeomVisual
-from rehabkit.core.scenario.models import World
 from rehabkit.models.robot_model import RobotModel
 
 _GEOM_SHAPES = {  # int keys: model arrays hold numpy ints, which don't hash-match the enum
@@ -131,56 +126,3 @@ class SceneView:
         for renderer in self._renderers.values():
             renderer.close()
         self._renderers.clear()
-
-
-class SceneMirror(SceneView):
-    """The scenario's scene posed from measured joints (no physics): a hardware run's view of its robot.
-
-    Two copies of the scene's data: the control thread poses and reads one (log, end
-    effector); a sensor thread poses the other at the newest state when it starts a frame
-    (whose pixels the frame server renders), so a slow frame never holds up the loop nor
-    sees a half-updated pose.
-    """
-
-    def __init__(self, robot: RobotModel, world: World | None):
-        spec = build_scene(robot, world or World(), 0.001)
-        self.model = spec.compile()
-        self.data = mujoco.MjData(self.model)
-        self.frame_data = mujoco.MjData(self.model)
-        self._init_view(robot.ee_site)
-        self._q = np.array([self.model.jnt_qposadr[self.model.joint(n).id] for n in robot.joint_names], int)
-        self._m = measured_joints(self.model, robot)
-        self.measured_count = len(self._m)
-        self._lock = threading.Lock()  # scripted object moves vs a frame copying them
-        self.frame_view = _FrameView(self)  # read it after frame(): what the frame showed
-
-    def pose(self, q: np.ndarray, measured: np.ndarray) -> None:
-        """Put the mirror at the measured joints (control thread)."""
-        self.data.qpos[self._q] = q
-        self.data.qpos[self._m] = measured
-        mujoco.mj_kinematics(self.model, self.data)
-        mujoco.mj_camlight(self.model, self.data)
-
-    def move_object(self, name: str, position: np.ndarray) -> None:
-        with self._lock:
-            super().move_object(name, position)
-            mujoco.mj_kinematics(self.model, self.data)
-
-    def frame(self, q: np.ndarray, measured: np.ndarray) -> SceneView:
-        """The frame copy, posed at ``q`` with the objects where they are now (any thread)."""
-        f = self.frame_data
-        with self._lock:
-            f.mocap_pos[:], f.mocap_quat[:] = self.data.mocap_pos, self.data.mocap_quat
-        f.qpos[self._q] = q
-        f.qpos[self._m] = measured
-        mujoco.mj_kinematics(self.model, f)
-        mujoco.mj_camlight(self.model, f)
-        return self.frame_view
-
-
-class _FrameView(SceneView):
-    """The mirror's frame copy as a view (its own renderers)."""
-
-    def __init__(self, mirror: SceneMirror):
-        self.model, self.data = mirror.model, mirror.frame_data
-        self._init_view(mirror.model.site(mirror._ee_site).name)
