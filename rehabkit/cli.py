@@ -290,9 +290,8 @@ def main(argv: list[str] | None = None) -> int:
 def entry() -> None:
     """The ``rehabkit`` command: :func:`main`, then the exit, without the interpreter's last collections."""
     code = main()
-    # the heap now holds every object the engines made (Rerun, pyarrow, pydantic, Pinocchio), and the collections
-    # at interpreter exit walk it all: ~0.2 s of a 1.3 s run. Frozen, it is left to the OS; atexit handlers (Ray,
-    # Rerun) still run, and every output was written whole and closed before this point.
+    # the collections at interpreter exit walk every object the engines made: ~0.2 s of a 1.3 s run. Frozen, they
+    # are left to the OS; atexit handlers (Ray, Rerun) still run, and every output is already whole and closed.
     gc.freeze()
     sys.exit(code)
 

@@ -12,9 +12,8 @@ are clipped (each episode an intervention) or trip the stop if the scenario asks
 A ramp-in blends from holding the start posture to the controller's torque, a
 ramp-out back to holding the posture where it began.
 
-The layer runs on the host for every backend, so a breach produces the same
-event in simulation and over a hardware link; the ``heartbeat`` timings go to
-backends that have a link to watch.
+The layer runs on the host for every backend: a breach is the same event in
+simulation and over a hardware link (whose backends take the ``heartbeat`` timings).
 """
 
 from __future__ import annotations
@@ -58,12 +57,9 @@ def _blend(s: float) -> float:
 
 
 class SafetyLayer:
-    """Checks every command; see the module docstring for the rules.
-
-    The limits are the robot model's (the runner narrows them to the patient's and the envelope's first);
-    ``hand(q)`` gives the end effector's world position, needed for a keep-in box; ``dt`` is the control
-    period (it tells one clipping episode from the next).
-    """
+    """Checks every command (the rules: the module docstring) against the limits of ``robot`` (the runner narrows
+    them first); ``hand(q)``: the hand's world position, for a keep-in box; ``dt`` tells one clipping episode from
+    the next."""
 
     def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None,
                  hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):
