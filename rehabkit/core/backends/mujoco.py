@@ -83,6 +83,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
             self._root_joint = int(self.model.body_jntadr[root_body.id])
             if self.model.jnt_type[self._root_joint] != mujoco.mjtJoint.mjJNT_FREE:
                 raise ValueError(f"robot '{robot.name}' is floating but its root body has no free joint")
+            j, m = self._root_joint, self.model
+            self._root_at = (int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j]), int(m.jnt_bodyid[j]))
         # held objects: their weld to the holder, the holder site, the object's free joint
         self._held = {}
         for obj in (context.world.objects if context.world else []):
@@ -164,9 +166,9 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
     def base_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         if self._root_joint is None:
             raise NotImplementedError(f"robot '{self.robot.name}' has no floating base to report")
-        qa, va = self.model.jnt_qposadr[self._root_joint], self.model.jnt_dofadr[self._root_joint]
+        qa, va, body = self._root_at
         d = self.data
-        rot = d.xmat[self.model.jnt_bodyid[self._root_joint]].reshape(3, 3)
+        rot = d.xmat[body].reshape(3, 3)
         # MuJoCo's free-joint angular velocity is in the body frame; report it in the world frame
         return d.qpos[qa : qa + 3].copy(), d.qpos[qa + 3 : qa + 7].copy(), d.qvel[va : va + 3].copy(), \
             rot @ d.qvel[va + 3 : va + 6]

@@ -59,6 +59,7 @@ class SceneView:
         self._ee_site = self.model.site(ee_site).id
         self._drawn = np.arange(1, self.model.nbody)
         self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
+        self._body_ids: dict[str, int] = {}  # model.body(name) makes a named view each call (~2 us)
 
     def ee_position(self) -> np.ndarray:
         return self.data.site_xpos[self._ee_site].copy()
@@ -81,7 +82,10 @@ class SceneView:
         self.data.mocap_pos[body.mocapid[0]] = position
 
     def object_position(self, name: str) -> np.ndarray:
-        return self.data.xpos[self.model.body(name).id].copy()
+        body = self._body_ids.get(name)
+        if body is None:
+            body = self._body_ids[name] = self.model.body(name).id
+        return self.data.xpos[body].copy()
 
     def render(self, camera: str, width: int, height: int) -> np.ndarray:
         key = (width, height)
