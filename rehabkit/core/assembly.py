@@ -23,7 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from rehabkit.core.capabilities import ExternalTorques, SceneObjects, missing_capabilities
-from rehabkit.core.errors import SetupError
+from rehabkit.core.errors import PluginSetupError, SetupError
 from rehabkit.core.interfaces import (
     Backend,
     Context,
@@ -98,13 +98,15 @@ class Assembly:
         """The validated scenario."""
         return self.loaded.model
 
-    def make(self, kind: str, config) -> Any:
-        """Build plugin ``config.type`` of ``kind``; its ``ValueError``/``PlanningError`` become a SetupError."""
+    def make(self, kind: str, config, path: tuple[str, ...]) -> Any:
+        """Build plugin ``config.type`` of ``kind`` from the section at ``path``; its ``ValueError`` or
+        ``PlanningError`` becomes a :class:`PluginSetupError` located in the scenario file."""
         info = self.registry.get(kind, config.type)
         try:
             return info.factory(config, self.context)
         except (ValueError, PlanningError) as exc:
-            raise SetupError(f"{kind} '{config.type}': {exc}") from exc
+            raise PluginSetupError(self.loaded.source, path, type(config).model_fields, f"{kind} '{config.type}': "
+                                   f"{exc}") from exc
 
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
@@ -122,7 +124,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx)
     extensions.hook.rehabkit_configure_robot(setup=a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
-    a.robot = a.make("robot", a.robot_config)
+    a.robot = a.make("robot", a.robot_config, ("robot",))
     a.context = replace(a.context, robot=a.robot)
     _narrow_limits(a)
     _check_capabilities(a)
@@ -134,12 +136,12 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     if upto == "targets":
         return a
     # sensors before the backend: their instruments go into the scene it builds
-    a.sensors = {name: a.make("sensor", cfg) for name, cfg in sc.sensors.items()}
+    a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
     a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
-    a.backend = a.make("backend", sc.backend)
-    a.planner = a.make("planner", sc.planner)
+    a.backend = a.make("backend", sc.backend, ("backend",))
+    a.planner = a.make("planner", sc.planner, ("planner",))
     a.context = replace(a.context, reference_space=a.planner.space)
-    a.controller = a.make("controller", sc.controller)
+    a.controller = a.make("controller", sc.controller, ("controller",))
     if a.planner.space != a.controller.reference:
         raise SetupError(f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
                          f"'{sc.controller.type}' takes {a.controller.reference} references; pick a matching pair")
@@ -203,7 +205,7 @@ def _patient_and_safety(a: Assembly) -> None:
             raise SetupError(f"patient.model '{model_cfg.type}' needs a backend that applies a simulated person's "
                              f"torques; backend '{sc.backend.type}' does not")
         else:
-            a.patient = a.make("patient", model_cfg)
+            a.patient = a.make("patient", model_cfg, ("patient", "model"))
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
               if v is not None]
     force_limit = min(limits) if limits else None

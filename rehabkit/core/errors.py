@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any
+
+from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 
 
 class SetupError(RuntimeError):
@@ -15,3 +18,16 @@ class SetupError(RuntimeError):
     def __init__(self, message: str, breach: Any = None):
         super().__init__(message)
         self.breach = breach
+
+
+class PluginSetupError(ScenarioError, SetupError):
+    """A plugin refused its settings when it was built: located at the setting its message names (the first
+    field of its config that the message mentions), else at its section. Both a :class:`ScenarioError` (the
+    CLI's exit 2 with ``file:line:col``) and a :class:`SetupError`."""
+
+    def __init__(self, source: Any, path: tuple[str, ...], fields: Any, message: str):
+        named = [f for f in fields if re.search(rf"(?<![\w.-]){re.escape(f)}(?![\w-])", message)]
+        at = next(((*path, f) for f in sorted(named, key=len, reverse=True) if (*path, f) in source.key_marks), path)
+        mark = source.key_marks.get(at) or source.value_marks.get(path) or source.value_marks[()]
+        ScenarioError.__init__(self, [Diagnostic(mark, ".".join(map(str, at)), message)])
+        self.breach = None

@@ -34,6 +34,7 @@ class RunRecord:
         plans: One entry per plan for the summary; ``plan_metrics`` their diagnostics combined.
         fired: Task events as they fired; ``acted`` scene actions done; ``notes`` plugins' messages.
         plan_warnings: What plans were found to run into (the keep-in box) before they ran.
+        no_plan: Why the first plan failed, if it did: the robot never moved, so no expectation counts as met.
     """
 
     trace: Trace
@@ -49,4 +50,5 @@ class RunRecord:
     notes: list[dict[str, Any]]
     plan_warnings: list[dict[str, Any]]
     extra_metrics: dict[str, float] = field(default_factory=dict)  # the loop's own (sensor-thread overruns)
+    no_plan: str | None = None  # why the first plan was refused or failed: the robot never moved
 

@@ -120,6 +120,10 @@ def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[
             series.update(c.series)
         view.finish(a.safety.interventions, series)
     verdicts = evaluate(sc.expect, metrics)
+    if r.no_plan is not None and "safety_events" not in sc.expect:  # (unless the scenario expects a stop)
+        # a robot that never moved has no tracking error: that passes nothing
+        for v in verdicts:
+            v.update(passed=False, reason=f"no plan ran ({r.no_plan})")
     unexpected_trip = a.safety.tripped and "safety_events" not in sc.expect
     return {
         "scenario": str(a.loaded.path), "name": sc.name or a.loaded.path.stem,

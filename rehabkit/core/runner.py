@@ -54,6 +54,7 @@ class Runner:
         self.out_dir, self.spawn, self.progress = out_dir, spawn, progress
         self.setup: Assembly | None = None
         self.notes: list[dict] = []
+        self._no_plan: str | None = None  # why the first plan failed: then no expectation is met
         self.view: RunView | None = None
 
     # the assembled plugins, for callers that inspect a run
@@ -149,6 +150,7 @@ class Runner:
     def _first_plan(self) -> None:
         a = self.setup
         self._replan(0, 0.0, self.q0, np.zeros(a.robot.model.dof), self.sc.task.order())
+        self._no_plan = (self._refusal or "stopped before it moved") if a.safety.tripped else None
         if a.safety.tripped and a.limit_sources.by_joint:  # refused before it runs, not stopped at t=0
             raise SetupError(f"{self._refusal} (joint limits narrowed by the patient's profile or the safety "
                              "envelope)", self._refused)
@@ -230,7 +232,8 @@ class Runner:
             self.view.executed(trace, k)
         tl = self.timeline
         record = RunRecord(trace, loop.wall_s, setup_s, loop.contact_steps, self.ref.goal, self.ref.movements,
-                           self.plans, self.gate.metrics, tl.fired, tl.acted, self.notes, self.gate.warnings, extra)
+                           self.plans, self.gate.metrics, tl.fired, tl.acted, self.notes, self.gate.warnings, extra,
+                           no_plan=self._no_plan)
         summary = finish(a, record, catalogue, self.view)
         if self.out_dir is not None:
             if self.view.log:

@@ -1,0 +1,86 @@
+"""A user's own robot, written carelessly: a plugin's refusal is located in the file, and a run whose first
+plan fails passes no expectation."""
+
+import json
+
+import pytest
+
+from rehabkit.core.errors import PluginSetupError, SetupError
+from rehabkit.core.runner import Runner
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.core.scenario.loader import load_scenario
+from tests.test_cli import cli
+
+ARM3 = """\
+name: my-arm3
+robot:
+  type: dh
+  name: arm3
+  convention: standard
+  table:
+    - {a: 0.0, alpha_deg: 90, d: 0.2}
+    - {a: 0.3}
+    - {a: 0.25}
+  joints:
+    - {name: yaw, range_deg: [-170, 170], velocity_deg_s: 120, effort: 40, mass: 1.5}
+    - {name: shoulder, range_deg: [-120, 120], velocity_deg_s: 120, effort: 40, mass: 1.2}
+    - {name: elbow, range_deg: [-150, 150], velocity_deg_s: 150, effort: 20, mass: 0.8}
+  base: {position: [0, 0, 0.5]}
+planner: {type: multi-cubic, segment_durations: [2]}
+controller:
+  type: joint-pd
+  kp: [300, 300, 150]
+  kd: [20, 20, 8]
+  feedforward: inverse-dynamics
+task:
+  targets:
+    - {name: A, joints_deg: [0, 30, 60]}
+    - {name: B, joints_deg: [40, 60, 20]}
+duration: 4.5
+expect:
+  final_joint_error_deg: {lt: 0.5}
+  tracking_max_deg: {lt: 2}
+"""
+
+
+def _write(tmp_path, text: str):
+    path = tmp_path / "arm3.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_the_users_robot_runs(tmp_path):
+    r = cli("run", str(_write(tmp_path, ARM3)), "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "PASS  final_joint_error_deg" in r.stdout
+
+
+def test_a_plugins_refusal_names_the_file_line_and_setting(tmp_path):
+    path = _write(tmp_path, ARM3.replace("kp: [300, 300, 150]", "kp: [300, 300]"))
+    with pytest.raises(PluginSetupError) as err:
+        Runner(load_scenario(path)).run()
+    assert isinstance(err.value, ScenarioError) and isinstance(err.value, SetupError)
+    (d,) = err.value.diagnostics
+    assert (d.mark.line, d.mark.col, d.path) == (18, 3, "controller.kp")
+    assert "kp has 2 values; the robot has 3 joints" in d.message
+    r = cli("run", str(path), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"{path}:18:3: controller.kp: controller 'joint-pd': joint-pd: kp has 2 values" in r.stderr
+    # a refusal that names none of the plugin's settings points at its section
+    loaded = load_scenario(path)
+    fields = type(loaded.model.controller).model_fields
+    (d,) = PluginSetupError(loaded.source, ("controller",), fields, "controller 'joint-pd': broke").diagnostics
+    assert (d.mark.line, d.path) == (16, "controller")
+
+
+def test_a_run_whose_first_plan_fails_passes_no_expectation(tmp_path):
+    path = _write(tmp_path, ARM3.replace("segment_durations: [2]", "segment_durations: [2, 2]"))
+    out = tmp_path / "out"
+    r = cli("run", str(path), "--out", str(out))
+    assert r.returncode == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["passed"] is False
+    assert [v["passed"] for v in summary["expectations"]] == [False, False]
+    assert all(v["reason"].startswith("no plan ran (planner failed: multi-cubic: 2 via points (A, B) need 1 segment")
+               for v in summary["expectations"])
+    assert "PASS" not in r.stdout and "FAIL  final_joint_error_deg" in r.stdout
