@@ -28,31 +28,11 @@ def _err(msg: str) -> None:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from rehabkit.api import run_scenario
+    from rehabkit.run_report import run_report
 
     out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
     result = run_scenario(args.scenario, overrides=args.set, out_dir=out, spawn=args.spawn, progress=True)
-    s = result.summary
-    print(f"{s['name']}: {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.3f} s "
-          f"(real-time factor {s['real_time_factor']:.1f})")
-    for e in s["expectations"]:
-        value = "missing" if e["value"] is None else f"{e['value']:.6g}"
-        print(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
-              + (f"  — {e['reason']}" if e.get("reason") else ""))
-    for w in s["safety"].get("plan_warnings", []):
-        print(f"  PLAN    {w['message']}")
-    for ev in s["safety"]["events"]:
-        print(f"  SAFETY  {ev['message']}")
-    for r in (s.get("patient") or {}).get("replaced_targets", []):
-        print(f"  PATIENT target '{r['target']}' outside the range of {', '.join(r['joints'])}: replaced by the "
-              f"nearest admissible posture ({r['moved_m'] * 1000:.1f} mm away)")
-    m = s["metrics"]
-    if m.get("reaches"):
-        shown = [f"{k} {m[k]:.3g}" for k in ("reaches_completed", "sparc", "path_length_ratio", "time_to_target_s",
-                                             "assistance_ratio", "peak_interaction_force_n") if m.get(k) is not None]
-        print("  outcomes: " + ", ".join(shown))
-    for name, text in s.get("reports", {}).items():
-        print(f"{name}:\n{text}")
-    print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))
+    print(run_report(result.summary, out))
     return EXIT_OK if result.passed else EXIT_FAILED
 
 
@@ -197,7 +177,10 @@ def cmd_bridge(args: argparse.Namespace) -> int:
 
 
 def parser() -> argparse.ArgumentParser:
+    from rehabkit.core.version import __version__
+
     p = argparse.ArgumentParser(prog="rehabkit", description=__doc__.splitlines()[0])
+    p.add_argument("--version", action="version", version=f"rehabkit {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a scenario; writes DIR/run.rrd and DIR/summary.json")
     r.add_argument("scenario")

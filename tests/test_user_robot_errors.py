@@ -49,12 +49,6 @@ def _write(tmp_path, text: str):
     return path
 
 
-def test_the_users_robot_runs(tmp_path):
-    r = cli("run", str(_write(tmp_path, ARM3)), "--out", str(tmp_path / "out"))
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert "PASS  final_joint_error_deg" in r.stdout
-
-
 def test_a_plugins_refusal_names_the_file_line_and_setting(tmp_path):
     path = _write(tmp_path, ARM3.replace("kp: [300, 300, 150]", "kp: [300, 300]"))
     with pytest.raises(PluginSetupError) as err:
@@ -84,3 +78,18 @@ def test_a_run_whose_first_plan_fails_passes_no_expectation(tmp_path):
     assert all(v["reason"].startswith("no plan ran (planner failed: multi-cubic: 2 via points (A, B) need 1 segment")
                for v in summary["expectations"])
     assert "PASS" not in r.stdout and "FAIL  final_joint_error_deg" in r.stdout
+
+
+def test_contacts_are_said_and_the_version_is_known(tmp_path):
+    """An arm whose base sits on the floor (the plane z = 0) touches it the whole run: the CLI says so."""
+    path = _write(tmp_path, ARM3.replace("base: {position: [0, 0, 0.5]}", "base: {position: [0, 0, 0]}"))
+    r = cli("run", str(path), "--out", str(tmp_path / "out"))
+    contacts = json.loads((tmp_path / "out" / "summary.json").read_text())["metrics"]["contact_steps"]
+    assert contacts > 4000
+    assert f"CONTACT the robot touched something in {int(contacts)} control steps (the floor is the plane z = 0)" \
+        in r.stdout
+    r = cli("run", str(_write(tmp_path, ARM3)), "--out", str(tmp_path / "out2"))
+    assert r.returncode == 0 and "PASS  final_joint_error_deg" in r.stdout and "CONTACT" not in r.stdout
+    from rehabkit.core.version import __version__
+
+    assert cli("--version").stdout.strip() == f"rehabkit {__version__}"
