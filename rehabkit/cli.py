@@ -86,12 +86,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _admission(loaded) -> str:
-    """The run's setup up to its targets (robot, narrowed limits, capabilities, admitted targets), as `run`
-    does it; with a patient or envelope ranges, what became of the fixed targets."""
-    from rehabkit.core.assembly import assemble
+    """The run's setup but its backend (robot, narrowed limits, capabilities, admitted targets, plugins) and its
+    first plan, as `run` makes them; with a patient or envelope ranges, what became of the fixed targets."""
+    from rehabkit.core.assembly import assemble, check_first_plan
     from rehabkit.core.lifecycle import default_extensions
 
-    setup = assemble(loaded, default_registry(), default_extensions(), upto="targets")
+    setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins")
+    check_first_plan(setup)
     sc = loaded.model
     if sc.patient is None and not sc.safety.joints:
         return ""
@@ -275,7 +276,9 @@ def entry() -> None:
     code = main()
     # the collections at interpreter exit walk every object the engines made: ~0.2 s of a 1.3 s run. Frozen, they
     # are left to the OS; atexit handlers (Ray, Rerun) still run, and every output is already whole and closed.
-    gc.freeze()
+    # Not with OMPL loaded: nanobind, its binding layer, reports every object left uncollected at exit as a leak.
+    if "ompl" not in sys.modules:
+        gc.freeze()
     sys.exit(code)
 
 

@@ -57,9 +57,10 @@ def test_a_plugins_refusal_names_the_file_line_and_setting(tmp_path):
     (d,) = err.value.diagnostics
     assert (d.mark.line, d.mark.col, d.path) == (18, 3, "controller.kp")
     assert "kp has 2 values; the robot has 3 joints" in d.message
-    r = cli("run", str(path), "--out", str(tmp_path / "out"))
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert f"{path}:18:3: controller.kp: controller 'joint-pd': joint-pd: kp has 2 values" in r.stderr
+    for command in (("validate",), ("run", "--out", str(tmp_path / "out"))):  # validate finds what run refuses
+        r = cli(command[0], str(path), *command[1:])
+        assert r.returncode == 2 and "Traceback" not in r.stderr
+        assert f"{path}:18:3: controller.kp: controller 'joint-pd': joint-pd: kp has 2 values" in r.stderr
     # a refusal that names none of the plugin's settings points at its section
     loaded = load_scenario(path)
     fields = type(loaded.model.controller).model_fields
@@ -67,8 +68,12 @@ def test_a_plugins_refusal_names_the_file_line_and_setting(tmp_path):
     assert (d.mark.line, d.path) == (16, "controller")
 
 
-def test_a_run_whose_first_plan_fails_passes_no_expectation(tmp_path):
+def test_a_run_whose_first_plan_fails_passes_no_expectation_and_validate_refuses_it(tmp_path):
     path = _write(tmp_path, ARM3.replace("segment_durations: [2]", "segment_durations: [2, 2]"))
+    r = cli("validate", str(path))  # the first plan is made (not run) by validate too
+    assert r.returncode == 2
+    assert (f"{path}:15:30: planner.segment_durations: planner 'multi-cubic': multi-cubic: 2 via points (A, B) "
+            "need 1 segment durations; segment_durations has 2") in r.stderr
     out = tmp_path / "out"
     r = cli("run", str(path), "--out", str(out))
     assert r.returncode == 1
@@ -93,3 +98,11 @@ def test_contacts_are_said_and_the_version_is_known(tmp_path):
     from rehabkit.core.version import __version__
 
     assert cli("--version").stdout.strip() == f"rehabkit {__version__}"
+
+
+def test_validate_plans_an_ompl_scenario_and_exits_quietly():
+    """Validating CaPaMan builds its planner and plans its first motion with OMPL (nanobind): ok, and at exit
+    no binding objects are reported leaked (the CLI skips freezing the heap when OMPL is loaded)."""
+    r = cli("validate", "scenarios/capaman_obstacle.yaml")
+    assert r.returncode == 0 and "ok" in r.stdout
+    assert "leaked" not in r.stderr

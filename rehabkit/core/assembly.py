@@ -1,8 +1,9 @@
 """Putting a run together: robot, limits, plugins, safety layer, targets.
 
 One function, :func:`assemble`, for ``rehabkit run`` and ``rehabkit validate``: the
-latter stops after the targets (``upto="targets"``: no backend, planner or
-controller is built) and so refuses exactly what a run's setup would. The order:
+latter builds everything but the backend (``upto="plugins"``, a dry-run context) and
+then makes the first plan (:func:`check_first_plan`), and so refuses what a run's
+setup would. The order:
 
 1. extensions adapt the robot's settings (``rehabkit_configure_robot``); the robot is built;
 2. its limits are narrowed by the envelope and the extensions (``rehabkit_narrow_limits``)
@@ -31,6 +32,7 @@ from rehabkit.core.interfaces import (
     Patient,
     Planner,
     PlanningError,
+    PlanRequest,
     Robot,
     Sensor,
     Target,
@@ -110,7 +112,7 @@ class Assembly:
 
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
-             upto: Literal["targets", "run"] = "run", plan: Callable | None = None,
+             upto: Literal["targets", "plugins", "run"] = "run", plan: Callable | None = None,
              note: Callable[[float, str], None] | None = None) -> Assembly:
     """Build the run of ``loaded`` (see the module docstring); ``plan``/``note`` go to the controllers' context.
 
@@ -120,7 +122,8 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     """
     sc = loaded.model
     ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
-                  out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=sc.patient, plan=plan, note=note)
+                  out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=sc.patient, plan=plan, note=note,
+                  dry_run=upto != "run")
     a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx)
     extensions.hook.rehabkit_configure_robot(setup=a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
@@ -138,18 +141,21 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     # sensors before the backend: their instruments go into the scene it builds
     a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
     a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
-    a.backend = a.make("backend", sc.backend, ("backend",))
+    if upto == "run":  # (a backend may start processes: a hardware link's bridge)
+        a.backend = a.make("backend", sc.backend, ("backend",))
     a.planner = a.make("planner", sc.planner, ("planner",))
     a.context = replace(a.context, reference_space=a.planner.space)
     a.controller = a.make("controller", sc.controller, ("controller",))
     if a.planner.space != a.controller.reference:
         raise SetupError(f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
                          f"'{sc.controller.type}' takes {a.controller.reference} references; pick a matching pair")
-    _patient_and_safety(a)
     for t in sc.task.targets:
         if t.sensor and t.sensor not in a.sensors:
             raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
                              f"{suggest(t.sensor, a.sensors)}")
+    if upto == "plugins":
+        return a
+    _patient_and_safety(a)
     a.schedule = _schedule(a)
     return a
 
@@ -249,3 +255,19 @@ def start_posture(a: Assembly) -> np.ndarray:
         raise SetupError(f"task.start: target '{name}' is Cartesian and the robot's IK gives no configuration "
                          "for it within the joint ranges; start from a joint-space target")
     return inside[0]
+
+
+def check_first_plan(a: Assembly) -> None:
+    """Make the task's first plan without running it (``rehabkit validate``); a planner's refusal is located at
+    the setting it names. Skipped where the run alone can plan: sensed targets, a controller planning itself."""
+    sc = a.sc
+    names = sc.task.order()
+    sensed = any(t.sensor for t in sc.task.targets if t.name in names)
+    if not names or sensed or a.controller.own_reference:
+        return
+    q0 = start_posture(a)
+    try:
+        a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
+    except PlanningError as exc:
+        raise PluginSetupError(a.loaded.source, ("planner",), type(sc.planner).model_fields,
+                               f"planner '{sc.planner.type}': {exc}") from exc

@@ -51,6 +51,7 @@ class Context:
     seed: int = 0
     safety: Any = None  # the scenario's safety envelope (``SafetyConfig``), e.g. for a link's heartbeat
     patient: Any = None  # the scenario's patient profile (``rehabkit.rehab.patient.PatientBase``), if any
+    dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
 
     def stream(self, name: str) -> np.random.Generator:
         """A random generator of its own for ``name``, from the scenario seed.

@@ -90,6 +90,23 @@ class PatchStore:
             raise StoreError(f"{self.path} is not a rehabkit patch store ({exc}); it was left untouched — "
                              "move it away or set REHABKIT_DATA to another folder") from None
 
+    @classmethod
+    def probe(cls, path: Path) -> None:
+        """Check an existing store file read-only (a missing one is fine: a run would make it)."""
+        if not (path.exists() and path.stat().st_size > 0):
+            return
+        store = cls.__new__(cls)
+        store.path = path
+        try:
+            db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+            try:
+                store._check(db)
+            finally:
+                db.close()
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{path} is not a rehabkit patch store ({exc}); it was left untouched — "
+                             "move it away or set REHABKIT_DATA to another folder") from None
+
     def _create(self) -> None:
         with self._transaction():
             self.db.execute(f"PRAGMA application_id={APPLICATION_ID}")
@@ -149,18 +166,24 @@ class PatchStore:
         self.db.close()
 
 
-def open_store(where: str, out_dir: Path | None, scenario_dir: Path) -> PatchStore:
+def open_store(where: str, out_dir: Path | None, scenario_dir: Path, dry: bool = False) -> PatchStore | None:
     """``where``: 'user' (:func:`default_path`), 'run' (a fresh store in the run's folder, ``out_dir`` or
-    ./out) or a path (relative to the scenario). A store that can't be opened raises ``ValueError``."""
+    ./out) or a path (relative to the scenario). A store that can't be opened raises ``ValueError``. ``dry``
+    (a scenario checked, not run): an existing file is only checked, read-only; nothing is opened or made."""
     if where == "user":
         path = default_path()
     elif where == "run":
         path = (out_dir or Path.cwd() / "out") / "patches.sqlite"
+        if dry:
+            return None
         path.unlink(missing_ok=True)
     else:
         path = Path(where).expanduser()
         path = path if path.is_absolute() else (scenario_dir / path).resolve()
     try:
+        if dry:
+            PatchStore.probe(path)
+            return None
         return PatchStore(path)
     except StoreError as exc:
         raise ValueError(str(exc)) from None
