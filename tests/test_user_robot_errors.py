@@ -106,3 +106,20 @@ def test_validate_plans_an_ompl_scenario_and_exits_quietly():
     r = cli("validate", "scenarios/capaman_obstacle.yaml")
     assert r.returncode == 0 and "ok" in r.stdout
     assert "leaked" not in r.stderr
+
+
+@pytest.mark.parametrize(("change", "where", "says"), [
+    (("duration: 4.5", "duration: yes"), "25:11: duration", "a number is needed here, not a boolean"),
+    (("kd: [20, 20, 8]", "kd: [20, on, 8]"), "19:3: controller.kd", "a number is needed here, not a boolean"),
+    (("duration: 4.5", "duration: .nan"), "25:11: duration", "Input should be a finite number"),
+    (("{a: 0.3}", "{a: .inf}"), "8:11: robot.table.1.a", "Input should be a finite number"),
+    (("duration: 4.5", "duration: 1e9"), "25:1: duration", "1e+12 control steps, whose record needs"),
+])
+def test_validate_refuses_booleans_non_finite_numbers_and_runs_too_long_to_record(tmp_path, capsys, change, where,
+                                                                                  says):
+    from rehabkit.cli import main
+
+    path = _write(tmp_path, ARM3.replace(*change))
+    assert main(["validate", str(path)]) == 2  # in-process: the CLI's own handling, without a process each
+    err = capsys.readouterr().err
+    assert f"{path}:{where}: " in err and says in err and "Traceback" not in err

@@ -16,6 +16,7 @@ setup would. The order:
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -136,6 +137,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     except PlanningError as exc:
         raise SetupError(f"task: {exc}") from exc
     extensions.hook.rehabkit_admit_targets(setup=a)
+    _check_duration(a)
     if upto == "targets":
         return a
     # sensors before the backend: their instruments go into the scene it builds
@@ -194,6 +196,20 @@ def _check_capabilities(a: Assembly) -> None:
         problems.append("task events that 'move' objects need a backend with scene objects")
     if problems:
         raise SetupError(f"{'; '.join(problems)} (robot '{sc.robot.type}', backend '{sc.backend.type}')")
+
+
+def _check_duration(a: Assembly) -> None:
+    """A run records every control step (about 8 rows of the robot's joints, 8-byte numbers): refuse, located, a
+    duration whose record would not fit in half this machine's memory (``duration: 1e9`` ended in MemoryError)."""
+    sc = a.sc
+    steps = sc.duration * sc.rates.control_hz
+    need = steps * (8 * a.robot.model.dof + 4) * 8
+    have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    if need > have / 2:
+        mark = a.loaded.source.key_marks.get(("duration",), a.loaded.source.value_marks[()])
+        raise ScenarioError([Diagnostic(mark, "duration", f"{sc.duration:g} s at {sc.rates.control_hz:g} Hz is "
+                            f"{steps:.3g} control steps, whose record needs ~{need / 2**30:.3g} GiB (this machine has "
+                            f"{have / 2**30:.3g} GiB); shorten the run or split it")])
 
 
 def _has(backend: Any, capability: type) -> bool:

@@ -2,10 +2,39 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict
+from typing import Any, get_args
+
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+BOOLEAN = "a number is needed here, not a boolean (YAML reads yes/no/on/off/true/false as booleans)"
+
+
+def _numbers_only(annotation: Any) -> bool:
+    """A number type, or a list/tuple/optional of them, that takes no boolean anywhere."""
+    if annotation in (float, int):
+        return True
+    kinds = [a for a in get_args(annotation) if a is not type(None) and a is not Ellipsis]
+    return bool(kinds) and all(_numbers_only(a) for a in kinds)
+
+
+def _has_bool(value: Any) -> bool:
+    return isinstance(value, bool) or (isinstance(value, (list, tuple)) and any(isinstance(v, bool) for v in value))
 
 
 class StrictModel(BaseModel):
-    """Base of every DSL model: unknown keys are errors, not silently ignored."""
+    """Base of every DSL model: unknown keys are errors, not silently ignored; numbers are finite and never
+    booleans (YAML reads ``yes``, ``no``, ``on``, ``off`` as booleans, and pydantic would take them as 1 and 0)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_booleans_for_numbers(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            bad = [k for k, v in data.items() if _has_bool(v) and (f := cls.model_fields.get(k)) is not None
+                   and _numbers_only(f.annotation)]
+            if bad:  # located at each such setting (a model validator: a field one would meet the union tags too)
+                raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
+                    type=PydanticCustomError("boolean_number", BOOLEAN), loc=(k,), input=data[k]) for k in bad])
+        return data
