@@ -60,7 +60,7 @@ def test_a_plugins_refusal_names_the_file_line_and_setting(tmp_path):
     for command in (("validate",), ("run", "--out", str(tmp_path / "out"))):  # validate finds what run refuses
         r = cli(command[0], str(path), *command[1:])
         assert r.returncode == 2 and "Traceback" not in r.stderr
-        assert f"{path}:18:3: controller.kp: controller 'joint-pd': joint-pd: kp has 2 values" in r.stderr
+        assert f"{path}:18:3: controller.kp: controller 'joint-pd': kp has 2 values" in r.stderr
     # a refusal that names none of the plugin's settings points at its section
     loaded = load_scenario(path)
     fields = type(loaded.model.controller).model_fields
@@ -72,7 +72,7 @@ def test_a_run_whose_first_plan_fails_passes_no_expectation_and_validate_refuses
     path = _write(tmp_path, ARM3.replace("segment_durations: [2]", "segment_durations: [2, 2]"))
     r = cli("validate", str(path))  # the first plan is made (not run) by validate too
     assert r.returncode == 2
-    assert (f"{path}:15:30: planner.segment_durations: planner 'multi-cubic': multi-cubic: 2 via points (A, B) "
+    assert (f"{path}:15:30: planner.segment_durations: planner 'multi-cubic': 2 via points (A, B) "
             "need 1 segment durations; segment_durations has 2") in r.stderr
     out = tmp_path / "out"
     r = cli("run", str(path), "--out", str(out))
