@@ -108,7 +108,7 @@ class ArmKeypad(Controller):
         self.kp[self.grip], self.kd[self.grip] = config.kp_gripper, config.kd_gripper
         if self.lift is not None:
             self.kp[self.lift], self.kd[self.lift] = config.kp_lift, config.kd_lift
-        self.store = open_store(config.store, context.out_dir, context.scenario_dir, dry=context.dry_run)
+        self.store = open_store(config.store, context.out_dir, context.resolve, dry=context.dry_run)
         self.jogger = Jogger(robot, config)
         self.keys = sorted(config.keys, key=lambda k: k.at)
         self.menu, self.selected = "MAIN", None

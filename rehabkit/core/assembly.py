@@ -108,9 +108,7 @@ class Assembly:
         try:
             return info.factory(config, self.context)
         except (ValueError, PlanningError) as exc:
-            text = str(exc).removeprefix(f"{config.type}: ")  # plugins often name themselves: once is enough
-            raise PluginSetupError(self.loaded.source, path, type(config).model_fields,
-                                   f"{kind} '{config.type}': {text}") from exc
+            raise PluginSetupError.refused(self.loaded.source, path, kind, config, exc) from exc
 
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
@@ -286,5 +284,4 @@ def check_first_plan(a: Assembly) -> None:
     try:
         a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
     except PlanningError as exc:
-        raise PluginSetupError(a.loaded.source, ("planner",), type(sc.planner).model_fields,
-                               f"planner '{sc.planner.type}': {str(exc).removeprefix(sc.planner.type + ': ')}") from exc
+        raise PluginSetupError.refused(a.loaded.source, ("planner",), "planner", sc.planner, exc) from exc

@@ -31,3 +31,9 @@ class PluginSetupError(ScenarioError, SetupError):
         mark = source.key_marks.get(at) or source.value_marks.get(path) or source.value_marks[()]
         ScenarioError.__init__(self, [Diagnostic(mark, ".".join(map(str, at)), message)])
         self.breach = None
+
+    @classmethod
+    def refused(cls, source: Any, path: tuple[str, ...], kind: str, config: Any, exc: Exception) -> PluginSetupError:
+        """Plugin ``config.type`` of ``kind`` (its section at ``path``) refused with ``exc``: named once."""
+        text = str(exc).removeprefix(f"{config.type}: ")  # plugins often name themselves
+        return cls(source, path, type(config).model_fields, f"{kind} '{config.type}': {text}")

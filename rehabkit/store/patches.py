@@ -17,6 +17,7 @@ import json
 import os
 import sqlite3
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -166,10 +167,12 @@ class PatchStore:
         self.db.close()
 
 
-def open_store(where: str, out_dir: Path | None, scenario_dir: Path, dry: bool = False) -> PatchStore | None:
+def open_store(where: str, out_dir: Path | None, resolve: Callable[[str], Path],
+               dry: bool = False) -> PatchStore | None:
     """``where``: 'user' (:func:`default_path`), 'run' (a fresh store in the run's folder, ``out_dir`` or
-    ./out) or a path (relative to the scenario). A store that can't be opened raises ``ValueError``. ``dry``
-    (a scenario checked, not run): an existing file is only checked, read-only; nothing is opened or made."""
+    ./out) or a path (``resolve`` makes it absolute: the plugin context's). A store that can't be opened raises
+    ``ValueError``. ``dry`` (a scenario checked, not run): an existing file is only checked, read-only; nothing is
+    opened or made."""
     if where == "user":
         path = default_path()
     elif where == "run":
@@ -178,8 +181,7 @@ def open_store(where: str, out_dir: Path | None, scenario_dir: Path, dry: bool =
             return None
         path.unlink(missing_ok=True)
     else:
-        path = Path(where).expanduser()
-        path = path if path.is_absolute() else (scenario_dir / path).resolve()
+        path = resolve(where)
     try:
         if dry:
             PatchStore.probe(path)
