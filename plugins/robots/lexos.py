@@ -135,6 +135,8 @@ def _joint_specs() -> tuple[list[JointSpec], list[JointSpec]]:
 class LexosRobot(Robot, WorkspaceTable, RandomReach):
     """L-Exos 4-DoF arm exoskeleton: 3R shoulder + elbow, paper's joint ranges, concave workspace."""
 
+    ik_kind = "position"  # four joints place the hand; the elbow's swivel is the redundancy
+
     def __init__(self, config: LexosConfig, context: Context | None = None):
         self.config = config
         self.lengths = (config.upper_arm, config.forearm)

@@ -17,6 +17,7 @@ setup would. The order:
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -261,7 +262,7 @@ def start_posture(a: Assembly) -> np.ndarray:
     if target.q is not None:
         return target.q.copy()
     try:
-        solutions = a.robot.ik(target.pose) if target.pose is not None else []
+        solutions = a.robot.solve_ik(target.pose, free=target.free) if target.pose is not None else []
     except NotImplementedError:
         solutions = []
     lim = a.robot.model.limits
@@ -284,4 +285,18 @@ def check_first_plan(a: Assembly) -> None:
     try:
         a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
     except PlanningError as exc:
-        raise PluginSetupError.refused(a.loaded.source, ("planner",), "planner", sc.planner, exc) from exc
+        raise _at_target(a, exc) or PluginSetupError.refused(a.loaded.source, ("planner",), "planner", sc.planner,
+                                                             exc) from exc
+
+
+def _at_target(a: Assembly, exc: Exception) -> PluginSetupError | None:
+    """A refusal naming one target (out of reach, say), located at where that target is given."""
+    named = re.match(r"target '([^']+)'", str(exc))
+    index = next((i for i, t in enumerate(a.sc.task.targets) if named and t.name == named[1]), None)
+    if index is None:
+        return None
+    spec = a.sc.task.targets[index]
+    key = next(k for k in ("position", "joints_deg", "joints_rad", "same_as", "random", "sensor")
+               if getattr(spec, k) is not None)
+    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), (),
+                            f"planner '{a.sc.planner.type}': {exc}")

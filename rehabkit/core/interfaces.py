@@ -129,12 +129,35 @@ class Robot(ABC):
         return self._pin_data
 
     def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
-        """Every joint solution reaching ``pose`` (4x4, base frame). Robots without IK raise.
+        """Every joint solution reaching ``pose`` (4x4, base frame), nearest ``reference`` first. Default: the
+        numeric IK of :attr:`numeric_ik`; robots with an analytic IK override this (and set :attr:`ik_kind`).
 
         ``reference`` is the current configuration, when there is one: joints the IK does not
         solve for (a lift, a gripper) keep their values from it.
         """
-        raise IKUnavailableError(f"robot '{self.model.name}' has no inverse kinematics for Cartesian targets")
+        return self.numeric_ik.solve(pose, reference)
+
+    def solve_ik(self, pose: np.ndarray, reference: np.ndarray | None = None, free: str = "") -> list[np.ndarray]:
+        """Solutions for a pose whose tool rotation is free about the axes in ``free`` (``"xyz"``: position only):
+        the robot's own :meth:`ik` where it answers that question, else the numeric IK."""
+        own = type(self).ik is not Robot.ik
+        if own and (self.ik_kind == "position" or not free):
+            return self.ik(pose, reference)
+        return self.numeric_ik.solve(pose, reference, free)
+
+    @property
+    def numeric_ik(self):
+        """The generic IK from the robot's Pinocchio model (:class:`rehabkit.models.ik.NumericIK`); it reads
+        the joint limits in force (a patient's narrowed ranges) on each solve."""
+        if getattr(self, "_numeric_ik", None) is None:
+            from rehabkit.models.ik import NumericIK
+
+            try:
+                self._numeric_ik = NumericIK(self.model)
+            except Exception as exc:  # Pinocchio can't load closed kinematic loops, for one
+                raise IKUnavailableError(f"robot '{self.model.name}' has no inverse kinematics: its model does "
+                                         f"not load in Pinocchio ({exc})") from exc
+        return self._numeric_ik
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.model!r})"
@@ -167,6 +190,12 @@ class Target:
     pose: np.ndarray | None = None
     position_only: bool = False
     same_as: str | None = None  # resolved alias: reuse that target's joint solution
+    free_axes: str = ""  # tool axes the orientation may turn about (a pointing target: "z")
+
+    @property
+    def free(self) -> str:
+        """The tool rotation axes left free by this target: ``"xyz"`` for a position alone."""
+        return "xyz" if self.position_only else self.free_axes
 
 
 @dataclass

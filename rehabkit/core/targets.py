@@ -34,7 +34,7 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
             ref = get(spec.same_as, (*stack, name))
             tgt = Target(name, q=None if ref.q is None else ref.q.copy(),
                          pose=None if ref.pose is None else ref.pose.copy(), position_only=ref.position_only,
-                         same_as=ref.same_as or ref.name)
+                         same_as=ref.same_as or ref.name, free_axes=ref.free_axes)
         elif spec.random is not None:
             if not isinstance(robot, RandomReach):
                 raise PlanningError(f"target '{name}': random targets need a robot that draws reachable points "
@@ -68,7 +68,7 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
                 pose[:3, :3] = rpy_to_matrix(np.radians(spec.rpy_deg))
             else:
                 position_only = True
-            tgt = Target(name, pose=pose, position_only=position_only)
+            tgt = Target(name, pose=pose, position_only=position_only, free_axes=spec.free_axes or "")
         out[name] = tgt
         return tgt
 
@@ -108,13 +108,9 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) ->
         elif (tgt.same_as or tgt.name) in solved:
             q = solved[tgt.same_as or tgt.name]
         else:
-            if tgt.position_only and robot.ik_kind != "position":
-                raise PlanningError(
-                    f"target '{tgt.name}' is a position only; give rpy_deg or orientation_of for a 6-DoF IK"
-                )
-            sols = robot.ik(tgt.pose)
+            sols = robot.solve_ik(tgt.pose, reference=prev, free=tgt.free)
             if not sols:
-                raise PlanningError(f"target '{tgt.name}' at {np.round(tgt.pose[:3, 3], 4).tolist()} m is out of reach")
+                raise PlanningError(unreachable(tgt, robot))
             sols = [prev + angular_distance(s, prev) for s in sols]
             inside = [s for s in sols if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
             if not inside:
@@ -123,9 +119,34 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) ->
             branches[tgt.name] = len(sols)
             reached = robot.fk(q)
             pos_err = max(pos_err, float(np.linalg.norm(reached[:3, 3] - tgt.pose[:3, 3])))
-            cos = (np.trace(reached[:3, :3].T @ tgt.pose[:3, :3]) - 1) / 2
-            rot_err = max(rot_err, float(np.degrees(np.arccos(np.clip(cos, -1, 1)))))
+            if not tgt.position_only:
+                rot_err = max(rot_err, axis_error_deg(reached[:3, :3], tgt.pose[:3, :3], tgt.free_axes))
         rows.append(np.asarray(q, dtype=float))
         solved.setdefault(tgt.same_as or tgt.name, rows[-1])
         prev = rows[-1]
     return JointWaypoints(np.array(rows), pos_err, rot_err, branches)
+
+
+def axis_error_deg(reached: np.ndarray, wanted: np.ndarray, free: str = "") -> float:
+    """Rotation error [deg] between two orientations, about the tool axes not in ``free`` (the components of the
+    rotation vector taking ``reached`` to ``wanted``, in the tool frame, as the numeric IK measures it)."""
+    R = reached.T @ wanted
+    angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+    kept = [i for i, axis in enumerate("xyz") if axis not in free]
+    if not kept or angle < 1e-12:
+        return 0.0
+    if not free or np.sin(angle) < 1e-6:  # the whole turn (near a half turn the axis is ill-defined: bound it)
+        return float(np.degrees(angle))
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2 * np.sin(angle))
+    return float(np.degrees(angle * np.abs(axis[kept]).max()))
+
+
+def unreachable(target: Target, robot: Robot) -> str:
+    """Why ``target`` has no joint solution, with how near the numeric IK came when it tried."""
+    where = np.round(target.pose[:3, 3], 4).tolist()
+    what = "position" if target.position_only else "pose"
+    closest = getattr(getattr(robot, "_numeric_ik", None), "closest_m", float("nan"))
+    near = f"; the closest the hand came is {closest * 1000:.0f} mm away" if np.isfinite(closest) and \
+        closest > 1e-3 else ""
+    return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
+            f"limits{near} (base frame; check the robot's base and the target's units)")

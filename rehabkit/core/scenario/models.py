@@ -101,6 +101,9 @@ class TargetSpec(StrictModel):
     position: Vec3 | None = Field(None, description="end-effector position in the robot base frame [m]")
     rpy_deg: Vec3 | None = Field(None, description="end-effector orientation; omit with orientation_of")
     orientation_of: str | None = Field(None, description="use the orientation of this (joint-space) target")
+    free_axes: Literal["x", "y", "z", "xy", "xz", "yz"] | None = Field(
+        None, description="tool axes the orientation may turn about: 'z' asks only that the tool's z axis point "
+                          "as rpy_deg's does")
     same_as: str | None = None
     sensor: str | None = Field(None, description="position seen by this sensor (its 'target_position' reading)")
     random: RandomTargetSpec | None = Field(None, description="a random point of the workspace (seeded)")
@@ -115,6 +118,8 @@ class TargetSpec(StrictModel):
             )
         if self.position is None and (self.rpy_deg is not None or self.orientation_of is not None):
             raise ValueError(f"target '{self.name}': rpy_deg/orientation_of only go with position")
+        if self.free_axes is not None and self.rpy_deg is None and self.orientation_of is None:
+            raise ValueError(f"target '{self.name}': free_axes goes with rpy_deg or orientation_of")
         if self.rpy_deg is not None and self.orientation_of is not None:
             raise ValueError(f"target '{self.name}': give rpy_deg or orientation_of, not both")
         return self
