@@ -18,7 +18,6 @@ import time
 import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
-from ompl import util as ou
 from pydantic import Field
 from scipy import ndimage
 
@@ -30,25 +29,9 @@ from rehabkit.core.targets import joint_waypoints
 from rehabkit.cspace.genetic import GAConfig, PathGA, resample
 from rehabkit.cspace.joint_matrix import JointMatrix, build_joint_matrix
 from rehabkit.cspace.occupancy import rasterise
+from rehabkit.cspace.ompl_seed import seed_ompl
 
 from .multi_cubic import MultiCubicTrajectory, solve_multi_cubic
-
-
-def _seed_ompl(seed: int) -> int:
-    """Reseed OMPL's process-wide seed generator; returns the seed used (OMPL ignores 0).
-
-    Each OMPL sampler takes its seed from that generator when it is made, and a plan makes all of its own, so a
-    plan reseeded first draws the same numbers whatever this process planned before (a serial sweep's later runs,
-    a test after another), as in a fresh process. OMPL logs an error for a reseed after its first draw, meant for
-    generators made earlier (they keep their streams): none of those takes part in a plan, so it is silenced.
-    """
-    seed = int(seed) % 2**32 or 2**31
-    ou.setLogLevel(ou.LogLevel.LOG_NONE)
-    try:
-        ou.RNG.setSeed(seed)
-    finally:
-        ou.setLogLevel(ou.LogLevel.LOG_WARN)
-    return seed
 
 
 class RrtGaConfig(StrictModel):
@@ -159,7 +142,7 @@ class RrtGaPlanner(Planner):
 
     def plan(self, request: PlanRequest) -> Plan:
         t0 = time.perf_counter()
-        ompl_seed = _seed_ompl(int(self.seed) + 7919 * self.plans)  # the first plan: the seed itself
+        ompl_seed = seed_ompl(int(self.seed) + 7919 * self.plans)  # the first plan: the seed itself
         self.plans += 1
         wp = joint_waypoints(request.targets, request.robot, request.q).q
         if not self.theta.is_free(wp).all():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,11 +93,13 @@ class JointWaypoints:
     ik_branches: dict[str, int]
 
 
-def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) -> JointWaypoints:
+def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray,
+                    accept: Callable[[np.ndarray], bool] | None = None) -> JointWaypoints:
     """Joint values for each target; Cartesian ones by IK, nearest branch to the previous point.
 
     The chosen branch is unwrapped relative to the previous waypoint so the arm
-    takes the short way round, then checked against the joint limits.
+    takes the short way round, then checked against the joint limits and ``accept`` (a planner's test, e.g.
+    free of the world's obstacles).
     """
     lim = robot.model.limits
     prev = np.asarray(q_start, dtype=float)
@@ -115,6 +118,11 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray) ->
             inside = [s for s in sols if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
             if not inside:
                 raise PlanningError(f"target '{tgt.name}': none of {len(sols)} IK solutions is within the joint limits")
+            if accept is not None:
+                inside = [s for s in inside if accept(s)]
+                if not inside:
+                    raise PlanningError(f"target '{tgt.name}': each of its IK solutions within the joint limits "
+                                        "touches the world (an obstacle or the floor)")
             q = min(inside, key=lambda s: float(np.linalg.norm(s - prev)))
             branches[tgt.name] = len(sols)
             reached = robot.fk(q)
