@@ -12,6 +12,8 @@ add via points).
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 from pydantic import Field
 
@@ -134,10 +136,8 @@ class CartesianPlanner(Planner):
     def _follow(self, robot, pose: np.ndarray, prev: np.ndarray, free: str, target: Target, s: float) -> np.ndarray:
         """Joint values at one sample of the line, continuing ``prev``."""
         q = None
-        try:
+        with contextlib.suppress(NotImplementedError):  # no Pinocchio model (closed loops): the robot's own IK
             q = robot.numeric_ik.track(pose, prev, free)
-        except NotImplementedError:  # no Pinocchio model (closed loops): the robot's own IK alone
-            pass
         if q is None:
             sols = robot.solve_ik(pose, reference=prev, free=free)
             if not sols:

@@ -53,14 +53,19 @@ class SceneCollision:
         """Robot–world geom pairs nearer than the clearance at joint values ``q``."""
         if not self._collide(q):
             return []
-        m, d = self.model, self.data
+        d = self.data
         out = []
         for c in d.contact[: d.ncon]:
             g1, g2 = int(c.geom[0]), int(c.geom[1])
             if self.robot_geom[g1] != self.robot_geom[g2] and c.dist < self.clearance:
                 r, w = (g1, g2) if self.robot_geom[g1] else (g2, g1)
-                out.append(Hit(m.geom(r).name or f"geom {r}", m.geom(w).name or f"geom {w}", float(c.dist)))
+                out.append(Hit(self._name(r), self._name(w), float(c.dist)))
         return out
+
+    def _name(self, geom: int) -> str:
+        """A geom's name, or its body's for an unnamed one (most model files name bodies, not geoms)."""
+        m = self.model
+        return m.geom(geom).name or f"{m.body(int(m.geom_bodyid[geom])).name or 'world'} (geom {geom})"
 
     def free(self, q: np.ndarray) -> bool:
         """No robot geom nearer than the clearance to the world at ``q``."""

@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit.models.dh import PoseSpec
+from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
 from rehabkit.models.strict import StrictModel
 
@@ -50,6 +51,9 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
     for key in ("meshdir", "texturedir"):  # assets must still resolve from a temporary copy
         current = getattr(spec, key) or ""
         setattr(spec, key, str((model_dir / current).resolve()))
+    for geom in spec.geoms:  # as on every rehabkit robot: links meet the world, not each other
+        if geom.contype or geom.conaffinity:
+            geom.contype, geom.conaffinity = ROBOT_CONTYPE, ROBOT_CONAFFINITY
     root = ET.fromstring(spec.to_xml())
     world = root.find("worldbody")
     if world is None:
@@ -72,6 +76,18 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
+def _load_spec(path: Path) -> mujoco.MjSpec:
+    """The file as an MjSpec. A URDF's fixed links are kept as bodies (MuJoCo would fuse them into their parents
+    and lose their names, yet a tool link on a fixed joint is the usual end effector), unless the file has
+    ``<mujoco>`` settings of its own."""
+    text = path.read_text(encoding="utf-8", errors="replace")
+    root = ET.fromstring(text) if path.suffix.lower() == ".urdf" else None
+    if root is None or root.tag != "robot" or root.find("mujoco") is not None:
+        return mujoco.MjSpec.from_file(str(path))
+    ET.SubElement(ET.SubElement(root, "mujoco"), "compiler", {"fusestatic": "false", "meshdir": str(path.parent)})
+    return mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"))
+
+
 def robot_from_file(
     path: Path,
     config: ModelFileConfig,
@@ -89,7 +105,7 @@ def robot_from_file(
     if not path.exists():
         raise ValueError(f"model file not found: {path}")
     try:
-        spec = mujoco.MjSpec.from_file(str(path))
+        spec = _load_spec(path)
         model = spec.compile()
     except Exception as exc:  # MuJoCo's own message says what and where
         raise ValueError(f"MuJoCo cannot load {path}: {exc}") from None

@@ -1,0 +1,46 @@
+"""A user's own robots (examples/robots: a DH table, a URDF and an MJCF file) reach Cartesian targets past the
+world's obstacles with each generic planner, and meet their scenario's expectations; the OMPL planner's path is
+free of the world when checked by MuJoCo along the timed reference."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rehabkit.core.runner import Runner
+from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.cspace.scene_check import SceneCollision
+
+EXAMPLES = Path(__file__).parents[1] / "examples" / "robots"
+ROBOTS = ["dh_arm3", "urdf_arm4", "mjcf_arm5"]
+
+
+@pytest.mark.parametrize("planner", ["ompl-joint", "cartesian"])
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_an_own_robot_meets_its_expectations_with_each_generic_planner(robot, planner):
+    loaded = load_scenario(EXAMPLES / f"{robot}.yaml", {"planner.type": planner})
+    runner = Runner(loaded)
+    result = runner.run()
+    assert result.passed, result.failures
+    m = result.metrics
+    assert m["reaches_completed"] == m["reaches"] >= 2
+    assert m["final_position_error_m"] < 0.002 and m["contact_steps"] == 0
+    if planner == "ompl-joint":
+        assert m["states_checked"] > 0
+    else:
+        assert m["ik_samples"] > 20 and m["path_length_ratio"] == pytest.approx(1.0, abs=0.02)  # straight lines
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_joint_space_path_goes_around_the_obstacles_not_through_them(robot):
+    loaded = load_scenario(EXAMPLES / f"{robot}.yaml")
+    runner = Runner(loaded)
+    result = runner.run()
+    checker = SceneCollision(runner.setup.robot.model, loaded.model.world)  # the true geometry, no clearance
+    q_ref = np.asarray(result.trace.q_ref)  # the timed reference, every control step
+    assert len(q_ref) > 5000 and checker.first_collision(q_ref) == -1
+    left, right = np.radians(result.summary["plans"][0]["waypoints_deg"][-2:])
+    straight = left + np.linspace(0, 1, 200)[:, None] * (right - left)
+    if robot == "urdf_arm4":  # no via points: the pillar stands between its targets (the others route by them)
+        assert result.metrics["path_vertices"] > 4 and result.metrics["path_length_ratio"] > 1.3  # a detour...
+        assert checker.first_collision(straight) >= 0  # ...which the straight joint-space line would hit
