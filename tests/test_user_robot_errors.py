@@ -123,3 +123,26 @@ def test_validate_refuses_booleans_non_finite_numbers_and_runs_too_long_to_recor
     assert main(["validate", str(path)]) == 2  # in-process: the CLI's own handling, without a process each
     err = capsys.readouterr().err
     assert f"{path}:{where}: " in err and says in err and "Traceback" not in err
+
+
+def test_gains_auto_tracks_where_hand_tuned_stiff_gains_shake_the_robot_into_a_stop(tmp_path):
+    """The issue's own case: gains too stiff for light links in a posture where the yaw axis carries little
+    inertia (the arm upright). gains: auto scales the PD by the model's inertia in every posture."""
+    up = ARM3.replace("{name: B, joints_deg: [40, 60, 20]}", "{name: B, joints_deg: [-120, 80, 90]}")
+    up = up.replace("{name: A, joints_deg: [0, 30, 60]}", "{name: A, joints_deg: [-60, 20, 90]}")
+    stiff = Runner(load_scenario(_write(tmp_path, up))).run()
+    assert not stiff.passed and stiff.metrics["safety_events"] >= 1  # a speed trip
+    auto = up.replace("  kp: [300, 300, 150]\n  kd: [20, 20, 8]\n", "  gains: auto\n")
+    result = Runner(load_scenario(_write(tmp_path, auto))).run()
+    assert result.passed and result.metrics["safety_events"] == 0 and result.metrics["tracking_max_deg"] < 0.05
+
+
+def test_gains_auto_refuses_hand_gains_and_a_bandwidth_the_control_rate_cannot_give(tmp_path):
+    both = ARM3.replace("  kp: [300, 300, 150]\n", "  gains: auto\n  kp: [300, 300, 150]\n")
+    done = cli("validate", str(_write(tmp_path, both)))
+    assert done.returncode == 2 and "arm3.yaml:19:3: controller.kp:" in done.stderr, done.stderr
+    assert "kp and kd are computed from the model's inertia here (auto)" in done.stderr
+    fast = ARM3.replace("  kp: [300, 300, 150]\n  kd: [20, 20, 8]\n", "  gains: auto\n  bandwidth_hz: 100\n")
+    done = cli("validate", str(_write(tmp_path, fast)))
+    assert done.returncode == 2 and "arm3.yaml:19:3: controller.bandwidth_hz" in done.stderr, done.stderr
+    assert "at most 48" in done.stderr

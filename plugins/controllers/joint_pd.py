@@ -13,10 +13,15 @@ from rehabkit.core.interfaces import Context, Controller, StrictModel
 
 
 class JointPDConfig(StrictModel):
-    """Gains per joint (a list) or for all joints (one number)."""
+    """Gains per joint (a list) or for all joints (one number); or ``gains: auto`` from the model's inertia."""
 
-    kp: float | list[float] = Field(100.0, description="stiffness [N·m/rad]")
-    kd: float | list[float] = Field(10.0, description="damping [N·m·s/rad]")
+    gains: Literal["manual", "auto"] = Field(
+        "manual", description="auto: τ = M(q)(ω²e + 2ζωė) with the joint-space inertia M(q) of the robot's model, "
+                              "so every joint, light or heavy, in any posture, responds at bandwidth_hz")
+    kp: float | list[float] = Field(100.0, description="stiffness [N·m/rad] (gains: manual)")
+    kd: float | list[float] = Field(10.0, description="damping [N·m·s/rad] (gains: manual)")
+    bandwidth_hz: float = Field(4.0, gt=0, description="gains: auto — each joint's closed-loop natural frequency [Hz]")
+    damping_ratio: float = Field(1.0, gt=0, description="gains: auto — each joint's damping ratio (1: critical)")
     feedforward: Literal["gravity", "inverse-dynamics", "none"] = Field(
         "gravity", description="gravity: RNEA(q, 0, 0); inverse-dynamics: RNEA(q, qd_ref, qdd_ref)"
     )
@@ -28,12 +33,25 @@ class JointPD(Controller):
     def __init__(self, config: JointPDConfig, context: Context):
         model = context.robot.model
         n = model.dof
-        self.kp = self._gains(config.kp, n, "kp")
-        self.kd = self._gains(config.kd, n, "kd")
+        self.auto = config.gains == "auto"
+        if self.auto:
+            given = [k for k in ("kp", "kd") if k in config.model_fields_set]
+            if given:
+                raise ValueError(f"joint-pd: {' and '.join(given)} {'are' if len(given) > 1 else 'is'} computed "
+                                 "from the model's inertia here (auto); leave it out, or ask for manual ones")
+            w = 2 * np.pi * config.bandwidth_hz
+            if w * context.control_dt > 0.3:  # a sampled PD this fast against its own period rings or diverges
+                most = 0.3 / context.control_dt / 2 / np.pi
+                raise ValueError(f"joint-pd: bandwidth_hz {config.bandwidth_hz:g} is too high for a control period "
+                                 f"of {context.control_dt * 1000:g} ms; at most {most:.0f}")
+            self.kp, self.kd = np.full(n, w * w), np.full(n, 2 * config.damping_ratio * w)  # per unit inertia
+        else:
+            self.kp = self._gains(config.kp, n, "kp")
+            self.kd = self._gains(config.kd, n, "kd")
         self.mode = config.feedforward
         self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
         self._gravity_torque = context.robot.gravity_torque  # the robot's own model (Pinocchio for serial arms)
-        if self._inverse_dynamics:
+        if self._inverse_dynamics or self.auto:
             self._model = model.pin_model
             self._data = self._model.createData()
 
@@ -48,6 +66,9 @@ class JointPD(Controller):
 
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
         tau = self.kp * (q_ref - q) + self.kd * (qd_ref - qd)
+        if self.auto:
+            M = pin.crba(self._model, self._data, q)  # the upper triangle: mirror it
+            tau = (np.triu(M) + np.triu(M, 1).T) @ tau
         if self._inverse_dynamics:
             tau += pin.rnea(self._model, self._data, q, qd_ref, qdd_ref)
         elif self._gravity:

@@ -51,13 +51,16 @@ def cubic_system(durations: np.ndarray) -> np.ndarray:
     return A
 
 
-def solve_multi_cubic(points: np.ndarray, durations: np.ndarray) -> np.ndarray:
-    """Coefficients, shape (m, 4, dof), for via points (m+1, dof) and segment durations (m,)."""
+def solve_multi_cubic(points: np.ndarray, durations: np.ndarray, v0: np.ndarray | None = None) -> np.ndarray:
+    """Coefficients, shape (m, 4, dof), for via points (m+1, dof) and segment durations (m,); the motion starts
+    at velocity ``v0`` (default: at rest) and ends at rest."""
     m = len(durations)
     if points.shape[0] != m + 1:
         raise ValueError(f"{points.shape[0]} via points need {points.shape[0] - 1} durations, got {m}")
     rhs = np.zeros((4 * m, points.shape[1]))
     rhs[0] = points[0]
+    if v0 is not None:
+        rhs[1] = v0
     r = 2
     for j in range(m):
         rhs[r] = points[j + 1]
@@ -112,7 +115,8 @@ class MultiCubicConfig(StrictModel):
 
     segment_durations: list[float] = Field(min_length=1, description="[s], one per segment between via points")
     start_from_current: bool = Field(
-        False, description="prepend the current joint state as the first via point (for replanning mid-motion)"
+        False, description="prepend the current joint state as the first via point, leaving at the current "
+                           "velocity (for replanning mid-motion)"
     )
 
 
@@ -136,7 +140,8 @@ class MultiCubicPlanner(Planner):
                 f"multi-cubic: {len(points)} via points ({', '.join(names)}) need {len(points) - 1} segment "
                 f"durations; segment_durations has {len(durations)}"
             )
-        traj = MultiCubicTrajectory(solve_multi_cubic(points, durations), durations)
+        v0 = np.asarray(request.qd, float) if self.config.start_from_current else None
+        traj = MultiCubicTrajectory(solve_multi_cubic(points, durations, v0), durations)
         jumps = np.degrees(traj.continuity())
         diag: dict[str, float] = {
             "ik_roundtrip_position_error_m": wp.ik_position_error_m,

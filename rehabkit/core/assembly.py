@@ -91,6 +91,7 @@ class Assembly:
     sensors: dict[str, Sensor] = field(default_factory=dict)
     backend: Backend | None = None
     planner: Planner | None = None
+    event_planners: dict[int, Planner] = field(default_factory=dict)  # replan events with planner settings
     controller: Controller | None = None
     patient: Patient | None = None
     hand_force: HandForce | None = None
@@ -132,6 +133,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     a.context = replace(a.context, robot=a.robot)
     _narrow_limits(a)
     _check_capabilities(a)
+    _check_scene_names(a)
     try:
         a.targets = resolve_targets(sc.task, a.robot, sc.seed)
     except PlanningError as exc:
@@ -146,6 +148,10 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     if upto == "run":  # (a backend may start processes: a hardware link's bridge)
         a.backend = a.make("backend", sc.backend, ("backend",))
     a.planner = a.make("planner", sc.planner, ("planner",))
+    for i, ev in enumerate(sc.task.events):
+        if ev.planner is not None:  # (the settings were validated with the scenario, each located)
+            config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
+            a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
     a.context = replace(a.context, reference_space=a.planner.space)
     a.controller = a.make("controller", sc.controller, ("controller",))
     if a.planner.space != a.controller.reference:
@@ -196,6 +202,24 @@ def _check_capabilities(a: Assembly) -> None:
         problems.append("task events that 'move' objects need a backend with scene objects")
     if problems:
         raise SetupError(f"{'; '.join(problems)} (robot '{sc.robot.type}', backend '{sc.backend.type}')")
+
+
+SCENE_NAMES = ("floor", "key_light")  # what the scene adds besides the robot and the world's objects
+
+
+def _check_scene_names(a: Assembly) -> None:
+    """A world object or camera may not take a name the scene already uses (MuJoCo would refuse the merged scene,
+    pointing into XML the user never wrote)."""
+    import xml.etree.ElementTree as ET
+
+    robot = {e.get("name"): e.tag for e in ET.fromstring(a.robot.model.mjcf).iter() if e.get("name")}
+    for kind, items in (("objects", a.sc.world.objects), ("cameras", a.sc.world.cameras)):
+        for i, item in enumerate(items):
+            owner = "rehabkit's scene" if item.name in SCENE_NAMES else (
+                f"the robot's {robot[item.name]}" if item.name in robot else None)
+            if owner:
+                raise PluginSetupError(a.loaded.source, ("world", kind, i, "name"), (),
+                                       f"world.{kind}: the name '{item.name}' is taken by {owner}; rename it")
 
 
 def _check_duration(a: Assembly) -> None:

@@ -30,9 +30,10 @@ class PlanGate:
         self.metrics: dict[str, float] = {}
         self.warnings: list[dict] = []
 
-    def ask(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
-        """The planner's plan from ``(q, qd)`` through ``targets`` (its ``PlanningError`` passes through)."""
-        return self.planner.plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
+    def ask(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target], planner=None) -> Plan:
+        """The plan from ``(q, qd)`` through ``targets`` by ``planner`` (default: the scenario's; an event's own
+        settings make another); its ``PlanningError`` passes through."""
+        return (planner or self.planner).plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
 
     def problem(self, plan: Plan) -> tuple[str | None, LimitBreach | None]:
         """Why the plan must not run (and the limit breach, when that is why), or ``(None, None)``."""

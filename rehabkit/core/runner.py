@@ -159,9 +159,11 @@ class Runner:
 
     # -- planning -----------------------------------------------------------
 
-    def _replan(self, k: int, t: float, q: np.ndarray, qd: np.ndarray, names: list[str]) -> None:
-        """Plan through the named targets from the current state and follow it from step ``k``; a plan that
-        can't be made or must not run stops the robot, saying why."""
+    def _replan(self, k: int, t: float, q: np.ndarray, qd: np.ndarray, names: list[str],
+                event: int | None = None) -> None:
+        """Plan through the named targets from the current state and follow it from step ``k`` (by the planner
+        with event ``event``'s settings, when it has some); a plan that can't be made or must not run stops the
+        robot, saying why."""
         a, self._refused = self.setup, None
         for name in names:  # sensor-driven targets take their latest sensed position
             spec = self.timeline.specs[name]
@@ -174,7 +176,7 @@ class Runner:
                 pose[:3, 3] = pos
                 a.targets[name] = Target(name, pose=pose, position_only=True)
         try:
-            plan = self.gate.ask(t, q, qd, [a.targets[n] for n in names])
+            plan = self.gate.ask(t, q, qd, [a.targets[n] for n in names], a.event_planners.get(event))
         except PlanningError as exc:
             self._stop(t, q, f"planner failed: {exc}")
             return
@@ -184,6 +186,7 @@ class Runner:
             return
         self.gate.warn_box(t, plan, a.robot.model.to_world)
         self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
+        self.timeline.following(names, t, plan.waypoint_times)
 
     def _stop(self, t: float, q: np.ndarray, why: str, then: str = "") -> None:
         self._refusal = why

@@ -17,13 +17,14 @@ import numpy as np
 from rehabkit.core.assembly import Assembly
 from rehabkit.core.sensor_threads import SensorThreads
 
-Replan = Callable[[int, float, np.ndarray, np.ndarray, list[str]], None]
+Replan = Callable[[int, float, np.ndarray, np.ndarray, list[str], int | None], None]
 
 
 class Timeline:
     """Events, scene actions, sensors and the stop of one run.
 
-    ``replan(k, t, q, qd, target_names)`` plans and installs; ``log`` (may be ``None``) records events and readings.
+    ``replan(k, t, q, qd, target_names, event)`` plans and installs (with the event's planner settings, if it has
+    some); ``log`` (may be ``None``) records events and readings.
     """
 
     def __init__(self, setup: Assembly, replan: Replan, log, threads: SensorThreads | None):
@@ -33,6 +34,7 @@ class Timeline:
         self.specs = {t.name: t for t in sc.task.targets}
         self.observations: dict[str, dict[str, Any]] = {}
         self.fired: list[dict] = []
+        self._following: tuple[list[str], float, np.ndarray | None] = ([], 0.0, None)
         self.acted: list[dict] = []
         self.actions: list[tuple[int, str, str]] = []  # (step, 'release' | 'grasp', object)
         self._timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(self.events) if e.at is not None)
@@ -52,6 +54,21 @@ class Timeline:
         dt = self.setup.schedule.control_dt
         self.actions = sorted([a for a in self.actions if a[0] < k0]
                               + [(k0 + int(round(at / dt)), kind, obj) for at, kind, obj in actions])
+
+    def following(self, names: list[str], t0: float, times: np.ndarray | None) -> None:
+        """The plan now followed: its targets, its start [s] and when it passes them (from its start)."""
+        self._following = (list(names), t0, None if times is None else np.asarray(times, float))
+
+    def remaining(self, trigger: str | None, t: float) -> list[str]:
+        """Targets of the plan being followed not reached yet: after ``trigger`` (the target whose reaching fired
+        the event), else those it passes after ``t``."""
+        names, t0, times = self._following
+        if trigger is not None and trigger in names:
+            return names[names.index(trigger) + 1:]
+        if times is None or len(times) < len(names):
+            return names
+        ahead = t0 + times[len(times) - len(names):] > t + 1e-9  # a plan's own start point comes first
+        return [n for n, later in zip(names, ahead) if later]
 
     def sensed(self, name: str) -> np.ndarray | None:
         """Where the sensor of a sensor-driven target last saw it (base frame), if it did."""
@@ -155,5 +172,11 @@ class Timeline:
                 self._ramp_out_at = k
         elif ev.action == "move":
             self.setup.backend.move_object(ev.object, np.asarray(ev.position, float))
-        else:
-            self.replan(k, t, q, qd, ev.sequence or self.setup.sc.task.order())
+        elif ev.moved is not None:  # a sensed target moved: reach it (the sequence) again
+            self.replan(k, t, q, qd, ev.sequence or self.setup.sc.task.order(), i)
+        else:  # from where the arm is to what is left
+            names = ev.sequence or self.remaining(ev.reached, t)
+            if names:
+                self.replan(k, t, q, qd, names, i)
+            elif self.log:
+                self.log.event(t, f"event {i}: every target is reached; nothing to plan", level="INFO")

@@ -59,7 +59,8 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
     if world is None:
         raise ValueError("the model has no <worldbody>")
     movable = [c for c in list(world) if c.tag in ("body", "geom", "site", "frame")]
-    base = ET.Element("body", {"name": "base"})
+    taken = {b.get("name") for b in root.iter("body")}
+    base = ET.Element("body", {"name": "base" if "base" not in taken else "rehabkit_base"})  # the file's own stays
     for child in movable:
         if child.tag == "body" and child.find("freejoint") is not None:
             raise ValueError(f"body '{child.get('name')}' is free-floating; rehabkit robots have a fixed base")

@@ -225,10 +225,38 @@ def validate_source(src: Source, registry: PluginRegistry, file: Path) -> Scenar
             problems.append(Diagnostic(mark, shown, msg))
         if not problems:
             problems.append(Diagnostic(Mark(str(file), 0, 0), "", str(exc)))
+    else:
+        problems += _event_planner_problems(src, result)
     if problems:
         problems.sort(key=lambda d: (d.mark.file, d.mark.line, d.mark.col))
         raise ScenarioError(problems)
     return result
+
+
+def _event_planner_problems(src: Source, scenario: ScenarioBase) -> list[Diagnostic]:
+    """A replan event's ``planner:`` settings, checked against the scenario's planner as they will be merged."""
+    out: list[Diagnostic] = []
+    for i, ev in enumerate(scenario.task.events):
+        base = ("task", "events", i, "planner")
+        if ev.planner is None:
+            continue
+        if "type" in ev.planner:
+            path, mark = _locate(src, (*base, "type"), key=True)
+            out.append(Diagnostic(mark, _dotted((*base, "type")), "an event's planner settings are for the "
+                                  f"scenario's planner ('{scenario.planner.type}'); leave out 'type'"))
+            continue
+        model = type(scenario.planner)
+        try:
+            model.model_validate({**scenario.planner.model_dump(), **ev.planner})
+        except ValidationError as exc:
+            for err in exc.errors():
+                loc = (*base, *err["loc"])
+                unknown = err["type"] == "extra_forbidden"
+                _, mark = _locate(src, loc, key=unknown)
+                msg = (f"unknown field '{loc[-1]}' of planner '{scenario.planner.type}'"
+                       f"{suggest(str(loc[-1]), list(model.model_fields))}" if unknown else _describe(err))
+                out.append(Diagnostic(mark, _dotted(loc), msg))
+    return out
 
 
 def load_scenario(

@@ -139,7 +139,10 @@ class EventSpec(StrictModel):
     tolerance_m: float = Field(0.005, gt=0, description="distance for 'reached' / movement for 'moved' [m]")
     settle: int = Field(3, ge=1, description="'moved': readings the new position must hold before firing")
     action: Literal["replan", "stop", "move"] = "replan"
-    sequence: list[str] | None = Field(None, description="replan through these targets (default: the task's)")
+    sequence: list[str] | None = Field(None, description="replan through these targets (default: those of the plan "
+                                                          "being followed not reached yet)")
+    planner: dict[str, Any] | None = Field(None, description="'replan': settings of the scenario's planner for this "
+                                                             "plan, over its own (e.g. segment_durations)")
     object: str | None = Field(None, description="'move': the mocap object")
     position: Vec3 | None = Field(None, description="'move': its new world position [m]")
 
@@ -147,6 +150,8 @@ class EventSpec(StrictModel):
     def _one_trigger(self) -> EventSpec:
         if sum(x is not None for x in (self.at, self.reached, self.moved)) != 1:
             raise ValueError("an event needs exactly one trigger: 'at', 'reached' or 'moved'")
+        if self.planner is not None and self.action != "replan":
+            raise ValueError("only a 'replan' event takes planner settings")
         if (self.action == "move") != (self.object is not None and self.position is not None):
             raise ValueError("a 'move' event needs 'object' and 'position' (and only a move takes them)")
         return self

@@ -1,0 +1,132 @@
+"""The README runs: each of its code blocks and each command it names is executed here or, where a run is long,
+by the test named for it below (checked to exist)."""
+
+import json
+import re
+import shlex
+import subprocess
+import sys
+
+import numpy as np
+import yaml
+
+from tests.conftest import ROOT
+from tests.test_cli import cli
+
+README = (ROOT / "README.md").read_text()
+BLOCKS = re.findall(r"```(\w*)\n(.*?)```", README, re.S)
+
+# commands the README names whose runs other tests make (long ones): command -> test file :: test function
+EXECUTED_ELSEWHERE = {
+    "rehabkit replay out/lexos_patient --set controller.type=assist-as-needed":
+        "tests/test_replay.py::test_replay_with_assist_as_needed_same_inputs_less_assistance",
+    "rehabkit sweep scenarios/lexos_planner_trial.yaml":
+        "tests/test_sweep.py::test_serial_and_ray_give_the_same_rows_and_a_second_call_runs_nothing",
+    "rehabkit run scenarios/lexos_reaching.yaml --set backend.type=hardware":
+        "tests/test_hardware_link.py::test_lexos_reaching_over_the_link_reaches_the_proxy_points_of_the_simulation",
+    "rehabkit plugins": "tests/test_cli.py::test_plugins_and_schema_commands",
+    "rehabkit plugins --json": "tests/test_cli.py::test_plugins_and_schema_commands",
+    "rehabkit schema": "tests/test_cli.py::test_plugins_and_schema_commands",
+    "rehabkit schema > rehabkit.schema.json": "tests/test_cli.py::test_plugins_and_schema_commands",
+    "rehabkit --version": "tests/test_user_robot_errors.py::test_contacts_are_said_and_the_version_is_known",
+}
+
+
+def _block_after(marker: str, lang: str) -> str:
+    tail = README[README.index(marker):]
+    return re.search(rf"```{lang}\n(.*?)```", tail, re.S).group(1)
+
+
+def _run(command: str, tmp_path, cwd=ROOT):
+    """A README command line, its ``--out`` sent to ``tmp_path`` (the README's own goes under the repository)."""
+    args = shlex.split(command.split("#")[0])
+    assert args[0] == "rehabkit"
+    if "--out" in args:
+        args[args.index("--out") + 1] = str(tmp_path / args[args.index("--out") + 1].replace("/", "_"))
+    return subprocess.run([sys.executable, "-m", "rehabkit.cli", *args[1:]], capture_output=True, text=True,
+                          cwd=cwd), args
+
+
+def test_the_main_job_runs_as_the_first_lines_say(tmp_path):
+    lang, block = BLOCKS[0]
+    assert lang == "bash"
+    main, tests = block.strip().splitlines()
+    assert main.startswith('pip install -e ".[dev]" && rehabkit run ') and "python -m pytest" in tests
+    done, args = _run(main.split("&& ", 1)[1], tmp_path)
+    assert done.returncode == 0, done.stderr
+    out = tmp_path / args[args.index("--out") + 1].split("/")[-1]
+    assert json.loads((out / "summary.json").read_text())["passed"] and (out / "run.rrd").stat().st_size > 0
+
+
+def test_the_bad_file_gives_exactly_the_errors_shown(tmp_path):
+    (tmp_path / "bad.yaml").write_text(_block_after("For this `bad.yaml`", "yaml"))
+    shown = _block_after("`rehabkit validate bad.yaml` prints", "").strip().splitlines()
+    done = cli("validate", "bad.yaml", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == shown
+
+
+def test_the_scenario_example_runs_and_replans_from_where_the_arm_is(tmp_path):
+    text = _block_after("## Scenarios", "yaml")
+    path = tmp_path / "example.yaml"
+    path.write_text(text)
+    assert cli("validate", str(path)).returncode == 0
+    done = cli("run", str(path), "--out", str(tmp_path / "out"))
+    assert done.returncode == 0, done.stdout + done.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    first, again = summary["plans"]
+    assert first["t"] == 0 and 2.0 < again["t"] < 3.5  # when the hand came within 5 mm of B
+    # the second plan leaves from where the arm was (near B, not back at A) and goes to C (= A) only
+    a = np.array(yaml.safe_load(text)["task"]["targets"][0]["joints_deg"])
+    start, end = np.array(again["waypoints_deg"][0]), np.array(again["waypoints_deg"][-1])
+    assert len(again["waypoints_deg"]) == 2 and np.abs(start - a).max() > 20 and np.abs(end - a).max() < 1e-6
+    assert summary["metrics"]["safety_events"] == 0 and summary["metrics"]["tracking_max_deg"] < 0.5
+    assert "SAFETY" not in done.stdout
+
+
+def test_the_safety_section_is_valid_on_a_robot_with_a_simulated_patient(tmp_path):
+    envelope = yaml.safe_load(_block_after("declarative envelope on top of the robot's limits", "yaml"))
+    path = tmp_path / "enveloped.yaml"
+    (tmp_path / "patients").mkdir()  # the base file's relative patient path resolves from the extending file
+    (tmp_path / "patients" / "p01.yaml").write_text((ROOT / "scenarios" / "patients" / "p01.yaml").read_text())
+    path.write_text(f"extends: {ROOT / 'scenarios' / 'lexos_patient.yaml'}\n" + yaml.safe_dump(envelope))
+    done = cli("validate", str(path))
+    assert done.returncode == 0, done.stderr
+
+
+def test_your_own_robot_commands_run(tmp_path):
+    block = _block_after("## Your own robot", "bash")
+    for line in block.strip().splitlines():
+        done, args = _run(line, tmp_path)
+        assert done.returncode == 0, (line, done.stdout, done.stderr)
+        if args[1] == "run":
+            assert "PASS" in done.stdout and "FAIL" not in done.stdout
+
+
+def test_the_plugin_snippet_is_the_example_plugins_registration():
+    snippet = next(b for lang, b in BLOCKS if lang == "python" and "rehabkit_register_planners" in b)
+    source = (ROOT / "examples" / "third_party_plugin" / "rehabkit_minjerk" / "__init__.py").read_text()
+    assert 'registry.add("min-jerk", config=MinJerkConfig, factory=MinJerkPlanner)' in snippet
+    assert 'registry.add("min-jerk", config=MinJerkConfig, factory=MinJerkPlanner)' in source
+
+
+def test_the_scenario_test_example_passes_under_pytest(tmp_path):
+    snippet = next(b for lang, b in BLOCKS if lang == "python" and "def test_speed" in b)
+    test_file = tmp_path / "test_readme_speed.py"
+    test_file.write_text("import pytest\n\n\n" + snippet)
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(test_file),
+                           "--rootdir", str(tmp_path)], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0 and "3 passed" in done.stdout, done.stdout + done.stderr
+
+
+def test_every_command_the_readme_names_is_executed():
+    named = {c.strip() for c in re.findall(r"`(rehabkit [^`]*)`", README)}
+    concrete = {c for c in named if not re.search(r"[A-Z]{2,}|S\.yaml|\[", c) and len(c.split()) > 1}
+    here = {"rehabkit validate bad.yaml"}  # (the bare names of commands are not commands to run)
+    bare = {"rehabkit run", "rehabkit validate", "rehabkit replay", "rehabkit bridge", "rehabkit plugins",
+            "rehabkit schema"}
+    assert concrete - here - bare - set(EXECUTED_ELSEWHERE) == set()
+    for command, node in EXECUTED_ELSEWHERE.items():
+        file, name = node.split("::")
+        assert f"def {name}(" in (ROOT / file).read_text(), node
+        assert command.split()[1] in (ROOT / file).read_text(), node  # that test does run the command
