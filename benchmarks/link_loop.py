@@ -52,7 +52,7 @@ def main() -> None:
         path = ROOT / "scenarios" / f"{name}.yaml"
         sim = run_scenario(path)
         for _ in range(args.repeats):
-            base_miss, _ = baseline(sim.summary["sim_time_s"])
+            base_miss, _ = baseline(sim.summary["metrics"]["sim_time_s"])
             hw = run_scenario(path, ["backend.type=hardware"])
             m = hw.metrics
             n = min(len(sim.trace.x if sim.trace.x is not None else sim.trace.q), len(hw.trace.q))
@@ -66,7 +66,7 @@ def main() -> None:
                   f"{m['tick_lateness_p99_ms']:8.2f}  {m['rtt_median_ms']:8.2f} {m['rtt_p99_ms']:8.2f} "
                   f"{met:>3d}/{len(hw.summary['expectations']):<3d} {rms:>10s}")
         ls = run_scenario(path, ["backend.type=hardware", "backend.clock=lockstep"])
-        wall = {k: r.summary["wall_time_s"] for k, r in (("sim", sim), ("lockstep", ls), ("realtime", hw))}
+        wall = {k: r.summary["metrics"]["wall_time_s"] for k, r in (("sim", sim), ("lockstep", ls), ("realtime", hw))}
         dev = np.degrees(np.abs(sim.trace.q - ls.trace.q).max()) if len(sim.trace.q) == len(ls.trace.q) else np.nan
         print(f"{name:16s} lock-step loop {wall['lockstep']:.2f} s = {wall['lockstep'] / wall['sim']:.1f}x the "
               f"simulation's, {wall['lockstep'] / wall['realtime']:.2f}x the real-time link's; "

@@ -42,9 +42,9 @@ def loop_seconds(overrides: dict) -> float:
         warnings.simplefilter("ignore")  # the controller swap drops the PD gains, with a warning
         loaded = load_scenario(SCENARIO, {"logging.rrd": False, **overrides})
     summary = Runner(loaded).run().summary
-    if summary["sim_time_s"] < 8.5 - 1e-6:
+    if summary["metrics"]["sim_time_s"] < 8.5 - 1e-6:
         raise SystemExit(f"{overrides}: the run stopped early: {summary['safety']['events']}")
-    return summary["wall_time_s"]
+    return summary["metrics"]["wall_time_s"]
 
 
 def main() -> None:

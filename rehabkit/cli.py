@@ -26,19 +26,41 @@ def _err(msg: str) -> None:
     print(msg, file=sys.stderr)
 
 
+def _unwritable(out: Path) -> str | None:
+    """Why the run could not write its outputs to ``out``, found before anything runs (or ``None``)."""
+    import tempfile
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        return f"error: --out {out}: cannot write there ({exc.strerror or exc}); choose another directory"
+    return None
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from rehabkit.api import run_scenario
     from rehabkit.run_report import run_report
 
     out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
+    if (why := _unwritable(out)) is not None:
+        _err(why)
+        return EXIT_INVALID
     result = run_scenario(args.scenario, overrides=args.set, out_dir=out, spawn=args.spawn, progress=True)
     print(run_report(result.summary, out))
+    if result.refusal is not None:  # the scenario as written could not be planned: bad input, said where
+        _err(str(result.refusal))
+        return EXIT_INVALID
     return EXIT_OK if result.passed else EXIT_FAILED
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from rehabkit.sweep.engine import run_sweep
 
+    if args.out and (why := _unwritable(Path(args.out))) is not None:
+        _err(why)
+        return EXIT_INVALID
     try:
         result = run_sweep(args.scenario, args.grid, args.seeds, args.out, address=args.address, workers=args.workers,
                            serial=args.serial, timeout_s=args.timeout, metrics=args.metric, progress=True)
@@ -59,6 +81,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     from rehabkit.rehab.replay import replay
 
+    if args.out and (why := _unwritable(Path(args.out))) is not None:
+        _err(why)
+        return EXIT_INVALID
     rep = replay(args.run_dir, args.set, args.out, progress=True)
     print(rep.table())
     for ev in rep.result.summary["safety"]["events"]:

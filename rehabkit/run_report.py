@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -11,15 +12,17 @@ OUTCOMES = ("reaches_completed", "sparc", "path_length_ratio", "time_to_target_s
 
 def run_report(s: dict[str, Any], out: Path) -> str:
     """The lines for a run whose ``summary.json`` holds ``s``, written to ``out``."""
-    lines = [f"{s['name']}: {s['sim_time_s']:.3f} s simulated in {s['wall_time_s']:.3f} s "
-             f"(real-time factor {s['real_time_factor']:.1f})"]
+    m = s["metrics"]
+    lines = [f"{s['name']}: {m['sim_time_s']:.3f} s simulated in {m['wall_time_s']:.3f} s "
+             f"(real-time factor {m['real_time_factor']:.1f})"]
     for e in s["expectations"]:
         value = "missing" if e["value"] is None else f"{e['value']:.6g}"
         lines.append(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
                      + (f"  — {e['reason']}" if e.get("reason") else ""))
     lines += [f"  PLAN    {w['message']}" for w in s["safety"].get("plan_warnings", [])]
     lines += [f"  SAFETY  {ev['message']}" for ev in s["safety"]["events"]]
-    m = s["metrics"]
+    lines += _interventions(s["safety"].get("interventions", []), s["safety"]["events"])
+    lines += _link(m)
     if contacts := int(m.get("contact_steps") or 0):  # e.g. an arm lying on the floor, which nothing else says
         lines.append(f"  CONTACT the robot touched something in {contacts} control steps (the floor is the "
                      "plane z = 0)")
@@ -31,3 +34,33 @@ def run_report(s: dict[str, Any], out: Path) -> str:
     lines += [f"{name}:\n{text}" for name, text in s.get("reports", {}).items()]
     lines.append(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))
     return "\n".join(lines)
+
+
+def _interventions(interventions: list[dict], events: list[dict], shown: int = 3) -> list[str]:
+    """Counts per rule and joint, then the first few not already said as safety events, in full."""
+    if not interventions:
+        return []
+    groups = Counter((e.get("rule"), e.get("joint")) for e in interventions)
+    counts = ", ".join(f"{rule}{' ' + joint if joint else ''} {n}" for (rule, joint), n in groups.most_common())
+    said = {e.get("message") for e in events}
+    new = [e for e in interventions if e.get("message") not in said]
+    out = [f"  INTERVENTIONS {len(interventions)}: {counts}"]
+    out += [f"    {e.get('message')}" for e in new[:shown]]
+    if len(new) > shown:
+        out.append(f"    … {len(new) - shown} more in summary.json (safety.interventions)")
+    return out
+
+
+def _link(m: dict[str, Any]) -> list[str]:
+    """A robot link's health when it was not perfect: late ticks, refused states, the bridge holding."""
+    said = []
+    if m.get("deadline_misses"):
+        said.append(f"{int(m['deadline_misses'])} of {int(m.get('link_ticks') or 0)} ticks late (the latest "
+                    f"{m.get('tick_lateness_max_ms', float('nan')):.1f} ms)")
+    if m.get("states_dropped"):
+        said.append(f"{int(m['states_dropped'])} states refused")
+    if m.get("bridge_stale_holds"):
+        said.append(f"the bridge held through {int(m['bridge_stale_holds'])} gaps in the commands")
+    if m.get("bridge_hold_at_s") is not None:
+        said.append(f"the bridge held the robot at {m['bridge_hold_at_s']:.3f} s")
+    return [f"  LINK    {'; '.join(said)}"] if said else []

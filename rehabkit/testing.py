@@ -78,7 +78,7 @@ class ScenarioItem(pytest.Item):
 
     def runtest(self) -> None:
         result = shared_run(self.config, self.path)  # once per session: a test may have examined it already
-        self.user_properties.append(("real_time_factor", result.summary["real_time_factor"]))
+        self.user_properties.append(("real_time_factor", result.summary["metrics"]["real_time_factor"]))
         if not result.passed:
             raise ScenarioFailedError(result)
 

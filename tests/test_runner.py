@@ -47,7 +47,7 @@ def test_outputs_are_complete_and_nothing_half_written(hit_run):
     out = hit_run.out_dir
     assert sorted(p.name for p in out.iterdir()) == ["run.rrd", "scenario.yaml", "summary.json"]
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["passed"] and summary["seed"] == 0 and summary["real_time_factor"] > 1
+    assert summary["passed"] and summary["seed"] == 0 and summary["metrics"]["real_time_factor"] > 1
 
 
 def test_rrd_holds_geometry_poses_paths_and_series(hit_run):
@@ -64,7 +64,7 @@ def test_replan_that_cannot_be_planned_holds_the_robot():
     r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan", "sequence": ["B", "C"]}], "expect": {}})
     (ev,) = r.summary["safety"]["events"]
     assert ev["rule"] == "plan" and "need 1 segment durations" in ev["message"] and ev["t"] == 1.0
-    assert r.summary["sim_time_s"] == pytest.approx(1.5)  # held for stop_after_s, then ended
+    assert r.summary["metrics"]["sim_time_s"] == pytest.approx(1.5)  # held for stop_after_s, then ended
 
 
 def test_timed_replan_then_stop():
@@ -72,7 +72,7 @@ def test_timed_replan_then_stop():
                            "planner.start_from_current": True, "planner.segment_durations": [2, 2, 2, 2, 2],
                            "expect": {}})
     assert [(e["action"], e["t"]) for e in r.summary["events"]] == [("replan", 1.0), ("stop", 3.5)]
-    assert not r.summary["safety"]["events"] and r.summary["sim_time_s"] == pytest.approx(3.5)
+    assert not r.summary["safety"]["events"] and r.summary["metrics"]["sim_time_s"] == pytest.approx(3.5)
     tr = r.trace
     assert np.abs(tr.q_ref[1000] - tr.q[1000]).max() < np.radians(0.5)  # the new plan starts where the arm is
 
@@ -81,7 +81,7 @@ def test_reached_event_fires_near_the_target():
     r = run_scenario(HIT, {"task.events": [{"reached": "B", "tolerance_m": 0.01, "action": "stop"}], "expect": {}})
     (ev,) = r.summary["events"]
     assert ev["trigger"] == "reached B" and 1.0 < ev["t"] < 2.1
-    assert r.summary["sim_time_s"] == pytest.approx(ev["t"], abs=0.002)
+    assert r.summary["metrics"]["sim_time_s"] == pytest.approx(ev["t"], abs=0.002)
 
 
 def test_too_fast_plan_is_rejected_before_the_robot_moves():
@@ -137,7 +137,7 @@ def test_broken_controller_stops_the_robot_and_the_logs_say_why(tmp_path, bad_re
     r = run_scenario(HIT, {"controller": {"type": "bad", "mode": mode}}, out_dir=tmp_path, registry=bad_registry)
     (ev,) = r.summary["safety"]["events"]
     assert ev["rule"] == rule and ev["t"] == pytest.approx(0.5, abs=0.002)
-    assert not r.passed and r.summary["sim_time_s"] == pytest.approx(1.0, abs=0.01)  # stop_after_s = 0.5
+    assert not r.passed and r.summary["metrics"]["sim_time_s"] == pytest.approx(1.0, abs=0.01)  # stop_after_s = 0.5
     assert np.all(np.isfinite(r.trace.tau))
     after = r.trace.qd[int(0.9 * 1000):]
     assert np.abs(after).max() < 0.5  # held, not flailing

@@ -86,7 +86,7 @@ def test_hand_leaving_the_box_stops_the_run_in_simulation(box_run, hit):
     assert hand[k, 2] < ev[0]["limit"] <= hand[k - 1, 2] + 1e-9  # the first sample outside, not later
     speed = np.abs(box_run.trace.qd).max(axis=1)
     assert speed[-1] < 0.3 * speed[k]  # held: slowing to a stop afterwards
-    assert box_run.summary["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.3, abs=2e-3)
+    assert box_run.summary["metrics"]["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.3, abs=2e-3)
     assert box_run.metrics["safety_interventions"] == 1
     # and it was said before moving: the plan's hand path, against the same box, leaves it where the hand did
     (warning,) = box_run.summary["safety"]["plan_warnings"]
@@ -134,7 +134,7 @@ def test_the_patients_comfort_force_stops_a_session_that_presses_too_hard():
     assert 20.0 < ev[0]["value"] < 21.0  # caught at the first step above the limit
     assert np.linalg.norm(ev[0]["data"]["force_n"]) == pytest.approx(ev[0]["value"], abs=1e-2)
     assert 4.0 < ev[0]["t"] < 10.0  # during the first reach (the ball shows at 4 s)
-    assert result.summary["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.5, abs=2e-3)
+    assert result.summary["metrics"]["sim_time_s"] == pytest.approx(ev[0]["t"] + 0.5, abs=2e-3)
 
 
 def test_a_force_limit_without_a_force_source_is_refused():

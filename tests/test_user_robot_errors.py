@@ -76,7 +76,8 @@ def test_a_run_whose_first_plan_fails_passes_no_expectation_and_validate_refuses
             "need 1 segment durations; segment_durations has 2") in r.stderr
     out = tmp_path / "out"
     r = cli("run", str(path), "--out", str(out))
-    assert r.returncode == 1
+    assert r.returncode == 2  # bad input, located as validate locates it; the summary says what ran
+    assert f"{path}:15:30: planner.segment_durations" in r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["passed"] is False
     assert [v["passed"] for v in summary["expectations"]] == [False, False]

@@ -23,6 +23,7 @@ from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S, ch
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import LiftArmGripper
 from rehabkit.core.interfaces import Context, Controller, PlanningError, StrictModel, Target
+from rehabkit.core.metric import Metric
 from rehabkit.store.patches import Action, Patch, open_store
 
 SETTLE_S = 1.0  # after a replay ends, the error to the stored target is measured this much later
@@ -93,6 +94,17 @@ class _Stats:
 
 class ArmKeypad(Controller):
     """ARM keypad HMI: menus, jogs, fold/unfold, record and replay of patches, PD + gravity servo."""
+
+    metrics = (
+        Metric("patches_stored", "count", description="patches stored with the keypad"),
+        Metric("replays", "count", description="patches replayed"),
+        Metric("replay_failures", "count", description="replays the planner could not make"),
+        Metric("replay_position_error_m", "m", description="largest hand position error at a replayed patch"),
+        Metric("replay_orientation_error_deg", "deg", description="largest hand orientation error at a replayed patch"),
+        Metric("sequences_stored", "count", description="action sequences stored"),
+        Metric("sequences_replayed", "count", description="action sequences replayed"),
+        Metric("sequence_replay_error_deg", "deg", description="largest joint error of a replayed sequence"),
+    )
 
     own_reference = True
     requires = (LiftArmGripper,)

@@ -23,6 +23,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import FloatingBase
 from rehabkit.core.interfaces import Context, Controller, StrictModel
+from rehabkit.core.metric import Metric
 from rehabkit.wholebody.stack import Level, compile_kernels, solve_cascade
 from rehabkit.wholebody.tasks import Constraints, ConstraintSpec, KinematicState, Task, TaskSpec
 
@@ -50,6 +51,14 @@ class QpStackConfig(StrictModel):
 
 class QpStack(Controller):
     """Cascade of velocity-level QPs (strict priorities, soft weights within a level), PD servo."""
+
+    metrics = (
+        Metric("qp_cycles", "count", description="control cycles of the QP cascade"),
+        Metric("qp_cycles_over_1ms", "count", description="cycles whose cascade took over 1 ms", clock="wall"),
+        Metric("qp_failed_cycles", "count", description="cycles where a level's QP failed"),
+        Metric("qp_level*_max_residual", description="largest task residual of a level"),
+        Metric("qp_solver_calls_share", description="share of cycles that called the QP solver"),
+    )
 
     reference = "cartesian"
     requires = (FloatingBase,)

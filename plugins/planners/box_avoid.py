@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.metric import Metric
 from rehabkit.core.targets import angular_distance
 from rehabkit.geometry.box_avoid import NoPathError, plan_path
 from rehabkit.geometry.solids import Solid, make_solid
@@ -87,6 +88,12 @@ class PiecewiseSpline:
 
 class BoxAvoidPlanner(Planner):
     """Gripper path over obstacle faces (ARM record-and-replay), in joint space via closed-form IK."""
+
+    metrics = (
+        Metric("max_tip_speed_m_s", "m/s", description="largest gripper tip speed of the plan"),
+        Metric("obstacle_merges", "count", description="overlapping obstacles merged for the path"),
+        Metric("tip_min_clearance_m", "m", description="smallest tip clearance from an obstacle"),
+    )
 
     def __init__(self, config: BoxAvoidConfig, context: Context):
         self.config, self.robot = config, context.robot

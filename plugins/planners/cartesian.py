@@ -66,9 +66,9 @@ class CartesianPlanner(Planner):
     """Straight task-space segments through the targets, minimum-jerk, IK along the way (any robot)."""
 
     metrics = (
-        Metric("ik_samples", "", description="poses solved by IK along the segments"),
+        Metric("ik_samples", "count", description="poses solved by IK along the segments"),
         Metric("path_length_m", "m", description="length of the hand's planned path"),
-        Metric("stretched_segments", "", description="segments slowed down to keep joint speeds within limits"),
+        Metric("stretched_segments", "count", description="segments slowed down to keep joint speeds within limits"),
     )
 
     def __init__(self, config: CartesianConfig, context: Context):

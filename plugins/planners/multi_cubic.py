@@ -15,6 +15,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.metric import Metric
 from rehabkit.core.targets import joint_waypoints
 
 
@@ -122,6 +123,14 @@ class MultiCubicConfig(StrictModel):
 
 class MultiCubicPlanner(Planner):
     """Multi-cubic C2 joint trajectory through via points, rest at both ends (HIT)."""
+
+    metrics = (
+        Metric("continuity_*", "deg, deg/s, deg/s^2", description="jump at an interior via point "
+               "(continuity_<via>_{position_deg,velocity_deg_s,acceleration_deg_s2}; continuity_max_…: the largest)"),
+        Metric("ik_roundtrip_position_error_m", "m", description="largest hand position error of the IK solutions"),
+        Metric("ik_roundtrip_orientation_error_deg", "deg",
+               description="largest hand orientation error of the IK solutions"),
+    )
 
     def __init__(self, config: MultiCubicConfig, context: Context | None = None):
         if any(t <= 0 for t in config.segment_durations):

@@ -47,8 +47,8 @@ class OmplJointPlanner(Planner):
     metrics = (
         Metric("planning_time_s", "s", "wall", description="time to plan, all legs"),
         Metric("path_length_rad", "rad", description="joint-space length of the planned path"),
-        Metric("path_vertices", "", description="vertices of the planned path, targets included"),
-        Metric("states_checked", "", description="states checked for collision by MuJoCo"),
+        Metric("path_vertices", "count", description="vertices of the planned path, targets included"),
+        Metric("states_checked", "count", description="states checked for collision by MuJoCo"),
     )
 
     def __init__(self, config: OmplJointConfig, context: Context):

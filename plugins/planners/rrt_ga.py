@@ -55,7 +55,24 @@ class RrtGaPlanner(Planner):
     """Joint-space paths around obstacles: joint matrix Θ, OMPL RRT-Connect population, genetic optimisation."""
 
     requires = (ClusterPoints,)  # the collision map is built from points on the moving body
-    metrics = (Metric("joint_matrix_setup_s", "s", "wall", description="time to build the joint matrix"),)
+    metrics = (
+        Metric("joint_matrix_setup_s", "s", "wall", description="time to build the joint matrix"),
+        Metric("joint_matrix_free_fraction", description="share of the joint matrix free of obstacles"),
+        Metric("rrt_paths", "count", description="RRT-Connect paths in the GA's first population"),
+        Metric("generations", "count", description="GA generations run"),
+        Metric("fitness_best_rrt", description="best fitness among the RRT paths"),
+        Metric("fitness_best_ga", description="best fitness after the GA"),
+        Metric("path_length_rrt_rad", "rad", description="joint-space length of the best RRT path"),
+        Metric("path_length_ga_rad", "rad", description="joint-space length of the GA's path"),
+        Metric("clearance_rrt_deg", "deg", description="joint-space clearance of the best RRT path"),
+        Metric("clearance_ga_deg", "deg", description="joint-space clearance of the GA's path"),
+        Metric("direct_motion_collides", description="whether the straight joint motion would collide"),
+        Metric("ompl_seed", description="OMPL's seed for the plan"),
+        Metric("tool_clearance_m", "m", description="smallest tool clearance from the obstacles"),
+        Metric("trajectory_colliding_samples", "count", description="planned trajectory samples in collision"),
+        Metric("executed_colliding_configurations", "count", description="executed configurations in collision"),
+        Metric("executed_min_joint_clearance_deg", "deg", description="smallest joint-space clearance executed"),
+    )
 
     def __init__(self, config: RrtGaConfig, context: Context):
         self.config = config

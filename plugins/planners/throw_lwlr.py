@@ -25,6 +25,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import FloatingBase
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.metric import Metric
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
 from rehabkit.workspace.trajectory import blend_weight
@@ -85,6 +86,13 @@ def _move(p0: np.ndarray, p1: np.ndarray, duration: float):
 
 class ThrowPlanner(Planner):
     """LWLR throw generator over retargeted, feasibility-checked demonstrations (Cartesian hand plans)."""
+
+    metrics = (
+        Metric("feasible_throws", "count", description="synthesised throws feasible for the robot"),
+        Metric("library_throws", "count", description="throws in the demonstration library"),
+        Metric("lwlr_prediction_error_m", "m", description="error of the LWLR-predicted catch point"),
+        Metric("throws_released", "count", description="throws whose ball was let go"),
+    )
 
     space = "cartesian"
 

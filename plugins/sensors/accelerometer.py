@@ -18,6 +18,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import Instruments
 from rehabkit.core.interfaces import Backend, Context, Instrument, Sensor, SensorConfig
+from rehabkit.core.metric import Metric
 from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank, rts_smooth
 from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
 
@@ -46,6 +47,16 @@ class AccelerometerArrayConfig(SensorConfig):
 
 class AccelerometerArraySensor(Sensor):
     """Triaxial accelerometers on a body + Kalman filtering + rigid-body reconstruction (a, ω)."""
+
+    metrics = (
+        Metric("accel_rms_*", "m/s^2", description="RMS error of an acceleration estimate "
+               "(raw, filtered, smoothed; over the run, while moving, or against the planned motion)"),
+        Metric("omega_rms_*", "rad/s", description="RMS error of an angular-velocity estimate (as accel_rms_*)"),
+        Metric("accel_filter_gain*", description="raw RMS error over the Kalman filter's"),
+        Metric("accel_smoother_gain*", description="raw RMS error over the RTS smoother's"),
+        Metric("omega_filter_gain*", description="raw RMS error over the EKF's"),
+        Metric("omega_smoother_gain*", description="raw RMS error over the smoother's"),
+    )
 
     requires = (Instruments,)
 

@@ -17,6 +17,7 @@ from scipy.spatial import ConvexHull
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import BaseState, FloatingBase
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.core.metric import Metric
 
 
 class BalanceConfig(SensorConfig):
@@ -29,6 +30,13 @@ class BalanceConfig(SensorConfig):
 
 class Balance(Sensor):
     """CoM margin to the support polygon's edges, feet displacement and pelvis tilt, every reading."""
+
+    metrics = (
+        Metric("com_margin_min_m", "m",
+               description="smallest distance of the CoM projection inside the support polygon"),
+        Metric("feet_slip_max_mm", "mm", description="largest slip of a foot on the floor"),
+        Metric("pelvis_tilt_max_deg", "deg", description="largest tilt of the pelvis from upright"),
+    )
 
     requires = (FloatingBase, BaseState)
 

@@ -16,6 +16,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import SceneGeometry, SceneObjects
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.core.metric import Metric
 from rehabkit.throwing.model import GRAVITY
 
 FIT_SAMPLES = 20  # samples after the release used to fit the flight's initial state
@@ -34,6 +35,17 @@ class BallTrackerConfig(SensorConfig):
 
 class BallTracker(Sensor):
     """Object position in the robot's base frame; flights, catch-plane crossings and parabola fits per run."""
+
+    metrics = (
+        Metric("catch_mean_error_m", "m", outcome=True,
+               description="mean distance of the catch-plane crossings from the catch point"),
+        Metric("catch_max_error_m", "m", description="largest distance of a crossing from the catch point"),
+        Metric("catch_spread_std_m", "m", description="spread of the crossings (standard deviation)"),
+        Metric("catch_spread_max_m", "m", description="largest distance between two crossings"),
+        Metric("throws_crossed", "count", description="throws whose ball crossed the catch plane"),
+        Metric("throws_in_zone", "count", description="throws crossing within the catch zone"),
+        Metric("parabola_max_dev_mm", "mm", description="largest deviation of a flight from its fitted parabola"),
+    )
 
     requires = (SceneGeometry, SceneObjects)
 

@@ -20,6 +20,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.capabilities import Cameras
 from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.core.metric import Metric
 
 HSV = tuple[int, int, int]
 
@@ -44,6 +45,14 @@ class ColorCameraConfig(SensorConfig):
 
 class ColorCamera(Sensor):
     """Overhead colour camera locating a ball: HSV mask, centroid, diameter → 3-D point in the robot frame."""
+
+    metrics = (
+        Metric("camera_detections", "count", description="frames where the ball was found"),
+        Metric("camera_misses", "count", description="frames where the ball was not found"),
+        Metric("camera_occluded", "count", description="frames where the ball was hidden by the robot"),
+        Metric("camera_error_mean_mm", "mm", description="mean error of the seen ball position"),
+        Metric("camera_error_max_mm", "mm", description="largest error of the seen ball position"),
+    )
 
     requires = (Cameras,)
 

@@ -41,6 +41,7 @@ from rehabkit.core.interfaces import (
 )
 from rehabkit.core.lifecycle import Extensions
 from rehabkit.core.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
+from rehabkit.core.metric import CORE_METRICS, MetricCatalogue
 from rehabkit.core.names import suggest
 from rehabkit.core.plugins import PluginRegistry
 from rehabkit.core.safety import SafetyLayer
@@ -137,8 +138,9 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     try:
         a.targets = resolve_targets(sc.task, a.robot, sc.seed)
     except PlanningError as exc:
-        raise SetupError(f"task: {exc}") from exc
+        raise _at_target(a, exc, "task") or SetupError(f"task: {exc}") from exc
     extensions.hook.rehabkit_admit_targets(setup=a)
+    _check_joint_targets(a)
     _check_duration(a)
     if upto == "targets":
         return a
@@ -155,17 +157,38 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     a.context = replace(a.context, reference_space=a.planner.space)
     a.controller = a.make("controller", sc.controller, ("controller",))
     if a.planner.space != a.controller.reference:
-        raise SetupError(f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
-                         f"'{sc.controller.type}' takes {a.controller.reference} references; pick a matching pair")
+        raise PluginSetupError(a.loaded.source, ("controller", "type"), (),
+                               f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
+                               f"'{sc.controller.type}' takes {a.controller.reference} references; pick a "
+                               "matching pair")
     for t in sc.task.targets:
         if t.sensor and t.sensor not in a.sensors:
             raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
                              f"{suggest(t.sensor, a.sensors)}")
-    if upto == "plugins":
-        return a
     _patient_and_safety(a)
+    _check_expectations(a)
     a.schedule = _schedule(a)
     return a
+
+
+def metric_catalogue(a: Assembly) -> MetricCatalogue:
+    """Every metric the run can report, described: the core's, the extensions', each plugin's."""
+    catalogue = MetricCatalogue(CORE_METRICS)
+    catalogue.add(a.extensions.metrics())
+    backend = a.backend if a.backend is not None else a.registry.get("backend", a.sc.backend.type).factory
+    for plugin in (a.planner, a.controller, backend, a.patient, *a.sensors.values()):
+        catalogue.add(getattr(plugin, "metrics", ()) if plugin is not None else ())
+    return catalogue
+
+
+def _check_expectations(a: Assembly) -> None:
+    """An ``expect:`` on a metric nothing in this run reports could never be met: refused, with the nearest."""
+    catalogue = metric_catalogue(a)
+    for name in a.sc.expect:
+        if not catalogue.known(name):
+            raise PluginSetupError(a.loaded.source, ("expect", name), (),
+                                   f"expect: no plugin of this run reports a metric '{name}'"
+                                   f"{suggest(name, catalogue.names())} (see `rehabkit plugins` for each plugin's)")
 
 
 def _narrow_limits(a: Assembly) -> None:
@@ -193,15 +216,20 @@ def _check_capabilities(a: Assembly) -> None:
     sc = a.sc
     backend = a.registry.get("backend", sc.backend.type).factory  # checked on the class: not built yet
     named = [("planner", sc.planner), ("controller", sc.controller), *(("sensor", c) for c in sc.sensors.values())]
-    problems = []
+    paths = {"planner": ("planner", "type"), "controller": ("controller", "type")}
+    problems, at = [], None
     for kind, cfg in named:
         missing = missing_capabilities(a.registry.get(kind, cfg.type).factory, a.robot, backend)
         if missing:
             problems.append(f"{kind} '{cfg.type}' needs {' and '.join(missing)}")
+            section = paths.get(kind) or ("sensors", next(n for n, c in sc.sensors.items() if c is cfg), "type")
+            at = at or section
     if any(e.action == "move" for e in sc.task.events) and not _has(backend, SceneObjects):
         problems.append("task events that 'move' objects need a backend with scene objects")
+        at = at or ("backend",)
     if problems:
-        raise SetupError(f"{'; '.join(problems)} (robot '{sc.robot.type}', backend '{sc.backend.type}')")
+        raise PluginSetupError(a.loaded.source, at, (), f"{'; '.join(problems)} (robot '{sc.robot.type}', "
+                               f"backend '{sc.backend.type}')")
 
 
 SCENE_NAMES = ("floor", "key_light")  # what the scene adds besides the robot and the world's objects
@@ -242,23 +270,28 @@ def _has(backend: Any, capability: type) -> bool:
 
 def _patient_and_safety(a: Assembly) -> None:
     sc = a.sc
+    backend = a.backend if a.backend is not None else a.registry.get("backend", sc.backend.type).factory
     model_cfg = getattr(sc.patient, "model", None) if sc.patient is not None else None
     if model_cfg is not None:
-        if a.backend.real_person:
-            a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
-                                "backend: the person is real")
-        elif not isinstance(a.backend, ExternalTorques):
-            raise SetupError(f"patient.model '{model_cfg.type}' needs a backend that applies a simulated person's "
-                             f"torques; backend '{sc.backend.type}' does not")
+        if getattr(backend, "real_person", False):
+            if a.context.note is not None:
+                a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
+                                    "backend: the person is real")
+        elif not _has(backend, ExternalTorques):
+            raise PluginSetupError(a.loaded.source, ("patient", "model", "type"), (),
+                                   f"patient.model '{model_cfg.type}' needs a backend that applies a simulated "
+                                   f"person's torques; backend '{sc.backend.type}' does not")
         else:
             a.patient = a.make("patient", model_cfg, ("patient", "model"))
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
               if v is not None]
     force_limit = min(limits) if limits else None
     if force_limit is not None and a.patient is None:
-        raise SetupError(f"an interaction-force limit ({force_limit:g} N, from safety.interaction_force_n or "
-                         "patient.comfort) needs a source of the force: a simulated patient (patient.model); "
-                         f"backend '{sc.backend.type}' measures none")
+        at = ("safety", "interaction_force_n") if sc.safety.interaction_force_n is not None else ("patient",)
+        raise PluginSetupError(a.loaded.source, at, (),
+                               f"an interaction-force limit ({force_limit:g} N, from safety.interaction_force_n or "
+                               "patient.comfort) needs a source of the force: a simulated patient (patient.model); "
+                               f"backend '{sc.backend.type}' measures none")
     a.hand_force = HandForce(a.robot.model) if force_limit is not None else None
     a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
@@ -266,12 +299,14 @@ def _patient_and_safety(a: Assembly) -> None:
 
 
 def _schedule(a: Assembly) -> Schedule:
-    sc, dt = a.sc, a.backend.timestep
+    sc = a.sc
+    dt = a.backend.timestep if a.backend is not None else sc.backend.timestep  # (validate builds no backend)
     control_dt = 1.0 / sc.rates.control_hz
     sub = control_dt / dt
     if abs(sub - round(sub)) > 1e-6 or round(sub) < 1:
-        raise SetupError(f"rates.control_hz = {sc.rates.control_hz} gives a period of {control_dt} s, "
-                         f"not a whole multiple of the backend timestep {dt} s")
+        raise PluginSetupError(a.loaded.source, ("rates", "control_hz"), (),
+                               f"rates.control_hz = {sc.rates.control_hz:g} gives a period of {control_dt:g} s, not "
+                               f"a whole multiple of the backend timestep {dt:g} s")
     every = tuple(max(1, round(sc.rates.control_hz / s.rate_hz)) for s in a.sensors.values())
     return Schedule(control_dt, round(sub), int(round(sc.duration / control_dt)),
                     max(1, round(sc.rates.control_hz / sc.logging.rate_hz)),
@@ -307,13 +342,45 @@ def check_first_plan(a: Assembly) -> None:
         return
     q0 = start_posture(a)
     try:
-        a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
+        plan = a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
     except PlanningError as exc:
-        raise _at_target(a, exc) or PluginSetupError.refused(a.loaded.source, ("planner",), "planner", sc.planner,
-                                                             exc) from exc
+        raise first_plan_refusal(a, exc) from exc
+    if a.planner.space == "joint":  # as the run's plan gate checks it
+        from rehabkit.core.limits import first_breach
+        from rehabkit.core.plan_gate import CHECK_DT
+
+        ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+        qs, qds, _ = plan.trajectory.sample(ts)
+        model = a.robot.model
+        breach = first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
+        if breach is not None:
+            raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
 
 
-def _at_target(a: Assembly, exc: Exception) -> PluginSetupError | None:
+def first_plan_refusal(a: Assembly, why: Exception | str) -> PluginSetupError:
+    """The task's first plan failed or broke a limit: bad input, located at the target it names, else at the
+    planner's setting it names, else at the planner."""
+    exc = why if isinstance(why, Exception) else PlanningError(why)
+    return _at_target(a, exc) or PluginSetupError.refused(a.loaded.source, ("planner",), "planner", a.sc.planner,
+                                                          exc)
+
+
+def _check_joint_targets(a: Assembly) -> None:
+    """Joint values a target gives within the joint ranges in force (after a patient's admission)."""
+    from rehabkit.core.limits import first_breach
+
+    model = a.robot.model
+    for name, target in a.targets.items():
+        if target.q is None:
+            continue
+        breach = first_breach(model.limits, model.joint_names, target.q[None], None, np.zeros(1),
+                              revolute=model.revolute)
+        if breach is not None:
+            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}")
+            raise _at_target(a, why, "task") or SetupError(str(why))
+
+
+def _at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetupError | None:
     """A refusal naming one target (out of reach, say), located at where that target is given."""
     named = re.match(r"target '([^']+)'", str(exc))
     index = next((i for i, t in enumerate(a.sc.task.targets) if named and t.name == named[1]), None)
@@ -322,5 +389,5 @@ def _at_target(a: Assembly, exc: Exception) -> PluginSetupError | None:
     spec = a.sc.task.targets[index]
     key = next(k for k in ("position", "joints_deg", "joints_rad", "same_as", "random", "sensor")
                if getattr(spec, k) is not None)
-    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), (),
-                            f"planner '{a.sc.planner.type}': {exc}")
+    prefix = f"planner '{a.sc.planner.type}': " if kind == "planner" else ""
+    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), (), f"{prefix}{exc}")

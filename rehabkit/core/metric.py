@@ -67,6 +67,16 @@ class MetricCatalogue:
             else:
                 self._exact[m.name] = m
 
+    def known(self, name: str) -> bool:
+        """Whether someone described ``name`` (or a family it belongs to)."""
+        return name in self._exact or any(
+            name.startswith(f.name.partition("*")[0]) and name.endswith(f.name.partition("*")[2])
+            and len(name) >= len(f.name) - 1 for f in self._families)  # ("*" may stand for nothing)
+
+    def names(self) -> list[str]:
+        """The described names and family patterns (for suggestions)."""
+        return sorted([*self._exact, *(f.name for f in self._families)])
+
     def get(self, name: str) -> Metric:
         if name in self._exact:
             return self._exact[name]
@@ -100,9 +110,9 @@ CORE_METRICS: tuple[Metric, ...] = (
     Metric("wall_time_s", "s", "wall", description="wall time of the loop"),
     Metric("setup_time_s", "s", "wall", description="wall time from loading to the first step"),
     Metric("real_time_factor", "1", "wall", description="simulated time / wall time of the loop"),
-    Metric("contact_steps", description="control steps with a robot collision"),
-    Metric("safety_events", description="safety trips"),
-    Metric("torque_saturation_steps", description="control steps with a torque clipped"),
-    Metric("sensor_overruns_*", clock="wall", description="readings skipped while a sensor thread was busy"),
+    Metric("contact_steps", "count", description="control steps with a robot collision"),
+    Metric("safety_events", "count", description="safety trips"),
+    Metric("torque_saturation_steps", "count", description="control steps with a torque clipped"),
+    Metric("sensor_overruns_*", "count", clock="wall", description="readings skipped while a sensor thread was busy"),
     Metric("*_ms", "ms", "wall", description="timings"),
 )

@@ -29,11 +29,14 @@ class RunResult:
         summary: The content of ``summary.json``.
         trace: Control-rate arrays of the run.
         out_dir: Where files were written (``None`` when nothing was written).
+        refusal: When the task's first plan failed on the scenario as written (a target out of reach, a planner
+            setting that does not fit), that failure located in the file; the robot did not move.
     """
 
     summary: dict[str, Any]
     trace: Trace
     out_dir: Path | None
+    refusal: Any = None
 
     @property
     def passed(self) -> bool:
@@ -119,6 +122,7 @@ def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[
         for c in contributions:
             series.update(c.series)
         view.finish(a.safety.interventions, series)
+    metrics = {k: _as_count(v) if catalogue.get(k).unit == "count" else v for k, v in metrics.items()}
     verdicts = evaluate(sc.expect, metrics)
     if r.no_plan is not None and "safety_events" not in sc.expect:  # (unless the scenario expects a stop)
         # a robot that never moved has no tracking error: that passes nothing
@@ -129,8 +133,6 @@ def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[
         "scenario": str(a.loaded.path), "name": sc.name or a.loaded.path.stem,
         "rehabkit_version": __version__, "seed": sc.seed, "plugins": plugin_versions(a),
         "passed": all(v["passed"] for v in verdicts) and not unexpected_trip,
-        "sim_time_s": metrics["sim_time_s"], "wall_time_s": metrics["wall_time_s"],
-        "real_time_factor": metrics["real_time_factor"],
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
                    "interventions": [e.as_dict() for e in a.safety.interventions],
@@ -140,3 +142,8 @@ def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[
         "events": r.fired, "plans": r.plans, "notes": r.notes, "actions": r.acted,
         "reports": {name: text for name, s in a.sensors.items() if (text := s.report(metrics))},
     }
+
+
+def _as_count(value: Any) -> Any:
+    """A count as the integer it is (plugins often report counts as floats)."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value

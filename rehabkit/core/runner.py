@@ -17,14 +17,21 @@ import numpy as np
 import yaml
 from threadpoolctl import threadpool_limits
 
-from rehabkit.core.assembly import Assembly, SetupError, assemble, start_posture
+from rehabkit.core.assembly import (
+    Assembly,
+    SetupError,
+    assemble,
+    first_plan_refusal,
+    metric_catalogue,
+    start_posture,
+)
 from rehabkit.core.capabilities import NamedJoints, PassiveJoints
 from rehabkit.core.interfaces import BackendFaultError, Plan, PlanningError, Target
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.lifecycle import Extensions, default_extensions
 from rehabkit.core.log import encode_images
 from rehabkit.core.loop import run_loop
-from rehabkit.core.metric import CORE_METRICS, MetricCatalogue
+from rehabkit.core.metric import MetricCatalogue
 from rehabkit.core.metrics import Trace
 from rehabkit.core.plan_gate import PlanGate
 from rehabkit.core.plugins import PluginRegistry, default_registry
@@ -32,6 +39,7 @@ from rehabkit.core.record import RunRecord
 from rehabkit.core.reference import ReferenceBuffer
 from rehabkit.core.results import RunResult, finish
 from rehabkit.core.run_view import RunView
+from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.core.timeline import Timeline
@@ -55,6 +63,8 @@ class Runner:
         self.setup: Assembly | None = None
         self.notes: list[dict] = []
         self._no_plan: str | None = None  # why the first plan failed: then no expectation is met
+        self._failed_plan: Exception | str | None = None  # the last plan's failure
+        self.refusal: ScenarioError | None = None  # the first plan's failure, located in the scenario file
         self.view: RunView | None = None
 
     # the assembled plugins, for callers that inspect a run
@@ -84,10 +94,7 @@ class Runner:
         try:
             t_setup = time.perf_counter()
             a = self.build()
-            catalogue = MetricCatalogue(CORE_METRICS)
-            catalogue.add(self.extensions.metrics())
-            for plugin in (a.planner, a.controller, a.backend, a.patient, *a.sensors.values()):
-                catalogue.add(plugin.metrics if plugin is not None else ())
+            catalogue = metric_catalogue(a)
             self.gate = PlanGate(a, catalogue)
             trace, packed = self._start()
             if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
@@ -154,6 +161,8 @@ class Runner:
         if a.safety.tripped and a.limit_sources.by_joint:  # refused before it runs, not stopped at t=0
             raise SetupError(f"{self._refusal} (joint limits narrowed by the patient's profile or the safety "
                              "envelope)", self._refused)
+        if self._failed_plan is not None:  # the task as written can't be planned: bad input, said where
+            self.refusal = first_plan_refusal(a, self._failed_plan)
         if self.view.log:
             self.view.planner_drawings()
 
@@ -178,10 +187,12 @@ class Runner:
         try:
             plan = self.gate.ask(t, q, qd, [a.targets[n] for n in names], a.event_planners.get(event))
         except PlanningError as exc:
+            self._failed_plan = exc
             self._stop(t, q, f"planner failed: {exc}")
             return
         problem, self._refused = self.gate.problem(plan)
         if problem:
+            self._failed_plan = problem
             self._stop(t, q, problem, "; not executed")
             return
         self.gate.warn_box(t, plan, a.robot.model.to_world)
@@ -248,4 +259,4 @@ class Runner:
                               + yaml.dump(self.loaded.source.data, Dumper=_DUMPER, sort_keys=False))
             atomic_write_json(self.out_dir / "summary.json", summary)
         a.backend.close()
-        return RunResult(summary, trace, self.out_dir)
+        return RunResult(summary, trace, self.out_dir, self.refusal)

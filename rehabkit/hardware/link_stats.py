@@ -10,11 +10,12 @@ from rehabkit.core.safety import SafetyEvent
 from rehabkit.hardware.protocol import STALE
 
 METRICS = (
-    Metric("link_ticks", clock="wall", description="ticks the loop ran over the link"),
-    Metric("deadline_*", clock="wall", description="ticks started after the next was due"),
-    Metric("states_dropped*", clock="wall", description="states refused (late, out of order, forged, …)"),
+    Metric("link_ticks", "count", clock="wall", description="ticks the loop ran over the link"),
+    Metric("deadline_misses", "count", clock="wall", description="ticks started after the next was due"),
+    Metric("deadline_*", clock="wall", description="ticks started after the next was due (the share: _rate)"),
+    Metric("states_dropped*", "count", clock="wall", description="states refused (late, out of order, forged, …)"),
     Metric("bridge_hold_at_s", "s", "wall", description="when the bridge held the robot on its own"),
-    Metric("bridge_stale_holds", clock="wall", description="gaps in the commands the bridge held through"),
+    Metric("bridge_stale_holds", "count", clock="wall", description="gaps in the commands the bridge held through"),
     Metric("ticks_skipped_s", "s", "wall", description="timeline paused after host stalls"),
     Metric("rtt_*", "ms", "wall", description="round trip of a command and its state"),
 )

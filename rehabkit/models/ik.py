@@ -41,8 +41,9 @@ class NumericIK:
         self.closest_m = float("nan")
 
     def solve(self, pose: np.ndarray, reference: np.ndarray | None = None, free: str = "",
-              limits: JointLimits | None = None) -> list[np.ndarray]:
-        """Distinct solutions for ``pose`` (4x4, base frame), nearest ``reference`` first (default: mid-range).
+              limits: JointLimits | None = None, first: bool = False) -> list[np.ndarray]:
+        """Distinct solutions for ``pose`` (4x4, base frame), nearest ``reference`` first (default: mid-range);
+        with ``first``, the first one found (from the reference when it converges there: the posture's own).
 
         Starts are drawn from a generator seeded afresh on each call, so the same question gets the same answer.
         """
@@ -58,6 +59,8 @@ class NumericIK:
             q = self._descend(pose, q0, free)
             if q is not None and all(np.abs(q - f).max() > 1e-3 for f in found):
                 found.append(q)
+                if first:
+                    break
         found.sort(key=lambda q: float(np.linalg.norm(q - ref)))
         return found
 

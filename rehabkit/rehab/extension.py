@@ -15,14 +15,14 @@ from rehabkit.core.lifecycle import Contribution
 from rehabkit.core.metric import Metric
 
 METRICS = (
-    Metric("reaches", outcome=True, description="planned movements counted as reaches"),
-    Metric("reaches_completed", outcome=True, description="reaches that got to their target and stayed"),
+    Metric("reaches", "count", outcome=True, description="planned movements counted as reaches"),
+    Metric("reaches_completed", "count", outcome=True, description="reaches that got to their target and stayed"),
     Metric("sparc", outcome=True, description="smoothness: spectral arc length of the hand's speed (mean)"),
     Metric("path_length_ratio", outcome=True, description="hand path length / straight line (mean)"),
     Metric("time_to_target_s", "s", outcome=True, description="time until the hand stays at the target (mean)"),
     Metric("assistance_ratio", outcome=True, description="the robot's share of the positive work done"),
     Metric("peak_interaction_force_n", "N", outcome=True, description="largest force at the hand"),
-    Metric("safety_interventions", outcome=True, description="trips and clipping episodes"),
+    Metric("safety_interventions", "count", outcome=True, description="trips and clipping episodes"),
     Metric("rom_deg_*", "deg", outcome=True, description="range of motion of a joint"),
 )
 

@@ -21,6 +21,7 @@ from pydantic import Field
 
 from rehabkit.core.capabilities import WorkspaceTable
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.metric import Metric
 from rehabkit.workspace.grid import BOUNDARY, INNER, VoxelWorkspace
 from rehabkit.workspace.search import SearchFailedError, astar, decimate, path_length
 from rehabkit.workspace.trajectory import Junction, Sequence, TimedPath, resample, smooth_path
@@ -43,6 +44,23 @@ class VoxelPlannerConfig(StrictModel):
 
 class VoxelPlanner(Planner):
     """Base of the workspace planners; subclasses supply :meth:`search`."""
+
+    metrics = (
+        Metric("goals_reached", "count", description="targets reached by the executed motion"),
+        Metric("goal_reach_error_max_mm", "mm", description="largest distance from a target when its reach ended"),
+        Metric("junction_s", "s", description="time spent joining a new plan to the motion under way"),
+        Metric("proxy_targets", "count", description="targets outside the workspace replaced by proxy points"),
+        Metric("straight_legs", "count", description="legs planned as a straight line (no search)"),
+        Metric("searched_legs", "count", description="legs planned by the search"),
+        Metric("path_length_m", "m", description="length of the planned hand path"),
+        Metric("decimated_path_length_m", "m", description="path length after decimation"),
+        Metric("decimation_used", description="whether the searched path was decimated before smoothing"),
+        Metric("workspace_lookup_table_mb", "MB", description="memory of the workspace look-up table"),
+        Metric("path_outside_workspace_samples", "count", description="plan samples outside the table"),
+        Metric("reference_outside_workspace_samples", "count", description="reference samples outside the table"),
+        Metric("proxy_bisection_lookups", "count", description="table look-ups of the proxy point bisection"),
+        Metric("proxy_reentry_checks", "count", description="checks of the path re-entering the workspace"),
+    )
 
     space = "cartesian"
     name = "voxel"

@@ -10,7 +10,16 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from rehabkit.plugin import Plan, Planner, PlanningError, PlanRequest, StrictModel, hookimpl, joint_waypoints
+from rehabkit.plugin import (
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    StrictModel,
+    hookimpl,
+    joint_waypoints,
+)
 
 
 class MinJerkConfig(StrictModel):
@@ -41,6 +50,12 @@ class MinJerkTrajectory:
 
 class MinJerkPlanner(Planner):
     """Minimum-jerk (quintic) rest-to-rest segments through the task's via points."""
+
+    # every figure the plan reports, declared: a scenario's expect: on any other name is refused by validate
+    metrics = (
+        Metric("ik_roundtrip_position_error_m", "m", description="largest hand error of the via points' IK"),
+        Metric("min_jerk_peak_speed_rad_s", "rad/s", description="fastest joint speed of the plan"),
+    )
 
     def __init__(self, config: MinJerkConfig, context=None):
         self.durations = np.asarray(config.segment_durations, dtype=float)

@@ -35,9 +35,16 @@ def read_yaml(path: Path) -> Source:
     """Parse one YAML file, keeping the position of every key and value."""
     name = str(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except OSError as exc:
         raise ScenarioError([Diagnostic(Mark(name, 0, 0), "", f"cannot read file: {exc.strerror}")]) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:  # located at the first byte that is not UTF-8
+        line = raw.count(b"\n", 0, exc.start) + 1
+        col = exc.start - (raw.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise ScenarioError([Diagnostic(Mark(name, line, col), "", f"the file is not UTF-8 text (byte "
+                                        f"0x{raw[exc.start]:02x}); save it as UTF-8")]) from None
     loader = YAML_LOADER(text)  # libyaml's parser where installed: the same marks
     try:
         node = loader.get_single_node()
