@@ -1,13 +1,37 @@
 """The command line: exit codes, messages, outputs."""
 
+import contextlib
+import io
 import json
+import os
 import subprocess
 import sys
+import warnings
 
+from rehabkit.cli import main
 from tests.conftest import ROOT, SCENARIOS
 
 
 def cli(*args, cwd=ROOT):
+    """``rehabkit ARGS`` run in this process (the command's own ``main``: its exit code, stdout and stderr as a
+    process would give them) — a second Python per call cost ~1 s of the suite each."""
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    try:
+        os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), warnings.catch_warnings():
+            warnings.simplefilter("default")
+            try:
+                code = main(list(map(str, args)))
+            except SystemExit as exc:  # argparse's own exits (--version, --help, a usage error)
+                code = exc.code if isinstance(exc.code, int) else 0 if exc.code is None else 2
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["rehabkit", *args], code, out.getvalue(), err.getvalue())
+
+
+def cli_process(*args, cwd=ROOT):
+    """``rehabkit ARGS`` in a process of its own (for what only a whole process shows)."""
     return subprocess.run([sys.executable, "-m", "rehabkit.cli", *args], capture_output=True, text=True, cwd=cwd)
 
 

@@ -43,8 +43,7 @@ def _run(command: str, tmp_path, cwd=ROOT):
     assert args[0] == "rehabkit"
     if "--out" in args:
         args[args.index("--out") + 1] = str(tmp_path / args[args.index("--out") + 1].replace("/", "_"))
-    return subprocess.run([sys.executable, "-m", "rehabkit.cli", *args[1:]], capture_output=True, text=True,
-                          cwd=cwd), args
+    return cli(*args[1:], cwd=cwd), args
 
 
 def test_the_main_job_runs_as_the_first_lines_say(tmp_path):
