@@ -130,6 +130,18 @@ def _admission(loaded) -> str:
 
 def cmd_plugins(args: argparse.Namespace) -> int:
     reg = default_registry()
+    if args.fields:
+        from rehabkit.core.hookspecs import KINDS
+        from rehabkit.core.names import suggest
+        from rehabkit.plugin_reference import plugin_reference
+
+        found = [p for p in (reg.find(kind, args.fields) for kind in KINDS) if p is not None]
+        if not found:
+            names = sorted({n for kind in KINDS for n in reg.names(kind)})
+            _err(f"error: no plugin named '{args.fields}'{suggest(args.fields, names)}")
+            return EXIT_INVALID
+        print("\n\n".join(plugin_reference(p) for p in found))
+        return EXIT_OK
     conflicts = reg.load_all()  # listing them is the one place every plugin is imported
     if args.json:
         print(json.dumps([
@@ -192,7 +204,12 @@ def cmd_bridge(args: argparse.Namespace) -> int:
             _err(f"error: --limits needs lower, upper and velocity per joint: {exc}")
             return EXIT_INVALID
     backstop = BridgeLimits(lower, upper, velocity, margin=np.radians(args.limit_margin_deg))
-    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=args.watchdog_ms / 1e3, stale_s=args.stale_ms / 1e3,
+    from rehabkit.hardware.config import HardwareConfig  # its defaults are the host's: a bridge by hand agrees
+
+    host = HardwareConfig.model_fields
+    watchdog_ms = host["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
+    stale_ms = host["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
+    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,
                     limits=backstop)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
     from threadpoolctl import threadpool_limits
@@ -240,6 +257,8 @@ def parser() -> argparse.ArgumentParser:
     v.set_defaults(func=cmd_validate)
     pl = sub.add_parser("plugins", help="list installed plugins and their settings")
     pl.add_argument("--json", action="store_true")
+    pl.add_argument("--fields", metavar="NAME", help="the reference of one plugin: every setting with its type, "
+                                                       "default and description, and the metrics it reports")
     pl.set_defaults(func=cmd_plugins)
     sc = sub.add_parser("schema", help="print the JSON Schema of scenarios (for editors)")
     sc.set_defaults(func=cmd_schema)
@@ -249,8 +268,9 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section)")
     b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
     b.add_argument("--robot-id", type=int, default=1)
-    b.add_argument("--watchdog-ms", type=float, default=5.0, help="hold the robot without valid commands this long")
-    b.add_argument("--stale-ms", type=float, default=10.0,
+    b.add_argument("--watchdog-ms", type=float, default=None,
+                   help="hold the robot without valid commands this long (default: the host backend's, 50 ms)")
+    b.add_argument("--stale-ms", type=float, default=None,
                    help="hold the posture after this long without a newer command, until the next one")
     b.add_argument("--limits", default=None, metavar="JSON",
                    help="the run's joint limits {lower, upper, velocity} (default: the robot's); beyond them by the "

@@ -153,3 +153,39 @@ def test_the_bridge_stops_a_joint_beyond_its_limits_whatever_the_host_sends(hit)
     finally:
         host.sock.close()
         bridge.sock.close()
+
+
+def test_a_latched_bridge_is_reset_by_the_next_host_session(hit):
+    """A new run is a new host process numbering its commands from 1: its reset opens a session (once dropped as
+    out of order, so a bridge started by hand answered one run only: "does not answer")."""
+    bridge = Bridge(MujocoPlant(hit), watchdog_s=0.050, stale_s=0.010)
+    first = Host(bridge)
+    try:
+        first.send(Q0, CMD_RESET)
+        first.state = first.tick()
+        first.hold_gravity(30)
+        for _ in range(60):  # the run ended: no more commands, the watchdog latches a hold
+            first.state = first.tick()
+        assert first.state[3] & HOLDING and first.seq > 30
+        second = Host(bridge)
+        second.now = first.now
+        try:
+            second.send(Q0, CMD_RESET)  # seq 1 again
+            second.state = second.tick()
+            assert second.state[3] & ENABLED and not second.state[3] & HOLDING
+            q, *_ = second.hold_gravity(40)
+            assert np.abs(q - Q0).max() < np.radians(1) and bridge.rx.dropped["out-of-order"] == 0
+        finally:
+            second.sock.close()
+    finally:
+        first.sock.close()
+        bridge.sock.close()
+
+
+def test_a_bridge_started_by_hand_has_the_hosts_watchdog_defaults():
+    from rehabkit.cli import parser
+    from rehabkit.hardware.config import HardwareConfig
+
+    args = parser().parse_args(["bridge", "hit"])
+    assert args.watchdog_ms is None and args.stale_ms is None  # resolved to the host's when the bridge starts
+    assert HardwareConfig().bridge_watchdog_ms == 50.0 and HardwareConfig().bridge_stale_ms == 10.0

@@ -99,3 +99,15 @@ def test_plugins_and_schema_commands():
     listed = json.loads(cli("plugins", "--json").stdout)
     rows = listed if isinstance(listed, list) else listed.get("plugins", listed)
     assert "ompl-joint" in json.dumps(rows) and "cartesian" in json.dumps(rows)
+
+
+def test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics():
+    r = cli("plugins", "--fields", "dh")
+    assert r.returncode == 0
+    assert "  table: list[DHRowSpec] = required" in r.stdout
+    assert "      mass: float = required — [kg]" in r.stdout  # a joint's setting, under the joints
+    r = cli("plugins", "--fields", "ompl-joint")
+    assert "  clearance_m: float = 0.01 — distance below which a link counts as touching the world [m]" in r.stdout
+    assert "  states_checked [count] — states checked for collision by MuJoCo" in r.stdout
+    r = cli("plugins", "--fields", "multicubic")
+    assert r.returncode == 2 and "did you mean 'multi-cubic'?" in r.stderr

@@ -185,3 +185,4 @@ def test_bad_commands_are_stopped_on_the_host_before_the_link(monkeypatch, tmp_p
     after = r.trace.t >= events[0]["t"] + 0.3  # held: the robot settles where it was stopped
     assert np.degrees(np.abs(np.diff(r.trace.q[after], axis=0))).max() < 0.05
     assert json.loads((tmp_path / "summary.json").read_text())["safety"]["tripped"]
+

@@ -29,6 +29,8 @@ EXECUTED_ELSEWHERE = {
     "rehabkit schema": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema > rehabkit.schema.json": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit --version": "tests/test_user_robot_errors.py::test_contacts_are_said_and_the_version_is_known",
+    "rehabkit plugins --fields dh":
+        "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
 }
 
 

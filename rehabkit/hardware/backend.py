@@ -154,9 +154,12 @@ class HardwareBackend(MirroredScene, Backend):
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
-                    why = (f"its watchdog saw no valid command for {self.config.bridge_watchdog_ms:g} ms"
+                    why = ((f"its watchdog saw no valid command for {self.config.bridge_watchdog_ms:g} ms"
+                            if self.config.spawn_bridge else "its watchdog saw no valid command within its "
+                            "--watchdog-ms (a bridge started by hand sets its own)")
                            if msg.status & WATCHDOG else "an e-stop at the robot" if msg.status & ESTOPPED else
                            self._beyond() if msg.status & LIMIT else "status holding")
+                    why += "; it stays latched until a reset: the next run sends one"
                     self._fault = f"the bridge holds the robot ({why}) at t={self.held_at:.3f}s"
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
@@ -187,8 +190,9 @@ class HardwareBackend(MirroredScene, Backend):
             if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
         else:
-            raise LinkLostError(f"the bridge at udp://{self.addr[0]}:{self.addr[1]} does not answer"
-                                + ("" if self.realtime else " (was it started with --lockstep?)"))
+            raise LinkLostError(f"the bridge at udp://{self.addr[0]}:{self.addr[1]} does not answer a reset"
+                                + (" (is `rehabkit bridge` running there, for this robot and robot_id?)"
+                                   if self.realtime else " (was it started with --lockstep?)"))
         self.t0 = self.deadline = self.last_state = self._now()
         self._started = False
         self.held_at, self._fault, self._estop_sent = None, None, False  # a reset re-enables the bridge

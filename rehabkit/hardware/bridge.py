@@ -94,7 +94,8 @@ class Bridge:
         self.sock.bind((host, port))
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]
-        self.rx = Receiver(COMMAND, robot_id, plant.joints)
+        # a host's reset opens its session: a new run (a new host process) numbers its commands from 1 again
+        self.rx = Receiver(COMMAND, robot_id, plant.joints, restart=CMD_RESET)
         self.peer = None
         self.tau = np.zeros(plant.joints)
         self.status = 0

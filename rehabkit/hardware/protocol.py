@@ -112,6 +112,7 @@ class Receiver:
     measured: int = 0  # measured-only joints each STATE carries
     max_age: float | None = None  # seconds; None: senders do not share our clock
     last_seq: int | None = None
+    restart: int = 0  # status bits that open a new session: its sequence numbers start over
     accepted: int = 0
     dropped: Counter = field(default_factory=Counter)
 
@@ -121,7 +122,7 @@ class Receiver:
         if msg is None:
             self.dropped[reason] += 1
             return None
-        if self.last_seq is not None and not newer(msg.seq, self.last_seq):
+        if self.last_seq is not None and not msg.status & self.restart and not newer(msg.seq, self.last_seq):
             self.dropped["duplicate" if msg.seq == self.last_seq else "out-of-order"] += 1
             return None
         if self.max_age is not None:
