@@ -8,6 +8,8 @@ implements in :mod:`rehabkit.core.lifecycle`.
 
 from rehabkit.core.capabilities import (
     ClusterPoints,
+    Contacts,
+    ExternalTorques,
     FloatingBase,
     LiftArmGripper,
     PassiveJoints,
@@ -56,6 +58,8 @@ __all__ = [
     "joint_waypoints", "JointWaypoints",
     # what a robot declares it can do, and a plugin ``requires``
     "WorkspaceTable", "RandomReach", "PassiveJoints", "ClusterPoints", "FloatingBase", "LiftArmGripper",
+    # what a backend declares it can do (the rest: rehabkit.core.capabilities)
+    "ExternalTorques", "Contacts",
     # describing metrics; extensions' contributions and limits
     "Metric", "Contribution", "Narrowing", "LimitBreach",
     # errors

@@ -1,25 +1,35 @@
-"""A separately installed package adds a planner through its own entry point."""
+"""Separately installed packages add plugins through their own entry points: a planner (examples/third_party_plugin)
+and one plugin of every other kind (examples/lab_plugins), installed together as a user would."""
 
 import json
 import os
 import subprocess
 import sys
 
+import pytest
+
 from tests.conftest import ROOT
 
 EXAMPLE = ROOT / "examples" / "third_party_plugin"
+LAB = ROOT / "examples" / "lab_plugins"
 
 
-def test_third_party_plugin_installs_and_runs_in_a_scenario(tmp_path):
-    target = tmp_path / "site"
-    # (no build isolation: the installed setuptools builds it, 1.6 s; an isolated build environment took 6 s)
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """Both example packages installed into a site directory of their own; the environment that sees them."""
+    target = tmp_path_factory.mktemp("site")
+    # (no build isolation: the installed setuptools builds them, 1.6 s; an isolated build environment took 6 s)
     pip = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
-                          "--target", str(target), str(EXAMPLE)], capture_output=True, text=True)
+                          "--target", str(target), str(EXAMPLE), str(LAB)], capture_output=True, text=True)
     assert pip.returncode == 0, pip.stderr
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(target), os.environ.get("PYTHONPATH", "")])}
-
     listed = subprocess.run([sys.executable, "-m", "rehabkit.cli", "plugins"], capture_output=True, text=True, env=env)
-    assert "min-jerk         rehabkit-minjerk 0.1.0" in listed.stdout
+    return env, listed.stdout
+
+
+def test_third_party_plugin_installs_and_runs_in_a_scenario(tmp_path, installed):
+    env, listed = installed
+    assert "min-jerk         rehabkit-minjerk 0.1.0" in listed
 
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "rehabkit.cli", "run",
@@ -34,3 +44,21 @@ def test_third_party_plugin_installs_and_runs_in_a_scenario(tmp_path):
     missing = subprocess.run([sys.executable, "-m", "rehabkit.cli", "validate",
                               str(EXAMPLE / "scenarios" / "hit_minjerk.yaml")], capture_output=True, text=True)
     assert missing.returncode == 2 and "unknown planner plugin 'min-jerk'" in missing.stderr
+
+
+def test_a_plugin_of_every_kind_installs_and_runs_together(tmp_path, installed):
+    env, listed = installed
+    for kind, name in (("robot", "planar-arm"), ("controller", "saturating-pd"), ("sensor", "hand-position"),
+                       ("backend", "rigid-body"), ("patient", "relaxed-arm")):
+        assert f"{kind:<10} {name:<16} rehabkit-lab-example 0.1.0" in listed, name
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "rehabkit.cli", "run", str(LAB / "scenarios" / "planar_lab.yaml"),
+                          "--out", str(out)], capture_output=True, text=True, env=env)
+    assert run.returncode == 0, run.stdout + run.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    used = {kind: summary["plugins"][kind]["package"] for kind in ("robot", "backend", "controller")}
+    assert used == dict.fromkeys(used, "rehabkit-lab-example")
+    m = summary["metrics"]
+    assert m["final_position_error_m"] < 0.005 and m["tracking_max_deg"] < 2  # reached through the person's pull
+    assert 0.6 < m["hand_marker_error_rms_mm"] < 1.2  # 0.5 mm per axis: √3 · 0.5 = 0.87 mm
+    assert m["person_torque_max_nm"] > 0.5 and 0 <= m["pd_saturated_share"] < 0.5
