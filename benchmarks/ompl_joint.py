@@ -15,6 +15,7 @@ straight line, planning time median / p95, states checked.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
 import time
@@ -47,7 +48,7 @@ def main() -> None:
     world = World.model_validate(WORLD)
     ctx = Context(ROOT / "examples" / "robots", np.random.default_rng(0), 0.001, world=world)
     robot = UrdfRobot(ModelFileConfig(file="arm4.urdf", ee_frame="tip", base={"position": [0, 0, 0.8]}), ctx)
-    ctx.robot = robot
+    ctx = dataclasses.replace(ctx, robot=robot)
     exact = SceneCollision(robot.model, world)
     padded = SceneCollision(robot.model, world, 0.01)
     rng = np.random.default_rng(11)
@@ -57,31 +58,33 @@ def main() -> None:
         a, b = rng.uniform(lim.lower, lim.upper, (2, robot.model.dof))
         if padded.free(a) and padded.free(b):
             pairs.append((a, b))
-    blocked = sum(exact.first_collision(a + np.linspace(0, 1, 100)[:, None] * (b - a)) >= 0 for a, b in pairs)
+    blocked = [exact.first_collision(a + np.linspace(0, 1, 100)[:, None] * (b - a)) >= 0 for a, b in pairs]
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}; {args.pairs} pairs, {blocked} of them blocked in a straight line; "
+          f"{platform.python_version()}; {args.pairs} pairs, {sum(blocked)} of them blocked in a straight line; "
           f"time limit {args.time_limit} s per leg")
-    print(f"{'algorithm':12s} {'success':>8s} {'colliding':>9s} {'length rad':>10s} {'/straight':>9s} "
+    print(f"{'algorithm, pairs':20s} {'success':>8s} {'colliding':>9s} {'length rad':>10s} {'/straight':>9s} "
           f"{'median s':>9s} {'p95 s':>7s} {'checks':>8s}")
     for algorithm in ("rrt-connect", "rrt-star", "prm"):
         planner = OmplJointPlanner(OmplJointConfig(algorithm=algorithm, time_limit_s=args.time_limit, seed=3), ctx)
-        ok, colliding, lengths, ratios, times, checks = 0, 0, [], [], [], []
-        for a, b in pairs:
+        rows = []  # (blocked, planned, colliding, length, ratio, time, checks)
+        for (a, b), hard in zip(pairs, blocked):
             t0 = time.perf_counter()
             try:
                 plan = planner.plan(PlanRequest(0.0, a, np.zeros_like(a), [Target("goal", q=b)], robot))
             except PlanningError:
+                rows.append((hard, False, False, np.nan, np.nan, time.perf_counter() - t0, np.nan))
                 continue
-            times.append(time.perf_counter() - t0)
-            ok += 1
+            elapsed = time.perf_counter() - t0
             q, _, _ = plan.trajectory.sample(np.arange(0.0, plan.trajectory.duration + 1e-9, 0.001))
-            colliding += exact.first_collision(q) >= 0
-            lengths.append(plan.diagnostics["path_length_rad"])
-            ratios.append(lengths[-1] / max(np.linalg.norm(b - a), 1e-9))
-            checks.append(plan.diagnostics["states_checked"])
-        print(f"{algorithm:12s} {ok / len(pairs):8.1%} {colliding:9d} {np.mean(lengths):10.2f} {np.mean(ratios):9.2f} "
-              f"{np.median(times):9.3f} {np.percentile(times, 95):7.3f} {np.median(checks):8.0f}")
-
+            length = plan.diagnostics["path_length_rad"]
+            rows.append((hard, True, exact.first_collision(q) >= 0, length,
+                         length / max(np.linalg.norm(b - a), 1e-9), elapsed, plan.diagnostics["states_checked"]))
+        for label, subset in (("all", rows), ("blocked", [r for r in rows if r[0]])):
+            ok = [r for r in subset if r[1]]
+            col = lambda i, rs=ok: np.array([r[i] for r in rs], float)  # noqa: E731
+            print(f"{algorithm + ' ' + label:20s} {len(ok) / len(subset):8.1%} {sum(r[2] for r in ok):9d} "
+                  f"{np.mean(col(3)):10.2f} {np.mean(col(4)):9.2f} {np.median(col(5)):9.3f} "
+                  f"{np.percentile(col(5), 95):7.3f} {np.median(col(6)):8.0f}")
 
 if __name__ == "__main__":
     main()

@@ -9,38 +9,10 @@ from rehabkit.core.errors import PluginSetupError, SetupError
 from rehabkit.core.runner import Runner
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
+from tests.conftest import DATA
 from tests.test_cli import cli
 
-ARM3 = """\
-name: my-arm3
-robot:
-  type: dh
-  name: arm3
-  convention: standard
-  table:
-    - {a: 0.0, alpha_deg: 90, d: 0.2}
-    - {a: 0.3}
-    - {a: 0.25}
-  joints:
-    - {name: yaw, range_deg: [-170, 170], velocity_deg_s: 120, effort: 40, mass: 1.5}
-    - {name: shoulder, range_deg: [-120, 120], velocity_deg_s: 120, effort: 40, mass: 1.2}
-    - {name: elbow, range_deg: [-150, 150], velocity_deg_s: 150, effort: 20, mass: 0.8}
-  base: {position: [0, 0, 0.5]}
-planner: {type: multi-cubic, segment_durations: [2]}
-controller:
-  type: joint-pd
-  kp: [300, 300, 150]
-  kd: [20, 20, 8]
-  feedforward: inverse-dynamics
-task:
-  targets:
-    - {name: A, joints_deg: [0, 30, 60]}
-    - {name: B, joints_deg: [40, 60, 20]}
-duration: 4.5
-expect:
-  final_joint_error_deg: {lt: 0.5}
-  tracking_max_deg: {lt: 2}
-"""
+ARM3 = (DATA / "arm3_dh.yaml").read_text()  # a user's own 3-joint arm, written as a DH table
 
 
 def _write(tmp_path, text: str):

@@ -111,7 +111,10 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray,
         elif (tgt.same_as or tgt.name) in solved:
             q = solved[tgt.same_as or tgt.name]
         else:
-            sols = robot.solve_ik(tgt.pose, reference=prev, free=tgt.free)
+            try:
+                sols = robot.solve_ik(tgt.pose, reference=prev, free=tgt.free)
+            except NotImplementedError as exc:  # no IK of its own and a model Pinocchio can't load
+                raise PlanningError(f"target '{tgt.name}' is Cartesian: {exc}; give it as joint values") from exc
             if not sols:
                 raise PlanningError(unreachable(tgt, robot))
             sols = [prev + angular_distance(s, prev) for s in sols]
