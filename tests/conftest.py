@@ -10,6 +10,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 DATA = Path(__file__).resolve().parent / "data"
+pytest_plugins = ["pytester"]  # (the README's scenario-test example runs in a pytest of its own, in-process)
 collect_ignore = ["bad_scenarios"]  # refused on purpose (tests/test_bad_corpus.py), not scenario tests
 
 

@@ -15,12 +15,21 @@ EXAMPLES = Path(__file__).parents[1] / "examples" / "robots"
 ROBOTS = ["dh_arm3", "urdf_arm4", "mjcf_arm5"]
 
 
+_RUNS: dict[tuple[str, str], tuple[Runner, object]] = {}
+
+
+def _run(robot: str, planner: str):
+    """Each example with each planner, run once for the tests of this module."""
+    if (robot, planner) not in _RUNS:
+        runner = Runner(load_scenario(EXAMPLES / f"{robot}.yaml", {"planner.type": planner}))
+        _RUNS[robot, planner] = runner, runner.run()
+    return _RUNS[robot, planner]
+
+
 @pytest.mark.parametrize("planner", ["ompl-joint", "cartesian"])
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_an_own_robot_meets_its_expectations_with_each_generic_planner(robot, planner):
-    loaded = load_scenario(EXAMPLES / f"{robot}.yaml", {"planner.type": planner})
-    runner = Runner(loaded)
-    result = runner.run()
+    _, result = _run(robot, planner)
     assert result.passed, result.failures
     m = result.metrics
     assert m["reaches_completed"] == m["reaches"] >= 2
@@ -33,10 +42,8 @@ def test_an_own_robot_meets_its_expectations_with_each_generic_planner(robot, pl
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_the_joint_space_path_goes_around_the_obstacles_not_through_them(robot):
-    loaded = load_scenario(EXAMPLES / f"{robot}.yaml")
-    runner = Runner(loaded)
-    result = runner.run()
-    checker = SceneCollision(runner.setup.robot.model, loaded.model.world)  # the true geometry, no clearance
+    runner, result = _run(robot, "ompl-joint")
+    checker = SceneCollision(runner.setup.robot.model, runner.sc.world)  # the true geometry, no clearance
     q_ref = np.asarray(result.trace.q_ref)  # the timed reference, every control step
     assert len(q_ref) > 5000 and checker.first_collision(q_ref) == -1
     left, right = np.radians(result.summary["plans"][0]["waypoints_deg"][-2:])

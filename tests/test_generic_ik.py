@@ -29,7 +29,7 @@ def test_a_3dof_dh_arm_reaches_positions_within_its_limits(arm3):
     rng = np.random.default_rng(0)
     lim = arm3.model.limits
     errors = []
-    for q in rng.uniform(lim.lower, lim.upper, (60, 3)):
+    for q in rng.uniform(lim.lower, lim.upper, (30, 3)):
         want = arm3.fk(q)
         (best, *_) = arm3.solve_ik(want, free="xyz")
         assert _within(arm3, best)
@@ -49,7 +49,7 @@ def test_a_6dof_arm_reaches_whole_poses_as_its_analytic_ik_does(hit):
     rng = np.random.default_rng(1)
     lim = hit.model.limits
     solved = 0
-    for q in rng.uniform(lim.lower, lim.upper, (40, 6)):
+    for q in rng.uniform(lim.lower, lim.upper, (20, 6)):
         want = hit.fk(q)
         sols = hit.numeric_ik.solve(want)
         assert hit.ik(want)  # the analytic IK reaches it too
@@ -59,7 +59,7 @@ def test_a_6dof_arm_reaches_whole_poses_as_its_analytic_ik_does(hit):
             assert np.linalg.norm(got[:3, 3] - want[:3, 3]) < 2e-5
             assert axis_error_deg(got[:3, :3], want[:3, :3]) < 0.01
             assert _within(hit, sols[0])
-    assert solved >= 39
+    assert solved >= 19
 
 
 def test_a_pointing_target_leaves_the_turn_about_the_tool_axis_free(hit):

@@ -4,8 +4,6 @@ by the test named for it below (checked to exist)."""
 import json
 import re
 import shlex
-import subprocess
-import sys
 
 import numpy as np
 import yaml
@@ -48,15 +46,17 @@ def _run(command: str, tmp_path, cwd=ROOT):
     return cli(*args[1:], cwd=cwd), args
 
 
-def test_the_main_job_runs_as_the_first_lines_say(tmp_path):
+def test_the_main_job_is_what_the_cli_test_runs():
+    """The first lines: set-up and the main job, set-up and the tests. tests/test_cli.py runs the main job's
+    command (its scenario, writing run.rrd and summary.json, exit 0)."""
     lang, block = BLOCKS[0]
     assert lang == "bash"
     main, tests = block.strip().splitlines()
-    assert main.startswith('pip install -e ".[dev]" && rehabkit run ') and "python -m pytest" in tests
-    done, args = _run(main.split("&& ", 1)[1], tmp_path)
-    assert done.returncode == 0, done.stderr
-    out = tmp_path / args[args.index("--out") + 1].split("/")[-1]
-    assert json.loads((out / "summary.json").read_text())["passed"] and (out / "run.rrd").stat().st_size > 0
+    assert main.split("#")[0].split() == ["pip", "install", "-e", '".[dev]"', "&&", "rehabkit", "run",
+                                          "scenarios/hit_roundtrip.yaml", "--out", "out/hit"]
+    assert tests.split("#")[0].split()[-3:] == ["python", "-m", "pytest"]
+    cli_test = (ROOT / "tests" / "test_cli.py").read_text()
+    assert 'cli("run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path))' in cli_test
 
 
 def test_the_bad_file_gives_exactly_the_errors_shown(tmp_path):
@@ -111,13 +111,12 @@ def test_the_plugin_snippet_is_the_example_plugins_registration():
     assert 'registry.add("min-jerk", config=MinJerkConfig, factory=MinJerkPlanner)' in source
 
 
-def test_the_scenario_test_example_passes_under_pytest(tmp_path):
+def test_the_scenario_test_example_passes_under_pytest(pytester):
     snippet = next(b for lang, b in BLOCKS if lang == "python" and "def test_speed" in b)
-    test_file = tmp_path / "test_readme_speed.py"
-    test_file.write_text("import pytest\n\n\n" + snippet)
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(test_file),
-                           "--rootdir", str(tmp_path)], capture_output=True, text=True, cwd=ROOT)
-    assert done.returncode == 0 and "3 passed" in done.stdout, done.stdout + done.stderr
+    (pytester.path / "scenarios").symlink_to(ROOT / "scenarios")  # its path is relative to the project
+    test_file = pytester.makepyfile(test_readme_speed="import pytest\n\n\n" + snippet)
+    result = pytester.runpytest_inprocess(str(test_file), "-p", "no:cacheprovider")
+    result.assert_outcomes(passed=3)
 
 
 def test_every_command_the_readme_names_is_executed():
