@@ -20,7 +20,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel, Target
 from rehabkit.core.metric import Metric
-from rehabkit.core.targets import unreachable
+from rehabkit.core.targets import angle_axis, unreachable
 
 from .multi_cubic import MultiCubicTrajectory, solve_multi_cubic
 
@@ -48,15 +48,9 @@ def min_jerk(tau: np.ndarray) -> np.ndarray:
 
 def slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Rotations (len(s), 3, 3) turning from ``a`` to ``b`` about one fixed axis, a fraction ``s`` of the way."""
-    R = a.T @ b
-    angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
-    if angle < 1e-9:
+    angle, axis = angle_axis(a.T @ b)
+    if axis is None:
         return np.repeat(a[None], len(s), axis=0)
-    if np.pi - angle < 1e-6:  # a half turn: the axis is the eigenvector of R for eigenvalue 1
-        w, v = np.linalg.eigh(R + R.T)
-        axis = v[:, np.argmax(w)]
-    else:
-        axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2 * np.sin(angle))
     K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     th = (np.asarray(s) * angle)[:, None, None]
     return a @ (np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * (K @ K))
@@ -96,8 +90,7 @@ class CartesianPlanner(Planner):
             goal = target.pose if target.pose is not None else robot.fk(target.q)
             free = target.free if target.pose is not None else ""
             dist = float(np.linalg.norm(goal[:3, 3] - pose[:3, 3]))
-            turn = 0.0 if free == "xyz" else float(np.degrees(np.arccos(np.clip(
-                (np.trace(pose[:3, :3].T @ goal[:3, :3]) - 1) / 2, -1, 1))))
+            turn = 0.0 if free == "xyz" else float(np.degrees(angle_axis(pose[:3, :3].T @ goal[:3, :3])[0]))
             if dist < 1e-6 and turn < 1e-3:
                 ends.append(len(qs) - 1)
                 continue

@@ -346,14 +346,9 @@ def check_first_plan(a: Assembly) -> None:
     except PlanningError as exc:
         raise first_plan_refusal(a, exc) from exc
     if a.planner.space == "joint":  # as the run's plan gate checks it
-        from rehabkit.core.limits import first_breach
-        from rehabkit.core.plan_gate import CHECK_DT
+        from rehabkit.core.plan_gate import plan_breach
 
-        ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-        qs, qds, _ = plan.trajectory.sample(ts)
-        model = a.robot.model
-        breach = first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
-        if breach is not None:
+        if (breach := plan_breach(plan, a.robot.model)) is not None:
             raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
 
 

@@ -69,22 +69,24 @@ class MetricCatalogue:
 
     def known(self, name: str) -> bool:
         """Whether someone described ``name`` (or a family it belongs to)."""
-        return name in self._exact or any(
-            name.startswith(f.name.partition("*")[0]) and name.endswith(f.name.partition("*")[2])
-            and len(name) >= len(f.name) - 1 for f in self._families)  # ("*" may stand for nothing)
+        return self._described(name) is not None
 
     def names(self) -> list[str]:
         """The described names and family patterns (for suggestions)."""
         return sorted([*self._exact, *(f.name for f in self._families)])
 
     def get(self, name: str) -> Metric:
+        return self._described(name) or Metric(name)
+
+    def _described(self, name: str) -> Metric | None:
+        """Its description, or its family's (``*`` may stand for nothing: ``accel_filter_gain*``)."""
         if name in self._exact:
             return self._exact[name]
         for fam in self._families:
             head, _, tail = fam.name.partition("*")
-            if name.startswith(head) and name.endswith(tail) and len(name) > len(head) + len(tail):
+            if name.startswith(head) and name.endswith(tail) and len(name) >= len(head) + len(tail):
                 return fam
-        return Metric(name)
+        return None
 
     def info(self, names: Iterable[str]) -> dict[str, dict]:
         """``{name: description}`` for ``names``, as ``summary.json`` keeps it."""

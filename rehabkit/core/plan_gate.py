@@ -19,6 +19,13 @@ from rehabkit.core.safety import AXES
 CHECK_DT = 0.005  # plans are checked at this resolution [s]
 
 
+def plan_breach(plan: Plan, model) -> LimitBreach | None:
+    """The first joint limit of ``model`` a joint-space plan breaks, sampled every ``CHECK_DT``."""
+    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+    qs, qds, _ = plan.trajectory.sample(ts)
+    return first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
+
+
 class PlanGate:
     """Asks the scenario's planner, checks what it answers, keeps the plans' diagnostics and warnings."""
 
@@ -47,12 +54,7 @@ class PlanGate:
 
     def limit_breach(self, plan: Plan) -> LimitBreach | None:
         """The first joint limit a joint-space plan breaks (Cartesian plans are mapped by the controller)."""
-        if self.cartesian:
-            return None
-        ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-        qs, qds, _ = plan.trajectory.sample(ts)
-        model = self.robot.model
-        return first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
+        return None if self.cartesian else plan_breach(plan, self.robot.model)
 
     def warn_box(self, t: float, plan: Plan, to_world) -> None:
         """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""

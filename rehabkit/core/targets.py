@@ -138,17 +138,27 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray,
     return JointWaypoints(np.array(rows), pos_err, rot_err, branches)
 
 
+def angle_axis(R: np.ndarray) -> tuple[float, np.ndarray | None]:
+    """The turn of rotation matrix ``R`` [rad] and its unit axis (``None`` for no turn; near a half turn the axis is
+    the eigenvector for eigenvalue 1)."""
+    angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
+    if angle < 1e-12:
+        return 0.0, None
+    if np.sin(angle) < 1e-6:
+        w, v = np.linalg.eigh(R + R.T)
+        return angle, v[:, np.argmax(w)]
+    return angle, np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2 * np.sin(angle))
+
+
 def axis_error_deg(reached: np.ndarray, wanted: np.ndarray, free: str = "") -> float:
     """Rotation error [deg] between two orientations, about the tool axes not in ``free`` (the components of the
     rotation vector taking ``reached`` to ``wanted``, in the tool frame, as the numeric IK measures it)."""
-    R = reached.T @ wanted
-    angle = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
-    kept = [i for i, axis in enumerate("xyz") if axis not in free]
-    if not kept or angle < 1e-12:
+    angle, axis = angle_axis(reached.T @ wanted)
+    kept = [i for i, name in enumerate("xyz") if name not in free]
+    if not kept or axis is None:
         return 0.0
-    if not free or np.sin(angle) < 1e-6:  # the whole turn (near a half turn the axis is ill-defined: bound it)
+    if not free or np.pi - angle < 1e-6:  # the whole turn (near a half turn the axis's sign is ill-defined: bound it)
         return float(np.degrees(angle))
-    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2 * np.sin(angle))
     return float(np.degrees(angle * np.abs(axis[kept]).max()))
 
 
