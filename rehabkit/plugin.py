@@ -11,6 +11,7 @@ from rehabkit.core.capabilities import (
     Contacts,
     ExternalTorques,
     FloatingBase,
+    HostsBodies,
     LiftArmGripper,
     PassiveJoints,
     RandomReach,
@@ -25,6 +26,7 @@ from rehabkit.core.interfaces import (
     Contact,
     Context,
     Controller,
+    EmbodiedPatient,
     GeomVisual,
     IKUnavailableError,
     Instrument,
@@ -46,6 +48,7 @@ from rehabkit.core.limits import LimitBreach, Narrowing
 from rehabkit.core.metric import Metric
 from rehabkit.core.targets import JointWaypoints, joint_waypoints
 from rehabkit.models.robot_model import JointLimits, RobotModel
+from rehabkit.models.wearable import Strap, Wearable
 
 __all__ = [
     # registering
@@ -53,13 +56,13 @@ __all__ = [
     # the plugin kinds and what they exchange
     "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "Backend", "BodyPoses", "Contact",
-    "GeomVisual", "Patient", "Context", "StrictModel",
+    "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "Wearable", "Strap",
     # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked)
     "joint_waypoints", "JointWaypoints",
     # what a robot declares it can do, and a plugin ``requires``
     "WorkspaceTable", "RandomReach", "PassiveJoints", "ClusterPoints", "FloatingBase", "LiftArmGripper",
     # what a backend declares it can do (the rest: rehabkit.core.capabilities)
-    "ExternalTorques", "Contacts",
+    "ExternalTorques", "Contacts", "HostsBodies",
     # describing metrics; extensions' contributions and limits
     "Metric", "Contribution", "Narrowing", "LimitBreach",
     # errors

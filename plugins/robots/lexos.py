@@ -33,6 +33,7 @@ from rehabkit.models.chain import KinematicChain, rot_x, trans
 from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
 from rehabkit.models.mjcf_builder import build_chain_mjcf
 from rehabkit.models.robot_model import RobotModel, SafeStop
+from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.workspace.build import build_workspace
 from rehabkit.workspace.grid import VoxelWorkspace
 from rehabkit.workspace.sampling import random_inner, random_inner_not_straight
@@ -116,6 +117,15 @@ class SwivelReachability:
         return ok.any(axis=1)
 
 
+def lexos_wearable(l1: float, l2: float) -> Wearable:
+    """The person's shoulder centre where the three shoulder axes meet (the base origin), facing the base's x;
+    a cuff on the upper arm (60 % of the way to the elbow) and one on the forearm, a hand's breadth before the
+    handle."""
+    return Wearable(shoulder=(0.0, 0.0, 0.0), forward=(1.0, 0.0, 0.0), up=(0.0, 0.0, 1.0),
+                    straps=(Strap("upper_arm", "q3_rotation_link", (0.0, 0.0, 0.6 * l1)),
+                            Strap("forearm", "q4_elbow_link", (max(0.05, l2 - 0.15), 0.0, 0.0))))
+
+
 class LexosConfig(StrictModel):
     """L-Exos arm: segment lengths, placement, stop behaviour."""
 
@@ -148,7 +158,7 @@ class LexosRobot(Robot, WorkspaceTable, RandomReach):
                                base_radius=0.06, ee_site="handle")
         self.model = RobotModel("lexos", xml, [j.name for j in joints], limits, "handle",
                                 base_pose=config.base.matrix(), safe_stop=config.safe_stop,
-                                passive_joints=[j.name for j in passive])
+                                passive_joints=[j.name for j in passive], wearable=lexos_wearable(*self.lengths))
         self.swivel = np.linspace(-np.pi, np.pi, config.swivel_samples, endpoint=False)
         self._own = (limits.lower.copy(), limits.upper.copy())  # before a patient's ranges narrow them
 

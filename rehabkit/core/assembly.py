@@ -10,8 +10,8 @@ setup would. The order:
    and set on the model, so everything built after plans and checks within them;
 3. the robot's declared capabilities are checked against what the other plugins require;
 4. targets are resolved and admitted (``rehabkit_admit_targets``);
-5. sensors (their instruments go into the scene), backend, planner, controller, patient,
-   the interaction-force limit (``rehabkit_force_limit``) and the safety layer.
+5. sensors, planner, controller, patient, the interaction-force limit (``rehabkit_force_limit``), the safety
+   layer, and the backend last (its scene holds the sensors' instruments and an embodied patient's body).
 """
 
 from __future__ import annotations
@@ -25,12 +25,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rehabkit.core.capabilities import ExternalTorques, SceneObjects, missing_capabilities
+from rehabkit.core.capabilities import ExternalTorques, HostsBodies, SceneObjects, missing_capabilities
 from rehabkit.core.errors import PluginSetupError, SetupError
 from rehabkit.core.interfaces import (
     Backend,
     Context,
     Controller,
+    EmbodiedPatient,
     Patient,
     Planner,
     PlanningError,
@@ -95,7 +96,7 @@ class Assembly:
     event_planners: dict[int, Planner] = field(default_factory=dict)  # replan events with planner settings
     controller: Controller | None = None
     patient: Patient | None = None
-    hand_force: HandForce | None = None
+    hand_force: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None  # (q, τ_person) → force [N]
     safety: SafetyLayer | None = None
     schedule: Schedule | None = None
 
@@ -147,8 +148,6 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     # sensors before the backend: their instruments go into the scene it builds
     a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
     a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
-    if upto == "run":  # (a backend may start processes: a hardware link's bridge)
-        a.backend = a.make("backend", sc.backend, ("backend",))
     a.planner = a.make("planner", sc.planner, ("planner",))
     for i, ev in enumerate(sc.task.events):
         if ev.planner is not None:  # (the settings were validated with the scenario, each located)
@@ -166,6 +165,11 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
             raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
                              f"{suggest(t.sensor, a.sensors)}")
     _patient_and_safety(a)
+    if upto == "run":  # last: a backend may start processes (a hardware link's bridge); its scene holds the
+        # sensors' instruments and an embodied patient's body
+        bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()
+        a.context = replace(a.context, bodies=bodies)
+        a.backend = a.make("backend", sc.backend, ("backend",))
     _check_expectations(a)
     a.schedule = _schedule(a)
     return a
@@ -277,11 +281,15 @@ def _patient_and_safety(a: Assembly) -> None:
             if a.context.note is not None:
                 a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
                                     "backend: the person is real")
-        elif not _has(backend, ExternalTorques):
-            raise PluginSetupError(a.loaded.source, ("patient", "model", "type"), (),
-                                   f"patient.model '{model_cfg.type}' needs a backend that applies a simulated "
-                                   f"person's torques; backend '{sc.backend.type}' does not")
         else:
+            factory = a.registry.get("patient", model_cfg.type).factory
+            embodied = isinstance(factory, type) and issubclass(factory, EmbodiedPatient)
+            need, what = (HostsBodies, "simulates a person's body in its scene") if embodied else \
+                (ExternalTorques, "applies a simulated person's torques")
+            if not _has(backend, need):
+                raise PluginSetupError(a.loaded.source, ("patient", "model", "type"), (),
+                                       f"patient.model '{model_cfg.type}' needs a backend that {what}; backend "
+                                       f"'{sc.backend.type}' does not")
             a.patient = a.make("patient", model_cfg, ("patient", "model"))
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
               if v is not None]
@@ -292,7 +300,10 @@ def _patient_and_safety(a: Assembly) -> None:
                                f"an interaction-force limit ({force_limit:g} N, from safety.interaction_force_n or "
                                "patient.comfort) needs a source of the force: a simulated patient (patient.model); "
                                f"backend '{sc.backend.type}' measures none")
-    a.hand_force = HandForce(a.robot.model) if force_limit is not None else None
+    if isinstance(a.patient, EmbodiedPatient):  # the straps' forces, measured in the scene
+        a.hand_force = (lambda q, tau: a.patient.interaction_force()) if force_limit is not None else None
+    else:
+        a.hand_force = HandForce(a.robot.model) if force_limit is not None else None
     a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
                            hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)

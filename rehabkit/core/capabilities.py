@@ -185,6 +185,15 @@ class ExternalTorques(Protocol):
         ...
 
 
+@runtime_checkable
+class HostsBodies(Protocol):
+    """Simulates bodies besides the robot in its scene (an embodied patient: ``Context.bodies``)."""
+
+    def hosted(self) -> list:
+        """The bodies composed into its scene (:class:`rehabkit.core.interfaces.EmbodiedPatient`)."""
+        ...
+
+
 ABILITY: dict[type, str] = {
     WorkspaceTable: "has a workspace look-up table (robot.workspace)",
     RandomReach: "draws random reachable targets (robot.random_reach)",
@@ -203,6 +212,7 @@ BACKEND_ABILITY: dict[type, str] = {
     BaseState: "reports a floating base's state",
     NamedJoints: "reads and sets joints by name",
     ExternalTorques: "applies a simulated person's torques",
+    HostsBodies: "simulates a person's body in its scene",
 }
 
 

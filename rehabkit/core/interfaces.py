@@ -52,6 +52,7 @@ class Context:
     safety: Any = None  # the scenario's safety envelope (``SafetyConfig``), e.g. for a link's heartbeat
     patient: Any = None  # the scenario's patient profile (``rehabkit.rehab.patient.PatientBase``), if any
     dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
+    bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
 
     def stream(self, name: str) -> np.random.Generator:
         """A random generator of its own for ``name``, from the scenario seed.
@@ -294,6 +295,32 @@ class Patient(ABC):
         return {}
 
 
+class EmbodiedPatient(Patient):
+    """A person simulated as a body in the backend's scene (a musculoskeletal arm) and strapped to the robot.
+
+    A backend that hosts bodies (:class:`~rehabkit.core.capabilities.HostsBodies`) calls :meth:`compose` on its
+    scene description before building it, :meth:`bind` on the built scene, and :meth:`place` at each reset, the
+    robot at its start posture. :meth:`torque` then drives the person's own actuators for the coming control period
+    and returns the torque their straps put on the robot's joints, for the record: the scene applies it.
+    """
+
+    @abstractmethod
+    def compose(self, spec: Any) -> None:
+        """Add the person's body and the straps to the scene description (a ``mujoco.MjSpec``)."""
+
+    @abstractmethod
+    def bind(self, model: Any, data: Any) -> None:
+        """The built scene (``mujoco.MjModel``/``MjData``): look up what the steps will read and write."""
+
+    @abstractmethod
+    def place(self) -> None:
+        """Fit the person to the robot as it stands now (called by the backend's reset)."""
+
+    @abstractmethod
+    def interaction_force(self) -> np.ndarray:
+        """The largest strap force now, world frame [N]: what the safety envelope's force limit checks."""
+
+
 class Controller(ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
 
@@ -323,7 +350,8 @@ class Controller(ABC):
 
 
 __all__ = [  # the backend and sensor kinds live in modules of their own; importable from here as before
-    "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "GeomVisual", "IKUnavailableError",
+    "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "EmbodiedPatient", "GeomVisual",
+    "IKUnavailableError",
     "Instrument", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest", "ReferenceSpace", "Robot", "Sensor",
     "SensorConfig", "StrictModel", "Target", "Trajectory",
 ]

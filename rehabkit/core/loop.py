@@ -16,7 +16,7 @@ import numpy as np
 
 from rehabkit.core.assembly import Assembly
 from rehabkit.core.capabilities import Contacts, SceneGeometry
-from rehabkit.core.interfaces import BackendFaultError, BodyPoses
+from rehabkit.core.interfaces import BackendFaultError, BodyPoses, EmbodiedPatient
 from rehabkit.core.metrics import Trace
 from rehabkit.core.reference import ReferenceBuffer
 from rehabkit.core.run_view import RunView
@@ -67,7 +67,8 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     own_ref = controller.own_reference
     person = a.patient.torque if a.patient is not None else None
     late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
-    push = backend.external_torque if person is not None else None  # the setup made sure the backend can
+    # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
+    push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
     tau_h, hand_force, goal_at = trace.tau_h, a.hand_force, ref.goal_at
     stop_after = a.sc.safety.stop_after_s
     bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
@@ -106,7 +107,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                 tqr[k] = controller.joint_reference
             try:
                 command(tau)
-                if person is not None:
+                if push is not None:
                     push(tau_h[k])
                 step(sub)
             except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete

@@ -17,6 +17,8 @@ from typing import Literal
 
 import numpy as np
 
+from rehabkit.models.wearable import Wearable
+
 SafeStop = Literal["hold", "zero-torque"]
 
 
@@ -73,6 +75,7 @@ class RobotModel:
             where it starts, and Pinocchio's model (with ``root`` among the passive joints)
             is the robot seen from its root body.
         support_geoms: Geoms whose contact with the floor is support (feet), not a collision.
+        wearable: Where a simulated person's arm sits in the robot and where it is strapped to it.
     """
 
     name: str
@@ -87,6 +90,7 @@ class RobotModel:
     passive_joints: list[str] = field(default_factory=list)
     floating: bool = False
     support_geoms: list[str] = field(default_factory=list)
+    wearable: Wearable | None = None  # where a person's arm sits in it (exoskeletons)
 
     @property
     def dof(self) -> int:

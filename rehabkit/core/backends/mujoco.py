@@ -16,6 +16,7 @@ from rehabkit.core.capabilities import (
     Contacts,
     ExternalTorques,
     HeldObjects,
+    HostsBodies,
     Instruments,
     NamedJoints,
     SceneGeometry,
@@ -40,8 +41,9 @@ def _span(indices: np.ndarray) -> slice | np.ndarray:
 
 
 class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, HeldObjects, Cameras, Instruments,
-                    BaseState, NamedJoints, ExternalTorques):
-    """MuJoCo physics: the robot's MJCF plus the scenario's world, driven by joint torques."""
+                    BaseState, NamedJoints, ExternalTorques, HostsBodies):
+    """MuJoCo physics: the robot's MJCF plus the scenario's world (and a simulated person's body, strapped in),
+    driven by joint torques."""
 
     def __init__(self, config: MujocoConfig, context: Context):
         robot = context.robot.model
@@ -49,8 +51,13 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self.timestep = config.timestep
         self.spec = build_scene(robot, context.world, config.timestep, config.integrator)
         add_instruments(self.spec, context.instruments)
+        self.bodies = list(context.bodies)
+        for body in self.bodies:
+            body.compose(self.spec)
         self.model = self.spec.compile()
         self.data = mujoco.MjData(self.model)
+        for body in self.bodies:
+            body.bind(self.model, self.data)
         jids = [self.model.joint(name).id for name in robot.joint_names]
         self._q = _span(np.array([self.model.jnt_qposadr[j] for j in jids]))
         self._v = _span(np.array([self.model.jnt_dofadr[j] for j in jids]))
@@ -96,6 +103,9 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self._q] = q0
         mujoco.mj_forward(self.model, self.data)
+        for body in self.bodies:  # fitted to the robot where it now stands
+            body.place()
+            mujoco.mj_forward(self.model, self.data)
         for name in self._held:
             self.grasp(name)
 
@@ -136,6 +146,9 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
 
     def command(self, tau: np.ndarray) -> None:
         self.data.qfrc_applied[self._v] = tau
+
+    def hosted(self) -> list:
+        return self.bodies
 
     def external_torque(self, tau: np.ndarray) -> None:
         self.data.qfrc_applied[self._v] += tau  # on top of the command just sent

@@ -1,0 +1,336 @@
+"""A musculoskeletal patient: MyoSuite's MyoArm or MyoElbow in the robot's scene, strapped to it, driven by
+muscles (``myo-sim``, Apache-2.0; see :mod:`rehabkit.musculo.human`).
+
+Each control period the person's intent becomes joint torques — holding their own arm up (``own_weight``) and a
+hand force toward the movement's goal as they perceive it (late, noisy, capped, as the spring-damper patient's) —
+plus the impairments acting through the drive (tremor, the flexor synergy); static optimisation turns that into
+muscle activations (:mod:`rehabkit.musculo.static_opt`), the stretch reflex adds its excitation, and MuJoCo's
+activation dynamics and muscle model do the rest. Weakness and fatigue scale the muscles' force, contracture
+narrows the joints' passive range. The straps' constraint forces are the interaction force: the safety envelope
+checks the largest, the outcome measures report them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import mujoco
+import numpy as np
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, EmbodiedPatient, StrictModel
+from rehabkit.core.metric import Metric
+from rehabkit.models.wearable import Strap, Wearable
+from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
+from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
+from rehabkit.musculo.impairments import MuscleFatigue, StretchReflex, Tremor
+from rehabkit.musculo.static_opt import StaticOptimisation
+
+SERIES_EVERY = 10  # control steps between logged samples
+Vec3 = tuple[float, float, float]
+
+
+class StrapConfig(StrictModel):
+    """A cuff on a robot body."""
+
+    segment: Literal["upper_arm", "forearm", "hand"] = Field(description="the person's segment it holds")
+    body: str = Field(description="the robot's MJCF body carrying it")
+    position: Vec3 = Field(description="its centre in that body's frame [m]")
+
+
+class FitConfig(StrictModel):
+    """Where the person sits in a robot that declares no fit of its own (the built-in exoskeletons do)."""
+
+    shoulder: Vec3 = Field(description="the person's shoulder centre in the robot base frame [m]")
+    forward: Vec3 = Field((1.0, 0.0, 0.0), description="the person's forward direction in the robot base frame")
+    up: Vec3 = Field((0.0, 0.0, 1.0), description="the person's upward direction in the robot base frame")
+    straps: list[StrapConfig] = Field(min_length=1, description="the cuffs holding the arm")
+
+
+class StrapsConfig(StrictModel):
+    """How the cuffs give: a linear spring-damper between the robot and the tissue under them."""
+
+    stiffness_n_m: float = Field(3000.0, gt=0, description="cuff stiffness [N/m] (padding and soft tissue)")
+    damping_ns_m: float = Field(60.0, ge=0, description="cuff damping [N·s/m]")
+
+
+class Drive(StrictModel):
+    """The person's intent: reach the goal, hold the arm up."""
+
+    hand_force_n: float = Field(20.0, gt=0, description="largest voluntary hand force toward the goal [N]")
+    stiffness_n_m: float = Field(200.0, ge=0, description="effort per distance to the goal [N/m]")
+    damping_ns_m: float = Field(15.0, ge=0, description="effort against the hand's own speed [N·s/m]")
+    delay_s: float = Field(0.2, ge=0, le=1.0, description="reaction delay: a new goal is perceived this late [s]")
+    noise: float = Field(0.1, ge=0, description="signal-dependent noise: deviation as a fraction of the effort")
+    noise_hz: float = Field(4.0, gt=0, description="bandwidth of that noise [Hz]")
+    participation: float = Field(1.0, ge=0, le=1, description="share of the reaching effort the person makes")
+    own_weight: float = Field(1.0, ge=0, le=1, description="share of their arm's weight the person holds up")
+
+
+class Spasticity(StrictModel):
+    """Velocity-dependent stretch reflex (a Tardieu test's catch): a muscle stretched faster than the threshold is
+    excited in proportion to the excess, a reflex delay later."""
+
+    gain: dict[str, float] = Field({}, description="excitation per L₀/s above the threshold, per muscle group")
+    threshold_l0_s: float = Field(0.3, ge=0, description="lengthening speed where the reflex starts [L₀/s] "
+                                                          "(0.3 is about 90°/s at the elbow)")
+    reflex_delay_s: float = Field(0.04, ge=0, le=0.2, description="reflex loop delay [s]")
+
+
+class TremorConfig(StrictModel):
+    """Involuntary oscillation in a narrow band (e.g. 4–6 Hz after a stroke or in Parkinson's disease)."""
+
+    amplitude_nm: dict[str, float] = Field({}, description="RMS tremor torque per joint [N·m]")
+    frequency_hz: float = Field(5.0, gt=0, le=20, description="centre frequency [Hz]")
+    bandwidth_hz: float = Field(0.5, gt=0, description="width of the band [Hz]")
+
+
+class Synergy(StrictModel):
+    """Abnormal flexor synergy: effort to abduct (elevate) the shoulder flexes the elbow with it."""
+
+    elbow_per_shoulder: float = Field(0.0, ge=0, description="elbow-flexion torque per N·m of shoulder "
+                                                              "elevation effort [N·m/N·m]")
+
+
+class FatigueConfig(StrictModel):
+    """Per-muscle capacity: falls with activation, recovers at rest."""
+
+    rate_per_s: float = Field(0.0, ge=0, description="capacity lost per second at full activation [1/s]")
+    recovery_per_s: float = Field(0.01, ge=0, description="share of the lost capacity regained per second at rest")
+
+
+class MusculoskeletalConfig(StrictModel):
+    """A muscle-driven arm (MyoSuite) strapped into the robot; impairments are illustrative parameters."""
+
+    model: Literal["myoarm", "myoelbow"] = Field("myoarm", description="MyoArm (shoulder to hand, 63 muscles) or "
+                                                                       "MyoElbow (the elbow, 6 muscles)")
+    straps: StrapsConfig = StrapsConfig()
+    fit: FitConfig | None = Field(None, description="where the person sits (default: the robot's own fit)")
+    drive: Drive = Drive()
+    weakness: dict[str, float] = Field({}, description="force scale per muscle group, 0–1 (1: full strength)")
+    spasticity: Spasticity = Spasticity()
+    tremor: TremorConfig = TremorConfig()
+    synergy: Synergy = Synergy()
+    fatigue: FatigueConfig = FatigueConfig()
+    contracture_deg: dict[str, tuple[float, float]] = Field(
+        {}, description="reduced passive range per joint [deg] (the model's joint convention)")
+
+
+def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], n: int, what: str,
+               default: float) -> np.ndarray:
+    out = np.full(n, default)
+    names = {g: i for i, g in enumerate(arm_groups)}
+    start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
+    for group, value in values.items():
+        if group not in names:
+            raise ValueError(f"{what}: no muscle group '{group}'; groups: {', '.join(arm_groups)}")
+        out[start[names[group]] : start[names[group] + 1]] = value
+    return out
+
+
+class Musculoskeletal(EmbodiedPatient):
+    """See the module docstring."""
+
+    metrics = (
+        Metric("peak_cuff_force_n", "N", outcome=True, description="largest strap force over the run"),
+        Metric("mean_cuff_force_n", "N", outcome=True, description="the largest strap's force, averaged over time"),
+        Metric("muscle_effort", outcome=True, description="Σ activation², averaged over time"),
+        Metric("drive_saturated_fraction", description="share of steps the muscles could not give the torque asked"),
+        Metric("fit_offset_mm", "mm", description="largest strap-to-segment distance the fit left"),
+        Metric("muscle_capacity_min", description="the most fatigued muscle's remaining capacity at the end"),
+    )
+
+    def __init__(self, config: MusculoskeletalConfig, context: Context):
+        self.config, self.robot, self.dt = config, context.robot, context.control_dt
+        self.cat = CATALOGUE[config.model]
+        profile = context.patient
+        if profile is not None and profile.side != self.cat.side:
+            raise ValueError(f"model: {config.model} is a {self.cat.side} arm; the profile treats the {profile.side} "
+                             "side (mirrored arms are not available)")
+        fit = config.fit
+        self.wearable = Wearable(fit.shoulder, fit.forward, fit.up, tuple(Strap(s.segment, s.body, s.position)
+                                 for s in fit.straps)) if fit else self.robot.model.wearable
+        if self.wearable is None:
+            raise ValueError(f"robot '{self.robot.model.name}' declares no fit for a person: give fit (shoulder and "
+                             "straps)")
+        if config.model == "myoelbow" and any(s.segment == "upper_arm" for s in self.wearable.straps):
+            raise ValueError("model: MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
+        for name in [*config.tremor.amplitude_nm, *config.contracture_deg]:
+            if name not in self.cat.joints:
+                raise ValueError(f"no joint '{name}' in {config.model}; joints: {', '.join(self.cat.joints)}")
+        if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in self.cat.joints:
+            raise ValueError(f"synergy: {config.model} has no shoulder")
+        n = len(self.cat.muscles)
+        self.scale = _per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
+        self.reflex_gain = _per_group(config.spasticity.gain, self.cat.groups, n, "spasticity.gain", 0.0)
+        if np.any((self.scale <= 0) | (self.scale > 1)):
+            raise ValueError("weakness: each force scale must be in (0, 1]")
+        self.spec = load_arm_spec(config.model)
+        for name, (lo, hi) in config.contracture_deg.items():
+            joint = self.spec.joint(self.cat.joints[name])
+            full = np.degrees(joint.range)
+            if not full[0] <= lo < hi <= full[1]:
+                raise ValueError(f"contracture_deg.{name}: [{lo:g}, {hi:g}] must be an interval inside the joint's "
+                                 f"range [{full[0]:.0f}, {full[1]:.0f}]")
+            joint.range = np.radians([lo, hi])
+        self.delay_s = config.drive.delay_s
+        self.cartesian = context.reference_space == "cartesian"
+        self.rng = context.stream("patient")
+        self.arm: HumanArm | None = None
+
+    # -- the scene ------------------------------------------------------------------------------------
+
+    def compose(self, spec) -> None:
+        bodies = {"upper_arm": self.cat.shoulder_body, "hand": self.cat.hand_body,
+                  "forearm": "radius_r" if self.config.model == "myoarm" else self.cat.elbow_body}
+        compose(spec, self.spec, self.wearable, self.robot.model.base_pose, self.wearable.straps,
+                {k: PREFIX + v for k, v in bodies.items()})
+
+    def bind(self, model, data) -> None:
+        self.m, self.d = model, data
+        arm = self.arm = HumanArm(self.cat, model, data)
+        self.so = StaticOptimisation(arm)
+        self.eqs = [model.equality(f"{PREFIX}strap_{s.segment}").id for s in self.wearable.straps]
+        self.robot_dofs = np.array([model.jnt_dofadr[model.joint(j).id] for j in self.robot.model.joint_names])
+        self.f0 = arm.f0 * self.scale  # weakness: the active force, passive tissue unchanged
+        model.actuator_gainprm[arm.muscles, 2] = self.f0
+        cfg = self.config
+        self.reflex = StretchReflex(self.reflex_gain, np.full(len(arm.muscles), cfg.spasticity.threshold_l0_s),
+                                    cfg.spasticity.reflex_delay_s, arm.l0, self.dt)
+        amp = np.array([cfg.tremor.amplitude_nm.get(j, 0.0) for j in self.cat.joints])
+        self.tremor = Tremor(amp, cfg.tremor.frequency_hz, cfg.tremor.bandwidth_hz, self.dt, self.rng)
+        self.fatigue = MuscleFatigue(len(arm.muscles), cfg.fatigue.rate_per_s, cfg.fatigue.recovery_per_s, self.dt)
+        self.noise_a = math.exp(-2 * math.pi * cfg.drive.noise_hz * self.dt)
+        self.noise = np.zeros(len(arm.driven))
+        self.ee = model.site(self.robot.model.ee_site).id
+        self.jac = np.zeros((3, model.nv))
+        self.elv = list(self.cat.joints).index("shoulder_elevation") if "shoulder_elevation" in self.cat.joints \
+            else None
+        self.elbow = list(self.cat.joints).index("elbow_flexion")
+        self._reset_record()
+
+    def _reset_record(self) -> None:
+        self.peak = self.force_sum = self.effort_sum = 0.0
+        self.steps = self.saturated = 0
+        self.force = np.zeros(3)
+        self._t: list[float] = []
+        self._rows: list[np.ndarray] = []
+
+    def place(self) -> None:
+        m, d = self.m, self.d
+        self.fitted, self.offset = fit_arm(self.arm, self.wearable, self.robot.model.base_pose,
+                                           self.wearable.straps, self.eqs)
+        d.qvel[self.arm.dofs] = 0.0
+        d.act[:] = 0.0
+        mujoco.mj_forward(m, d)
+        for eq in self.eqs:
+            m.eq_solref[eq] = strap_solref(m, d, eq, self.config.straps.stiffness_n_m, self.config.straps.damping_ns_m)
+        hand = self.arm.body["hand"]  # the point of the hand at the robot's handle: where the person aims
+        self.hand_body = hand
+        self.hand_point = d.xmat[hand].reshape(3, 3).T @ (d.site_xpos[self.ee] - d.xpos[hand])
+        self._reset_record()
+
+    # -- each control period --------------------------------------------------------------------------
+
+    def _hand(self) -> tuple[np.ndarray, np.ndarray]:
+        d, hand = self.d, self.hand_body
+        point = d.xpos[hand] + d.xmat[hand].reshape(3, 3) @ self.hand_point
+        mujoco.mj_jac(self.m, d, self.jac, None, point, hand)
+        return point, self.jac
+
+    def _goal_world(self, goal: np.ndarray) -> np.ndarray:
+        base = self.robot.model.base_pose
+        p = goal if self.cartesian else self.robot.fk(goal)[:3, 3]
+        return base[:3, :3] @ p + base[:3, 3]
+
+    def intent(self, goal: np.ndarray) -> np.ndarray:
+        """Torques the person wants at the driven joints: hold the arm, reach for the goal, the synergy."""
+        cfg, arm, d = self.config.drive, self.arm, self.d
+        C = arm.coupling_matrix()
+        tau = cfg.own_weight * (C.T @ d.qfrc_bias)
+        if cfg.participation > 0 and goal is not None:
+            x, J = self._hand()
+            force = cfg.stiffness_n_m * (self._goal_world(goal) - x) - cfg.damping_ns_m * (J @ d.qvel)
+            size = float(np.linalg.norm(force))
+            if size > cfg.hand_force_n:
+                force *= cfg.hand_force_n / size
+            reach = C.T @ (J.T @ force)
+            self.noise = self.noise_a * self.noise + math.sqrt(1 - self.noise_a**2) * self.rng.standard_normal(
+                len(self.noise))
+            tau += cfg.participation * reach * (1.0 + cfg.noise * self.noise)
+        if self.tremor.active:
+            tau += self.tremor.torque()
+        if self.elv is not None and self.config.synergy.elbow_per_shoulder > 0:
+            tau[self.elbow] += self.config.synergy.elbow_per_shoulder * max(0.0, tau[self.elv])
+        return tau
+
+    def excite(self, tau: np.ndarray) -> np.ndarray:
+        """Muscle excitations for ``tau`` at the driven joints (static optimisation + stretch reflex), set on the
+        scene; returns them."""
+        arm, d = self.arm, self.d
+        solution = self.so.solve(tau)
+        excitation = solution.activation
+        if self.reflex.active:
+            excitation = np.minimum(1.0, excitation + self.reflex.excitation(d.actuator_velocity[arm.muscles]))
+        d.ctrl[arm.muscles] = excitation
+        if self.fatigue.active:
+            self.m.actuator_gainprm[arm.muscles, 2] = self.f0 * self.fatigue.step(d.act[self.so.act_of_muscles])
+        self.saturated += solution.saturated
+        self.effort_sum += float(excitation @ excitation)
+        return excitation
+
+    def strap_forces(self) -> list[np.ndarray]:
+        """Each strap's force on the robot now, world frame [N]."""
+        d = self.d
+        return [d.efc_force[strap_rows(self.m, d, eq)].copy() for eq in self.eqs]
+
+    def torque(self, t, q, qd, goal):
+        d = self.d
+        excitation = self.excite(self.intent(goal))
+        forces = self.strap_forces()
+        sizes = [float(np.linalg.norm(f)) for f in forces]
+        worst = int(np.argmax(sizes))
+        self.force = forces[worst]
+        self.peak = max(self.peak, sizes[worst])
+        self.force_sum += sizes[worst]
+        # the straps' torque on the robot's joints: Jᵀ f over their constraint rows
+        rows = np.concatenate([strap_rows(self.m, d, eq) for eq in self.eqs])
+        vec = np.zeros(d.nefc)
+        vec[rows] = d.efc_force[rows]
+        full = np.zeros(self.m.nv)
+        mujoco.mj_mulJacTVec(self.m, d, full, vec)
+        if self.steps % SERIES_EVERY == 0:
+            self._t.append(t)
+            groups = [float(np.mean(excitation[idx])) for idx in self.arm.groups.values()]
+            self._rows.append(np.array([*sizes, *groups, float(np.min(self.fatigue.capacity))]))
+        self.steps += 1
+        return full[self.robot_dofs]
+
+    def interaction_force(self) -> np.ndarray:
+        return self.force
+
+    # -- the record -----------------------------------------------------------------------------------
+
+    def run_metrics(self, trace=None) -> dict[str, float]:
+        n = max(1, self.steps)
+        return {"peak_cuff_force_n": self.peak, "mean_cuff_force_n": self.force_sum / n,
+                "muscle_effort": self.effort_sum / n, "drive_saturated_fraction": self.saturated / n,
+                "fit_offset_mm": 1000.0 * getattr(self, "offset", 0.0),
+                "muscle_capacity_min": float(np.min(self.fatigue.capacity)) if self.arm else 1.0}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        if not self._rows:
+            return {}
+        t, v = np.asarray(self._t), np.asarray(self._rows)
+        out = {f"patient/cuff_force_n/{s.segment}": (t, v[:, i]) for i, s in enumerate(self.wearable.straps)}
+        k = len(self.wearable.straps)
+        out.update({f"patient/activation/{g}": (t, v[:, k + i]) for i, g in enumerate(self.arm.groups)})
+        out["patient/muscle_capacity_min"] = (t, v[:, -1])
+        return out
+
+
+@hookimpl
+def rehabkit_register_patients(registry) -> None:
+    registry.add("musculoskeletal", config=MusculoskeletalConfig, factory=Musculoskeletal)
