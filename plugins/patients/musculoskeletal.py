@@ -227,6 +227,10 @@ class Musculoskeletal(EmbodiedPatient):
         mujoco.mj_forward(m, d)
         for eq in self.eqs:
             m.eq_solref[eq] = strap_solref(m, d, eq, self.config.straps.stiffness_n_m, self.config.straps.damping_ns_m)
+        # the person was holding their arm before the run began: their muscles start at that activation
+        steady = self.so.solve(self.config.drive.own_weight * (self.arm.coupling_matrix().T @ d.qfrc_bias))
+        d.act[self.so.act_of_muscles] = d.ctrl[self.arm.muscles] = steady.activation
+        mujoco.mj_forward(m, d)
         hand = self.arm.body["hand"]  # the point of the hand at the robot's handle: where the person aims
         self.hand_body = hand
         self.hand_point = d.xmat[hand].reshape(3, 3).T @ (d.site_xpos[self.ee] - d.xpos[hand])
@@ -270,14 +274,17 @@ class Musculoskeletal(EmbodiedPatient):
         """Muscle excitations for ``tau`` at the driven joints (static optimisation + stretch reflex), set on the
         scene; returns them."""
         arm, d = self.arm, self.d
-        solution = self.so.solve(tau)
-        excitation = solution.activation
+        if np.any(tau):
+            solution = self.so.solve(tau)
+            excitation = solution.activation
+        else:  # no intent at all: relaxed (the passive tissue is not fought)
+            solution, excitation = None, np.zeros(len(arm.muscles))
         if self.reflex.active:
             excitation = np.minimum(1.0, excitation + self.reflex.excitation(d.actuator_velocity[arm.muscles]))
         d.ctrl[arm.muscles] = excitation
         if self.fatigue.active:
             self.m.actuator_gainprm[arm.muscles, 2] = self.f0 * self.fatigue.step(d.act[self.so.act_of_muscles])
-        self.saturated += solution.saturated
+        self.saturated += solution is not None and solution.saturated
         self.effort_sum += float(excitation @ excitation)
         return excitation
 
@@ -286,8 +293,17 @@ class Musculoskeletal(EmbodiedPatient):
         d = self.d
         return [d.efc_force[strap_rows(self.m, d, eq)].copy() for eq in self.eqs]
 
-    def torque(self, t, q, qd, goal):
+    def strap_torque(self) -> np.ndarray:
+        """The straps' torque on the robot's joints now [N·m]: Jᵀ f over their constraint rows."""
         d = self.d
+        rows = np.concatenate([strap_rows(self.m, d, eq) for eq in self.eqs])
+        vec = np.zeros(d.nefc)
+        vec[rows] = d.efc_force[rows]
+        full = np.zeros(self.m.nv)
+        mujoco.mj_mulJacTVec(self.m, d, full, vec)
+        return full[self.robot_dofs]
+
+    def torque(self, t, q, qd, goal):
         excitation = self.excite(self.intent(goal))
         forces = self.strap_forces()
         sizes = [float(np.linalg.norm(f)) for f in forces]
@@ -295,18 +311,12 @@ class Musculoskeletal(EmbodiedPatient):
         self.force = forces[worst]
         self.peak = max(self.peak, sizes[worst])
         self.force_sum += sizes[worst]
-        # the straps' torque on the robot's joints: Jᵀ f over their constraint rows
-        rows = np.concatenate([strap_rows(self.m, d, eq) for eq in self.eqs])
-        vec = np.zeros(d.nefc)
-        vec[rows] = d.efc_force[rows]
-        full = np.zeros(self.m.nv)
-        mujoco.mj_mulJacTVec(self.m, d, full, vec)
         if self.steps % SERIES_EVERY == 0:
             self._t.append(t)
             groups = [float(np.mean(excitation[idx])) for idx in self.arm.groups.values()]
             self._rows.append(np.array([*sizes, *groups, float(np.min(self.fatigue.capacity))]))
         self.steps += 1
-        return full[self.robot_dofs]
+        return self.strap_torque()
 
     def interaction_force(self) -> np.ndarray:
         return self.force

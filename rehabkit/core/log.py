@@ -71,6 +71,11 @@ def encode_images(reading: dict[str, Any]) -> dict[str, Any]:
     return {k: encode_image(v) if is_image(v) else v for k, v in reading.items()}
 
 
+
+def _part(name: str) -> str:
+    """A model's name as one entity-path part (MyoSuite names hold spaces, which Rerun warns about)."""
+    return name.replace(" ", "_")
+
 class _Column:
     """One sensor value's readings, appended in place (no per-sample list to convert at the flush)."""
 
@@ -132,11 +137,11 @@ class RerunLog:
     def scene(self, geoms: list[GeomVisual]) -> None:
         """Geometry of every body, each geom at its fixed offset in its body."""
         for g in geoms:
-            parent = "world/scene" if g.body == "world" else f"world/bodies/{g.body}"
+            parent = "world/scene" if g.body == "world" else f"world/bodies/{_part(g.body)}"
             archetype = _shape(g)
             if archetype is None:
                 continue
-            path = f"{parent}/{g.name}"
+            path = f"{parent}/{_part(g.name)}"
             self.rec.log(path, rr.Transform3D(translation=g.position, quaternion=_xyzw(g.quat_wxyz)), static=True)
             self.rec.log(path, archetype, static=True)
 
@@ -225,7 +230,7 @@ class RerunLog:
             pos = np.array([r[1].positions for r in rows])
             quat = _xyzw(np.array([r[1].quats_wxyz for r in rows]))
             for i, name in enumerate(names):
-                self._send(f"world/bodies/{name}", times,
+                self._send(f"world/bodies/{_part(name)}", times,
                            lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
             ee = np.array(self._ee_path[-len(rows):])
             self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))

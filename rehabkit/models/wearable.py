@@ -49,9 +49,13 @@ class Wearable:
     straps: tuple[Strap, ...]
 
     def person_axes(self) -> np.ndarray:
-        """3×3 whose columns are the person's forward, left and up directions in the robot base frame."""
+        """3×3 whose columns are the person's forward, left and up directions in the robot base frame (``forward``
+        made exactly perpendicular to ``up``)."""
         f, u = np.asarray(self.forward, float), np.asarray(self.up, float)
         f, u = f / np.linalg.norm(f), u / np.linalg.norm(u)
-        if abs(f @ u) > 1e-6:
-            raise ValueError("wearable: 'forward' and 'up' must be perpendicular")
+        if abs(f @ u) > 0.2:
+            raise ValueError("wearable: 'forward' and 'up' must be perpendicular (they are "
+                             f"{np.degrees(np.arccos(np.clip(f @ u, -1, 1))):.0f}° apart)")
+        f = f - (f @ u) * u
+        f /= np.linalg.norm(f)
         return np.column_stack([f, np.cross(u, f), u])

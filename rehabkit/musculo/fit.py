@@ -24,7 +24,8 @@ from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.human import PERSON_FROM_MODEL, PREFIX, HumanArm
 
 STRAP_IMPEDANCE = 0.95  # MuJoCo's solimp d: constant, so a strap is a linear spring-damper
-FIT_JOINTS = ("shoulder_plane", "shoulder_elevation", "shoulder_rotation", "elbow_flexion")
+FIT_JOINTS = {"shoulder_plane": 0.0, "shoulder_elevation": 30.0, "shoulder_rotation": 0.0, "elbow_flexion": 60.0}
+# (the joints the fit turns, and where it starts them [deg]: the arm a little forward, the elbow bent)
 
 
 def compose(spec: mujoco.MjSpec, arm_spec: mujoco.MjSpec, wearable: Wearable, base_pose: np.ndarray,
@@ -62,7 +63,7 @@ def fit_arm(arm: HumanArm, wearable: Wearable, base_pose: np.ndarray, straps: tu
     names = [n for n in FIT_JOINTS if n in arm.jnt]
     lo = np.array([m.jnt_range[arm.jnt[n], 0] for n in names])
     hi = np.array([m.jnt_range[arm.jnt[n], 1] for n in names])
-    x = np.clip(np.radians([0.0, 30.0, 0.0, 60.0])[: len(names)], lo, hi)
+    x = np.clip(np.radians([FIT_JOINTS[n] for n in names]), lo, hi)
     points = []
     for s in straps:
         body = m.body(s.body).id
@@ -81,7 +82,7 @@ def fit_arm(arm: HumanArm, wearable: Wearable, base_pose: np.ndarray, straps: tu
             axis = (b - a) / np.linalg.norm(b - a)
             r = p - a
             out.append(r - (r @ axis) * axis)  # the strap's offset from the segment's axis
-        out.append(0.05 * (values - x0))  # what the straps leave free (the upper arm's roll, straight) stays put
+        out.append(0.002 * (values - x0))  # what the straps leave free (the upper arm's roll, straight) stays put
         return np.concatenate(out)
 
     x0 = x.copy()

@@ -12,6 +12,10 @@ and the muscles' force and moment arms for the static optimisation.
 
 from __future__ import annotations
 
+import os
+import sys
+import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import mujoco
@@ -77,11 +81,13 @@ def load_arm_spec(model: str) -> mujoco.MjSpec:
     between the person and the robot; bones meeting the robot's links would be a second, unmodelled contact)."""
     import myo_sim
 
-    spec = myo_sim.load_spec(CATALOGUE[model].spec_name)
+    with _quiet_output():  # MyoArm's loader attaches a part without a prefix, and MuJoCo prints a warning of it
+        spec = myo_sim.load_spec(CATALOGUE[model].spec_name).copy()  # the copy is whole: building it warns no more
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = 0, 0
     for key in list(spec.keys):  # a keyframe sized for the arm alone would not fit the composed scene
         spec.delete(key)
+    spec.njmax, spec.nconmax, spec.nuser_jnt = -1, -1, -1  # the scene's own sizes apply (MuJoCo warned of each)
     return spec
 
 
@@ -177,6 +183,28 @@ class HumanArm:
         if segment == "forearm":
             return elbow, wrist
         return wrist, d.xpos[self.body["hand"]] + (d.xpos[self.body["hand"]] - wrist)
+
+
+@contextmanager
+def _quiet_output():
+    """Hold back what C code prints (stdout and stderr); pass on all but MuJoCo's empty-prefix warning."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 1)
+        os.dup2(held.fileno(), 2)
+        try:
+            yield
+        finally:
+            for fd, copy in ((1, saved[0]), (2, saved[1])):
+                os.dup2(copy, fd)
+                os.close(copy)
+            held.seek(0)
+            text = held.read().decode(errors="replace")
+    rest = [line for line in text.splitlines() if line.strip() and "empty prefix" not in line]
+    if rest:
+        print("\n".join(rest), file=sys.stderr)
 
 
 def _has_site(m: mujoco.MjModel, name: str) -> bool:
