@@ -20,7 +20,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, EmbodiedPatient, StrictModel
+from rehabkit.core.interfaces import Context, Drawing, EmbodiedPatient, StrictModel
 from rehabkit.core.metric import Metric
 from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
@@ -29,6 +29,7 @@ from rehabkit.musculo.impairments import MuscleFatigue, StretchReflex, Tremor
 from rehabkit.musculo.static_opt import StaticOptimisation
 
 SERIES_EVERY = 10  # control steps between logged samples
+DRAW_EVERY_S = 0.1  # [s] between drawings of the muscles and straps
 Vec3 = tuple[float, float, float]
 
 
@@ -179,6 +180,8 @@ class Musculoskeletal(EmbodiedPatient):
         self.cartesian = context.reference_space == "cartesian"
         self.rng = context.stream("patient")
         self.arm: HumanArm | None = None
+        self._goal_key, self._goal_world_at = b"", np.zeros(3)
+        self._drawn_at = -np.inf
 
     # -- the scene ------------------------------------------------------------------------------------
 
@@ -215,6 +218,7 @@ class Musculoskeletal(EmbodiedPatient):
         self.peak = self.force_sum = self.effort_sum = 0.0
         self.steps = self.saturated = 0
         self.force = np.zeros(3)
+        self._drawn_at = -np.inf
         self._t: list[float] = []
         self._rows: list[np.ndarray] = []
 
@@ -245,9 +249,12 @@ class Musculoskeletal(EmbodiedPatient):
         return point, self.jac
 
     def _goal_world(self, goal: np.ndarray) -> np.ndarray:
-        base = self.robot.model.base_pose
-        p = goal if self.cartesian else self.robot.fk(goal)[:3, 3]
-        return base[:3, :3] @ p + base[:3, 3]
+        key = goal.tobytes()
+        if key != self._goal_key:  # the goal of a reach holds for the whole reach: its hand position is kept
+            base = self.robot.model.base_pose
+            p = goal if self.cartesian else self.robot.fk(goal)[:3, 3]
+            self._goal_key, self._goal_world_at = key, base[:3, :3] @ p + base[:3, 3]
+        return self._goal_world_at
 
     def intent(self, goal: np.ndarray) -> np.ndarray:
         """Torques the person wants at the driven joints: hold the arm, reach for the goal, the synergy."""
@@ -296,9 +303,10 @@ class Musculoskeletal(EmbodiedPatient):
     def strap_torque(self) -> np.ndarray:
         """The straps' torque on the robot's joints now [N·m]: Jᵀ f over their constraint rows."""
         d = self.d
-        rows = np.concatenate([strap_rows(self.m, d, eq) for eq in self.eqs])
         vec = np.zeros(d.nefc)
-        vec[rows] = d.efc_force[rows]
+        for eq in self.eqs:
+            rows = strap_rows(self.m, d, eq)
+            vec[rows] = d.efc_force[rows]
         full = np.zeros(self.m.nv)
         mujoco.mj_mulJacTVec(self.m, d, full, vec)
         return full[self.robot_dofs]
@@ -320,6 +328,26 @@ class Musculoskeletal(EmbodiedPatient):
 
     def interaction_force(self) -> np.ndarray:
         return self.force
+
+    def drawing(self) -> dict[str, Drawing]:
+        """Each muscle's path coloured by its activation (blue at rest, red at full), each strap's force as an
+        arrow from the strap (1 cm per 5 N); at most every :data:`DRAW_EVERY_S` (63 paths cost ~1 ms to log)."""
+        m, d = self.m, self.d
+        if d.time - self._drawn_at < DRAW_EVERY_S - 1e-9:
+            return {}
+        self._drawn_at = d.time
+        tendons = m.actuator_trnid[self.arm.all_muscles, 0]  # (MuJoCo keeps the paths in tendon order)
+        start, count = d.ten_wrapadr[tendons], d.ten_wrapnum[tendons]
+        points = d.wrap_xpos.reshape(-1, 3)[start[0] : start[-1] + count[-1]]
+        lines = np.split(points, start[1:] - start[0])
+        act = d.act[m.actuator_actadr[self.arm.all_muscles]]
+        rgba = np.column_stack([0.2 + 0.8 * act, 0.3 * (1 - act), 1.0 - act, np.ones_like(act)])
+        origins = np.array([d.xpos[m.eq_obj1id[eq]] + d.xmat[m.eq_obj1id[eq]].reshape(3, 3) @ m.eq_data[eq, :3]
+                            for eq in self.eqs])
+        vectors = -np.array(self.strap_forces()) / 500.0  # the force on the person, 1 cm per 5 N
+        return {"muscles": Drawing(lines=lines, line_rgba=rgba),
+                "cuffs": Drawing(origins=origins, vectors=vectors,
+                                 arrow_rgba=np.tile([1.0, 0.8, 0.1, 1.0], (len(self.eqs), 1)))}
 
     # -- the record -----------------------------------------------------------------------------------
 

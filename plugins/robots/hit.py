@@ -35,6 +35,7 @@ from rehabkit.core.io import load_yaml
 from rehabkit.models.chain import DHRow, KinematicChain, inv_se3, mdh_transform
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.robot_model import SafeStop
+from rehabkit.models.wearable import Strap, Wearable
 
 L1, L2, L3 = 0.313, 0.252, 0.1  # upper arm, forearm, hand [m] (paper's values)
 
@@ -132,6 +133,15 @@ def ik(A: np.ndarray, l1: float = L1, l2: float = L2, l3: float = L3, tol: float
     return sols
 
 
+def hit_wearable(l1: float) -> Wearable:
+    """The person's shoulder centre where the shoulder module's axes meet (the base origin), facing the base's -x;
+    a cuff on the upper arm (on the link turning with the humerus, 40 % of the way back from the elbow) and one on
+    the forearm, 15 cm from the elbow."""
+    return Wearable(shoulder=(0.0, 0.0, 0.0), forward=(-1.0, 0.0, 0.0), up=(0.0, 0.0, 1.0),
+                    straps=(Strap("upper_arm", "elbow_1_link", (0.0, 0.0, 0.4 * l1)),
+                            Strap("forearm", "elbow_2_link", (0.0, -0.15, 0.0))))
+
+
 class HitConfig(StrictModel):
     """HIT exoskeleton: segment lengths, base placement and stop behaviour."""
 
@@ -164,6 +174,7 @@ class HitRobot(Robot):
             base=config.base, safe_stop=config.safe_stop,
         )
         self.model = build_dh_robot(self.spec)
+        self.model.wearable = hit_wearable(config.l1)
         self._lengths = (config.l1, config.l2, config.l3)
 
     def fk(self, q: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ class GeomVisual:
         body: Body name (its pose comes from :meth:`Backend.body_poses`).
         name: Geom name.
         shape: ``box`` (half-extents), ``sphere`` (radius), ``capsule``/``cylinder``
-            (radius, half-length along local z), ``plane`` (half-sizes x, y).
+            (radius, half-length along local z), ``plane`` (half-sizes x, y), ``mesh`` (see ``mesh``).
         size: Shape parameters [m].
         position: Offset in the body frame [m].
         quat_wxyz: Orientation in the body frame.
@@ -43,6 +43,26 @@ class GeomVisual:
     position: tuple[float, float, float]
     quat_wxyz: tuple[float, float, float, float]
     rgba: tuple[float, float, float, float]
+    mesh: tuple[np.ndarray, np.ndarray] | None = None  # a mesh's vertices (n, 3) [m] and triangles (k, 3)
+
+
+@dataclass
+class Drawing:
+    """Shapes that change during a run (world frame), drawn at the log rate: polylines and arrows.
+
+    Attributes:
+        lines: Polylines, each (k, 3) [m].
+        line_rgba: One colour per polyline (n, 4), 0..1.
+        origins: Arrow tails (m, 3) [m].
+        vectors: Arrows (m, 3) [m].
+        arrow_rgba: One colour per arrow (m, 4), 0..1.
+    """
+
+    lines: list[np.ndarray] | None = None
+    line_rgba: np.ndarray | None = None
+    origins: np.ndarray | None = None
+    vectors: np.ndarray | None = None
+    arrow_rgba: np.ndarray | None = None
 
 
 @dataclass

@@ -12,7 +12,7 @@ from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
-from rehabkit.core.backend import Backend, BackendFaultError, BodyPoses, Contact, GeomVisual
+from rehabkit.core.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
 from rehabkit.core.metric import Metric
 from rehabkit.core.sensing import Instrument, Sensor, SensorConfig
 from rehabkit.models.robot_model import RobotModel
@@ -294,6 +294,10 @@ class Patient(ABC):
         """Internal states over time for the log, name → (times [s], values); default none."""
         return {}
 
+    def drawing(self) -> dict[str, Drawing]:
+        """What to draw of the person now (called at the log rate), name → shapes; default none."""
+        return {}
+
 
 class EmbodiedPatient(Patient):
     """A person simulated as a body in the backend's scene (a musculoskeletal arm) and strapped to the robot.
@@ -350,7 +354,8 @@ class Controller(ABC):
 
 
 __all__ = [  # the backend and sensor kinds live in modules of their own; importable from here as before
-    "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "EmbodiedPatient", "GeomVisual",
+    "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "Drawing", "EmbodiedPatient",
+    "GeomVisual",
     "IKUnavailableError",
     "Instrument", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest", "ReferenceSpace", "Robot", "Sensor",
     "SensorConfig", "StrictModel", "Target", "Trajectory",

@@ -19,13 +19,17 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from rehabkit.core.interfaces import BodyPoses, GeomVisual
+from rehabkit.core.interfaces import BodyPoses, Drawing, GeomVisual
 
 TIMELINE = "sim_time"
 
 
 def _rgba(c) -> list[int]:
     return [int(round(255 * v)) for v in c]
+
+
+def _rgba_rows(rgba) -> np.ndarray | None:
+    return None if rgba is None else np.round(255 * np.clip(np.asarray(rgba, float), 0, 1)).astype(np.uint8)
 
 
 def _xyzw(wxyz: np.ndarray) -> np.ndarray:
@@ -45,6 +49,8 @@ def _shape(g: GeomVisual):
         return rr.Boxes3D(half_sizes=[[g.size[0], g.size[1], 0.001]], colors=color, fill_mode="solid")
     if g.shape == "cylinder":
         return rr.Cylinders3D(lengths=[2 * g.size[1]], radii=[g.size[0]], colors=color, fill_mode="solid")
+    if g.shape == "mesh" and g.mesh is not None:
+        return rr.Mesh3D(vertex_positions=g.mesh[0], triangle_indices=g.mesh[1], albedo_factor=color[0])
     if g.shape == "capsule":  # Rerun's capsule starts at the origin; MuJoCo's is centred
         return rr.Capsules3D(lengths=[2 * g.size[1]], radii=[g.size[0]], translations=[[0, 0, -g.size[1]]],
                              colors=color, fill_mode="solid")
@@ -169,6 +175,21 @@ class RerunLog:
         if t is not None:
             self.rec.set_time(TIMELINE, duration=t)
         self.rec.log(path, rr.LineStrips3D([points], colors=[color], radii=radius), static=t is None)
+
+    def drawing(self, t: float, path: str, shapes: Drawing) -> None:
+        """Shapes that change during the run, at time ``t`` (logged as they come: a few per log sample)."""
+        def send() -> None:
+            self.rec.set_time(TIMELINE, duration=t)
+            if shapes.lines is not None:
+                self.rec.log(f"{path}/lines", rr.LineStrips3D(shapes.lines, colors=_rgba_rows(shapes.line_rgba),
+                                                              radii=0.003))
+            if shapes.origins is not None:
+                self.rec.log(f"{path}/arrows", rr.Arrows3D(origins=shapes.origins, vectors=shapes.vectors,
+                                                           colors=_rgba_rows(shapes.arrow_rgba), radii=0.006))
+        if self.deferred:
+            self._queue.append(send)
+        else:
+            send()
 
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)

@@ -16,7 +16,7 @@ import numpy as np
 
 from rehabkit.core.assembly import Assembly
 from rehabkit.core.capabilities import Contacts, SceneGeometry
-from rehabkit.core.interfaces import BackendFaultError, BodyPoses, EmbodiedPatient
+from rehabkit.core.interfaces import BackendFaultError, BodyPoses, EmbodiedPatient, Patient
 from rehabkit.core.metrics import Trace
 from rehabkit.core.reference import ReferenceBuffer
 from rehabkit.core.run_view import RunView
@@ -70,6 +70,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
     push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
     tau_h, hand_force, goal_at = trace.tau_h, a.hand_force, ref.goal_at
+    draws = a.patient.drawing if a.patient is not None and type(a.patient).drawing is not Patient.drawing else None
     stop_after = a.sc.safety.stop_after_s
     bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
     # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
@@ -122,6 +123,9 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                     log.record(t, backend.body_poses(), backend.ee_position())
                 else:
                     log.record(t, NO_BODIES, ee(q[None])[0])
+                if draws is not None:
+                    for name, shapes in draws().items():
+                        log.drawing(t, f"world/patient/{name}", shapes)
                 if log.pending >= flush_samples:
                     view.flush(trace, k + 1)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick

@@ -104,10 +104,11 @@ def fit_arm(arm: HumanArm, wearable: Wearable, base_pose: np.ndarray, straps: tu
     return dict(zip(names, x)), worst
 
 
-def strap_rows(m: mujoco.MjModel, d: mujoco.MjData, eq: int) -> np.ndarray:
-    """The constraint rows of equality ``eq`` in the current step (equalities come first, in order)."""
-    n = d.ne
-    return np.flatnonzero((d.efc_type[:n] == mujoco.mjtConstraint.mjCNSTR_EQUALITY) & (d.efc_id[:n] == eq))
+def strap_rows(m: mujoco.MjModel, d: mujoco.MjData, eq: int) -> slice:
+    """The constraint rows of equality ``eq`` in the current step: MuJoCo puts the ``ne`` equality rows first, in
+    the order of the equalities."""
+    ids = d.efc_id[: d.ne]
+    return slice(int(np.searchsorted(ids, eq, "left")), int(np.searchsorted(ids, eq, "right")))
 
 
 def strap_solref(m: mujoco.MjModel, d: mujoco.MjData, eq: int, stiffness: float, damping: float) -> np.ndarray:

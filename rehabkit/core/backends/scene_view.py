@@ -114,15 +114,25 @@ class SceneView:
         m = self.model
         out = []
         for g in range(m.ngeom):
-            shape = _GEOM_SHAPES.get(int(m.geom_type[g]))
+            if m.geom_group[g] >= 3 or m.geom_rgba[g, 3] == 0:  # hidden, as MuJoCo's own viewer hides them
+                continue
+            mesh = None
+            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+                k = m.geom_dataid[g]
+                v, f = m.mesh_vertadr[k], m.mesh_faceadr[k]
+                shape, mesh = "mesh", (m.mesh_vert[v : v + m.mesh_vertnum[k]].copy(),
+                                       m.mesh_face[f : f + m.mesh_facenum[k]].copy())
+            else:
+                shape = _GEOM_SHAPES.get(int(m.geom_type[g]))
             if shape is None:
                 continue
             size = m.geom_size[g]
-            size = {"box": size[:3], "sphere": size[:1], "plane": size[:2], "ellipsoid": size[:3]}.get(shape, size[:2])
+            size = {"box": size[:3], "sphere": size[:1], "plane": size[:2], "ellipsoid": size[:3],
+                    "mesh": size[:0]}.get(shape, size[:2])
             out.append(GeomVisual(
                 body=m.body(m.geom_bodyid[g]).name or "world", name=m.geom(g).name or f"geom{g}", shape=shape,
                 size=tuple(float(s) for s in size), position=tuple(m.geom_pos[g]), quat_wxyz=tuple(m.geom_quat[g]),
-                rgba=tuple(float(c) for c in m.geom_rgba[g]),
+                rgba=tuple(float(c) for c in m.geom_rgba[g]), mesh=mesh,
             ))
         return out
 
