@@ -109,5 +109,8 @@ def test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its
     r = cli("plugins", "--fields", "ompl-joint")
     assert "  clearance_m: float = 0.01 — distance below which a link counts as touching the world [m]" in r.stdout
     assert "  states_checked [count] — states checked for collision by MuJoCo" in r.stdout
+    r = cli("plugins", "--fields", "musculoskeletal")  # a patient's: nested impairments, with their units
+    assert "  model: Literal['myoarm', 'myoelbow'] = 'myoarm'" in r.stdout
+    assert "threshold_l0_s: float = 0.3" in r.stdout and "peak_cuff_force_n [N]" in r.stdout
     r = cli("plugins", "--fields", "multicubic")
     assert r.returncode == 2 and "did you mean 'multi-cubic'?" in r.stderr

@@ -1,9 +1,11 @@
 """The README runs: each of its code blocks and each command it names is executed here or, where a run is long,
 by the test named for it below (checked to exist)."""
 
+import csv
 import json
 import re
 import shlex
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -27,9 +29,14 @@ EXECUTED_ELSEWHERE = {
     "rehabkit schema": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema > rehabkit.schema.json": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit --version": "tests/test_user_robot_errors.py::test_contacts_are_said_and_the_version_is_known",
+    "rehabkit plugins --fields musculoskeletal":
+        "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
     "rehabkit plugins --fields dh":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
 }
+MUSCLES = "tests/test_readme.py::test_the_musculoskeletal_commands_compare_controllers_and_severities"
+EXECUTED_ELSEWHERE.update({c.split("#")[0].strip(): MUSCLES for c in
+                           re.search(r"## A musculoskeletal patient.*?```bash\n(.*?)```", README, re.S)[1].splitlines()})
 
 
 def _block_after(marker: str, lang: str) -> str:
@@ -124,9 +131,39 @@ def test_every_command_the_readme_names_is_executed():
     concrete = {c for c in named if not re.search(r"[A-Z]{2,}|S\.yaml|\[", c) and len(c.split()) > 1}
     here = {"rehabkit validate bad.yaml"}  # (the bare names of commands are not commands to run)
     bare = {"rehabkit run", "rehabkit validate", "rehabkit replay", "rehabkit bridge", "rehabkit plugins",
-            "rehabkit schema"}
+            "rehabkit schema", "rehabkit sweep"}
     assert concrete - here - bare - set(EXECUTED_ELSEWHERE) == set()
     for command, node in EXECUTED_ELSEWHERE.items():
         file, name = node.split("::")
         assert f"def {name}(" in (ROOT / file).read_text(), node
         assert command.split()[1] in (ROOT / file).read_text(), node  # that test does run the command
+
+
+def test_the_musculoskeletal_commands_compare_controllers_and_severities(tmp_path):
+    """The section's three commands, shortened (6 s sessions, a 3 s serial sweep): PD and assist-as-needed side
+    by side on the same person; the severities in order of the help the robot gives."""
+    run, replay, sweep = [line.split("#")[0].strip() for line in _block_after("## A musculoskeletal patient",
+                                                                              "bash").strip().splitlines()]
+    done, args = _run(run + " --set duration=6", tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    out = args[args.index("--out") + 1]
+    again = cli(*replay.replace("out/lexos_myoarm", out).split()[1:])
+    assert again.returncode in (0, 1), again.stderr
+    table = again.stdout
+    for measure in ("sparc", "path_length_ratio", "time_to_target_s", "assistance_ratio", "peak_cuff_force_n",
+                    "muscle_effort"):
+        assert measure in table
+    assert "patient_noise same" in table  # the same person, noise for noise
+    done, args = _run(sweep + " --grid duration=3 --serial --out sev", tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    with open(Path(args[args.index("--out") + 1]) / "aggregate.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["patient"].split("/")[-1].split("_")[0] for r in rows] == ["mild", "moderate", "severe"]
+    help_given = [float(r["assistance_ratio.mean"]) for r in rows]
+    assert help_given == sorted(help_given) and help_given[-1] > 0.3 > help_given[0]
+
+
+def test_the_fit_block_is_the_dynamometer_example():
+    block = _block_after("## A musculoskeletal patient", "yaml")
+    example = yaml.safe_load((ROOT / "examples" / "robots" / "elbow_dynamometer.yaml").read_text())
+    assert yaml.safe_load(block)["fit"] == example["patient"]["model"]["fit"]

@@ -25,7 +25,7 @@ from rehabkit.core.metric import Metric
 from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
 from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
-from rehabkit.musculo.impairments import MuscleFatigue, StretchReflex, Tremor
+from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
 from rehabkit.musculo.static_opt import StaticOptimisation
 
 SERIES_EVERY = 10  # control steps between logged samples
@@ -132,7 +132,7 @@ def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]],
 
 
 class Musculoskeletal(EmbodiedPatient):
-    """See the module docstring."""
+    """A muscle-driven arm (MyoSuite's MyoArm or MyoElbow) in the scene, strapped to the robot; see the module."""
 
     metrics = (
         Metric("peak_cuff_force_n", "N", outcome=True, description="largest strap force over the run"),
@@ -178,7 +178,7 @@ class Musculoskeletal(EmbodiedPatient):
             joint.range = np.radians([lo, hi])
         self.delay_s = config.drive.delay_s
         self.cartesian = context.reference_space == "cartesian"
-        self.rng = context.stream("patient")
+        self.noise_stream = NoiseStream(context.stream("patient"))
         self.arm: HumanArm | None = None
         self._goal_key, self._goal_world_at = b"", np.zeros(3)
         self._drawn_at = -np.inf
@@ -203,7 +203,7 @@ class Musculoskeletal(EmbodiedPatient):
         self.reflex = StretchReflex(self.reflex_gain, np.full(len(arm.muscles), cfg.spasticity.threshold_l0_s),
                                     cfg.spasticity.reflex_delay_s, arm.l0, self.dt)
         amp = np.array([cfg.tremor.amplitude_nm.get(j, 0.0) for j in self.cat.joints])
-        self.tremor = Tremor(amp, cfg.tremor.frequency_hz, cfg.tremor.bandwidth_hz, self.dt, self.rng)
+        self.tremor = Tremor(amp, cfg.tremor.frequency_hz, cfg.tremor.bandwidth_hz, self.dt, self.noise_stream)
         self.fatigue = MuscleFatigue(len(arm.muscles), cfg.fatigue.rate_per_s, cfg.fatigue.recovery_per_s, self.dt)
         self.noise_a = math.exp(-2 * math.pi * cfg.drive.noise_hz * self.dt)
         self.noise = np.zeros(len(arm.driven))
@@ -268,7 +268,7 @@ class Musculoskeletal(EmbodiedPatient):
             if size > cfg.hand_force_n:
                 force *= cfg.hand_force_n / size
             reach = C.T @ (J.T @ force)
-            self.noise = self.noise_a * self.noise + math.sqrt(1 - self.noise_a**2) * self.rng.standard_normal(
+            self.noise = self.noise_a * self.noise + math.sqrt(1 - self.noise_a**2) * self.noise_stream.normal(
                 len(self.noise))
             tau += cfg.participation * reach * (1.0 + cfg.noise * self.noise)
         if self.tremor.active:
@@ -357,6 +357,9 @@ class Musculoskeletal(EmbodiedPatient):
                 "muscle_effort": self.effort_sum / n, "drive_saturated_fraction": self.saturated / n,
                 "fit_offset_mm": 1000.0 * getattr(self, "offset", 0.0),
                 "muscle_capacity_min": float(np.min(self.fatigue.capacity)) if self.arm else 1.0}
+
+    def inputs(self) -> dict[str, str]:
+        return {"patient_noise": self.noise_stream.digest.hexdigest()[:16]}
 
     def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         if not self._rows:

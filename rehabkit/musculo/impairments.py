@@ -12,9 +12,28 @@
 from __future__ import annotations
 
 import cmath
+import hashlib
 import math
 
 import numpy as np
+
+
+class NoiseStream:
+    """Standard normal numbers drawn in blocks from ``rng`` (a call per control step would cost more than the
+    draw), with a digest of everything drawn: a replay shows it gave the person the same noise."""
+
+    def __init__(self, rng: np.random.Generator, block: int = 16384):
+        self.rng, self.block = rng, block
+        self.values, self.next = np.empty(0), 0
+        self.digest = hashlib.sha256()
+
+    def normal(self, k: int) -> np.ndarray:
+        if self.next + k > len(self.values):
+            self.values, self.next = self.rng.standard_normal(max(self.block, k)), 0
+            self.digest.update(self.values.tobytes())
+        out = self.values[self.next : self.next + k]
+        self.next += k
+        return out
 
 
 class StretchReflex:
@@ -39,17 +58,19 @@ class Tremor:
     """RMS ``amplitude`` [N·m] per joint in a band of ``bandwidth_hz`` around ``frequency_hz``."""
 
     def __init__(self, amplitude: np.ndarray, frequency_hz: float, bandwidth_hz: float, dt: float,
-                 rng: np.random.Generator):
+                 noise: NoiseStream):
         self.amplitude = np.asarray(amplitude, float)
         decay = math.exp(-math.pi * bandwidth_hz * dt)
         self.pole = decay * cmath.exp(2j * math.pi * frequency_hz * dt)
         self.drive = math.sqrt(1.0 - decay**2)  # so that E|z|² = 2, E[Re z]² = 1
         self.z = np.zeros(len(self.amplitude), complex)
-        self.rng = rng
+        self.noise = noise
         self.active = bool(np.any(self.amplitude > 0))
 
     def torque(self) -> np.ndarray:
-        w = self.rng.standard_normal(len(self.z)) + 1j * self.rng.standard_normal(len(self.z))
+        n = len(self.z)
+        w = self.noise.normal(2 * n)
+        w = w[:n] + 1j * w[n:]
         self.z = self.pole * self.z + self.drive * w
         return self.amplitude * self.z.real
 

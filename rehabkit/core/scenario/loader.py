@@ -287,6 +287,7 @@ def load_scenario(
         apply_overrides(src, overrides)
     except ValueError as exc:
         raise ScenarioError([Diagnostic(Mark("<--set>", 0, 0), "", str(exc))]) from None
+    _with_profile(src, path)  # --set patient=FILE (a sweep over profiles): from the scenario's folder, as in it
     _fit_new_types(src, overrides, registry)
     _relabel(src, path)
     return LoadedScenario(validate_source(src, registry, path), (origin or path).resolve(), src)
