@@ -35,8 +35,8 @@ EXECUTED_ELSEWHERE = {
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
 }
 MUSCLES = "tests/test_readme.py::test_the_musculoskeletal_commands_compare_controllers_and_severities"
-EXECUTED_ELSEWHERE.update({c.split("#")[0].strip(): MUSCLES for c in
-                           re.search(r"## A musculoskeletal patient.*?```bash\n(.*?)```", README, re.S)[1].splitlines()})
+_MUSCLE_BLOCK = re.search(r"## A musculoskeletal patient.*?```bash\n(.*?)```", README, re.S)[1]
+EXECUTED_ELSEWHERE.update({c.split("#")[0].strip(): MUSCLES for c in _MUSCLE_BLOCK.splitlines()})
 
 
 def _block_after(marker: str, lang: str) -> str:
