@@ -1,9 +1,9 @@
 """The musculoskeletal patient against known answers, on a one-joint elbow dynamometer (a user's robot, with the
 person's fit in its scenario: examples/robots/elbow_dynamometer.yaml) and on MyoArm in the L-Exos.
 
-The bench steps the assembled scene itself, as a clinical dynamometer would: the lever held (isometric), driven
-at a set speed (isokinetic, a Tardieu test), or left free with its own weight compensated (transparent); the
-person's torque is what the straps put on the lever.
+The bench (:mod:`rehabkit.musculo.dynamometer`) steps the assembled scene itself, as a clinical dynamometer would:
+the lever held (isometric), driven at a set speed (isokinetic, a Tardieu test), or left free with its own weight
+compensated (transparent); the person's torque is what the straps put on the lever.
 """
 
 from __future__ import annotations
@@ -14,60 +14,23 @@ import pytest
 
 from rehabkit.core.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.musculo.dynamometer import MVC, RIGID, Dynamometer, isometric, tardieu
 from rehabkit.musculo.static_opt import StaticOptimisation
 from tests.conftest import ROOT, SCENARIOS
 
 DYNO = ROOT / "examples" / "robots" / "elbow_dynamometer.yaml"
-MVC = np.array([300.0])  # an elbow-flexion torque far beyond anyone's: the muscles give all they have [N·m]
-RIGID = {"patient.model.straps.stiffness_n_m": 50000.0, "patient.model.straps.damping_ns_m": 500.0}
 
 
-class Bench:
-    """The dynamometer with the person strapped in, stepped at the control period by the test."""
-
-    def __init__(self, overrides: dict | None = None, driven: bool = False, q0: float = 0.0):
-        self.a = Runner(load_scenario(DYNO, overrides or {})).build()
-        self.backend, self.person, self.robot = self.a.backend, self.a.patient, self.a.robot
-        self.m, self.d = self.backend.model, self.backend.data
-        self.dof = int(self.m.jnt_dofadr[self.m.joint("elbow").id])
-        if driven:  # a motor-driven dynamometer: a lever the person cannot move (its position is imposed)
-            self.m.dof_armature[self.dof] += 1000.0
-        self.backend.reset(np.array([q0]))
-        self.qadr = int(self.m.jnt_qposadr[self.m.joint("elbow").id])
-        self.dt = self.a.context.control_dt
-        self.sub = round(self.dt / self.backend.timestep)
-
-    def run(self, seconds: float, request=None, lever=None, goal=None) -> dict[str, np.ndarray]:
-        """Step for ``seconds``. ``request(t)``: the elbow torque the person wants (default: their own drive toward
-        ``goal``); ``lever(t)``: the lever's (angle, speed) imposed (default: free, its weight compensated)."""
-        out = {"t": [], "tau": [], "q": [], "qd": [], "force": [], "flexors": []}
-        t0 = self.d.time
-        flexors = self.person.arm.groups["elbow_flexors"]
-        for _ in range(round(seconds / self.dt)):
-            t = self.d.time - t0
-            if lever is not None:
-                self.d.qpos[self.qadr], self.d.qvel[self.dof] = lever(t)
-            q = self.d.qpos[self.qadr : self.qadr + 1].copy()
-            tau = request(t) if request is not None else self.person.intent(goal)
-            excitation = self.person.excite(np.atleast_1d(tau))
-            self.backend.command(self.robot.gravity_torque(q))
-            self.backend.step(self.sub)
-            out["t"].append(t)
-            out["tau"].append(self.person.strap_torque()[0])
-            out["q"].append(self.d.qpos[self.qadr])
-            out["qd"].append(self.d.qvel[self.dof])
-            out["force"].append(max(np.linalg.norm(f) for f in self.person.strap_forces()))
-            out["flexors"].append(float(np.max(excitation[flexors])))
-        return {k: np.asarray(v) for k, v in out.items()}
+def _bench(overrides: dict | None = None, driven: bool = False, q0: float = 0.0) -> Dynamometer:
+    return Dynamometer(DYNO, overrides, driven, q0)
 
 
 def _isometric(overrides: dict | None = None) -> tuple[float, float]:
-    """The lever held at 90° of elbow flexion: (the person's maximal flexion torque, their relaxed torque) [N·m]."""
-    bench = Bench({**RIGID, **(overrides or {})}, driven=True)
-    hold = lambda t: (0.0, 0.0)  # noqa: E731
-    relaxed = bench.run(0.8, request=lambda t: np.zeros(1), lever=hold)["tau"][-25:].mean()
-    mvc = bench.run(0.4, request=lambda t: MVC, lever=hold)["tau"][-25:].mean()
-    return float(mvc), float(relaxed)
+    return isometric(DYNO, overrides)
+
+
+def _tardieu(speed_deg_s: float, overrides: dict) -> tuple[float, float]:
+    return tardieu(DYNO, speed_deg_s, overrides)
 
 
 def test_weakness_scales_the_isometric_elbow_flexion_torque_in_proportion():
@@ -79,19 +42,7 @@ def test_weakness_scales_the_isometric_elbow_flexion_torque_in_proportion():
     assert (half - rest_half) / (full - rest_full) == pytest.approx(0.5, abs=0.02)
 
 
-def _tardieu(speed_deg_s: float, overrides: dict) -> tuple[float, float]:
-    """A relaxed elbow stretched by the lever from 100° to 20° of flexion: the largest resistance [N·m] over its
-    last two thirds and the flexors' largest excitation."""
-    start, span = np.radians(-10.0), np.radians(80.0)
-    bench = Bench({**RIGID, **overrides, "patient.model.drive.own_weight": 0.0}, driven=True, q0=start)
-    w = np.radians(speed_deg_s)
-    bench.run(0.2, request=lambda t: np.zeros(1), lever=lambda t: (start, 0.0))
-    move = bench.run(span / w, request=lambda t: np.zeros(1), lever=lambda t: (start + w * t, w))
-    late = slice(len(move["t"]) // 3, None)  # past the jolt of starting at full speed
-    return float(-move["tau"][late].min()), float(move["flexors"].max())  # resisting: pushing the lever back
-
-
-def _reflex_speed(bench: Bench, threshold_l0_s: float) -> float:
+def _reflex_speed(bench: Dynamometer, threshold_l0_s: float) -> float:
     """The elbow speed [°/s] at which the most sensitive flexor is stretched at the threshold, at 90° of flexion
     (its optimal length and moment arm from the model): where a Tardieu test should find the catch."""
     m, d, arm = bench.m, bench.d, bench.person.arm
@@ -105,7 +56,7 @@ def _reflex_speed(bench: Bench, threshold_l0_s: float) -> float:
 @pytest.mark.parametrize("spastic", [True, False])
 def test_a_fast_stretch_meets_a_reflex_only_above_the_threshold_speed(spastic):
     gain = {"patient.model.spasticity": {"gain": {"elbow_flexors": 0.5}, "threshold_l0_s": 0.3}} if spastic else {}
-    catch = _reflex_speed(Bench(), 0.3)
+    catch = _reflex_speed(_bench(), 0.3)
     assert 30.0 < catch < 60.0  # the biceps' L₀ and moment arm put it near 45°/s
     speeds = (0.3 * catch, 0.6 * catch, 3 * catch, 6 * catch)
     resist = {v: _tardieu(v, gain) for v in speeds}
@@ -121,7 +72,7 @@ def test_a_fast_stretch_meets_a_reflex_only_above_the_threshold_speed(spastic):
 
 def test_tremor_puts_a_peak_in_the_hands_speed_spectrum_at_its_frequency():
     def spectrum(amplitude: float):
-        bench = Bench({"patient.model.tremor": {"amplitude_nm": {"elbow_flexion": amplitude}, "frequency_hz": 5.0}})
+        bench = _bench({"patient.model.tremor": {"amplitude_nm": {"elbow_flexion": amplitude}, "frequency_hz": 5.0}})
         rec = bench.run(4.0)  # holding the forearm still, the lever free
         speed = rec["qd"][100:] * 0.25  # the hand's speed on the 0.25 m lever [m/s]
         power = np.abs(np.fft.rfft(speed - speed.mean())) ** 2
@@ -135,7 +86,7 @@ def test_tremor_puts_a_peak_in_the_hands_speed_spectrum_at_its_frequency():
 
 
 def test_fatigue_lowers_the_maximal_torque_under_a_sustained_effort_and_it_recovers():
-    bench = Bench({**RIGID, "patient.model.fatigue": {"rate_per_s": 0.3, "recovery_per_s": 0.3}}, driven=True)
+    bench = _bench({**RIGID, "patient.model.fatigue": {"rate_per_s": 0.3, "recovery_per_s": 0.3}}, driven=True)
     hold = lambda t: (0.0, 0.0)  # noqa: E731
     sustained = bench.run(3.0, request=lambda t: MVC, lever=hold)["tau"]
     fresh, tired = sustained[25:50].mean(), sustained[-25:].mean()
@@ -149,19 +100,19 @@ def test_fatigue_lowers_the_maximal_torque_under_a_sustained_effort_and_it_recov
 
 def test_cuff_forces_stay_near_zero_while_person_and_robot_move_together_unloaded():
     reach = {"patient.model.drive.participation": 1.0}
-    bench = Bench(reach)  # the soft cuffs of the example, the lever free and its weight compensated
+    bench = _bench(reach)  # the soft cuffs of the example, the lever free and its weight compensated
     still = bench.run(0.5)  # the person holds their own forearm
     assert still["force"][50:].max() < 0.5
     moving = bench.run(1.5, goal=np.radians([-30.0]))  # they flex the elbow 30°, carrying the light lever along
     assert moving["q"][-1] < np.radians(-20.0)
     assert moving["force"].max() < 3.0
-    held = Bench(reach, driven=True)  # the same move against a lever that stays put: the cuff takes the person's effort
+    held = _bench(reach, driven=True)  # the same move against a lever that stays put: the cuff takes the effort
     held_run = held.run(1.5, goal=np.radians([-30.0]), lever=lambda t: (0.0, 0.0))
     assert held_run["force"].max() > 5 * moving["force"].max()
 
 
 def test_static_optimisation_reproduces_a_torque_within_capacity_and_reports_saturation_beyond():
-    bench = Bench()
+    bench = _bench()
     so: StaticOptimisation = bench.person.so
     A, passive = so.matrices()
     within = so.solve(np.array([5.0]), A, passive)

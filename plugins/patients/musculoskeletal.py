@@ -287,10 +287,10 @@ class Musculoskeletal(EmbodiedPatient):
         else:  # no intent at all: relaxed (the passive tissue is not fought)
             solution, excitation = None, np.zeros(len(arm.muscles))
         if self.reflex.active:
-            excitation = np.minimum(1.0, excitation + self.reflex.excitation(d.actuator_velocity[arm.muscles]))
-        d.ctrl[arm.muscles] = excitation
+            excitation = np.minimum(1.0, excitation + self.reflex.excitation(d.actuator_velocity[arm.muscle_span]))
+        d.ctrl[arm.muscle_span] = excitation
         if self.fatigue.active:
-            self.m.actuator_gainprm[arm.muscles, 2] = self.f0 * self.fatigue.step(d.act[self.so.act_of_muscles])
+            self.m.actuator_gainprm[arm.muscle_span, 2] = self.f0 * self.fatigue.step(d.act[self.so.act_of_muscles])
         self.saturated += solution is not None and solution.saturated
         self.effort_sum += float(excitation @ excitation)
         return excitation

@@ -12,11 +12,15 @@ and the muscles' force and moment arms for the static optimisation.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import sys
 import tempfile
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from importlib.metadata import version
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -78,11 +82,27 @@ PERSON_FROM_MODEL = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]
 
 def load_arm_spec(model: str) -> mujoco.MjSpec:
     """The arm's MjSpec from the installed ``myo_sim``, its geoms made touch-free (the straps carry every force
-    between the person and the robot; bones meeting the robot's links would be a second, unmodelled contact)."""
+    between the person and the robot; bones meeting the robot's links would be a second, unmodelled contact).
+
+    ``myo_sim`` builds MyoArm from its parts (~0.7 s); the result is kept as MJCF under ``$REHABKIT_CACHE``, one
+    file per model, ``myo-sim`` and MuJoCo version and install folder, which loads in ~10 ms.
+    """
     import myo_sim
 
-    with _quiet_output():  # MyoArm's loader attaches a part without a prefix, and MuJoCo prints a warning of it
-        spec = myo_sim.load_spec(CATALOGUE[model].spec_name).copy()  # the copy is whole: building it warns no more
+    from rehabkit.core.io import atomic_write_text
+    from rehabkit.workspace.build import cache_dir
+
+    where = hashlib.sha256(str(Path(myo_sim.__file__).parent).encode()).hexdigest()[:8]
+    path = cache_dir() / "myo" / f"{model}-{version('myo-sim')}-mujoco{mujoco.__version__}-{where}.json"
+    if path.exists():
+        kept = json.loads(path.read_text())
+        spec = mujoco.MjSpec.from_string(kept["xml"])
+        spec.modelfiledir = kept["modelfiledir"]  # the meshes' paths are relative to the model's own folder
+    else:
+        with _quiet_output():  # MyoArm's loader attaches a part without a prefix, and MuJoCo prints a warning of it
+            spec = myo_sim.load_spec(CATALOGUE[model].spec_name).copy()  # the copy is whole: it builds quietly
+            text = spec.to_xml()
+        atomic_write_text(path, json.dumps({"xml": text, "modelfiledir": spec.modelfiledir}))
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = 0, 0
     for key in list(spec.keys):  # a keyframe sized for the arm alone would not fit the composed scene
@@ -111,6 +131,7 @@ class HumanArm:
         self.dofs = np.array([m.jnt_dofadr[j] for j in human])
         self.driven = np.array([m.jnt_dofadr[j] for j in self.jnt.values()])
         self.muscles = np.array([m.actuator(PREFIX + name).id for name in cat.muscles])
+        self.muscle_span = span(self.muscles)  # (a slice where contiguous: cheaper in the hot loop)
         index = {name: i for i, name in enumerate(cat.muscles)}
         self.groups = {g: np.array([index[n] for n in names]) for g, names in cat.groups.items()}
         self.all_muscles = np.array([a for a in range(m.nu) if m.actuator(a).name.startswith(PREFIX)])
@@ -205,6 +226,14 @@ def _quiet_output():
     rest = [line for line in text.splitlines() if line.strip() and "empty prefix" not in line]
     if rest:
         print("\n".join(rest), file=sys.stderr)
+
+
+def span(indices: np.ndarray) -> slice | np.ndarray:
+    """A slice when the indices are contiguous and ascending (cheaper than fancy indexing each step), else them."""
+    indices = np.asarray(indices)
+    if len(indices) and np.all(np.diff(indices) == 1):
+        return slice(int(indices[0]), int(indices[-1]) + 1)
+    return indices
 
 
 def _has_site(m: mujoco.MjModel, name: str) -> bool:

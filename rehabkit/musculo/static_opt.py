@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from qpsolvers import solve_qp
+import qpsolvers
 
-from rehabkit.musculo.human import HumanArm
+from rehabkit.musculo.human import HumanArm, span
 
 TOLERANCE_NM = 1e-3  # a torque met within this is reproduced; beyond it the step is saturated
 EFFORT_WEIGHT = 1e-4  # the least-squares fallback's pull toward low activations (per N·m² of torque error)
@@ -44,14 +44,16 @@ class StaticOptimisation:
 
     def __init__(self, arm: HumanArm, solver: str = "daqp"):
         self.arm, self.solver = arm, solver
+        # the solver's own qpsolvers entry point: solve_qp's problem checks cost as much as the solve here
+        self._solve = getattr(qpsolvers, f"{solver}_solve_qp")
         m = arm.model
         self._moment = np.zeros((m.nu, m.nv))
         self._n = len(arm.muscles)
         self._P = 2.0 * np.eye(self._n)
         self._zero = np.zeros(self._n)
         self._lb, self._ub = np.zeros(self._n), np.ones(self._n)
-        self._act = m.actuator_actadr[arm.all_muscles]  # activation states of every muscle of the arm
-        self.act_of_muscles = m.actuator_actadr[arm.muscles]  # those of the optimised muscles, in their order
+        self._act = span(m.actuator_actadr[arm.all_muscles])  # activation states of every muscle of the arm
+        self.act_of_muscles = span(m.actuator_actadr[arm.muscles])  # those of the optimised muscles, in order
 
     def matrices(self) -> tuple[np.ndarray, np.ndarray]:
         """(A, τ_passive): the driven joints' torque is A a + τ_passive at the present state."""
@@ -62,12 +64,12 @@ class StaticOptimisation:
         m, act, saved = arm.model, d.act, d.act[self._act].copy()
         act[self._act] = 0.0
         mujoco.mj_fwdActuation(m, d)
-        bias = d.actuator_force[arm.muscles].copy()
+        bias = d.actuator_force[arm.muscle_span].copy()
         act[self._act] = 1.0
         mujoco.mj_fwdActuation(m, d)
-        gain = d.actuator_force[arm.muscles] - bias
+        gain = d.actuator_force[arm.muscle_span] - bias
         act[self._act] = saved  # (the forces themselves are recomputed by the next step)
-        arms = self._moment[arm.muscles] @ arm.coupling_matrix()  # muscles × driven joints
+        arms = self._moment[arm.muscle_span] @ arm.coupling_matrix()  # muscles × driven joints
         return arms.T * gain, arms.T @ bias
 
     def solve(self, tau: np.ndarray, A: np.ndarray | None = None, passive: np.ndarray | None = None) -> Solution:
@@ -75,11 +77,11 @@ class StaticOptimisation:
         if A is None or passive is None:
             A, passive = self.matrices()
         rhs = np.asarray(tau, float) - passive
-        a = solve_qp(self._P, self._zero, A=A, b=rhs, lb=self._lb, ub=self._ub, solver=self.solver)
+        a = self._solve(self._P, self._zero, None, None, A, rhs, self._lb, self._ub)
         if a is not None and np.max(np.abs(A @ a - rhs)) <= TOLERANCE_NM:
             return Solution(np.clip(a, 0.0, 1.0), A @ a + passive, False)
         # beyond reach: the nearest torque the muscles can give, a little effort weight to make it unique
         P = 2.0 * (A.T @ A + EFFORT_WEIGHT * np.eye(self._n))
-        a = solve_qp(P, -2.0 * A.T @ rhs, lb=self._lb, ub=self._ub, solver=self.solver)
+        a = self._solve(P, -2.0 * A.T @ rhs, None, None, None, None, self._lb, self._ub)
         a = np.clip(a if a is not None else self._zero, 0.0, 1.0)
         return Solution(a, A @ a + passive, True)
