@@ -128,15 +128,28 @@ def test_static_optimisation_reproduces_a_torque_within_capacity_and_reports_sat
     assert beyond.torque[0] == pytest.approx((A @ full + passive)[0], rel=1e-3)
 
 
-def test_myoarm_in_the_lexos_fits_within_a_centimetre_and_holds_its_own_weight():
+def test_myoarm_is_sized_to_the_profile_and_fits_the_lexos_axes():
     a = Runner(load_scenario(SCENARIOS / "lexos_myoarm.yaml")).build()
     a.backend.reset(np.radians([20.0, -45.0, 0.0, -70.0]))
-    person = a.patient
-    assert person.offset < 0.01  # the fit: each strap within 1 cm of its segment's axis
-    arm, d = person.arm, a.backend.data
-    shoulder = d.xpos[arm.body["shoulder"]]
+    person, m, d = a.patient, a.backend.model, a.backend.data
+    arm = person.arm
+    shoulder, elbow = d.xpos[arm.body["shoulder"]], d.xpos[arm.body["elbow"]]
+    assert np.linalg.norm(elbow - shoulder) == pytest.approx(0.30, abs=1e-4)  # the profile's upper_arm
+    wrist = d.xpos[m.body("human/lunate_r").id]
+    assert np.linalg.norm(wrist - elbow) == pytest.approx(0.35 - 0.07, abs=0.005)  # forearm: elbow to the grip
     assert shoulder == pytest.approx(a.robot.model.base_pose[:3, 3], abs=1e-3)  # where the L-Exos axes meet
+    robot_elbow = m.joint("q4_elbow").id
+    off_axis = np.cross(elbow - d.xanchor[robot_elbow], d.xaxis[robot_elbow])
+    assert np.linalg.norm(off_axis) < 0.005  # the person's elbow on the exoskeleton's elbow axis
+    assert person.offset < 1e-3  # each strap on its segment's axis
     hold = person.arm.coupling_matrix().T @ d.qfrc_bias
     solution = person.so.solve(hold)
     assert not solution.saturated and solution.torque == pytest.approx(hold, abs=1e-3)
-    assert mujoco.mj_name2id(a.backend.model, mujoco.mjtObj.mjOBJ_EQUALITY, "human/strap_forearm") >= 0
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, "human/strap_forearm") >= 0
+
+
+def test_a_contracture_stops_the_elbow_short_of_extension():
+    # a slow stretch (no reflex) from 100° toward 20° of flexion, with extension lost beyond 50°
+    free, _ = _tardieu(15, {})
+    stiff, _ = _tardieu(15, {"patient.model.contracture_deg": {"elbow_flexion": [50, 130]}})
+    assert free < 3.0 and stiff > 10 * free

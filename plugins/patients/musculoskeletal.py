@@ -13,6 +13,7 @@ checks the largest, the outcome measures report them.
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from typing import Literal
 
 import mujoco
@@ -22,10 +23,12 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Drawing, EmbodiedPatient, StrictModel
 from rehabkit.core.metric import Metric
+from rehabkit.core.names import suggest
 from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
 from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
 from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
+from rehabkit.musculo.scaling import scale_arm
 from rehabkit.musculo.static_opt import StaticOptimisation
 
 SERIES_EVERY = 10  # control steps between logged samples
@@ -117,6 +120,9 @@ class MusculoskeletalConfig(StrictModel):
     fatigue: FatigueConfig = FatigueConfig()
     contracture_deg: dict[str, tuple[float, float]] = Field(
         {}, description="reduced passive range per joint [deg] (the model's joint convention)")
+    scale_to_profile: bool = Field(True, description="stretch the arm's upper arm and forearm to the profile's "
+                                                     "segments (upper_arm: shoulder centre to elbow; forearm: elbow "
+                                                     "to the middle of the grip)")
 
 
 def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], n: int, what: str,
@@ -126,7 +132,8 @@ def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]],
     start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
     for group, value in values.items():
         if group not in names:
-            raise ValueError(f"{what}: no muscle group '{group}'; groups: {', '.join(arm_groups)}")
+            raise ValueError(f"{what}: no muscle group '{group}'{suggest(group, arm_groups)}; groups: "
+                             f"{', '.join(arm_groups)}")
         out[start[names[group]] : start[names[group] + 1]] = value
     return out
 
@@ -141,6 +148,8 @@ class Musculoskeletal(EmbodiedPatient):
         Metric("drive_saturated_fraction", description="share of steps the muscles could not give the torque asked"),
         Metric("fit_offset_mm", "mm", description="largest strap-to-segment distance the fit left"),
         Metric("muscle_capacity_min", description="the most fatigued muscle's remaining capacity at the end"),
+        Metric("arm_scale_upper_arm", description="the model's upper arm stretched by this to the profile's"),
+        Metric("arm_scale_forearm", description="the model's forearm bones stretched by this to the profile's"),
     )
 
     def __init__(self, config: MusculoskeletalConfig, context: Context):
@@ -156,17 +165,24 @@ class Musculoskeletal(EmbodiedPatient):
         if self.wearable is None:
             raise ValueError(f"robot '{self.robot.model.name}' declares no fit for a person: give fit (shoulder and "
                              "straps)")
+        bodies = {e.get("name") for e in ET.fromstring(self.robot.model.mjcf).iter("body")}
+        for strap in self.wearable.straps:
+            if strap.body not in bodies:
+                raise ValueError(f"{'fit: ' if fit else ''}strap on the {strap.segment}: robot "
+                                 f"'{self.robot.model.name}' has no body '{strap.body}'{suggest(strap.body, bodies)}; "
+                                 f"its bodies: {', '.join(sorted(b for b in bodies if b))}")
         if config.model == "myoelbow" and any(s.segment == "upper_arm" for s in self.wearable.straps):
             raise ValueError("model: MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
         for name in [*config.tremor.amplitude_nm, *config.contracture_deg]:
             if name not in self.cat.joints:
-                raise ValueError(f"no joint '{name}' in {config.model}; joints: {', '.join(self.cat.joints)}")
+                raise ValueError(f"no joint '{name}' in {config.model}{suggest(name, self.cat.joints)}; joints: "
+                                 f"{', '.join(self.cat.joints)}")
         if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in self.cat.joints:
             raise ValueError(f"synergy: {config.model} has no shoulder")
         n = len(self.cat.muscles)
-        self.scale = _per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
+        self.strength = _per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
         self.reflex_gain = _per_group(config.spasticity.gain, self.cat.groups, n, "spasticity.gain", 0.0)
-        if np.any((self.scale <= 0) | (self.scale > 1)):
+        if np.any((self.strength <= 0) | (self.strength > 1)):
             raise ValueError("weakness: each force scale must be in (0, 1]")
         self.spec = load_arm_spec(config.model)
         for name, (lo, hi) in config.contracture_deg.items():
@@ -176,6 +192,11 @@ class Musculoskeletal(EmbodiedPatient):
                 raise ValueError(f"contracture_deg.{name}: [{lo:g}, {hi:g}] must be an interval inside the joint's "
                                  f"range [{full[0]:.0f}, {full[1]:.0f}]")
             joint.range = np.radians([lo, hi])
+        self.scale: dict[str, float] = {}  # the segments' stretch
+        segments = {k: v for k, v in (profile.segments if profile is not None else {}).items()
+                    if k in ("upper_arm", "forearm")}
+        if config.scale_to_profile and segments:
+            self.scale = scale_arm(self.spec, self.cat, segments)
         self.delay_s = config.drive.delay_s
         self.cartesian = context.reference_space == "cartesian"
         self.noise_stream = NoiseStream(context.stream("patient"))
@@ -197,7 +218,7 @@ class Musculoskeletal(EmbodiedPatient):
         self.so = StaticOptimisation(arm)
         self.eqs = [model.equality(f"{PREFIX}strap_{s.segment}").id for s in self.wearable.straps]
         self.robot_dofs = np.array([model.jnt_dofadr[model.joint(j).id] for j in self.robot.model.joint_names])
-        self.f0 = arm.f0 * self.scale  # weakness: the active force, passive tissue unchanged
+        self.f0 = arm.f0 * self.strength  # weakness: the active force, passive tissue unchanged
         model.actuator_gainprm[arm.muscles, 2] = self.f0
         cfg = self.config
         self.reflex = StretchReflex(self.reflex_gain, np.full(len(arm.muscles), cfg.spasticity.threshold_l0_s),
@@ -356,7 +377,9 @@ class Musculoskeletal(EmbodiedPatient):
         return {"peak_cuff_force_n": self.peak, "mean_cuff_force_n": self.force_sum / n,
                 "muscle_effort": self.effort_sum / n, "drive_saturated_fraction": self.saturated / n,
                 "fit_offset_mm": 1000.0 * getattr(self, "offset", 0.0),
-                "muscle_capacity_min": float(np.min(self.fatigue.capacity)) if self.arm else 1.0}
+                "muscle_capacity_min": float(np.min(self.fatigue.capacity)) if self.arm else 1.0,
+                "arm_scale_upper_arm": self.scale.get("upper_arm", 1.0),
+                "arm_scale_forearm": self.scale.get("forearm", 1.0)}
 
     def inputs(self) -> dict[str, str]:
         return {"patient_noise": self.noise_stream.digest.hexdigest()[:16]}
