@@ -26,7 +26,7 @@ from rehabkit.core.metric import Metric
 from rehabkit.core.names import suggest
 from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
-from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
+from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec, span
 from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
 from rehabkit.musculo.scaling import scale_arm
 from rehabkit.musculo.static_opt import StaticOptimisation
@@ -217,7 +217,8 @@ class Musculoskeletal(EmbodiedPatient):
         arm = self.arm = HumanArm(self.cat, model, data)
         self.so = StaticOptimisation(arm)
         self.eqs = [model.equality(f"{PREFIX}strap_{s.segment}").id for s in self.wearable.straps]
-        self.robot_dofs = np.array([model.jnt_dofadr[model.joint(j).id] for j in self.robot.model.joint_names])
+        self.robot_dofs = span(np.array([model.jnt_dofadr[model.joint(j).id] for j in self.robot.model.joint_names]))
+        self._full = np.zeros(model.nv)
         self.f0 = arm.f0 * self.strength  # weakness: the active force, passive tissue unchanged
         model.actuator_gainprm[arm.muscles, 2] = self.f0
         cfg = self.config
@@ -316,26 +317,28 @@ class Musculoskeletal(EmbodiedPatient):
         self.effort_sum += float(excitation @ excitation)
         return excitation
 
-    def strap_forces(self) -> list[np.ndarray]:
-        """Each strap's force on the robot now, world frame [N]."""
-        d = self.d
-        return [d.efc_force[strap_rows(self.m, d, eq)].copy() for eq in self.eqs]
+    def _strap_rows(self) -> list[slice]:
+        return [strap_rows(self.m, self.d, eq) for eq in self.eqs]
 
-    def strap_torque(self) -> np.ndarray:
+    def strap_forces(self, rows: list[slice] | None = None) -> list[np.ndarray]:
+        """Each strap's force on the robot now, world frame [N]."""
+        force = self.d.efc_force
+        return [force[r].copy() for r in rows or self._strap_rows()]
+
+    def strap_torque(self, rows: list[slice] | None = None) -> np.ndarray:
         """The straps' torque on the robot's joints now [N·m]: Jᵀ f over their constraint rows."""
         d = self.d
         vec = np.zeros(d.nefc)
-        for eq in self.eqs:
-            rows = strap_rows(self.m, d, eq)
-            vec[rows] = d.efc_force[rows]
-        full = np.zeros(self.m.nv)
-        mujoco.mj_mulJacTVec(self.m, d, full, vec)
-        return full[self.robot_dofs]
+        for r in rows or self._strap_rows():
+            vec[r] = d.efc_force[r]
+        mujoco.mj_mulJacTVec(self.m, d, self._full, vec)
+        return self._full[self.robot_dofs].copy()
 
     def torque(self, t, q, qd, goal):
         excitation = self.excite(self.intent(goal))
-        forces = self.strap_forces()
-        sizes = [float(np.linalg.norm(f)) for f in forces]
+        rows = self._strap_rows()
+        forces = self.strap_forces(rows)
+        sizes = [math.sqrt(float(f @ f)) for f in forces]
         worst = int(np.argmax(sizes))
         self.force = forces[worst]
         self.peak = max(self.peak, sizes[worst])
@@ -345,7 +348,7 @@ class Musculoskeletal(EmbodiedPatient):
             groups = [float(np.mean(excitation[idx])) for idx in self.arm.groups.values()]
             self._rows.append(np.array([*sizes, *groups, float(np.min(self.fatigue.capacity))]))
         self.steps += 1
-        return self.strap_torque()
+        return self.strap_torque(rows)
 
     def interaction_force(self) -> np.ndarray:
         return self.force
