@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from typing import Literal
 
 import mujoco
 import numpy as np
-from pydantic import Field
+from rehabkit_plugins.patients.musculoskeletal_settings import MusculoskeletalConfig
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Drawing, EmbodiedPatient, StrictModel
+from rehabkit.core.interfaces import Context, Drawing, EmbodiedPatient
 from rehabkit.core.metric import Metric
 from rehabkit.core.names import suggest
 from rehabkit.models.wearable import Strap, Wearable
@@ -33,96 +32,6 @@ from rehabkit.musculo.static_opt import StaticOptimisation
 
 SERIES_EVERY = 10  # control steps between logged samples
 DRAW_EVERY_S = 0.1  # [s] between drawings of the muscles and straps
-Vec3 = tuple[float, float, float]
-
-
-class StrapConfig(StrictModel):
-    """A cuff on a robot body."""
-
-    segment: Literal["upper_arm", "forearm", "hand"] = Field(description="the person's segment it holds")
-    body: str = Field(description="the robot's MJCF body carrying it")
-    position: Vec3 = Field(description="its centre in that body's frame [m]")
-
-
-class FitConfig(StrictModel):
-    """Where the person sits in a robot that declares no fit of its own (the built-in exoskeletons do)."""
-
-    shoulder: Vec3 = Field(description="the person's shoulder centre in the robot base frame [m]")
-    forward: Vec3 = Field((1.0, 0.0, 0.0), description="the person's forward direction in the robot base frame")
-    up: Vec3 = Field((0.0, 0.0, 1.0), description="the person's upward direction in the robot base frame")
-    straps: list[StrapConfig] = Field(min_length=1, description="the cuffs holding the arm")
-
-
-class StrapsConfig(StrictModel):
-    """How the cuffs give: a linear spring-damper between the robot and the tissue under them."""
-
-    stiffness_n_m: float = Field(3000.0, gt=0, description="cuff stiffness [N/m] (padding and soft tissue)")
-    damping_ns_m: float = Field(60.0, ge=0, description="cuff damping [N·s/m]")
-
-
-class Drive(StrictModel):
-    """The person's intent: reach the goal, hold the arm up."""
-
-    hand_force_n: float = Field(20.0, gt=0, description="largest voluntary hand force toward the goal [N]")
-    stiffness_n_m: float = Field(200.0, ge=0, description="effort per distance to the goal [N/m]")
-    damping_ns_m: float = Field(15.0, ge=0, description="effort against the hand's own speed [N·s/m]")
-    delay_s: float = Field(0.2, ge=0, le=1.0, description="reaction delay: a new goal is perceived this late [s]")
-    noise: float = Field(0.1, ge=0, description="signal-dependent noise: deviation as a fraction of the effort")
-    noise_hz: float = Field(4.0, gt=0, description="bandwidth of that noise [Hz]")
-    participation: float = Field(1.0, ge=0, le=1, description="share of the reaching effort the person makes")
-    own_weight: float = Field(1.0, ge=0, le=1, description="share of their arm's weight the person holds up")
-
-
-class Spasticity(StrictModel):
-    """Velocity-dependent stretch reflex (a Tardieu test's catch): a muscle stretched faster than the threshold is
-    excited in proportion to the excess, a reflex delay later."""
-
-    gain: dict[str, float] = Field({}, description="excitation per L₀/s above the threshold, per muscle group")
-    threshold_l0_s: float = Field(0.3, ge=0, description="lengthening speed where the reflex starts [L₀/s] "
-                                                          "(0.3 is about 90°/s at the elbow)")
-    reflex_delay_s: float = Field(0.04, ge=0, le=0.2, description="reflex loop delay [s]")
-
-
-class TremorConfig(StrictModel):
-    """Involuntary oscillation in a narrow band (e.g. 4–6 Hz after a stroke or in Parkinson's disease)."""
-
-    amplitude_nm: dict[str, float] = Field({}, description="RMS tremor torque per joint [N·m]")
-    frequency_hz: float = Field(5.0, gt=0, le=20, description="centre frequency [Hz]")
-    bandwidth_hz: float = Field(0.5, gt=0, description="width of the band [Hz]")
-
-
-class Synergy(StrictModel):
-    """Abnormal flexor synergy: effort to abduct (elevate) the shoulder flexes the elbow with it."""
-
-    elbow_per_shoulder: float = Field(0.0, ge=0, description="elbow-flexion torque per N·m of shoulder "
-                                                              "elevation effort [N·m/N·m]")
-
-
-class FatigueConfig(StrictModel):
-    """Per-muscle capacity: falls with activation, recovers at rest."""
-
-    rate_per_s: float = Field(0.0, ge=0, description="capacity lost per second at full activation [1/s]")
-    recovery_per_s: float = Field(0.01, ge=0, description="share of the lost capacity regained per second at rest")
-
-
-class MusculoskeletalConfig(StrictModel):
-    """A muscle-driven arm (MyoSuite) strapped into the robot; impairments are illustrative parameters."""
-
-    model: Literal["myoarm", "myoelbow"] = Field("myoarm", description="MyoArm (shoulder to hand, 63 muscles) or "
-                                                                       "MyoElbow (the elbow, 6 muscles)")
-    straps: StrapsConfig = StrapsConfig()
-    fit: FitConfig | None = Field(None, description="where the person sits (default: the robot's own fit)")
-    drive: Drive = Drive()
-    weakness: dict[str, float] = Field({}, description="force scale per muscle group, 0–1 (1: full strength)")
-    spasticity: Spasticity = Spasticity()
-    tremor: TremorConfig = TremorConfig()
-    synergy: Synergy = Synergy()
-    fatigue: FatigueConfig = FatigueConfig()
-    contracture_deg: dict[str, tuple[float, float]] = Field(
-        {}, description="reduced passive range per joint [deg] (the model's joint convention)")
-    scale_to_profile: bool = Field(True, description="stretch the arm's upper arm and forearm to the profile's "
-                                                     "segments (upper_arm: shoulder centre to elbow; forearm: elbow "
-                                                     "to the middle of the grip)")
 
 
 def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], n: int, what: str,
@@ -132,8 +41,7 @@ def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]],
     start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
     for group, value in values.items():
         if group not in names:
-            raise ValueError(f"{what}: no muscle group '{group}'{suggest(group, arm_groups)}; groups: "
-                             f"{', '.join(arm_groups)}")
+            raise ValueError(f"{what}: no muscle group '{group}' in this arm{suggest(group, arm_groups)}")
         out[start[names[group]] : start[names[group] + 1]] = value
     return out
 
@@ -165,6 +73,7 @@ class Musculoskeletal(EmbodiedPatient):
         if self.wearable is None:
             raise ValueError(f"robot '{self.robot.model.name}' declares no fit for a person: give fit (shoulder and "
                              "straps)")
+        self.wearable.person_axes()  # (a robot's own declaration checked as the scenario's is)
         bodies = {e.get("name") for e in ET.fromstring(self.robot.model.mjcf).iter("body")}
         for strap in self.wearable.straps:
             if strap.body not in bodies:
@@ -173,17 +82,16 @@ class Musculoskeletal(EmbodiedPatient):
                                  f"its bodies: {', '.join(sorted(b for b in bodies if b))}")
         if config.model == "myoelbow" and any(s.segment == "upper_arm" for s in self.wearable.straps):
             raise ValueError("model: MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
-        for name in [*config.tremor.amplitude_nm, *config.contracture_deg]:
-            if name not in self.cat.joints:
-                raise ValueError(f"no joint '{name}' in {config.model}{suggest(name, self.cat.joints)}; joints: "
-                                 f"{', '.join(self.cat.joints)}")
+        for field, names in (("tremor.amplitude_nm", config.tremor.amplitude_nm),
+                             ("contracture_deg", config.contracture_deg)):
+            for name in names:
+                if name not in self.cat.joints:
+                    raise ValueError(f"{field}: no joint '{name}' in {config.model}{suggest(name, self.cat.joints)}")
         if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in self.cat.joints:
             raise ValueError(f"synergy: {config.model} has no shoulder")
         n = len(self.cat.muscles)
         self.strength = _per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
         self.reflex_gain = _per_group(config.spasticity.gain, self.cat.groups, n, "spasticity.gain", 0.0)
-        if np.any((self.strength <= 0) | (self.strength > 1)):
-            raise ValueError("weakness: each force scale must be in (0, 1]")
         self.spec = load_arm_spec(config.model)
         for name, (lo, hi) in config.contracture_deg.items():
             joint = self.spec.joint(self.cat.joints[name])
@@ -254,7 +162,8 @@ class Musculoskeletal(EmbodiedPatient):
         for eq in self.eqs:
             m.eq_solref[eq] = strap_solref(m, d, eq, self.config.straps.stiffness_n_m, self.config.straps.damping_ns_m)
         # the person was holding their arm before the run began: their muscles start at that activation
-        steady = self.so.solve(self.config.drive.own_weight * (self.arm.coupling_matrix().T @ d.qfrc_bias))
+        hold = self.config.drive.own_weight * (self.arm.coupling_matrix().T @ d.qfrc_bias)
+        steady = self.so.solve(self._synergy(hold))
         d.act[self.so.act_of_muscles] = d.ctrl[self.arm.muscles] = steady.activation
         mujoco.mj_forward(m, d)
         hand = self.arm.body["hand"]  # the point of the hand at the robot's handle: where the person aims
@@ -295,6 +204,10 @@ class Musculoskeletal(EmbodiedPatient):
             tau += cfg.participation * reach * (1.0 + cfg.noise * self.noise)
         if self.tremor.active:
             tau += self.tremor.torque()
+        return self._synergy(tau)
+
+    def _synergy(self, tau: np.ndarray) -> np.ndarray:
+        """The flexor synergy: shoulder elevation effort flexes the elbow with it."""
         if self.elv is not None and self.config.synergy.elbow_per_shoulder > 0:
             tau[self.elbow] += self.config.synergy.elbow_per_shoulder * max(0.0, tau[self.elv])
         return tau

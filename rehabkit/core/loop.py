@@ -69,7 +69,8 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
     # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
     push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
-    tau_h, hand_force, goal_at = trace.tau_h, a.hand_force, ref.goal_at
+    tau_h, hand_force, goal_at, f_h = trace.tau_h, a.hand_force, ref.goal_at, trace.f_h
+    felt = a.patient.interaction_force if f_h is not None else None  # an embodied person's cuffs, measured
     draws = a.patient.drawing if a.patient is not None and type(a.patient).drawing is not Patient.drawing else None
     stop_after = a.sc.safety.stop_after_s
     bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
@@ -97,6 +98,8 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             row = packed[k]
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
+                if f_h is not None:
+                    f_h[k] = float(np.linalg.norm(felt()))
                 if hand_force is not None:
                     safety.check_force(t, q, hand_force(q, tau_h[k]))
             tau = check(t, row)

@@ -24,10 +24,11 @@ class Trace:
     x: np.ndarray | None = None  # end effector, robot base frame (Cartesian runs)
     x_ref: np.ndarray | None = None
     tau_h: np.ndarray | None = None  # torques a (simulated) person applied at the joints
+    f_h: np.ndarray | None = None  # interaction force measured in the scene [N] (an embodied person's cuffs)
 
     def trimmed(self, n: int) -> Trace:
         return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]
-                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h")))
+                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h", "f_h")))
 
 
 def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:

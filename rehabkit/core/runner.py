@@ -26,7 +26,7 @@ from rehabkit.core.assembly import (
     start_posture,
 )
 from rehabkit.core.capabilities import NamedJoints, PassiveJoints
-from rehabkit.core.interfaces import BackendFaultError, Plan, PlanningError, Target
+from rehabkit.core.interfaces import BackendFaultError, EmbodiedPatient, Plan, PlanningError, Target
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.lifecycle import Extensions, default_extensions
 from rehabkit.core.log import encode_images
@@ -129,7 +129,8 @@ class Runner:
         packed = np.zeros((n, 3 * dof))
         trace = Trace(np.arange(n) * a.schedule.control_dt, packed[:, :dof], packed[:, dof : 2 * dof],
                       packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)),
-                      tau_h=np.zeros((n, dof)) if a.patient is not None else None)
+                      tau_h=np.zeros((n, dof)) if a.patient is not None else None,
+                      f_h=np.zeros(n) if isinstance(a.patient, EmbodiedPatient) else None)
         self.view = RunView(a, self.spawn)
         self.q0 = q0 = start_posture(a)
         try:

@@ -52,6 +52,8 @@ class Wearable:
         """3×3 whose columns are the person's forward, left and up directions in the robot base frame (``forward``
         made exactly perpendicular to ``up``)."""
         f, u = np.asarray(self.forward, float), np.asarray(self.up, float)
+        if not (np.linalg.norm(f) > 1e-9 and np.linalg.norm(u) > 1e-9):
+            raise ValueError("wearable: 'forward' and 'up' must be directions (not zero)")
         f, u = f / np.linalg.norm(f), u / np.linalg.norm(u)
         if abs(f @ u) > 0.2:
             raise ValueError("wearable: 'forward' and 'up' must be perpendicular (they are "

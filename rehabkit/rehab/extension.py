@@ -21,7 +21,9 @@ METRICS = (
     Metric("path_length_ratio", outcome=True, description="hand path length / straight line (mean)"),
     Metric("time_to_target_s", "s", outcome=True, description="time until the hand stays at the target (mean)"),
     Metric("assistance_ratio", outcome=True, description="the robot's share of the positive work done"),
-    Metric("peak_interaction_force_n", "N", outcome=True, description="largest force at the hand"),
+    Metric("peak_interaction_force_n", "N", outcome=True,
+           description="largest force between person and robot: at the hand (from the person's joint torques), or "
+                       "an embodied person's largest cuff force (measured)"),
     Metric("safety_interventions", "count", outcome=True, description="trips and clipping episodes"),
     Metric("rom_deg_*", "deg", outcome=True, description="range of motion of a joint"),
 )

@@ -73,8 +73,10 @@ def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, 
     if person:
         own_weight = robot.gravity_torques(trace.q).reshape(trace.tau.shape)
         assist = assistance_ratio(trace.tau - own_weight, trace.tau_h, trace.qd, dt)
-        hf = HandForce(model)
-        magnitude = np.linalg.norm(interaction_forces(hf.jacobians(trace.q), trace.tau_h), axis=1)
+        if trace.f_h is not None:  # measured in the scene: an embodied person's largest cuff force
+            magnitude = trace.f_h
+        else:  # the hand force equivalent to the person's joint torques
+            magnitude = np.linalg.norm(interaction_forces(HandForce(model).jacobians(trace.q), trace.tau_h), axis=1)
     else:  # nobody in the robot: whatever work was done, the robot did
         assist, magnitude = (1.0 if len(trace.t) else float("nan")), np.zeros(len(trace.t))
     metrics = {

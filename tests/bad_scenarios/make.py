@@ -12,6 +12,9 @@ ARM3 = (HERE.parent / "data" / "arm3_dh.yaml").read_text()  # a 3-joint DH arm (
 URDF = (HERE.parents[1] / "examples" / "robots" / "urdf_arm4.yaml").read_text().replace(
     "file: arm4.urdf", "file: ../../examples/robots/arm4.urdf")
 DH_BOXES = (HERE.parents[1] / "examples" / "robots" / "dh_arm3.yaml").read_text()
+DYNO = (HERE.parents[1] / "examples" / "robots" / "elbow_dynamometer.yaml").read_text()  # MyoElbow strapped in
+STRAP = "straps: [{segment: forearm, body: elbow_link, position: [0.18, 0, 0]}]"
+DRIVE = "    drive: {participation"  # (a line of the patient's model to put a setting before)
 
 # name: (what is wrong, base, [(old, new), ...])
 CASES: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
@@ -178,6 +181,21 @@ CASES: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
     "top_level_list": ("a list where the scenario's mapping belongs", "- name: my-arm3\n- duration: 4.5\n", []),
     "empty_file": ("nothing in the file", "", []),
     "missing_robot": ("no robot section", ARM3, [(ARM3[ARM3.index("robot:"):ARM3.index("planner:")], "")]),
+    "strap_body_misspelt": ("a strap on a body the robot does not have", DYNO,
+                            [("body: elbow_link", "body: elbo_link")]),
+    "strap_twice": ("two straps on one segment", DYNO,
+                    [(STRAP, STRAP.replace("}]", "}, {segment: forearm, body: elbow_link, position: [0.1, 0, 0]}]"))]),
+    "fit_forward_zero": ("a zero forward direction", DYNO, [("forward: [0.9987, 0.0, -0.0501]", "forward: [0, 0, 0]")]),
+    "weakness_above_one": ("a force scale above full strength", DYNO,
+                           [(DRIVE, "    weakness: {elbow_flexors: 1.5}\n" + DRIVE)]),
+    "muscle_group_unknown": ("a misspelt muscle group", DYNO,
+                             [(DRIVE, "    weakness: {elbow_flexor: 0.5}\n" + DRIVE)]),
+    "contracture_unknown_joint": ("a contracture of a joint MyoElbow does not have", DYNO,
+                                  [(DRIVE, "    contracture_deg: {wrist_flexion: [0, 10]}\n" + DRIVE)]),
+    "myoelbow_upper_arm_strap": ("an upper-arm strap on MyoElbow, whose upper arm is fixed", DYNO,
+                                 [("segment: forearm", "segment: upper_arm")]),
+    "musculoskeletal_left_side": ("a left-side profile for the right-arm models", DYNO,
+                                  [("side: right", "side: left")]),
 }
 
 
