@@ -120,7 +120,7 @@ def known_answers() -> None:
     half, rest_half = isometric(DYNO, {"patient.model.weakness": {"elbow_flexors": 0.5}})
     print(f"isometric flexion at 90°: full {-(full - rest):.2f} N·m, flexors at 0.5: {-(half - rest_half):.2f} N·m "
           f"(ratio {(half - rest_half) / (full - rest):.3f}); relaxed {rest:.3f} / {rest_half:.3f} N·m")
-    spastic = {"patient.model.spasticity": {"gain": {"elbow_flexors": 0.5}, "threshold_l0_s": 0.3}}
+    spastic = {"patient.model.spasticity": {"gain": {"elbow_flexors": 0.1}, "threshold_l0_s": 0.3}}  # moderate
     print("Tardieu: stretch speed °/s | resistance N·m without / with spasticity | flexor excitation with")
     for speed_deg_s in (15, 30, 60, 90, 180, 270, 360):
         plain, _ = tardieu(DYNO, speed_deg_s)
