@@ -103,6 +103,9 @@ def load_arm_spec(model: str) -> mujoco.MjSpec:
             spec = myo_sim.load_spec(CATALOGUE[model].spec_name).copy()  # the copy is whole: it builds quietly
             text = spec.to_xml()
         atomic_write_text(path, json.dumps({"xml": text, "modelfiledir": spec.modelfiledir}))
+    # MyoSuite's own stage (floor, platform, room), light and cameras stay out of the robot's scene
+    for item in [*spec.worldbody.geoms, *spec.lights, *spec.cameras]:
+        spec.delete(item)
     for geom in spec.geoms:
         geom.contype, geom.conaffinity = 0, 0
     for key in list(spec.keys):  # a keyframe sized for the arm alone would not fit the composed scene
