@@ -25,6 +25,18 @@ from rehabkit.core.timeline import Timeline
 NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
 
 
+@dataclass
+class LoopState:
+    """Where a loop run in parts stands between them."""
+
+    k: int = 0  # the next step to run
+    due: int = 0  # the next step with something due besides the control (events, sensors)
+    contact_steps: int = 0
+    failed: bool = False  # the controller raised: the safety layer drives from then on
+    stopped: bool = False  # ended for good: a stop event, a backend fault, or the safety stop has run its course
+    next_log: int | None = None  # the next step logged (None: from the start)
+
+
 @dataclass(frozen=True)
 class LoopResult:
     steps: int  # steps run
@@ -45,10 +57,13 @@ def _idle(dof: int):
 
 
 def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer, timeline: Timeline, view: RunView,
-             progress: bool = False) -> LoopResult:
-    """Run the control loop until the end, a stop event, or the safety layer's stop has run its course."""
+             progress: bool = False, k_to: int | None = None, state: LoopState | None = None) -> LoopResult:
+    """Run the control loop until the end, a stop event, or the safety layer's stop has run its course — or, in
+    parts, from where ``state`` left it up to step ``k_to`` (a learning environment's policy period)."""
     sch, backend, safety, controller = a.schedule, a.backend, a.safety, a.controller
     n, dof, dt, sub = sch.steps, a.robot.model.dof, sch.control_dt, sch.substeps
+    st = state if state is not None else LoopState()
+    k_from, k_end = st.k, n if k_to is None else min(k_to, n)
     ref_q, ref_qd, ref_qdd = ref.views()
     state, compute, check = backend.state, controller.compute, safety.check_row
     command, step = backend.command, backend.step
@@ -56,7 +71,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     log = view.log
     tq, tqd, ttau = trace.q, trace.qd, trace.tau  # column views of ``packed``
     log_every, flush_samples = sch.log_every, view.flush_samples
-    next_log = 0 if log else -1
+    next_log = (0 if log else -1) if st.next_log is None else st.next_log
     deferred_log = bool(log) and backend.realtime
     if deferred_log:
         log.deferred = True
@@ -78,15 +93,18 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     # (a full collection first would cost ~0.1 s of every run's start: only the youngest generation is swept)
     gc.collect(0)
     gc.freeze()
-    contact_steps, due, k = 0, 0, 0
+    contact_steps, due, k = st.contact_steps, st.due, k_from
+    if st.failed:
+        compute = _idle(dof)
     t_loop = time.perf_counter()
     try:
-        for k in range(n):
+        for k in range(k_from, k_end):
             t = k * dt
             _, q, qd = state()
             if k >= due:
                 due = timeline.due(k, t, q, qd)
                 if due < 0:
+                    st.stopped = True
                     break
             tq[k], tqd[k] = q, qd  # the row's columns, written one by one: cheaper than a concatenation
             try:
@@ -94,6 +112,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             except Exception as exc:  # a crashing controller must still leave the robot held
                 safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
                 compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
+                st.failed = True
                 ttau[k] = 0.0
             row = packed[k]
             if person is not None:
@@ -117,6 +136,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete
                 safety.trip(t, q, "backend", str(exc))
                 k += 1
+                st.stopped = True
                 break
             if contacts():
                 contact_steps += 1
@@ -141,10 +161,12 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                     bar.update(k + 1)
             if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
                 k += 1
+                st.stopped = True
                 break
         else:
-            k = n
+            k = k_end
     finally:
+        st.k, st.due, st.contact_steps, st.next_log = k, due, contact_steps, next_log
         gc.unfreeze()
         if bar is not None:
             bar.close()

@@ -93,15 +93,8 @@ class Runner:
         threads = None
         try:
             t_setup = time.perf_counter()
-            a = self.build()
-            catalogue = metric_catalogue(a)
-            self.gate = PlanGate(a, catalogue)
-            trace, packed = self._start()
-            if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
-                threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
-                                        prepare=encode_images if self.view.log else None)
-            self.timeline = Timeline(a, self._replan, self.view.log, threads)
-            self._first_plan()
+            threads = self.start()
+            a, trace, packed, catalogue = self.setup, self.trace, self.packed, self.catalogue
             # a control loop's matrices are small: BLAS worker threads only spin against it, and against a bridge or
             # renderer sharing the machine (L-Exos over the lock-step link 24.4 -> 13.6 s; in simulation 7.8 -> 7.0 s)
             with threadpool_limits(limits=1, user_api="blas"):
@@ -119,6 +112,22 @@ class Runner:
         finally:
             if threads is not None:
                 threads.close()
+
+    def start(self) -> SensorThreads | None:
+        """Build, plan and stand at the start, the loop not yet run: what :meth:`run` does first, and what a
+        learning environment does at each reset (it then runs the loop a policy period at a time with
+        :func:`~rehabkit.core.loop.run_loop`'s ``k_to``). Returns the sensor threads of a real-time run."""
+        a = self.build()
+        self.catalogue = metric_catalogue(a)
+        self.gate = PlanGate(a, self.catalogue)
+        self.trace, self.packed = self._start()
+        threads = None
+        if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
+            threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
+                                    prepare=encode_images if self.view.log else None)
+        self.timeline = Timeline(a, self._replan, self.view.log, threads)
+        self._first_plan()
+        return threads
 
     # -- start: the trace, the reference, the first plan --------------------
 

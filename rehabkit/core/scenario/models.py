@@ -15,6 +15,7 @@ from pydantic import Field, create_model, model_validator
 
 from rehabkit.core.interfaces import StrictModel
 from rehabkit.core.plugins import PluginRegistry
+from rehabkit.core.scenario.learning import LearningSpec
 from rehabkit.core.scenario.patient import PatientBase
 from rehabkit.core.scenario.safety import SafetyConfig
 
@@ -267,6 +268,7 @@ class ScenarioBase(StrictModel):
     outcomes: OutcomeSpec = OutcomeSpec()
     expect: dict[str, Bound] = {}
     sweep: SweepSpec | None = None
+    learning: LearningSpec | None = Field(None, description="the scenario as a learning environment (rehabkit.gym)")
 
 
 PLUGIN_SECTIONS = {"robot": "robot", "backend": "backend", "planner": "planner", "controller": "controller"}

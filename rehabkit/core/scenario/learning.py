@@ -1,0 +1,71 @@
+"""The ``learning:`` section: the scenario as a reinforcement-learning environment (``rehabkit.gym``).
+
+What the policy does (``action``), what it sees (``observation``), what it is paid (``reward``, weighted terms) and
+how often it acts (``policy_hz``, over the control loop). The DSL only: the environment itself is
+:mod:`rehabkit.gym`, a layer above the core.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from rehabkit.models.strict import StrictModel
+
+OBSERVATION_TERMS = ("joint_state", "reference", "tracking_error", "goal", "phase", "interaction_force",
+                     "person_torque", "pixels")
+REWARD_TERMS = ("tracking", "interaction_force", "assistance", "jerk", "reached")
+
+
+class ActionSpec(StrictModel):
+    """What the policy's action in [−1, 1]ⁿ does."""
+
+    kind: Literal["residual", "torque"] = Field(
+        "residual", description="residual: a torque added to the scenario's controller's; torque: the whole torque "
+                                "(on top of the robot's own gravity compensation)")
+    scale: float | list[float] = Field(
+        0.2, gt=0, description="action 1.0 is this fraction of each joint's effort limit (one value or one per joint)")
+
+    @model_validator(mode="after")
+    def _positive(self) -> ActionSpec:
+        values = self.scale if isinstance(self.scale, list) else [self.scale]
+        if not values or any(not 0 < v <= 1 for v in values):
+            raise ValueError("scale: each fraction of the effort limit must be in (0, 1]")
+        return self
+
+
+class ObservationSpec(StrictModel):
+    """What the policy sees each time it acts."""
+
+    terms: list[Literal[OBSERVATION_TERMS]] = Field(  # type: ignore[valid-type]
+        ["joint_state", "tracking_error", "phase"], min_length=1,
+        description="joint_state (q, q̇), reference (q_ref, q̇_ref), tracking_error (q_ref − q), goal (of the movement "
+                    "under way), phase (time / duration), interaction_force (the person's, N), person_torque (at the "
+                    "joints, N·m), pixels (a camera image; only with layout: dict)")
+    layout: Literal["box", "dict"] = Field("box", description="box: one flat vector; dict: a term each")
+    camera: str | None = Field(None, description="the world camera the pixels term renders")
+    width: int = Field(64, ge=8, le=512, description="pixels: image width")
+    height: int = Field(64, ge=8, le=512, description="pixels: image height")
+
+    @model_validator(mode="after")
+    def _pixels(self) -> ObservationSpec:
+        if "pixels" in self.terms and (self.layout != "dict" or self.camera is None):
+            raise ValueError("terms: pixels needs layout: dict and a camera")
+        if len(set(self.terms)) != len(self.terms):
+            raise ValueError("terms: each term once")
+        return self
+
+
+class LearningSpec(StrictModel):
+    """The scenario as an environment: the policy acts at ``policy_hz`` over the control loop."""
+
+    policy_hz: float = Field(50.0, gt=0, description="how often the policy acts [Hz] (a divisor of the control rate)")
+    action: ActionSpec = ActionSpec()
+    observation: ObservationSpec = ObservationSpec()
+    reward: dict[Literal[REWARD_TERMS], float] = Field(  # type: ignore[valid-type]
+        {"tracking": 1.0}, min_length=1,
+        description="weight per term, each per second of the policy step: tracking (−mean squared tracking error, "
+                    "rad²), interaction_force (−mean force, N), assistance (−mean squared robot torque beyond its "
+                    "gravity compensation, (N·m)²), jerk (−mean squared joint jerk, (rad/s³)², ×1e-6), reached "
+                    "(+1 a step once the goal of the movement under way is within the outcome tolerance)")
