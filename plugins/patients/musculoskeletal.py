@@ -104,7 +104,7 @@ class Musculoskeletal(EmbodiedPatient):
         segments = {k: v for k, v in (profile.segments if profile is not None else {}).items()
                     if k in ("upper_arm", "forearm")}
         if config.scale_to_profile and segments:
-            self.scale = scale_arm(self.spec, self.cat, segments)
+            self.scale = scale_arm(self.spec, self.cat, segments, memo=config.model)
         self.delay_s = config.drive.delay_s
         self.cartesian = context.reference_space == "cartesian"
         self.noise_stream = NoiseStream(context.stream("patient"))

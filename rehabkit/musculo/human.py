@@ -84,8 +84,8 @@ def load_arm_spec(model: str) -> mujoco.MjSpec:
     """The arm's MjSpec from the installed ``myo_sim``, its geoms made touch-free (the straps carry every force
     between the person and the robot; bones meeting the robot's links would be a second, unmodelled contact).
 
-    ``myo_sim`` builds MyoArm from its parts (~0.7 s); the result is kept as MJCF under ``$REHABKIT_CACHE``, one
-    file per model, ``myo-sim`` and MuJoCo version and install folder, which loads in ~10 ms.
+    ``myo_sim`` builds MyoArm from its parts (~0.7 s); the result, made ready for a robot's scene, is kept as MJCF
+    under ``$REHABKIT_CACHE``, one file per model, ``myo-sim`` and MuJoCo version and install folder: ~10 ms.
     """
     import myo_sim
 
@@ -93,16 +93,14 @@ def load_arm_spec(model: str) -> mujoco.MjSpec:
     from rehabkit.workspace.build import cache_dir
 
     where = hashlib.sha256(str(Path(myo_sim.__file__).parent).encode()).hexdigest()[:8]
-    path = cache_dir() / "myo" / f"{model}-{version('myo-sim')}-mujoco{mujoco.__version__}-{where}.json"
+    path = cache_dir() / "myo" / f"{model}-{version('myo-sim')}-mujoco{mujoco.__version__}-{where}-v2.json"
     if path.exists():
         kept = json.loads(path.read_text())
         spec = mujoco.MjSpec.from_string(kept["xml"])
         spec.modelfiledir = kept["modelfiledir"]  # the meshes' paths are relative to the model's own folder
-    else:
-        with _quiet_output():  # MyoArm's loader attaches a part without a prefix, and MuJoCo prints a warning of it
-            spec = myo_sim.load_spec(CATALOGUE[model].spec_name).copy()  # the copy is whole: it builds quietly
-            text = spec.to_xml()
-        atomic_write_text(path, json.dumps({"xml": text, "modelfiledir": spec.modelfiledir}))
+        return spec
+    with _quiet_output():  # MyoArm's loader attaches a part without a prefix, and MuJoCo prints a warning of it
+        spec = myo_sim.load_spec(CATALOGUE[model].spec_name).copy()  # the copy is whole: it builds quietly
     # MyoSuite's own stage (floor, platform, room), light and cameras stay out of the robot's scene
     for item in [*spec.worldbody.geoms, *spec.lights, *spec.cameras]:
         spec.delete(item)
@@ -111,6 +109,9 @@ def load_arm_spec(model: str) -> mujoco.MjSpec:
     for key in list(spec.keys):  # a keyframe sized for the arm alone would not fit the composed scene
         spec.delete(key)
     spec.njmax, spec.nconmax, spec.nuser_jnt = -1, -1, -1  # the scene's own sizes apply (MuJoCo warned of each)
+    with _quiet_output():
+        text = spec.to_xml()
+    atomic_write_text(path, json.dumps({"xml": text, "modelfiledir": spec.modelfiledir}))
     return spec
 
 

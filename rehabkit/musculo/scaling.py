@@ -22,6 +22,7 @@ import numpy as np
 
 from rehabkit.musculo.human import ArmCatalogue
 
+_RATIOS: dict[tuple, np.ndarray] = {}  # (model, lengths) → each muscle's length ratio, for scale_arm's memo
 GRIP_BEYOND_WRIST_M = 0.07  # wrist centre to the middle of a closed hand's grip, adult [m]
 SEGMENTS = {"myoarm": {"upper_arm": ("humerus_r",), "forearm": ("ulna_r", "radius_r")},
             "myoelbow": {"upper_arm": ("r_humerus",), "forearm": ("r_ulna_radius_hand",)}}
@@ -90,13 +91,19 @@ def _conj(q) -> np.ndarray:
     return np.array([q[0], -q[1], -q[2], -q[3]])
 
 
-def scale_arm(spec: mujoco.MjSpec, cat: ArmCatalogue, lengths: dict[str, float]) -> dict[str, float]:
-    """Stretch the segments named in ``lengths`` to them [m], in place; returns the stretch of each."""
+def scale_arm(spec: mujoco.MjSpec, cat: ArmCatalogue, lengths: dict[str, float], memo: str | None = None
+              ) -> dict[str, float]:
+    """Stretch the segments named in ``lengths`` to them [m], in place; returns the stretch of each. ``memo`` names
+    the unscaled model (e.g. its file): the muscle lengths measured for it (two compilations) are kept in this
+    process for the next arm of that model and those lengths (a learning environment's resets)."""
     own = segment_lengths(spec, cat)
     factors = {name: lengths[name] / own[name] for name in ("upper_arm", "forearm") if name in lengths}
     if not factors:
         return {}
-    before = _muscle_lengths(spec)
+    key = None if memo is None else (memo, tuple(sorted((k, round(v, 12)) for k, v in lengths.items())))
+    if key is not None and key in _RATIOS:
+        ratios = _RATIOS[key]
+    before = _muscle_lengths(spec) if key is None or key not in _RATIOS else None
     shoulder, elbow = spec.body(cat.shoulder_body), spec.body(cat.elbow_body)  # (each one's origin on its joint)
     for name, k in factors.items():
         if name == "upper_arm":
@@ -112,8 +119,11 @@ def scale_arm(spec: mujoco.MjSpec, cat: ArmCatalogue, lengths: dict[str, float])
             body = spec.body(body_name)
             wrist = _wrist_in(spec, cat, body)
             _stretch_body(spec, body, wrist / np.linalg.norm(wrist), float(np.linalg.norm(wrist)), k_bone)
-    after = _muscle_lengths(spec)
-    for actuator, ratio in zip(spec.actuators, after / before):
+    if before is not None:
+        ratios = _muscle_lengths(spec) / before
+        if key is not None:
+            _RATIOS[key] = ratios
+    for actuator, ratio in zip(spec.actuators, ratios):
         actuator.lengthrange = np.asarray(actuator.lengthrange, float) * ratio
     return factors
 

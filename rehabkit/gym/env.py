@@ -1,0 +1,157 @@
+"""Any scenario with a ``learning:`` section as a Gymnasium environment.
+
+Each episode is the scenario's run: built from the file at reset (its seed the episode's, so the targets, the
+sensors' and the patient's noise are the episode's own and the same seed gives the same episode bit for bit), then
+advanced a policy period at a time through the same control loop a run uses — events, sensors, the scenario's
+controller, the person, the safety layer, the backend. The action acts on the controller's torque (``residual``:
+added to it; ``torque``: instead of it, over the robot's gravity compensation), scaled to the joints' effort limits,
+and passes the safety layer like any command: a safety stop ends the episode (``terminated``, the event in
+``info``), the scenario's duration truncates it. Rewards are the ``learning.reward`` terms, each reported in
+``info["reward_terms"]``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from rehabkit.core.errors import PluginSetupError
+from rehabkit.core.loop import LoopState, run_loop
+from rehabkit.core.runner import Runner
+from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
+from rehabkit.gym.terms import Observer, RewardTerms
+
+
+class ScenarioEnv(gym.Env):
+    """A scenario file as an environment: ``ScenarioEnv("scenarios/x.yaml", overrides=["a.b=1"])`` or
+    ``gymnasium.make("rehabkit/Scenario-v0", scenario=..., overrides=[...])``."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+
+    def __init__(self, scenario: str | Path, overrides: list[str] | dict[str, Any] = (), render_mode: str | None = None,
+                 render_size: tuple[int, int] = (480, 640)):
+        self.path, self.overrides = Path(scenario), overrides
+        loaded = load_scenario(self.path, overrides)  # bad input: a located ScenarioError, before anything runs
+        self.spec_learning = _learning(loaded)
+        sc = loaded.model
+        self.every = _policy_every(loaded)
+        self.render_mode, self.render_size = render_mode, render_size
+        self._renderer = None
+        self._runner: Runner | None = None
+        self._open(sc.seed)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self._dof,), np.float32)
+        self.observation_space = self.observer.space()
+
+    # -- episodes --------------------------------------------------------------------------------------
+
+    def _open(self, seed: int) -> None:
+        """Build the scenario afresh with this seed and stand at its start."""
+        self.close_run()
+        runner = Runner(load_scenario(self.path, _with_seed(self.overrides, seed)))
+        runner.start()
+        a = runner.setup
+        self._runner, self._a, self._dof = runner, a, a.robot.model.dof
+        self.state = LoopState()
+        self._ended = False
+        limit = a.robot.model.limits.effort
+        scale = self.spec_learning.action.scale
+        self._scale = limit * (np.asarray(scale, float) if isinstance(scale, list) else scale)
+        if len(np.atleast_1d(self._scale)) not in (1, self._dof):
+            raise ValueError(f"learning.action.scale: {len(scale)} values for a robot of {self._dof} joints")
+        self._u = np.zeros(self._dof)
+        controller = a.controller
+        inner = controller.compute
+        if self.spec_learning.action.kind == "residual":
+            controller.compute = lambda *args: inner(*args) + self._u  # noqa: E731 (the loop reads .compute)
+        else:
+            gravity = a.robot.gravity_torque
+            controller.compute = lambda t, q, *rest: gravity(q) + self._u  # noqa: E731
+        self.observer = Observer(self.spec_learning.observation, runner)
+        self.rewards = RewardTerms(self.spec_learning.reward, runner, self.every)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        episode_seed = seed if seed is not None else int(self.np_random.integers(2**31 - 1))
+        self._open(episode_seed)
+        return self.observer.observe(0), {"seed": episode_seed, "t": 0.0}
+
+    def step(self, action):
+        a, st = self._a, self.state
+        if self._ended:
+            raise RuntimeError("the episode has ended: call reset()")
+        self._u[:] = self._scale * np.clip(np.asarray(action, float), -1.0, 1.0)
+        k0 = st.k
+        with threadpool_limits(limits=1, user_api="blas"):
+            run_loop(a, self._runner.trace, self._runner.packed, self._runner.ref, self._runner.timeline,
+                     self._runner.view, k_to=k0 + self.every, state=st)
+        terms = self.rewards.terms(k0, st.k)
+        reward = float(sum(terms.values()))
+        terminated = a.safety.tripped_at is not None
+        truncated = not terminated and (st.k >= a.schedule.steps or st.stopped)
+        self._ended = terminated or truncated
+        info: dict[str, Any] = {"t": st.k * a.schedule.control_dt, "reward_terms": terms}
+        if terminated:
+            trip = next(e for e in reversed(a.safety.events) if e.t == a.safety.tripped_at)
+            info["safety"] = {"rule": trip.rule, "joint": trip.joint, "t": trip.t, "message": trip.message}
+        return self.observer.observe(st.k), reward, terminated, truncated, info
+
+    # -- the view --------------------------------------------------------------------------------------
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        import mujoco
+
+        backend = self._a.backend
+        model, data = getattr(backend, "model", None), getattr(backend, "data", None)
+        if model is None:
+            raise RuntimeError(f"backend '{self._a.sc.backend.type}' has no scene to render")
+        if self._renderer is None or self._renderer_model is not model:
+            self._renderer = mujoco.Renderer(model, *self.render_size)
+            self._renderer_model = model
+        camera = self.spec_learning.observation.camera
+        if camera is None:
+            camera = mujoco.MjvCamera()
+            camera.lookat[:] = self._a.robot.model.base_pose[:3, 3]
+            camera.distance, camera.azimuth, camera.elevation = 1.8, 150.0, -20.0
+        self._renderer.update_scene(data, camera)
+        return self._renderer.render()
+
+    def close_run(self) -> None:
+        if self._runner is not None and self._runner.setup is not None:
+            self._runner.setup.backend.close()
+        self._runner = None
+
+    def close(self) -> None:
+        self.close_run()
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def _learning(loaded: LoadedScenario):
+    if loaded.model.learning is None:
+        raise PluginSetupError(loaded.source, (), (), f"{loaded.path.name} has no learning: section (the policy's "
+                               "action, observation, reward and rate); add one to use it as an environment")
+    return loaded.model.learning
+
+
+def _policy_every(loaded: LoadedScenario) -> int:
+    """Control steps a policy step spans: the control rate over the policy rate, a whole number."""
+    sc = loaded.model
+    every = sc.rates.control_hz / sc.learning.policy_hz
+    if abs(every - round(every)) > 1e-9 or round(every) < 1:
+        raise PluginSetupError(loaded.source, ("learning", "policy_hz"), (),
+                               f"learning.policy_hz: {sc.learning.policy_hz:g} Hz does not divide the control rate "
+                               f"{sc.rates.control_hz:g} Hz; take one that does (e.g. {sc.rates.control_hz / 20:g})")
+    return round(every)
+
+
+def _with_seed(overrides, seed: int):
+    if isinstance(overrides, dict):
+        return {**overrides, "seed": seed}
+    return [*overrides, f"seed={seed}"]

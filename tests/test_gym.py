@@ -1,0 +1,97 @@
+"""Scenarios as Gymnasium environments (rehabkit.gym): Gymnasium's own checker on every built-in scenario with a
+learning: section, vectorised environments, bit-for-bit episodes from a seed, and dangerous actions ending in a
+safety stop."""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import rehabkit.gym  # noqa: F401  (registers rehabkit/Scenario-v0)
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.gym.env import ScenarioEnv
+from tests.conftest import SCENARIOS
+
+LEARNING = sorted(p for p in SCENARIOS.glob("*.yaml") if "\nlearning:" in p.read_text())
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+HIT_LEARNING = {"learning": {"policy_hz": 50}}  # the round trip as an environment, its learning defaults
+
+
+def test_some_built_in_scenarios_are_environments():
+    assert {p.name for p in LEARNING} >= {"lexos_myoarm.yaml", "hit_myoarm.yaml"}
+
+
+@pytest.mark.filterwarnings("ignore:.*infinity")  # (the joint states have no finite bounds to declare)
+@pytest.mark.parametrize("path", LEARNING, ids=[p.stem for p in LEARNING])
+def test_gymnasiums_checker_passes(path):
+    env = gymnasium.make("rehabkit/Scenario-v0", scenario=str(path))
+    check_env(env.unwrapped)
+    env.close()
+
+
+def test_the_same_seed_gives_the_same_episode_bit_for_bit():
+    env = ScenarioEnv(SCENARIOS / "hit_myoarm.yaml", {"duration": 1.0, "patient.comfort.max_interaction_force_n": 500})
+    actions = np.random.default_rng(0).uniform(-0.3, 0.3, (50, env.action_space.shape[0])).astype(np.float32)
+
+    def episode(seed):
+        obs, _ = env.reset(seed=seed)
+        seen, paid = [obs], []
+        for action in actions:
+            obs, reward, terminated, truncated, info = env.step(action)
+            seen.append(obs)
+            paid.append((reward, *info["reward_terms"].values()))
+            if terminated or truncated:
+                break
+        return np.array(seen), np.array(paid), terminated, truncated
+
+    first, again, other = episode(7), episode(7), episode(8)
+    assert first[3] and not first[2]  # truncated by the duration, after 50 policy steps of 20 ms
+    assert np.array_equal(first[0], again[0]) and np.array_equal(first[1], again[1])
+    assert not np.array_equal(first[0], other[0])  # another seed: another person's noise
+    env.close()
+
+
+def test_a_dangerous_action_ends_in_a_safety_stop_not_a_crash():
+    env = ScenarioEnv(HIT, {**HIT_LEARNING, "learning.action": {"kind": "torque", "scale": 1.0}})
+    env.reset(seed=0)
+    full = np.ones(env.action_space.shape, np.float32)  # every joint's whole effort, one way
+    for _ in range(100):
+        _, _, terminated, truncated, info = env.step(full)
+        if terminated or truncated:
+            break
+    assert terminated and not truncated
+    assert info["safety"]["rule"] in {"velocity", "position", "torque"} and "robot held" in info["safety"]["message"]
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(full)
+    env.close()
+
+
+def test_two_environments_step_in_an_async_vector_env():
+    envs = gymnasium.vector.AsyncVectorEnv(
+        [lambda: gymnasium.make("rehabkit.gym:rehabkit/Scenario-v0", scenario=str(HIT), overrides=HIT_LEARNING)] * 2)
+    obs, _ = envs.reset(seed=[1, 2])
+    for _ in range(5):
+        obs, rewards, terminated, truncated, _ = envs.step(np.zeros((2, 6), np.float32))
+    assert obs.shape == (2, envs.single_observation_space.shape[0]) and np.all(np.isfinite(rewards))
+    assert not terminated.any() and not truncated.any()
+    envs.close()
+
+
+def test_renders_the_scene():
+    env = ScenarioEnv(HIT, HIT_LEARNING, render_mode="rgb_array", render_size=(120, 160))
+    env.reset(seed=0)
+    image = env.render()
+    assert image.shape == (120, 160, 3) and image.dtype == np.uint8 and image.std() > 5
+    env.close()
+
+
+def test_learning_settings_are_checked_and_located():
+    with pytest.raises(ScenarioError, match="policy_hz") as bad_rate:
+        ScenarioEnv(HIT, {"learning": {"policy_hz": 300}})  # 1000 Hz control: not a whole number of steps
+    assert "does not divide the control rate" in str(bad_rate.value)
+    with pytest.raises(ScenarioError, match="no learning: section"):
+        ScenarioEnv(HIT)
+    with pytest.raises(ScenarioError, match="pixels needs layout: dict"):
+        ScenarioEnv(HIT, {"learning": {"observation": {"terms": ["joint_state", "pixels"]}}})
