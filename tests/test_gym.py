@@ -10,8 +10,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import rehabkit.gym  # noqa: F401  (registers rehabkit/Scenario-v0)
+from rehabkit.api import run_scenario
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.gym.env import ScenarioEnv
+from rehabkit.models.policy import Policy
 from tests.conftest import SCENARIOS
 
 LEARNING = sorted(p for p in SCENARIOS.glob("*.yaml") if "\nlearning:" in p.read_text())
@@ -95,3 +97,36 @@ def test_learning_settings_are_checked_and_located():
         ScenarioEnv(HIT)
     with pytest.raises(ScenarioError, match="pixels needs layout: dict"):
         ScenarioEnv(HIT, {"learning": {"observation": {"terms": ["joint_state", "pixels"]}}})
+
+
+def test_a_policy_runs_as_a_controller_exactly_as_in_its_environment(tmp_path):
+    """A policy acting in the environment and the same file run by the `policy` controller in the scenario give the
+    same motion, sample for sample: what is learned is what runs (in simulation, and over the link)."""
+    learning = {"learning": {"policy_hz": 50, "action": {"kind": "residual", "scale": 0.05},
+                             "observation": {"terms": ["joint_state", "tracking_error", "phase"]}}}
+    env = ScenarioEnv(HIT, {**learning, "duration": 2.0})
+    n_obs, n_act = env.observation_space.shape[0], env.action_space.shape[0]
+    rng = np.random.default_rng(4)
+    policy = Policy.zeros([n_obs, 8, n_act], std=np.full(n_obs, 2.0), meta=env.policy_meta())
+    policy = policy.with_flat(rng.normal(0, 0.5, len(policy.flat())))
+    path = policy.save(tmp_path / "hit.npz")
+    obs, _ = env.reset(seed=0)
+    actions = []
+    while True:
+        actions.append(policy(obs))
+        obs, _, terminated, truncated, _ = env.step(actions[-1])
+        if terminated or truncated:
+            break
+    learned_q = env._runner.trace.q.copy()
+    assert np.abs(np.array(actions)).max() > 0.3  # the policy did act
+    env.close()
+    run = run_scenario(HIT, {"duration": 2.0, "controller": {"type": "policy", "file": str(path)}})
+    assert run.metrics["safety_events"] == 0
+    assert np.array_equal(run.trace.q, learned_q)
+
+
+def test_a_policy_that_needs_what_a_controller_cannot_see_is_refused(tmp_path):
+    env = ScenarioEnv(HIT, {"learning": {"observation": {"terms": ["joint_state", "goal"]}}, "duration": 0.5})
+    policy = Policy.zeros([env.observation_space.shape[0], 6], meta=env.policy_meta()).save(tmp_path / "p.npz")
+    with pytest.raises(ScenarioError, match="observes goal, which a controller is not given"):
+        run_scenario(HIT, {"controller": {"type": "policy", "file": str(policy)}})

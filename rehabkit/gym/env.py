@@ -99,6 +99,14 @@ class ScenarioEnv(gym.Env):
             info["safety"] = {"rule": trip.rule, "joint": trip.joint, "t": trip.t, "message": trip.message}
         return self.observer.observe(st.k), reward, terminated, truncated, info
 
+    def policy_meta(self) -> dict:
+        """What a policy trained here must carry for the ``policy`` controller to run it (rehabkit.models.policy)."""
+        sc, spec = self._a.sc, self.spec_learning
+        return {"terms": list(spec.observation.terms), "dof": self._dof, "policy_hz": spec.policy_hz,
+                "duration_s": sc.duration, "scenario": str(self.path),
+                "action": {"kind": spec.action.kind, "scale": spec.action.scale},
+                "base": sc.controller.model_dump(mode="json") if spec.action.kind == "residual" else None}
+
     # -- the view --------------------------------------------------------------------------------------
 
     def render(self):

@@ -60,8 +60,8 @@ class Observer:
                 value = self.ref_q[row] - (a.robot.fk(q)[:3, 3] if self.cart else q)
             elif term == "goal":
                 value = self.goal_at[row]
-            elif term == "phase":
-                value = np.array([min(1.0, k / n)])
+            elif term == "phase":  # (as the policy controller computes it: t over the episode's length)
+                value = np.array([min(1.0, k * a.schedule.control_dt / a.sc.duration)])
             elif term == "interaction_force":
                 value = np.array([self._force(max(0, k - 1), q)])
             elif term == "person_torque":
