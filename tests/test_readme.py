@@ -167,3 +167,16 @@ def test_the_fit_block_is_the_dynamometer_example():
     block = _block_after("## A musculoskeletal patient", "yaml")
     example = yaml.safe_load((ROOT / "examples" / "robots" / "elbow_dynamometer.yaml").read_text())
     assert yaml.safe_load(block)["fit"] == example["patient"]["model"]["fit"]
+
+
+def test_the_gymnasium_example_runs(monkeypatch, capsys):
+    snippet = next(b for lang, b in BLOCKS if lang == "python" and "rehabkit/Scenario-v0" in b)
+    monkeypatch.chdir(ROOT)
+    exec(compile(snippet, "README.md", "exec"), {})
+    assert "tracking" in capsys.readouterr().out
+
+
+def test_the_learning_block_is_lexos_myoarms():
+    block = yaml.safe_load(_block_after("## Learning: scenarios as Gymnasium environments", "yaml"))["learning"]
+    scenario = yaml.safe_load((ROOT / "scenarios" / "lexos_myoarm.yaml").read_text())["learning"]
+    assert block == {**scenario, "observation": {**scenario["observation"], "layout": "box"}}

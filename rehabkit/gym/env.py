@@ -12,6 +12,7 @@ and passes the safety layer like any command: a safety stop ends the episode (``
 
 from __future__ import annotations
 
+import gc
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +52,9 @@ class ScenarioEnv(gym.Env):
     def _open(self, seed: int) -> None:
         """Build the scenario afresh with this seed and stand at its start."""
         self.close_run()
+        # the last episode's scene (a MuJoCo model of ~100 MB with a musculoskeletal arm) is held by reference cycles
+        # whose Python side is small: the collector would not run for it, and a learner's worker grew to 10 GB
+        gc.collect()
         runner = Runner(load_scenario(self.path, _with_seed(self.overrides, seed)))
         runner.start()
         a = runner.setup
