@@ -23,7 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "lexos_myoarm.yaml"
 MEASURES = ("reaches_completed", "sparc", "path_length_ratio", "time_to_target_s", "assistance_ratio",
-            "peak_cuff_force_n", "muscle_effort", "tracking_rms_deg")
+            "peak_cuff_force_n", "muscle_effort", "tracking_rms_deg", "safety_events")
 
 
 def rollout(env, policy, seed: int) -> float:

@@ -99,6 +99,8 @@ class ScenarioEnv(gym.Env):
         self._ended = terminated or truncated
         info: dict[str, Any] = {"t": st.k * a.schedule.control_dt, "reward_terms": terms}
         if terminated:
+            terms["safety_stop"] = -self.spec_learning.stop_penalty
+            reward -= self.spec_learning.stop_penalty
             trip = next(e for e in reversed(a.safety.events) if e.t == a.safety.tripped_at)
             info["safety"] = {"rule": trip.rule, "joint": trip.joint, "t": trip.t, "message": trip.message}
         return self.observer.observe(st.k), reward, terminated, truncated, info

@@ -61,6 +61,9 @@ class LearningSpec(StrictModel):
     """The scenario as an environment: the policy acts at ``policy_hz`` over the control loop."""
 
     policy_hz: float = Field(50.0, gt=0, description="how often the policy acts [Hz] (a divisor of the control rate)")
+    stop_penalty: float = Field(
+        10.0, ge=0, description="taken from the reward of the step a safety stop ends the episode on (else a policy "
+                                "paid by the step's costs learns to stop the robot early)")
     action: ActionSpec = ActionSpec()
     observation: ObservationSpec = ObservationSpec()
     reward: dict[Literal[REWARD_TERMS], float] = Field(  # type: ignore[valid-type]
