@@ -65,6 +65,7 @@ def test_a_dangerous_action_ends_in_a_safety_stop_not_a_crash():
             break
     assert terminated and not truncated
     assert info["safety"]["rule"] in {"velocity", "position", "torque"} and "robot held" in info["safety"]["message"]
+    assert info["reward_terms"]["safety_stop"] == -10.0  # stopping early is no way out of the costs
     with pytest.raises(RuntimeError, match="call reset"):
         env.step(full)
     env.close()
@@ -130,3 +131,22 @@ def test_a_policy_that_needs_what_a_controller_cannot_see_is_refused(tmp_path):
     policy = Policy.zeros([env.observation_space.shape[0], 6], meta=env.policy_meta()).save(tmp_path / "p.npz")
     with pytest.raises(ScenarioError, match="observes goal, which a controller is not given"):
         run_scenario(HIT, {"controller": {"type": "policy", "file": str(policy)}})
+
+
+def test_a_policy_can_tune_the_controllers_own_settings(tmp_path):
+    tuning = {"controller": {"type": "assist-as-needed"}, "duration": 1.0,
+              "learning": {"policy_hz": 50, "action": {"kind": "parameters", "parameters": {"k_max": [200, 3000]}},
+                           "observation": {"terms": ["joint_state", "phase"]}}}
+    env = ScenarioEnv(HIT, tuning)
+    env.reset(seed=0)
+    assert env.action_space.shape == (1,)
+    env.step(np.array([1.0], np.float32))
+    assert env._a.controller.cfg.k_max == pytest.approx(3000)
+    env.step(np.array([-1.0], np.float32))
+    assert env._a.controller.cfg.k_max == pytest.approx(200)
+    with pytest.raises(ScenarioError, match="cannot tune k_max"):  # joint-pd tunes nothing
+        ScenarioEnv(HIT, {**tuning, "controller": {"type": "joint-pd", "kp": 100, "kd": 10}})
+    policy = Policy.zeros([env.observation_space.shape[0], 1], meta=env.policy_meta()).save(tmp_path / "k.npz")
+    env.close()
+    run = run_scenario(HIT, {"duration": 1.0, "controller": {"type": "policy", "file": str(policy)}})
+    assert run.metrics["aan_stiffness_max"] <= 1600 + 1e-6  # tanh(0) = 0: k_max half way, as the file says

@@ -36,7 +36,8 @@ EXECUTED_ELSEWHERE = {
 }
 MUSCLES = "tests/test_readme.py::test_the_musculoskeletal_commands_compare_controllers_and_severities"
 _MUSCLE_BLOCK = re.search(r"## A musculoskeletal patient.*?```bash\n(.*?)```", README, re.S)[1]
-EXECUTED_ELSEWHERE.update({c.split("#")[0].strip(): MUSCLES for c in _MUSCLE_BLOCK.splitlines()})
+_POLICY_REPLAY = re.search(r"## Learning: scenarios.*?```bash\n(.*?)```", README, re.S)[1].strip()
+EXECUTED_ELSEWHERE.update({c.split("#")[0].strip(): MUSCLES for c in [*_MUSCLE_BLOCK.splitlines(), _POLICY_REPLAY]})
 
 
 def _block_after(marker: str, lang: str) -> str:
@@ -154,6 +155,9 @@ def test_the_musculoskeletal_commands_compare_controllers_and_severities(tmp_pat
                     "muscle_effort"):
         assert measure in table
     assert "patient_noise same" in table  # the same person, noise for noise
+    learned = cli(*_POLICY_REPLAY.replace("out/lexos_myoarm", out).split()[1:])  # the learned policy, same session
+    assert learned.returncode in (0, 1), learned.stderr
+    assert "policy" in learned.stdout and "patient_noise same" in learned.stdout
     done, args = _run(sweep + " --grid duration=3 --serial --out sev", tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
     with open(Path(args[args.index("--out") + 1]) / "aggregate.csv") as f:

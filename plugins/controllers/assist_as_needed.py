@@ -60,6 +60,7 @@ class AssistAsNeededConfig(StrictModel):
 class AssistAsNeeded(Controller):
     """Impedance control whose stiffness follows the tracking error; see the module docstring."""
 
+    tunable = ("k_min", "k_max", "gain", "dead_band", "force_gain", "force_max", "forgetting_s")
     metrics = (Metric("aan_stiffness_mean", "N/m or N·m/rad", outcome=True, description="mean assisting stiffness"),
                Metric("aan_stiffness_max", "N/m or N·m/rad", description="largest assisting stiffness"))
 
@@ -83,6 +84,14 @@ class AssistAsNeeded(Controller):
         self._t: list[float] = []
         self._k: list[float] = []
         self._k_sum = 0.0
+
+    def tune(self, values: dict[str, float]) -> None:
+        super().tune(values)
+        cfg = self.cfg.model_copy(update={k: float(v) for k, v in values.items()})
+        if cfg.k_min > cfg.k_max or cfg.forgetting_s <= 0:
+            raise ValueError(f"assist-as-needed: tuned to k_min {cfg.k_min:g} > k_max {cfg.k_max:g} or "
+                             f"forgetting_s {cfg.forgetting_s:g} <= 0")
+        self.cfg = cfg
 
     def _adapt(self, error):
         c = self.cfg

@@ -45,21 +45,27 @@ class PolicyController(Controller):
             raise ValueError(f"file: the policy observes {', '.join(unseen)}, which a controller is not given; train "
                              f"it on {', '.join(CONTROLLER_TERMS)}")
         action = meta.get("action", {})
-        if policy.sizes[-1] != dof or meta.get("dof", dof) != dof:
-            raise ValueError(f"file: the policy acts on {policy.sizes[-1]} joints; the robot has {dof}")
         self.terms, self.kind = terms, action.get("kind", "residual")
+        self.tuned = action.get("parameters", {}) if self.kind == "parameters" else {}
+        outputs = len(self.tuned) if self.tuned else dof
+        if policy.sizes[-1] != outputs or meta.get("dof", dof) != dof:
+            raise ValueError(f"file: the policy has {policy.sizes[-1]} outputs; this robot and action need {outputs}")
         scale = np.asarray(action.get("scale", 0.2), float)
         self.scale = context.robot.model.limits.effort * scale
         self.every = max(1, round(1.0 / (meta.get("policy_hz", 1.0 / context.control_dt) * context.control_dt)))
         self.duration = float(meta.get("duration_s", 1.0))
         self.robot = context.robot
         self.base: Controller | None = None
-        if self.kind == "residual":
+        if self.kind in ("residual", "parameters"):
             spec = config.base or meta.get("base")
             if not spec:
                 raise ValueError("base: a residual policy needs the controller it acts on (none in the file)")
             self.base = _build(spec, context)
             self.reference = self.base.reference
+            self.metrics = self.base.metrics  # what it reports, it reports for the policy's run
+            if self.tuned:
+                self.base.tune({})  # (refuses a controller that tunes nothing)
+                self._lo, self._hi = (np.array([r[i] for r in self.tuned.values()], float) for i in (0, 1))
         else:  # the whole torque: it takes the references the planner gives
             self.reference = context.reference_space
         self._gravity = context.robot.gravity_torque
@@ -70,6 +76,12 @@ class PolicyController(Controller):
     @property
     def joint_reference(self):
         return self.base.joint_reference if self.base is not None else None
+
+    def run_metrics(self, trace):
+        return self.base.run_metrics(trace) if self.base is not None else {}
+
+    def series(self):
+        return self.base.series() if self.base is not None else {}
 
     def observe(self, t, q, qd, q_ref, qd_ref) -> np.ndarray:
         """The policy's input, as the learning environment made it."""
@@ -87,7 +99,11 @@ class PolicyController(Controller):
 
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
         if self._k % self.every == 0:  # the policy's step; its action held until the next
-            self._u = self.scale * self.policy(self.observe(t, q, qd, q_ref, qd_ref))
+            action = self.policy(self.observe(t, q, qd, q_ref, qd_ref))
+            if self.tuned:
+                self.base.tune(dict(zip(self.tuned, self._lo + (action + 1.0) * (self._hi - self._lo) / 2)))
+            else:
+                self._u = self.scale * action
         self._k += 1
         if self.base is not None:
             return self.base.compute(t, q, qd, q_ref, qd_ref, qdd_ref) + self._u

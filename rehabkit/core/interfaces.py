@@ -346,6 +346,14 @@ class Controller(ABC):
         """Internal states over time for the log, name → (times [s], values); default none."""
         return {}
 
+    tunable: ClassVar[tuple[str, ...]] = ()  # settings a learner may change during a run (see :meth:`tune`)
+
+    def tune(self, values: dict[str, float]) -> None:
+        """Change settings named in :attr:`tunable` from now on (a policy acting on the controller's parameters)."""
+        if unknown := [k for k in values if k not in self.tunable]:
+            raise ValueError(f"controller {type(self).__name__} cannot tune {', '.join(unknown)}; it tunes "
+                             f"{', '.join(self.tunable) or 'nothing'}")
+
     @abstractmethod
     def compute(
         self, t: float, q: np.ndarray, qd: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray

@@ -44,7 +44,8 @@ class ScenarioEnv(gym.Env):
         self._renderer = None
         self._runner: Runner | None = None
         self._open(sc.seed)
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (self._dof,), np.float32)
+        n = len(self._tuned[0]) if self._tuned else self._dof
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.observation_space = self.observer.space()
 
     # -- episodes --------------------------------------------------------------------------------------
@@ -69,7 +70,19 @@ class ScenarioEnv(gym.Env):
         self._u = np.zeros(self._dof)
         controller = a.controller
         inner = controller.compute
-        if self.spec_learning.action.kind == "residual":
+        action = self.spec_learning.action
+        self._tuned = None
+        if action.kind == "parameters":  # the controller's own settings, each from its range
+            names = list(action.parameters)
+            try:
+                controller.tune({})
+                controller.tune({n: action.parameters[n][0] for n in names})
+            except ValueError as exc:
+                raise PluginSetupError(runner.loaded.source, ("learning", "action", "parameters"), (),
+                                       f"learning.action.parameters: {exc}") from None
+            lo, hi = (np.array([action.parameters[n][i] for n in names]) for i in (0, 1))
+            self._tuned = (names, lo, hi)
+        elif action.kind == "residual":
             controller.compute = lambda *args: inner(*args) + self._u  # noqa: E731 (the loop reads .compute)
         else:
             gravity = a.robot.gravity_torque
@@ -87,7 +100,12 @@ class ScenarioEnv(gym.Env):
         a, st = self._a, self.state
         if self._ended:
             raise RuntimeError("the episode has ended: call reset()")
-        self._u[:] = self._scale * np.clip(np.asarray(action, float), -1.0, 1.0)
+        action = np.clip(np.asarray(action, float), -1.0, 1.0)
+        if self._tuned is not None:
+            names, lo, hi = self._tuned
+            a.controller.tune(dict(zip(names, lo + (action + 1.0) * (hi - lo) / 2)))
+        else:
+            self._u[:] = self._scale * action
         k0 = st.k
         with threadpool_limits(limits=1, user_api="blas"):
             run_loop(a, self._runner.trace, self._runner.packed, self._runner.ref, self._runner.timeline,
@@ -110,8 +128,9 @@ class ScenarioEnv(gym.Env):
         sc, spec = self._a.sc, self.spec_learning
         return {"terms": list(spec.observation.terms), "dof": self._dof, "policy_hz": spec.policy_hz,
                 "duration_s": sc.duration, "scenario": str(self.path),
-                "action": {"kind": spec.action.kind, "scale": spec.action.scale},
-                "base": sc.controller.model_dump(mode="json") if spec.action.kind == "residual" else None}
+                "action": {"kind": spec.action.kind, "scale": spec.action.scale,
+                           "parameters": {k: list(v) for k, v in spec.action.parameters.items()}},
+                "base": sc.controller.model_dump(mode="json") if spec.action.kind != "torque" else None}
 
     # -- the view --------------------------------------------------------------------------------------
 

@@ -21,9 +21,12 @@ REWARD_TERMS = ("tracking", "interaction_force", "assistance", "jerk", "reached"
 class ActionSpec(StrictModel):
     """What the policy's action in [−1, 1]ⁿ does."""
 
-    kind: Literal["residual", "torque"] = Field(
+    kind: Literal["residual", "torque", "parameters"] = Field(
         "residual", description="residual: a torque added to the scenario's controller's; torque: the whole torque "
-                                "(on top of the robot's own gravity compensation)")
+                                "(on top of the robot's own gravity compensation); parameters: the controller's own "
+                                "settings, each over its range")
+    parameters: dict[str, tuple[float, float]] = Field(
+        {}, description="parameters: setting → [value at −1, value at +1] (e.g. assist-as-needed's k_max)")
     scale: float | list[float] = Field(
         0.2, gt=0, description="action 1.0 is this fraction of each joint's effort limit (one value or one per joint)")
 
@@ -32,6 +35,8 @@ class ActionSpec(StrictModel):
         values = self.scale if isinstance(self.scale, list) else [self.scale]
         if not values or any(not 0 < v <= 1 for v in values):
             raise ValueError("scale: each fraction of the effort limit must be in (0, 1]")
+        if (self.kind == "parameters") != bool(self.parameters):
+            raise ValueError("parameters: give the settings the action tunes, and only with kind: parameters")
         return self
 
 
