@@ -266,6 +266,12 @@ class Musculoskeletal(EmbodiedPatient):
     def interaction_force(self) -> np.ndarray:
         return self.force
 
+    def state(self) -> np.ndarray:
+        """Each muscle group's mean activation and its least fatigued-away capacity (groups in catalogue order)."""
+        act = self.d.act[self.so.act_of_muscles]
+        cap = self.fatigue.capacity
+        return np.array([v for idx in self.arm.groups.values() for v in (act[idx].mean(), cap[idx].min())])
+
     def drawing(self) -> dict[str, Drawing]:
         """Each muscle's path coloured by its activation (blue at rest, red at full), each strap's force as an
         arrow from the strap (1 cm per 5 N); at most every :data:`DRAW_EVERY_S` (63 paths cost ~1 ms to log)."""

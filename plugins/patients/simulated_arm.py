@@ -181,6 +181,10 @@ class SimulatedArm(Patient):
         self.step += 1
         return tau
 
+    def state(self) -> np.ndarray:
+        """The remaining voluntary capacity (fatigue)."""
+        return np.array([self.capacity])
+
     def run_metrics(self, trace=None) -> dict[str, float]:
         return {"patient_capacity_final": self.capacity, "patient_voluntary_work_j": self.voluntary_work}
 

@@ -298,6 +298,11 @@ class Patient(ABC):
         """What to draw of the person now (called at the log rate), name → shapes; default none."""
         return {}
 
+    def state(self) -> np.ndarray:
+        """The simulated person's inner state now, a fixed-length vector (what a learning environment's
+        ``person_state`` term shows, e.g. fatigue); default empty."""
+        return np.zeros(0)
+
 
 class EmbodiedPatient(Patient):
     """A person simulated as a body in the backend's scene (a musculoskeletal arm) and strapped to the robot.

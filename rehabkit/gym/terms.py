@@ -8,6 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from rehabkit.core.errors import PluginSetupError
 from rehabkit.core.interfaces import EmbodiedPatient
 from rehabkit.core.runner import Runner
 from rehabkit.core.scenario.learning import ObservationSpec
@@ -30,7 +31,12 @@ class Observer:
         self.hand_force = HandForce(a.robot.model) if a.patient is not None else None
         self.sizes = {"joint_state": 2 * self.dof, "reference": 2 * self.ref_q.shape[1],
                       "tracking_error": self.ref_q.shape[1], "goal": self.goal_at.shape[1], "phase": 1,
-                      "interaction_force": 1, "person_torque": self.dof}
+                      "interaction_force": 1, "person_torque": self.dof,
+                      "person_state": len(a.patient.state()) if a.patient is not None else 0}
+        if "person_state" in spec.terms and not self.sizes["person_state"]:
+            raise PluginSetupError(runner.loaded.source, ("learning", "observation", "terms"), (),
+                                   "learning.observation.terms: person_state needs a simulated person with an inner "
+                                   "state (patient.model)")
 
     def space(self) -> gym.Space:
         spec = self.spec
@@ -64,6 +70,8 @@ class Observer:
                 value = np.array([min(1.0, k * a.schedule.control_dt / a.sc.duration)])
             elif term == "interaction_force":
                 value = np.array([self._force(max(0, k - 1), q)])
+            elif term == "person_state":
+                value = a.patient.state()
             elif term == "person_torque":
                 tau_h = self.trace.tau_h
                 value = tau_h[max(0, k - 1)] if tau_h is not None else np.zeros(self.dof)

@@ -14,7 +14,7 @@ from pydantic import Field, model_validator
 from rehabkit.models.strict import StrictModel
 
 OBSERVATION_TERMS = ("joint_state", "reference", "tracking_error", "goal", "phase", "interaction_force",
-                     "person_torque", "pixels")
+                     "person_torque", "person_state", "pixels")
 REWARD_TERMS = ("tracking", "interaction_force", "assistance", "jerk", "reached")
 
 
@@ -47,7 +47,8 @@ class ObservationSpec(StrictModel):
         ["joint_state", "tracking_error", "phase"], min_length=1,
         description="joint_state (q, q̇), reference (q_ref, q̇_ref), tracking_error (q_ref − q), goal (of the movement "
                     "under way), phase (time / duration), interaction_force (the person's, N), person_torque (at the "
-                    "joints, N·m), pixels (a camera image; only with layout: dict)")
+                    "joints, N·m), person_state (a simulated person's inner state, e.g. fatigue), "
+                    "pixels (a camera image; only with layout: dict)")
     layout: Literal["box", "dict"] = Field("box", description="box: one flat vector; dict: a term each")
     camera: str | None = Field(None, description="the world camera the pixels term renders")
     width: int = Field(64, ge=8, le=512, description="pixels: image width")
