@@ -13,6 +13,7 @@ and passes the safety layer like any command: a safety stop ends the episode (``
 from __future__ import annotations
 
 import gc
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,7 @@ class ScenarioEnv(gym.Env):
                  render_size: tuple[int, int] = (480, 640)):
         self.path, self.overrides = Path(scenario), overrides
         loaded = load_scenario(self.path, overrides)  # bad input: a located ScenarioError, before anything runs
+        self._loaded = loaded
         self.spec_learning = _learning(loaded)
         sc = loaded.model
         self.every = _policy_every(loaded)
@@ -56,7 +58,9 @@ class ScenarioEnv(gym.Env):
         # the last episode's scene (a MuJoCo model of ~100 MB with a musculoskeletal arm) is held by reference cycles
         # whose Python side is small: the collector would not run for it, and a learner's worker grew to 10 GB
         gc.collect()
-        runner = Runner(load_scenario(self.path, _with_seed(self.overrides, seed)))
+        # the validated scenario with the episode's seed (a deep copy: a run's setup may adapt its sections)
+        loaded = self._loaded
+        runner = Runner(replace(loaded, model=loaded.model.model_copy(update={"seed": seed}, deep=True)))
         runner.start()
         a = runner.setup
         self._runner, self._a, self._dof = runner, a, a.robot.model.dof
@@ -183,8 +187,3 @@ def _policy_every(loaded: LoadedScenario) -> int:
                                f"{sc.rates.control_hz:g} Hz; take one that does (e.g. {sc.rates.control_hz / 20:g})")
     return round(every)
 
-
-def _with_seed(overrides, seed: int):
-    if isinstance(overrides, dict):
-        return {**overrides, "seed": seed}
-    return [*overrides, f"seed={seed}"]
