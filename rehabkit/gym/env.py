@@ -131,7 +131,7 @@ class ScenarioEnv(gym.Env):
         """What a policy trained here must carry for the ``policy`` controller to run it (rehabkit.models.policy)."""
         sc, spec = self._a.sc, self.spec_learning
         return {"terms": list(spec.observation.terms), "dof": self._dof, "policy_hz": spec.policy_hz,
-                "duration_s": sc.duration, "scenario": str(self.path),
+                "duration_s": sc.duration, "scenario": self.path.name,
                 "action": {"kind": spec.action.kind, "scale": spec.action.scale,
                            "parameters": {k: list(v) for k, v in spec.action.parameters.items()}},
                 "base": sc.controller.model_dump(mode="json") if spec.action.kind != "torque" else None}

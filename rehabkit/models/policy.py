@@ -70,6 +70,9 @@ class Policy:
         for i, (W, b) in enumerate(self.layers):
             arrays[f"W{i}"], arrays[f"b{i}"] = W, b
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes it private; a policy file is an ordinary output
         os.close(fd)
         np.savez(tmp, **arrays)
         os.replace(tmp, path)
