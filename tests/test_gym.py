@@ -124,6 +124,11 @@ def test_a_policy_runs_as_a_controller_exactly_as_in_its_environment(tmp_path):
     run = run_scenario(HIT, {"duration": 2.0, "controller": {"type": "policy", "file": str(path)}})
     assert run.metrics["safety_events"] == 0
     assert np.array_equal(run.trace.q, learned_q)
+    # over the robot link (the bridge on the host's clock), the same controller, the same motion
+    link = run_scenario(HIT, {"duration": 2.0, "controller": {"type": "policy", "file": str(path)},
+                              "backend": {"type": "hardware", "clock": "lockstep"}})
+    assert link.metrics["safety_events"] == 0 and link.metrics["link_ticks"] == len(learned_q)
+    assert np.abs(link.trace.q - learned_q).max() < 1e-9
 
 
 def test_a_policy_that_needs_what_a_controller_cannot_see_is_refused(tmp_path):
