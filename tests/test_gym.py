@@ -155,3 +155,14 @@ def test_a_policy_can_tune_the_controllers_own_settings(tmp_path):
     env.close()
     run = run_scenario(HIT, {"duration": 1.0, "controller": {"type": "policy", "file": str(policy)}})
     assert run.metrics["aan_stiffness_max"] <= 1600 + 1e-6  # tanh(0) = 0: k_max half way, as the file says
+
+
+def test_a_policy_can_see_a_world_camera():
+    seeing = {"learning": {"policy_hz": 50, "observation": {"terms": ["joint_state", "pixels"], "layout": "dict",
+                                                            "camera": "front", "width": 32, "height": 24}},
+              "world": {"cameras": [{"name": "front", "position": [-1.5, 0, 1.3], "look_at": [-0.4, 0, 1.1]}]},
+              "duration": 0.1}
+    env = ScenarioEnv(HIT, seeing)
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs) and obs["pixels"].shape == (24, 32, 3) and obs["pixels"].std() > 1
+    env.close()
