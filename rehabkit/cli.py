@@ -284,6 +284,9 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--effort", default=None, metavar="JSON",
                    help="torque limits per joint [N·m], tighter than the robot's (a safety envelope's)")
     b.set_defaults(func=cmd_bridge)
+    from rehabkit.audit import add_parser as add_audit
+
+    add_audit(sub)
     return p
 
 

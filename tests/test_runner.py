@@ -45,7 +45,7 @@ def test_same_seed_same_run(hit_run):
 
 def test_outputs_are_complete_and_nothing_half_written(hit_run):
     out = hit_run.out_dir
-    assert sorted(p.name for p in out.iterdir()) == ["run.rrd", "scenario.yaml", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["run.rrd", "safety_log.jsonl", "scenario.yaml", "summary.json"]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["passed"] and summary["seed"] == 0 and summary["metrics"]["real_time_factor"] > 1
 
@@ -147,7 +147,8 @@ def test_broken_controller_stops_the_robot_and_the_logs_say_why(tmp_path, bad_re
 
 def test_no_rrd_when_logging_is_off(tmp_path):
     r = run_scenario(HIT, {"logging.rrd": False, "duration": 0.5, "expect": {}}, out_dir=tmp_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["scenario.yaml", "summary.json"] and r.passed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["safety_log.jsonl", "scenario.yaml", "summary.json"]
+    assert r.passed
 
 
 def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):

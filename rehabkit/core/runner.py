@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 from threadpoolctl import threadpool_limits
 
+from rehabkit.core import safety_log
 from rehabkit.core.assembly import (
     Assembly,
     SetupError,
@@ -264,9 +265,14 @@ class Runner:
                 self.view.log.close()
                 summary["outputs"] = {"rrd": "run.rrd"}
             summary.setdefault("outputs", {})["scenario"] = SNAPSHOT
-            atomic_write_text(self.out_dir / SNAPSHOT, f"# {self.loaded.path} as this run used it (extends merged, "
-                              "profile inlined, --set applied); `rehabkit replay` reads it\n"
-                              + yaml.dump(self.loaded.source.data, Dumper=_DUMPER, sort_keys=False))
+            snapshot = (f"# {self.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "
+                        "`rehabkit replay` reads it\n" + yaml.dump(self.loaded.source.data, Dumper=_DUMPER,
+                                                                    sort_keys=False))
+            atomic_write_text(self.out_dir / SNAPSHOT, snapshot)
+            # the tamper-evident record of the run's safety (rehabkit audit), its last hash in the summary
+            summary["outputs"]["safety_log"] = safety_log.LOG
+            summary["safety_log_hash"] = safety_log.write(self.out_dir / safety_log.LOG,
+                                                          safety_log.run_records(a, snapshot, summary))
             atomic_write_json(self.out_dir / "summary.json", summary)
         a.backend.close()
         return RunResult(summary, trace, self.out_dir, self.refusal)
