@@ -20,12 +20,13 @@ import numpy as np
 from rehabkit_plugins.patients.musculoskeletal_settings import MusculoskeletalConfig
 
 from rehabkit import hookimpl
+from rehabkit.core.backends.mujoco import span
 from rehabkit.core.interfaces import Context, Drawing, EmbodiedPatient
 from rehabkit.core.metric import Metric
 from rehabkit.core.names import suggest
 from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
-from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec, span
+from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
 from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
 from rehabkit.musculo.scaling import scale_arm
 from rehabkit.musculo.static_opt import StaticOptimisation
@@ -160,7 +161,7 @@ class Musculoskeletal(EmbodiedPatient):
         d.act[:] = 0.0
         mujoco.mj_forward(m, d)
         for eq in self.eqs:
-            m.eq_solref[eq] = strap_solref(m, d, eq, self.config.straps.stiffness_n_m, self.config.straps.damping_ns_m)
+            m.eq_solref[eq] = strap_solref(d, eq, self.config.straps.stiffness_n_m, self.config.straps.damping_ns_m)
         # the person was holding their arm before the run began: their muscles start at that activation
         hold = self.config.drive.own_weight * (self.arm.coupling_matrix().T @ d.qfrc_bias)
         steady = self.so.solve(self._synergy(hold))
@@ -231,7 +232,7 @@ class Musculoskeletal(EmbodiedPatient):
         return excitation
 
     def _strap_rows(self) -> list[slice]:
-        return [strap_rows(self.m, self.d, eq) for eq in self.eqs]
+        return [strap_rows(self.d, eq) for eq in self.eqs]
 
     def strap_forces(self, rows: list[slice] | None = None) -> list[np.ndarray]:
         """Each strap's force on the robot now, world frame [N]."""

@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from rehabkit.core.io import atomic_write_text
-from rehabkit.core.version import __version__
 
 LOG = "safety_log.jsonl"
 KEY_ENV = "REHABKIT_AUDIT_KEY"
@@ -81,16 +80,10 @@ def verify(path: Path, key: bytes | None = None) -> tuple[list[dict[str, Any]], 
 
 def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dict[str, Any]]:
     """The records of a finished run (``a``: its :class:`~rehabkit.core.assembly.Assembly`)."""
-    sc = a.sc
-    plugins = {}
-    for kind, cfg in (("robot", sc.robot), ("backend", sc.backend), ("planner", sc.planner),
-                      ("controller", sc.controller), *(("sensor", c) for c in sc.sensors.values())):
-        info = a.registry.get(kind, cfg.type)
-        plugins[f"{kind}:{cfg.type}"] = f"{info.provider.package} {info.provider.version}"
-    patient = sc.patient
-    if patient is not None and getattr(patient, "model", None) is not None:
-        info = a.registry.get("patient", patient.model.type)
-        plugins[f"patient:{patient.model.type}"] = f"{info.provider.package} {info.provider.version}"
+    sc, patient = a.sc, a.sc.patient
+    used = summary["plugins"]  # (results.plugin_versions: kind → type, package, version; sensors by name)
+    plugins = {f"{kind}:{p['type']}": f"{p['package']} {p['version']}" for kind, p in used.items() if kind != "sensors"}
+    plugins.update({f"sensor:{p['type']}": f"{p['package']} {p['version']}" for p in used["sensors"].values()})
     model, lim = a.robot.model, a.limits
     sources = a.limit_sources.as_dict()
     joints = {name: {"lower_deg": round(float(np.degrees(lim.lower[j])), 6),
@@ -100,7 +93,8 @@ def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dic
                      "narrowed_by": sources.get(name, {})} for j, name in enumerate(model.joint_names)}
     safety = a.safety.config
     records = [
-        {"kind": "run", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "software": {"rehabkit": __version__},
+        {"kind": "run", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+         "software": {"rehabkit": summary["rehabkit_version"]},
          "scenario": {"file": str(a.loaded.path), "sha256": hashlib.sha256(scenario_text.encode()).hexdigest()},
          "plugins": plugins, "patient": patient.id if patient is not None else None, "backend": sc.backend.type,
          "seed": sc.seed, "keyed": audit_key() is not None},

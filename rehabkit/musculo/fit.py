@@ -104,21 +104,21 @@ def fit_arm(arm: HumanArm, wearable: Wearable, base_pose: np.ndarray, straps: tu
     return dict(zip(names, x)), worst
 
 
-def strap_rows(m: mujoco.MjModel, d: mujoco.MjData, eq: int) -> slice:
+def strap_rows(d: mujoco.MjData, eq: int) -> slice:
     """The constraint rows of equality ``eq`` in the current step: MuJoCo puts the ``ne`` equality rows first, in
     the order of the equalities."""
     ids = d.efc_id[: d.ne]
     return slice(int(np.searchsorted(ids, eq, "left")), int(np.searchsorted(ids, eq, "right")))
 
 
-def strap_solref(m: mujoco.MjModel, d: mujoco.MjData, eq: int, stiffness: float, damping: float) -> np.ndarray:
+def strap_solref(d: mujoco.MjData, eq: int, stiffness: float, damping: float) -> np.ndarray:
     """MuJoCo's direct ``solref`` (−k, −b) giving a strap of ``stiffness`` [N/m] and ``damping`` [N·s/m].
 
     With a constant impedance d, a strap loaded by a force f settles at a stretch r = f (1 − d) Â / k, Â being
     the constraint's inverse effective mass (MuJoCo's ``efc_diagA``): K = k / ((1 − d) Â), and likewise for the
     damping (checked against a known load in the tests).
     """
-    rows = strap_rows(m, d, eq)
+    rows = strap_rows(d, eq)
     inv_mass = float(np.mean(d.efc_diagA[rows]))
     scale = (1.0 - STRAP_IMPEDANCE) * inv_mass
     return np.array([-stiffness * scale, -damping * scale])

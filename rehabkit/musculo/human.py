@@ -25,6 +25,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from rehabkit.core.backends.mujoco import span
+
 PREFIX = "human/"
 
 
@@ -230,14 +232,6 @@ def _quiet_output():
     rest = [line for line in text.splitlines() if line.strip() and "empty prefix" not in line]
     if rest:
         print("\n".join(rest), file=sys.stderr)
-
-
-def span(indices: np.ndarray) -> slice | np.ndarray:
-    """A slice when the indices are contiguous and ascending (cheaper than fancy indexing each step), else them."""
-    indices = np.asarray(indices)
-    if len(indices) and np.all(np.diff(indices) == 1):
-        return slice(int(indices[0]), int(indices[-1]) + 1)
-    return indices
 
 
 def _has_site(m: mujoco.MjModel, name: str) -> bool:

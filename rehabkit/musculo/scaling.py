@@ -101,9 +101,8 @@ def scale_arm(spec: mujoco.MjSpec, cat: ArmCatalogue, lengths: dict[str, float],
     if not factors:
         return {}
     key = None if memo is None else (memo, tuple(sorted((k, round(v, 12)) for k, v in lengths.items())))
-    if key is not None and key in _RATIOS:
-        ratios = _RATIOS[key]
-    before = _muscle_lengths(spec) if key is None or key not in _RATIOS else None
+    ratios = _RATIOS.get(key)
+    before = _muscle_lengths(spec) if ratios is None else None
     shoulder, elbow = spec.body(cat.shoulder_body), spec.body(cat.elbow_body)  # (each one's origin on its joint)
     for name, k in factors.items():
         if name == "upper_arm":
@@ -119,7 +118,7 @@ def scale_arm(spec: mujoco.MjSpec, cat: ArmCatalogue, lengths: dict[str, float],
             body = spec.body(body_name)
             wrist = _wrist_in(spec, cat, body)
             _stretch_body(spec, body, wrist / np.linalg.norm(wrist), float(np.linalg.norm(wrist)), k_bone)
-    if before is not None:
+    if ratios is None:
         ratios = _muscle_lengths(spec) / before
         if key is not None:
             _RATIOS[key] = ratios

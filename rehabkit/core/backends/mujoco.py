@@ -33,7 +33,7 @@ class MujocoConfig(StrictModel):
     integrator: Literal[tuple(INTEGRATORS)] = "implicitfast"  # type: ignore[valid-type]
 
 
-def _span(indices: np.ndarray) -> slice | np.ndarray:
+def span(indices: np.ndarray) -> slice | np.ndarray:
     """A slice when the indices are contiguous: cheaper than fancy indexing in the hot loop."""
     if len(indices) and np.all(np.diff(indices) == 1):
         return slice(int(indices[0]), int(indices[-1]) + 1)
@@ -59,8 +59,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         for body in self.bodies:
             body.bind(self.model, self.data)
         jids = [self.model.joint(name).id for name in robot.joint_names]
-        self._q = _span(np.array([self.model.jnt_qposadr[j] for j in jids]))
-        self._v = _span(np.array([self.model.jnt_dofadr[j] for j in jids]))
+        self._q = span(np.array([self.model.jnt_qposadr[j] for j in jids]))
+        self._v = span(np.array([self.model.jnt_dofadr[j] for j in jids]))
         robot_bodies = {self.model.jnt_bodyid[j] for j in jids}
         # the fixed root and every body below it belong to the robot
         root = self.model.body(self.spec.worldbody.first_body().name).id
