@@ -1,6 +1,6 @@
-"""Base classes of the plugin kinds (robot, planner, controller, patient; sensor and backend in
-:mod:`rehabkit.core.sensing` and :mod:`rehabkit.core.backend`, re-exported here) and the small types they
-exchange. Third parties import all of them from :mod:`rehabkit.plugin`."""
+"""Base classes of the plugin kinds (robot, planner, controller; sensor, backend and patient in
+:mod:`rehabkit.core.sensing`, :mod:`rehabkit.core.backend` and :mod:`rehabkit.core.patient_kind`, re-exported
+here) and the small types they exchange. Third parties import all of them from :mod:`rehabkit.plugin`."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import numpy as np
 
 from rehabkit.core.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
 from rehabkit.core.metric import Metric
+from rehabkit.core.patient_kind import EmbodiedPatient, Patient
 from rehabkit.core.sensing import Instrument, Sensor, SensorConfig
 from rehabkit.models.robot_model import RobotModel
 from rehabkit.models.strict import StrictModel
@@ -267,69 +268,6 @@ class Planner(ABC):
         return {}
 
 
-class Patient(ABC):
-    """A simulated person at the robot's joints: the torques their arm applies, each control step.
-
-    ``delay_s`` is how late the person perceives the task: the runner passes the goal of the
-    movement under way (in the planner's space: a hand position or joint values) as it was that
-    long ago.
-    """
-
-    delay_s: float = 0.0
-    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
-
-    @abstractmethod
-    def torque(self, t: float, q: np.ndarray, qd: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """Joint torques [N·m] the person applies to the robot now (positive along each joint's axis)."""
-
-    def run_metrics(self, trace: Any) -> dict[str, float]:
-        """Figures about the person over the run (e.g. fatigue); default none."""
-        return {}
-
-    def inputs(self) -> dict[str, str]:
-        """Fingerprints of what drove the person (e.g. a digest of the noise drawn), for replays; default none."""
-        return {}
-
-    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Internal states over time for the log, name → (times [s], values); default none."""
-        return {}
-
-    def drawing(self) -> dict[str, Drawing]:
-        """What to draw of the person now (called at the log rate), name → shapes; default none."""
-        return {}
-
-    def state(self) -> np.ndarray:
-        """The simulated person's inner state now, a fixed-length vector (what a learning environment's
-        ``person_state`` term shows, e.g. fatigue); default empty."""
-        return np.zeros(0)
-
-
-class EmbodiedPatient(Patient):
-    """A person simulated as a body in the backend's scene (a musculoskeletal arm) and strapped to the robot.
-
-    A backend that hosts bodies (:class:`~rehabkit.core.capabilities.HostsBodies`) calls :meth:`compose` on its
-    scene description before building it, :meth:`bind` on the built scene, and :meth:`place` at each reset, the
-    robot at its start posture. :meth:`torque` then drives the person's own actuators for the coming control period
-    and returns the torque their straps put on the robot's joints, for the record: the scene applies it.
-    """
-
-    @abstractmethod
-    def compose(self, spec: Any) -> None:
-        """Add the person's body and the straps to the scene description (a ``mujoco.MjSpec``)."""
-
-    @abstractmethod
-    def bind(self, model: Any, data: Any) -> None:
-        """The built scene (``mujoco.MjModel``/``MjData``): look up what the steps will read and write."""
-
-    @abstractmethod
-    def place(self) -> None:
-        """Fit the person to the robot as it stands now (called by the backend's reset)."""
-
-    @abstractmethod
-    def interaction_force(self) -> np.ndarray:
-        """The largest strap force now, world frame [N]: what the safety envelope's force limit checks."""
-
-
 class Controller(ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
 
@@ -366,7 +304,7 @@ class Controller(ABC):
         """Joint torques [N·m]; called in the hot loop, so keep it allocation-light."""
 
 
-__all__ = [  # the backend and sensor kinds live in modules of their own; importable from here as before
+__all__ = [  # the backend, sensor and patient kinds live in modules of their own; importable from here as before
     "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "Drawing", "EmbodiedPatient",
     "GeomVisual",
     "IKUnavailableError",
