@@ -30,6 +30,7 @@ from rehabkit.core.interfaces import (
     GeomVisual,
     IKUnavailableError,
     Instrument,
+    InteractionForceSensor,
     Patient,
     Plan,
     Planner,
@@ -55,8 +56,8 @@ __all__ = [
     "hookimpl",
     # the plugin kinds and what they exchange
     "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
-    "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "Backend", "BodyPoses", "Contact",
-    "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "Wearable", "Strap",
+    "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "InteractionForceSensor", "Backend",
+    "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "Wearable", "Strap",
     # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked)
     "joint_waypoints", "JointWaypoints",
     # what a robot declares it can do, and a plugin ``requires``

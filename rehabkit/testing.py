@@ -25,6 +25,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -43,8 +45,23 @@ def shared_run(config: pytest.Config, path: str | Path):
     runs = config.stash.setdefault(_RUNS, {})
     if path not in runs:
         out = Path(config._tmp_path_factory.mktemp(path.stem))  # type: ignore[attr-defined]
-        runs[path] = run_scenario(path, out_dir=out)
+        with own_state(out / "state"):  # a scenario test starts with no e-stop latched, and leaves none behind
+            runs[path] = run_scenario(path, out_dir=out)
     return runs[path]
+
+
+@contextlib.contextmanager
+def own_state(folder: Path):
+    """Keep rehabkit's state across sessions (e-stop latches) in ``folder`` meanwhile."""
+    before = os.environ.get("REHABKIT_STATE")
+    os.environ["REHABKIT_STATE"] = str(folder)
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("REHABKIT_STATE", None)
+        else:
+            os.environ["REHABKIT_STATE"] = before
 
 
 def _is_scenario(path: Path) -> bool:

@@ -31,3 +31,9 @@ def lexos():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(autouse=True)
+def _own_state(tmp_path, monkeypatch):
+    """Each test keeps its e-stop latches to itself (rehabkit.core.estop: $REHABKIT_STATE)."""
+    monkeypatch.setenv("REHABKIT_STATE", str(tmp_path / "state"))

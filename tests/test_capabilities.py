@@ -33,11 +33,13 @@ def test_validate_refuses_a_controller_the_robot_cannot_serve(capsys):
 
 
 def test_validate_refuses_a_sensor_the_backend_cannot_serve(capsys, tmp_path):
-    # a hardware link reads no simulated accelerometers: refused before a bridge is started
-    code = main(["validate", str(HIT), "--set", "backend.type=hardware", "--set",
-                 "sensors.imu={type: accelerometer-array, body: elbow_2_link}"])
+    # a hardware link reports no floating base's state: refused before a bridge is started
+    code = main(["validate", str(SCENARIOS / "coman_juggling.yaml"), "--set", "backend.type=hardware"])
     err = capsys.readouterr().err
-    assert code == 2 and "sensor 'accelerometer-array' needs a backend that reads simulated instruments" in err
+    assert code == 2 and "sensor 'balance' needs a backend that reports a floating base's state" in err
+    # instruments it reads, simulated or carried over the link from the robot side (accelerometers, force sensors)
+    assert main(["validate", str(HIT), "--set", "backend.type=hardware", "--set",
+                 "sensors.imu={type: accelerometer-array, body: elbow_2_link}"]) == 0
 
 
 def test_several_missing_capabilities_are_named_together():

@@ -90,6 +90,21 @@ def test_measured_only_joints_travel_with_the_state_and_their_count_is_checked()
     np.testing.assert_array_equal(got.measured, [0.25, -0.5])
     # a receiver expecting another count drops it (a different robot model on the other side)
     rx = Receiver(STATE, robot=7, joints=6, measured=1)
-    assert rx.accept(data) is None and rx.dropped["length"] == 1
+    assert rx.accept(data) is None and rx.dropped["joints"] == 1
     with pytest.raises(ValueError, match="measured-only"):
         encode(COMMAND, 7, 1, np.zeros(6), measured=np.zeros(1))
+
+
+def test_instrument_values_travel_with_the_state_and_their_count_is_checked():
+    values = np.arange(18, dtype=float).reshape(3, 6)
+    ft = np.array([1.0, -2.0, 30.5, 0.1, 0.2, -0.3])  # a force-torque sensor's force and torque
+    data = encode(STATE, 7, 1, values, sent_at=1.0, measured=np.array([0.25]), instruments=ft)
+    got = Receiver(STATE, robot=7, joints=6, measured=1, instruments=6).accept(data)
+    np.testing.assert_array_equal(got.measured, [0.25])
+    np.testing.assert_array_equal(got.instruments, ft)
+    # a bridge started without the run's sensors sends none: dropped, and the reason says so
+    rx = Receiver(STATE, robot=7, joints=6, measured=1, instruments=6)
+    assert rx.accept(encode(STATE, 7, 2, values, measured=np.array([0.25]))) is None
+    assert rx.dropped == {"instruments": 1}
+    truncated = data[:-12] + data[-4:]  # (its checksum no longer matches: only 'length' can be said)
+    assert rx.accept(truncated) is None and rx.dropped["length"] == 1

@@ -153,6 +153,10 @@ class HitConfig(StrictModel):
         description="shoulder centre in the world; base z is up, the arm reaches along base -x",
     )
     safe_stop: SafeStop = "hold"
+    brakes_nm: list[float] | None = Field(None, min_length=6, max_length=6,
+                                          description="holding brakes per joint [N·m], engaged when the torque goes "
+                                          "off (safety stop categories 0 and 1); default none (the paper's robot "
+                                          "names none)")
 
 
 def _joint_specs() -> list[JointSpec]:
@@ -173,6 +177,9 @@ class HitRobot(Robot):
             name="hit", convention="modified", reverse=True, table=rows, joints=_joint_specs(),
             base=config.base, safe_stop=config.safe_stop,
         )
+        if config.brakes_nm is not None:
+            self.spec = self.spec.model_copy(update={"joints": [j.model_copy(update={"brake": b}) for j, b in
+                                                                 zip(self.spec.joints, config.brakes_nm)]})
         self.model = build_dh_robot(self.spec)
         self.model.wearable = hit_wearable(config.l1)
         self._lengths = (config.l1, config.l2, config.l3)

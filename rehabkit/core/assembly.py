@@ -32,6 +32,7 @@ from rehabkit.core.interfaces import (
     Context,
     Controller,
     EmbodiedPatient,
+    InteractionForceSensor,
     Patient,
     Planner,
     PlanningError,
@@ -96,7 +97,10 @@ class Assembly:
     event_planners: dict[int, Planner] = field(default_factory=dict)  # replan events with planner settings
     controller: Controller | None = None
     patient: Patient | None = None
-    hand_force: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None  # (q, τ_person) → force [N]
+    # the interaction force [N] each control step, (t, q, τ_person) → 3 values: measured (a force-torque sensor, an
+    # embodied person's straps) or estimated from a simulated person's joint torques; ``measured`` says which
+    force_source: Callable[[float, np.ndarray, np.ndarray | None], np.ndarray] | None = None
+    force_measured: bool = False
     safety: SafetyLayer | None = None
     schedule: Schedule | None = None
 
@@ -148,6 +152,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     # sensors before the backend: their instruments go into the scene it builds
     a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
     a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
+    _check_loads(a)
     a.planner = a.make("planner", sc.planner, ("planner",))
     for i, ev in enumerate(sc.task.events):
         if ev.planner is not None:  # (the settings were validated with the scenario, each located)
@@ -254,6 +259,19 @@ def _check_scene_names(a: Assembly) -> None:
                                        f"world.{kind}: the name '{item.name}' is taken by {owner}; rename it")
 
 
+def _check_loads(a: Assembly) -> None:
+    """A test rig's load pushes on a robot body or a force sensor's mount: another name is refused where written."""
+    import xml.etree.ElementTree as ET
+
+    bodies = [e.get("name") for e in ET.fromstring(a.robot.model.mjcf).iter("body") if e.get("name")]
+    bodies += sorted({i.mount for i in a.context.instruments if i.mount})
+    for i, load in enumerate(a.sc.world.loads):
+        if load.body not in bodies:
+            raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"), (),
+                                   f"world.loads '{load.name}': no body '{load.body}' in the scene"
+                                   f"{suggest(load.body, bodies)} (a robot body, or a force-torque sensor's name)")
+
+
 def _check_duration(a: Assembly) -> None:
     """A run records every control step (about 8 rows of the robot's joints, 8-byte numbers): refuse, located, a
     duration whose record would not fit in half this machine's memory (``duration: 1e9`` ended in MemoryError)."""
@@ -294,19 +312,35 @@ def _patient_and_safety(a: Assembly) -> None:
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
               if v is not None]
     force_limit = min(limits) if limits else None
-    if force_limit is not None and a.patient is None:
-        at = ("safety", "interaction_force_n") if sc.safety.interaction_force_n is not None else ("patient",)
-        raise PluginSetupError(a.loaded.source, at, (),
-                               f"an interaction-force limit ({force_limit:g} N, from safety.interaction_force_n or "
-                               "patient.comfort) needs a source of the force: a simulated patient (patient.model); "
-                               f"backend '{sc.backend.type}' measures none")
-    if isinstance(a.patient, EmbodiedPatient):  # the straps' forces, measured in the scene
-        a.hand_force = (lambda q, tau: a.patient.interaction_force()) if force_limit is not None else None
-    else:
-        a.hand_force = HandForce(a.robot.model) if force_limit is not None else None
+    _force_source(a, force_limit)
     a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
                            hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
+
+
+def _force_source(a: Assembly, limit: float | None) -> None:
+    """Where the interaction force comes from: force-torque sensors (measured, on any backend reading them), else an
+    embodied person's straps (measured in the scene), else a simulated person's joint torques (estimated at the
+    hand); an interaction-force limit with none of them is refused."""
+    sensing = [s for s in a.sensors.values() if isinstance(s, InteractionForceSensor) and s.interaction]
+    if sensing:
+        def measured(t, q, tau_h):  # the largest of them (a cuff per segment)
+            forces = [s.interaction_force(t, a.backend) for s in sensing]
+            return max(forces, key=lambda f: f @ f)
+
+        a.force_source, a.force_measured = measured, True
+    elif isinstance(a.patient, EmbodiedPatient):
+        a.force_source, a.force_measured = (lambda t, q, tau_h: a.patient.interaction_force()), True
+    elif a.patient is not None and limit is not None:
+        estimate = HandForce(a.robot.model)
+        a.force_source = lambda t, q, tau_h: estimate(q, tau_h)
+    elif limit is not None:
+        at = ("safety", "interaction_force_n") if a.sc.safety.interaction_force_n is not None else ("patient",)
+        raise PluginSetupError(a.loaded.source, at, (),
+                               f"an interaction-force limit ({limit:g} N, from safety.interaction_force_n or "
+                               "patient.comfort) needs a source of the force: a force-torque sensor (sensors: {ft: "
+                               "{type: force-torque}}) or a simulated patient (patient.model); backend "
+                               f"'{a.sc.backend.type}' measures none")
 
 
 def _schedule(a: Assembly) -> Schedule:

@@ -90,6 +90,7 @@ class Backend(ABC):
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
     real_person: bool = False  # drives a real robot (or its stand-in over the link): a person in it is not simulated
+    ramp_in_after_clear: float = 0.0  # set by reset: the first session after an e-stop was cleared ramps in this long
 
     @abstractmethod
     def reset(self, q0: np.ndarray) -> None:
@@ -114,6 +115,17 @@ class Backend(ABC):
     def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Time series only the backend knows, name → (times [s], values), for the log; default none."""
         return {}
+
+    def engage_brakes(self) -> bool:
+        """Apply the robot's holding brakes (the torque has gone off: a stop of category 0 or 1); False where the
+        robot has none (the default)."""
+        return False
+
+    def latch_estop(self, reason: str) -> bool:
+        """Latch an e-stop at the robot: it holds across sessions until a person clears it
+        (:mod:`rehabkit.core.estop`), and the next session's reset is refused meanwhile. False where this backend
+        keeps no latch (the default)."""
+        return False
 
     def interventions(self) -> list:
         """Safety events the robot side took on its own (``SafetyEvent``s, e.g. a hold through a gap in the

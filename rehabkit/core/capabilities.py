@@ -147,7 +147,8 @@ class Cameras(Protocol):
 
 @runtime_checkable
 class Instruments(Protocol):
-    """Reads the simulated instruments sensors put in the scene (accelerometers, gyros)."""
+    """Reads the instruments sensors declare (accelerometers, gyros, force-torque sensors): simulated in its scene, or
+    read by the robot side and carried over the link."""
 
     def read_instrument(self, name: str) -> np.ndarray:
         """The current value of an instrument a sensor asked for."""
@@ -208,7 +209,7 @@ BACKEND_ABILITY: dict[type, str] = {
     SceneObjects: "has scene objects to move and locate",
     HeldObjects: "grasps and releases held objects",
     Cameras: "renders cameras",
-    Instruments: "reads simulated instruments",
+    Instruments: "reads instruments (simulated, or carried over a robot link)",
     BaseState: "reports a floating base's state",
     NamedJoints: "reads and sets joints by name",
     ExternalTorques: "applies a simulated person's torques",

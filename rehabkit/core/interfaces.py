@@ -15,7 +15,7 @@ import numpy as np
 from rehabkit.core.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
 from rehabkit.core.metric import Metric
 from rehabkit.core.patient_kind import EmbodiedPatient, Patient
-from rehabkit.core.sensing import Instrument, Sensor, SensorConfig
+from rehabkit.core.sensing import Instrument, InteractionForceSensor, Sensor, SensorConfig
 from rehabkit.models.robot_model import RobotModel
 from rehabkit.models.strict import StrictModel
 
@@ -308,6 +308,6 @@ __all__ = [  # the backend, sensor and patient kinds live in modules of their ow
     "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "Drawing", "EmbodiedPatient",
     "GeomVisual",
     "IKUnavailableError",
-    "Instrument", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest", "ReferenceSpace", "Robot", "Sensor",
-    "SensorConfig", "StrictModel", "Target", "Trajectory",
+    "Instrument", "InteractionForceSensor", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest",
+    "ReferenceSpace", "Robot", "Sensor", "SensorConfig", "StrictModel", "Target", "Trajectory",
 ]

@@ -9,6 +9,7 @@ behind one integer comparison.
 from __future__ import annotations
 
 import gc
+import math
 import time
 from dataclasses import dataclass
 
@@ -34,6 +35,7 @@ class LoopState:
     contact_steps: int = 0
     failed: bool = False  # the controller raised: the safety layer drives from then on
     stopped: bool = False  # ended for good: a stop event, a backend fault, or the safety stop has run its course
+    braked: bool = False  # the torque went off after a trip and the brakes (if any) were applied
     next_log: int | None = None  # the next step logged (None: from the start)
 
 
@@ -84,8 +86,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
     late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
     # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
     push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
-    tau_h, hand_force, goal_at, f_h = trace.tau_h, a.hand_force, ref.goal_at, trace.f_h
-    felt = a.patient.interaction_force if f_h is not None else None  # an embodied person's cuffs, measured
+    tau_h, force_at, goal_at, f_h = trace.tau_h, a.force_source, ref.goal_at, trace.f_h  # (f_h: when measured)
     draws = a.patient.drawing if a.patient is not None and type(a.patient).drawing is not Patient.drawing else None
     stop_after = a.sc.safety.stop_after_s
     bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
@@ -110,17 +111,18 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             try:
                 ttau[k] = compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
             except Exception as exc:  # a crashing controller must still leave the robot held
-                safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}")
+                safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}", qd)
                 compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
                 st.failed = True
                 ttau[k] = 0.0
             row = packed[k]
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
+            if force_at is not None:
+                force = force_at(t, q, tau_h[k] if person is not None else None)
                 if f_h is not None:
-                    f_h[k] = float(np.linalg.norm(felt()))
-                if hand_force is not None:
-                    safety.check_force(t, q, hand_force(q, tau_h[k]))
+                    f_h[k] = math.sqrt(force @ force)
+                safety.check_force(t, q, force, qd)
             tau = check(t, row)
             if cart:
                 tx[k] = ee(q[None])[0] if ee is not None else backend.ee_position()  # world; base frame at the end
@@ -134,7 +136,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                     push(tau_h[k])
                 step(sub)
             except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete
-                safety.trip(t, q, "backend", str(exc))
+                safety.trip(t, q, "backend", str(exc), qd)
                 k += 1
                 st.stopped = True
                 break
@@ -159,6 +161,9 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                 elif time.perf_counter() - t_loop > 1.0:
                     bar = _progress_bar(n)
                     bar.update(k + 1)
+            if safety.tripped_at is not None and not st.braked and safety.torque_off:
+                st.braked = True
+                safety.braked(t, backend.engage_brakes())
             if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
                 k += 1
                 st.stopped = True

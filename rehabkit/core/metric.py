@@ -115,6 +115,12 @@ CORE_METRICS: tuple[Metric, ...] = (
     Metric("contact_steps", "count", description="control steps with a robot collision"),
     Metric("safety_events", "count", description="safety trips"),
     Metric("torque_saturation_steps", "count", description="control steps with a torque clipped"),
+    Metric("stop_category", "count", description="the safety stop's category (IEC 60204-1: 0, 1, 2)"),
+    Metric("stop_time_s", "s", description="from the trip to standstill (every joint < 1°/s for 50 ms; NaN: not "
+           "at rest by the run's end)"),
+    Metric("stop_distance_deg", "deg", description="the largest joint travel from the trip to standstill"),
+    Metric("stop_distance_m", "m", description="the hand's path from the trip to standstill"),
+    Metric("stop_peak_speed_deg_s", "deg/s", description="the fastest joint speed after the trip"),
     Metric("sensor_overruns_*", "count", clock="wall", description="readings skipped while a sensor thread was busy"),
     Metric("*_ms", "ms", "wall", description="timings"),
 )

@@ -24,7 +24,7 @@ class Trace:
     x: np.ndarray | None = None  # end effector, robot base frame (Cartesian runs)
     x_ref: np.ndarray | None = None
     tau_h: np.ndarray | None = None  # torques a (simulated) person applied at the joints
-    f_h: np.ndarray | None = None  # interaction force measured in the scene [N] (an embodied person's cuffs)
+    f_h: np.ndarray | None = None  # interaction force measured [N] (a force-torque sensor, an embodied person's cuffs)
 
     def trimmed(self, n: int) -> Trace:
         return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]

@@ -13,11 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from rehabkit.core.assembly import Assembly
 from rehabkit.core.lifecycle import Contribution
 from rehabkit.core.metric import MetricCatalogue
 from rehabkit.core.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
 from rehabkit.core.record import RunRecord
+from rehabkit.core.stopping import stop_figures
 from rehabkit.core.version import __version__
 
 
@@ -75,7 +78,19 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
         "contact_steps": r.contact_steps, "safety_events": len(a.safety.events),
         "torque_saturation_steps": a.safety.saturated_steps,
     })
+    metrics.update(stop_metrics(a, trace))
     return metrics, per_joint
+
+
+def stop_metrics(a: Assembly, trace) -> dict[str, float]:
+    """What the safety stop took (the first trip): its category, the time to standstill, the travel meanwhile."""
+    if a.safety.tripped_at is None or not len(trace.t):
+        return {}
+    k0 = int(np.searchsorted(trace.t, a.safety.tripped_at - 1e-12))
+    hand = np.full((len(trace.t), 3), np.nan)
+    hand[k0:] = a.robot.fk_batch(trace.q[k0:])[:, :3, 3]  # (the stop's steps only)
+    figures = stop_figures(trace.t, trace.q, trace.qd, hand, a.safety.tripped_at, a.robot.model.revolute)
+    return {"stop_category": float(a.safety.category), **figures}
 
 
 def plugin_versions(a: Assembly) -> dict[str, Any]:

@@ -27,7 +27,7 @@ from rehabkit.core.assembly import (
     start_posture,
 )
 from rehabkit.core.capabilities import NamedJoints, PassiveJoints
-from rehabkit.core.interfaces import BackendFaultError, EmbodiedPatient, Plan, PlanningError, Target
+from rehabkit.core.interfaces import BackendFaultError, Plan, PlanningError, Target
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.lifecycle import Extensions, default_extensions
 from rehabkit.core.log import encode_images
@@ -140,13 +140,15 @@ class Runner:
         trace = Trace(np.arange(n) * a.schedule.control_dt, packed[:, :dof], packed[:, dof : 2 * dof],
                       packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)),
                       tau_h=np.zeros((n, dof)) if a.patient is not None else None,
-                      f_h=np.zeros(n) if isinstance(a.patient, EmbodiedPatient) else None)
+                      f_h=np.zeros(n) if a.force_measured else None)
         self.view = RunView(a, self.spawn)
         self.q0 = q0 = start_posture(a)
         try:
             a.backend.reset(q0)
         except BackendFaultError as exc:
             raise SetupError(f"backend '{sc.backend.type}': {exc}") from exc
+        if a.backend.ramp_in_after_clear:  # the first session after an e-stop was cleared eases in
+            a.safety.require_ramp_in(a.backend.ramp_in_after_clear)
         if isinstance(a.robot, PassiveJoints) and isinstance(a.backend, NamedJoints):
             # parallel mechanisms: the passive joints assembled too, where the backend sets joints by name
             a.backend.set_joints(a.robot.passive_state(q0))

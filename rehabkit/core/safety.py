@@ -5,9 +5,11 @@ against the effective limits (the robot's, narrowed by the patient's profile and
 the envelope's per-joint limits). A non-finite value, a joint outside its range or
 faster than its speed limit, the hand outside the keep-in box or an interaction
 force above its limit trips a latched stop: from then on the controller is
-ignored and the robot is held where it was (``hold``: PD to the trip posture
-with gravity compensation, within effort limits) or left limp
-(``zero-torque``), as the robot model says. Torques beyond the effort limit
+ignored and the robot stopped in the category the envelope sets for the rule
+(:mod:`rehabkit.core.stopping`: 0 torque off; 1 and 2 a controlled stop with
+bounded deceleration, then torque off or the posture held, PD with gravity
+compensation within effort limits); by default 2, or 0 for a robot whose
+``safe_stop`` is ``zero-torque``. Torques beyond the effort limit
 are clipped (each episode an intervention) or trip the stop if the scenario asks.
 A ramp-in blends from holding the start posture to the controller's torque, a
 ramp-out back to holding the posture where it began.
@@ -26,6 +28,7 @@ import numpy as np
 
 from rehabkit.core.limits import LimitBreach
 from rehabkit.core.scenario.safety import SafetyConfig
+from rehabkit.core.stopping import STOP_RULES, WORDS, ControlledStop
 from rehabkit.models.robot_model import RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
@@ -71,7 +74,15 @@ class SafetyLayer:
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
         self.config = config
-        self.mode = robot.safe_stop
+        default = 2 if robot.safe_stop == "hold" else 0
+        self._category = {r: config.stop_category.get(r, config.stop_category.get("default", default))
+                          for r in STOP_RULES}
+        a = config.stop_decel_deg_s2
+        self._decel = None if a is None else np.where(robot.revolute, np.radians(a), a / 1e3)
+        self.category: int | None = None  # the stop under way's
+        self._stop: ControlledStop | None = None
+        self._robot = robot
+        self._limp = False
         self.events: list[SafetyEvent] = []  # trips
         self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
         self.tripped_at: float | None = None
@@ -133,8 +144,8 @@ class SafetyLayer:
                 n = self._n
                 self._plain = (self._box is None and self._start_q is not None and self._ramp_from is None
                                and t >= self._ramp_in)
-                if self._box is not None and self._outside_box(t, row[:n]):
-                    tau[:] = self._stop_torque(row[:n], row[n : 2 * n])
+                if self._box is not None and self._outside_box(t, row[:n], row[n : 2 * n]):
+                    tau[:] = self._stop_torque(t, row[:n], row[n : 2 * n])
                     return tau
                 if self._start_q is None:
                     self._start_q = row[:n].copy()
@@ -158,18 +169,18 @@ class SafetyLayer:
                     self.saturated_steps += 1
                     self._clipped(t, tau, over)
                     np.clip(tau, -self.effort, self.effort, out=tau)
-                    if self._box is not None and self._outside_box(t, q):
-                        tau[:] = self._stop_torque(q, qd)
+                    if self._box is not None and self._outside_box(t, q, qd):
+                        tau[:] = self._stop_torque(t, q, qd)
                     return tau
                 j = int(np.argmax(over))
                 self._breach(t, q, LimitBreach("torque", self.names[j], float(tau[j]), float(self.effort[j])),
-                             "commanded")
+                             "commanded", qd)
             else:
                 self._diagnose(t, q, qd, tau)
-        tau[:] = self._stop_torque(q, qd)
+        tau[:] = self._stop_torque(t, q, qd)
         return tau
 
-    def check_force(self, t: float, q: np.ndarray, force: np.ndarray) -> None:
+    def check_force(self, t: float, q: np.ndarray, force: np.ndarray, qd: np.ndarray | None = None) -> None:
         """Trip if the interaction force at the hand (world frame [N]) is above the envelope's limit."""
         limit = self.config.interaction_force_n
         if limit is None or self.tripped_at is not None:
@@ -177,11 +188,33 @@ class SafetyLayer:
         magnitude = float(np.linalg.norm(force))
         if not magnitude <= limit:  # NaN trips too
             self._trip(t, q, "interaction-force", None, magnitude, limit, "interaction force above its limit",
-                       {"force_n": np.round(force, 3).tolist()})
+                       {"force_n": np.round(force, 3).tolist()}, qd=qd)
 
-    def trip(self, t: float, q: np.ndarray, rule: str, message: str) -> None:
-        """Trip from outside (a rejected plan, an external e-stop)."""
-        self._trip(t, q, rule, None, None, None, message)
+    def trip(self, t: float, q: np.ndarray, rule: str, message: str, qd: np.ndarray | None = None) -> None:
+        """Trip from outside (a rejected plan, an external e-stop); ``qd``: the speed the controlled stop
+        starts from (none: from rest)."""
+        self._trip(t, q, rule, None, None, None, message, qd=qd)
+
+    @property
+    def categories(self) -> dict[str, int]:
+        """The stop category of each rule."""
+        return dict(self._category)
+
+    @property
+    def torque_off(self) -> bool:
+        """Tripped, and the torque has gone off (category 0, or 1 once stopped): the brakes are due."""
+        return self.tripped_at is not None and (self.category == 0 or self._limp)
+
+    def braked(self, t: float, engaged: bool) -> None:
+        """Record that the torque went off, and whether brakes hold the robot."""
+        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: torque off; " + (
+            "holding brakes engaged" if engaged else "no brakes: the robot is free to move (gravity, the person)"),
+            {"engaged": engaged}))
+
+    def require_ramp_in(self, seconds: float) -> None:
+        """Ramp in at least this long (the first session after an e-stop was cleared)."""
+        if seconds > self._ramp_in:
+            self._ramp_in, self._plain = seconds, False
 
     def begin_ramp_out(self, t: float, q: np.ndarray) -> None:
         """Start the soft stop: over ``ramp_out_s`` the torque blends into holding posture ``q``."""
@@ -219,7 +252,7 @@ class SafetyLayer:
         below = bool(points[k, a] < lo[a])
         return k, a, "min" if below else "max", float(lo[a] if below else hi[a])
 
-    def _outside_box(self, t: float, q: np.ndarray) -> bool:
+    def _outside_box(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
         x = self._hand(q)
         lo, hi = self._box
         if (x >= lo).all() and (x <= hi).all():  # the every-step case, kept cheap
@@ -229,7 +262,7 @@ class SafetyLayer:
             return False
         _, a, side, bound = found
         self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
-                   {"axis": AXES[a], "hand_m": np.round(x, 5).tolist()})
+                   {"axis": AXES[a], "hand_m": np.round(x, 5).tolist()}, qd=qd)
         return True
 
     def _clipped(self, t: float, tau: np.ndarray, over: np.ndarray) -> None:
@@ -254,36 +287,40 @@ class SafetyLayer:
             bad = ~np.isfinite(arr)
             if bad.any():
                 j = int(np.argmax(bad))
-                self._trip(t, q, "non-finite", j, None, None, f"non-finite {name} ({arr[j]})")
+                self._trip(t, q, "non-finite", j, None, None, f"non-finite {name} ({arr[j]})", qd=qd)
                 return
         for j in range(len(q)):
             if q[j] < self.lo[j] or q[j] > self.hi[j]:
                 limit = self.lo[j] if q[j] < self.lo[j] else self.hi[j]
                 self._breach(t, q, LimitBreach("position", self.names[j], float(q[j]), float(limit),
-                                               revolute=bool(self._revolute[j])), "measured")
+                                               revolute=bool(self._revolute[j])), "measured", qd)
                 return
         j = int(np.argmax(np.abs(qd) / self.vmax))
         self._breach(t, q, LimitBreach("velocity", self.names[j], float(qd[j]), float(self.vmax[j]),
-                                       revolute=bool(self._revolute[j])), "measured")
+                                       revolute=bool(self._revolute[j])), "measured", qd)
 
-    def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str) -> None:
+    def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str, qd: np.ndarray) -> None:
         """A limit rule's trip: the event's fields are the breach's, its message the breach's one wording."""
         self._trip(t, q, breach.quantity, breach.joint, breach.value, breach.limit, f"{what}: {breach.describe()}",
-                   described=True)
+                   described=True, qd=qd)
 
-    def _trip(self, t, q, rule, joint, value, limit, message, data=None, described=False) -> None:
+    def _trip(self, t, q, rule, joint, value, limit, message, data=None, described=False, qd=None) -> None:
         name = self.names[joint] if isinstance(joint, int) else joint
         subject = f"{name} = " if name else ""
         digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
         text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
                                             if value is not None and not described else "")
-        text += f"; robot {'held' if self.mode == 'hold' else 'set to zero torque'}"
-        event = SafetyEvent(t, rule, name, value, limit, text, data or {})
+        category = self._category.get(rule, self._category["default"])
+        text += f"; {WORDS[category]}"
+        event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category})
         self.events.append(event)
         self._note(event)
         self.tripped_at = t
         hold = np.where(np.isfinite(q), q, 0.0)
         self._hold_q = np.clip(hold, self.lo, self.hi)
+        self.category = category
+        if category:
+            self._stop = ControlledStop.start(category, t, hold, qd, self._decel, self.effort, self._robot, self._dt)
 
     def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
@@ -291,9 +328,24 @@ class SafetyLayer:
             tau += self._gravity(q)
         return np.clip(tau, -self.effort, self.effort)
 
-    def _stop_torque(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        if self.mode == "zero-torque":
+    def _stop_torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        if self.category == 0 or self._limp:
             return self._zero.copy()
         q = np.where(np.isfinite(q), q, self._hold_q)
         qd = np.where(np.isfinite(qd), qd, 0.0)
+        stop = self._stop
+        if stop is not None:
+            if not stop.over(t):  # on the deceleration ramp
+                q_r, qd_r = stop.reference(t)
+                tau = self.config.hold_kp * (q_r - q) + self.config.hold_kd * (qd_r - qd)
+                if stop.feedforward is not None:
+                    tau += stop.feedforward
+                if self._gravity is not None:
+                    tau += self._gravity(q)
+                return np.clip(tau, -self.effort, self.effort)
+            self._stop = None
+            if stop.category == 1:
+                self._limp = True
+                return self._zero.copy()
+            self._hold_q = np.clip(stop.end, self.lo, self.hi)
         return self._hold_torque(self._hold_q, q, qd)

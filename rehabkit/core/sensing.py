@@ -19,15 +19,31 @@ class Instrument:
 
     Attributes:
         name: Unique name (the backend reads it back by this name).
-        kind: ``accelerometer`` (specific force, site frame [m/s²]) or ``gyro`` (angular velocity [rad/s]).
+        kind: ``accelerometer`` (specific force, site frame [m/s²]), ``gyro`` (angular velocity [rad/s]),
+            ``force`` [N] or ``torque`` [N·m] (what the body beyond the sensor exerts on the robot, site frame).
         body: Body it is fixed to.
         position: Where on that body (body frame) [m]; axes aligned with the body's.
+        mount: ``force``/``torque``: the body beyond the sensor (a handle, a cuff), made at ``position`` on ``body``
+            and weighing 1 g; what pushes on it (a strap, a test rig's load) is what the sensor reads. Instruments
+            naming the same mount share it.
+        bias: A simulated sensor's constant offset, added to every reading (a real one brings its own).
+        noise: A simulated sensor's white noise, standard deviation per axis.
     """
 
     name: str
-    kind: Literal["accelerometer", "gyro"]
+    kind: Literal["accelerometer", "gyro", "force", "torque"]
     body: str
     position: tuple[float, float, float]
+    mount: str | None = None
+    bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    noise: float = 0.0
+
+    @property
+    def simulated_error(self) -> bool:
+        return self.noise > 0 or any(self.bias)
+
+
+INSTRUMENT_DIM = 3  # every instrument reads a 3-vector
 
 
 class SensorConfig(StrictModel):
@@ -63,3 +79,15 @@ class Sensor(ABC):
     def instruments(self) -> list[Instrument]:
         """Sensing elements to put in the simulated scene (read with ``backend.read_instrument``)."""
         return []
+
+
+class InteractionForceSensor(Sensor):
+    """A sensor of the force between the person and the robot (a force-torque sensor at a handle or cuff). When
+    ``interaction`` is set, the runner reads it every control step and the safety envelope's interaction-force limit
+    checks it, on every backend that reads its instruments (a simulation, or a robot link)."""
+
+    interaction: bool = True
+
+    @abstractmethod
+    def interaction_force(self, t: float, backend: Any) -> np.ndarray:
+        """The force the person (or a rig) puts on the robot now [N], 3 values; called every control step."""

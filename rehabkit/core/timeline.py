@@ -102,7 +102,7 @@ class Timeline:
                 return -1
             self._read_sensors(k, t, q, qd)
         except Exception as exc:
-            a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}")
+            a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
         nxt = self.stop_at
         for d in self._sensor_due:
             if d < nxt:
@@ -170,6 +170,12 @@ class Timeline:
             self.stop_at = min(self.stop_at, k + self._ramp_steps)
             if self._ramp_steps:
                 self._ramp_out_at = k
+        elif ev.action == "estop":  # pressed: stopped in the e-stop rule's category, latched at the robot
+            a = self.setup
+            why = f"e-stop pressed (event {i}, {trigger})"
+            a.safety.trip(t, q, "e-stop", why, qd)
+            if not a.backend.latch_estop(why) and self.log:
+                self.log.event(t, f"backend '{a.sc.backend.type}' keeps no e-stop latch", level="WARN")
         elif ev.action == "move":
             self.setup.backend.move_object(ev.object, np.asarray(ev.position, float))
         elif ev.moved is not None:  # a sensed target moved: reach it (the sequence) again

@@ -29,10 +29,13 @@ import time
 
 import numpy as np
 
+from rehabkit.core.capabilities import Instruments
+from rehabkit.core.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.hookspecs import hookimpl
 from rehabkit.core.interfaces import Backend, Context
 from rehabkit.core.limits import first_breach
 from rehabkit.core.safety import SafetyEvent
+from rehabkit.core.sensing import INSTRUMENT_DIM
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
 from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkLostError
@@ -41,12 +44,15 @@ from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, not
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 from rehabkit.hardware.protocol import (
     CLOCK,
+    CMD_BRAKE,
     CMD_ESTOP,
+    CMD_LATCH,
     CMD_RESET,
     COMMAND,
     ESTOPPED,
     HOLDING,
     LIMIT,
+    RAMP_IN,
     STATE,
     WATCHDOG,
     Receiver,
@@ -57,7 +63,7 @@ from rehabkit.hardware.protocol import (
 LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
 
 
-class HardwareBackend(MirroredScene, Backend):
+class HardwareBackend(MirroredScene, Backend, Instruments):
     """The robot over UDP (a bridge in front of its drives, or of a MuJoCo plant); the scene mirrored on the host
     from the measured joints (drawn, scripted objects, cameras rendered in a process of their own)."""
 
@@ -75,11 +81,18 @@ class HardwareBackend(MirroredScene, Backend):
         self.clock, self._clock_seq, self._answered = 0, 0, -1.0
         robot = context.robot
         self.n = robot.model.dof
+        self.robot_type = (context.robot_spec or {}).get("type", robot.model.name)
+        self.brakes = robot.model.brakes is not None
+        self._flags = 0  # sent with every command (the brakes, once applied)
         self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
         self.revolute = robot.model.revolute
         self.mirror = SceneMirror(robot.model, context.world)
         self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
         self.measured = np.zeros(self.mirror.measured_count)
+        # the instruments' readings each state carries (3 values each, in the run's order), read by name
+        self._instrument_at = {i.name: slice(INSTRUMENT_DIM * k, INSTRUMENT_DIM * (k + 1))
+                               for k, i in enumerate(context.instruments)}
+        self.instruments = np.zeros(INSTRUMENT_DIM * len(context.instruments))
         self._posed = False
         self.process = None
         port = config.port
@@ -88,7 +101,8 @@ class HardwareBackend(MirroredScene, Backend):
         self.addr = (config.host, port)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
-        self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured), max_age=config.max_age_s)
+        self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured),
+                           instruments=len(self.instruments), max_age=config.max_age_s)
         self.seq, self.tau = 0, np.zeros(self.n)
         self.q, self.qd = np.zeros(self.n), np.zeros(self.n)
         self.applied = np.zeros(self.n)
@@ -147,7 +161,7 @@ class HardwareBackend(MirroredScene, Backend):
                 continue
             self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
             self.applied = msg.values[2].copy()  # the torque the robot side applied (after its own clipping)
-            self.measured, self._posed = msg.measured, False
+            self.measured, self.instruments, self._posed = msg.measured, msg.instruments, False
             self.status, self.last_state, self._got = msg.status, now, True
             if self._started:
                 note_stale(self, msg, now - self.t0)
@@ -169,6 +183,10 @@ class HardwareBackend(MirroredScene, Backend):
         breach = first_breach(self.limits, self.joint_names, self.q, self.qd, tol=0.0, revolute=self.revolute)
         return f"its own limit check: {breach.describe()}" if breach else "its own limit check"
 
+    def read_instrument(self, name: str) -> np.ndarray:
+        """An instrument's reading in the newest state (read by the robot side at the tick that state closes)."""
+        return self.instruments[self._instrument_at[name]].copy()
+
     def interventions(self) -> list[SafetyEvent]:
         """The bridge's holds through gaps in the commands, as safety events."""
         return stale_interventions(self)
@@ -187,6 +205,8 @@ class HardwareBackend(MirroredScene, Backend):
                 self._receive()
             else:
                 self._tick_lockstep(0.2)
+            if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
+                raise BridgeHoldError(self._latched_message())
             if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
         else:
@@ -194,8 +214,10 @@ class HardwareBackend(MirroredScene, Backend):
                                 + (" (is `rehabkit bridge` running there, for this robot and robot_id?)"
                                    if self.realtime else " (was it started with --lockstep?)"))
         self.t0 = self.deadline = self.last_state = self._now()
+        self.ramp_in_after_clear = RAMP_IN_AFTER_CLEAR_S if self.status & RAMP_IN else 0.0
         self._started = False
         self.held_at, self._fault, self._estop_sent = None, None, False  # a reset re-enables the bridge
+        self._flags = 0
         self.stale_holds, self._held, self._stale_open, self._state_t = [], 0, False, 0.0
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
@@ -204,12 +226,17 @@ class HardwareBackend(MirroredScene, Backend):
     def command(self, tau: np.ndarray) -> None:
         self.tau = np.array(tau, float)
 
+    def engage_brakes(self) -> bool:
+        """Tell the bridge to apply the robot's brakes (with every command from now on)."""
+        self._flags |= CMD_BRAKE
+        return self.brakes
+
     def step(self, n: int = 1) -> None:
         if not self._started:  # the timeline starts with the loop, not at the reset (setup work comes between)
             self._started = True
             self.deadline = self.last_state = self.t0 = self._now()
         for _ in range(n):
-            self._send(self.tau)
+            self._send(self.tau, self._flags)
             self.deadline += self.timestep
             self._got = False
             late = self._pace()
@@ -248,9 +275,22 @@ class HardwareBackend(MirroredScene, Backend):
         return 0.0
 
     def estop(self) -> None:
-        """Tell the bridge to hold the robot now."""
+        """Tell the bridge to hold the robot now (and latch its e-stop)."""
         self._estop_sent = True
         self._send(np.zeros(self.n), CMD_ESTOP)
+
+    def latch_estop(self, reason: str) -> bool:
+        """Latch the e-stop at the robot; this session's stop is the safety layer's, in its category."""
+        self._send(self.tau, CMD_LATCH)
+        return True
+
+    def _latched_message(self) -> str:
+        where = f"udp://{self.addr[0]}:{self.addr[1]}"
+        name = f"{self.robot_type}-{self.config.robot_id}"
+        return (f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it "
+                f"with `rehabkit estop clear {name} --by NAME` on the bridge's machine (a bridge this run starts "
+                f"reads it from there), or `rehabkit estop clear --bridge {self.addr[0]}:{self.addr[1]} --robot-id "
+                f"{self.config.robot_id} --by NAME` while it runs")
 
     @property
     def holding(self) -> bool:

@@ -10,7 +10,12 @@ stall, lost packets) it holds the posture it is at (PD to it plus gravity; statu
 ``STALE``) until the next command, which resumes torque control at once. Ticks, not wall
 time, count here, so a bridge catching up after a stall of its own holds too. If no valid
 command arrives for ``watchdog_s`` while running, or an e-stop command comes, the hold is
-latched (status ``HOLDING``) and only a reset from the host re-enables the robot. Given the
+latched (status ``HOLDING``) and only a reset from the host re-enables the robot. An e-stop
+(a host's, or the button at the robot: :meth:`Bridge.press_estop`, or the bridge's keypad) is
+latched further, in the bridge's latch file (:mod:`rehabkit.core.estop`): across sessions and
+restarts, resets are refused (status ``ESTOPPED``) until a person clears it (``CMD_CLEAR`` from
+``rehabkit estop clear --bridge``, the keypad, or the latch file cleared while the bridge is down);
+the session after that tells the host to ramp in (status ``RAMP_IN``). Given the
 run's joint limits, the bridge is also a backstop to the host's safety layer: a joint beyond
 its range or speed by more than a margin (wider than the host's, which acts first) latches
 the hold too (status ``LIMIT``), whatever the host is doing. Real drives plug in as another
@@ -28,17 +33,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rehabkit.core.estop import EStopLatch
 from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.plant import Plant
 from rehabkit.hardware.protocol import (
     CLOCK,
+    CMD_BRAKE,
+    CMD_CLEAR,
     CMD_ESTOP,
+    CMD_LATCH,
     CMD_RESET,
     COMMAND,
     ENABLED,
     ESTOPPED,
     HOLDING,
     LIMIT,
+    RAMP_IN,
     STALE,
     STATE,
     WATCHDOG,
@@ -84,8 +94,10 @@ class Bridge:
     the commands and (given ``limits``) its own limit check."""
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
-                 watchdog_s: float = 0.005, stale_s: float = 0.010, limits: BridgeLimits | None = None):
+                 watchdog_s: float = 0.005, stale_s: float = 0.010, limits: BridgeLimits | None = None,
+                 latch: EStopLatch | None = None):
         self.plant, self.robot_id, self.watchdog_s, self.limits = plant, robot_id, watchdog_s, limits
+        self.latch = latch
         self.stale_ticks = max(1, round(stale_s / plant.timestep))
         self.since_command = 0  # plant ticks since the newest torque command
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
@@ -95,7 +107,7 @@ class Bridge:
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]
         # a host's reset opens its session: a new run (a new host process) numbers its commands from 1 again
-        self.rx = Receiver(COMMAND, robot_id, plant.joints, restart=CMD_RESET)
+        self.rx = Receiver(COMMAND, robot_id, plant.joints, restart=CMD_RESET | CMD_CLEAR)  # (a new sender's)
         self.peer = None
         self.tau = np.zeros(plant.joints)
         self.status = 0
@@ -107,6 +119,11 @@ class Bridge:
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
         self._state = np.zeros((3, plant.joints))  # the STATE message's rows, reused
+        self._ramp_next = False  # the latch was cleared: the next session ramps in
+        self.braked = False
+        if latch is not None and latch.latched() is not None:  # latched before this bridge started
+            self.status = HOLDING | ESTOPPED
+            self.hold_q = plant.read()[0]
 
     def _hold(self, now: float, why: str, bit: int) -> None:
         if not self.status & HOLDING:
@@ -115,6 +132,24 @@ class Bridge:
                 self.hold_q = self.plant.read()[0]
             self.waiting = False
         self.status = (self.status | HOLDING | bit) & ~(ENABLED | STALE)
+
+    def _press(self, reason: str, by: str) -> None:
+        if self.latch is not None:
+            self.latch.press(reason, by)
+
+    def press_estop(self, now: float, by: str = "the e-stop button at the robot") -> None:
+        """The e-stop at the robot: held at once, latched until cleared."""
+        self._press(by, "robot")
+        self._hold(now, "e-stop", ESTOPPED)
+
+    def clear_estop(self, by: str) -> None:
+        """A person cleared the e-stop: the robot stays held until the host's next reset, which then ramps in."""
+        if self.latch is not None:
+            self.latch.clear(by)
+        if self.status & ESTOPPED:
+            self.status = (self.status & ~ESTOPPED) | HOLDING
+            self.status &= ~ENABLED
+            self._ramp_next = True
 
     def _arrived(self) -> list[tuple[bytes, tuple]]:
         out = []
@@ -130,14 +165,28 @@ class Bridge:
             if msg is None:
                 continue
             self.peer, self.echo = addr, msg.sent_at
+            if msg.status & CMD_CLEAR:
+                self.clear_estop(f"host command from {addr[0]}")
+                continue
             if msg.status & CMD_RESET:  # also the way back from a hold: held at q0 until the first command
+                if self.status & ESTOPPED:  # latched: no session starts, the robot stays held where it is
+                    continue
                 self.plant.reset(msg.values)
                 self.tau[:] = 0.0
-                self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED, np.inf
-                self.waiting, self.since_command, self.held_ticks = True, 0, 0
+                ramp = self._ramp_next or (self.latch is not None and self.latch.take_ramp_in())
+                self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED | (RAMP_IN if ramp else 0), \
+                    np.inf
+                self.waiting, self.since_command, self.held_ticks, self._ramp_next = True, 0, 0, False
+                self.braked = False
                 continue
             self.last_valid = now
+            if msg.status & CMD_BRAKE and not self.braked:
+                self.braked = self.plant.brake()
+            if msg.status & CMD_LATCH:  # the host's e-stop: it stops the robot now, the latch keeps it stopped
+                self._press("e-stop at the host (its safety layer stops the robot)", "host")
+                self.status |= ESTOPPED
             if msg.status & CMD_ESTOP:
+                self._press("e-stop command from the host", "host")
                 self._hold(now, "e-stop", ESTOPPED)
             elif self.status & ENABLED:
                 if self.waiting or self.status & STALE:  # the host's torques take over (again) from the hold
@@ -179,7 +228,8 @@ class Bridge:
             state[0], state[1], state[2] = q, qd, tau
             self.sock.sendto(encode(STATE, self.robot_id, self.seq, state, sent, echo=self.echo,
                                     status=self.status, held=self.held_ticks,
-                                    measured=self.plant.read_measured()), self.peer)
+                                    measured=self.plant.read_measured(),
+                                    instruments=self.plant.read_instruments()), self.peer)
 
     def serve(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given

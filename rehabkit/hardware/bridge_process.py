@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import tempfile
+from dataclasses import asdict
 
 from rehabkit.core.interfaces import Context
 
@@ -24,7 +25,12 @@ def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
            "--effort", json.dumps(context.robot.model.limits.effort.tolist()),
            # and checks the run's ranges and speeds on its own, a margin wider than the host's safety layer
            "--limits", json.dumps({k: getattr(context.robot.model.limits, k).tolist()
-                                   for k in ("lower", "upper", "velocity")})]
+                                   for k in ("lower", "upper", "velocity")}),
+           # the run's instruments (a force-torque sensor's, with a simulated sensor's errors), read by the plant and
+           # sent with each state, and a test rig's loads on the plant
+           "--instruments", json.dumps([asdict(i) for i in context.instruments]),
+           "--loads", json.dumps([x.model_dump(mode="json") for x in (context.world.loads if context.world else [])]),
+           "--seed", str(context.seed or 0)]
     # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
     log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)

@@ -4,14 +4,18 @@ MuJoCo model standing in for them (tests, hardware-in-the-loop rehearsal)."""
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
 
-from rehabkit.core.backends.scene import build_scene
+from rehabkit.core.backends.loads import LoadApplier
+from rehabkit.core.backends.scene import InstrumentErrors, add_instruments, build_scene, engage_brakes
 from rehabkit.core.backends.scene_view import measured_joints
 from rehabkit.core.capabilities import PassiveJoints
+from rehabkit.core.scenario.loads import Load
 from rehabkit.core.scenario.models import World
+from rehabkit.core.sensing import INSTRUMENT_DIM, Instrument
 
 
 class Plant(ABC):
@@ -33,6 +37,15 @@ class Plant(ABC):
         """Positions of measured-only joints (passive, with an encoder), in the robot's order; default none."""
         return np.zeros(0)
 
+    def read_instruments(self) -> np.ndarray:
+        """The instruments' readings (force-torque sensors, accelerometers: 3 values each), in the order the host's
+        run declares them; default none."""
+        return np.zeros(0)
+
+    def brake(self) -> bool:
+        """Apply the holding brakes; False without any (the default)."""
+        return False
+
     @abstractmethod
     def apply(self, tau: np.ndarray) -> None:
         """Joint torques until the next call."""
@@ -47,20 +60,37 @@ class Plant(ABC):
 
 
 class MujocoPlant(Plant):
-    """A robot's MuJoCo model as the plant (the robot alone on the floor)."""
+    """A robot's MuJoCo model as the plant (the robot alone on the floor), with the run's instruments (and their
+    simulated errors) and a test rig's loads."""
 
-    def __init__(self, robot, timestep: float = 0.001):
+    def __init__(self, robot, timestep: float = 0.001, instruments: Sequence[Instrument] = (),
+                 loads: Sequence[Load] = (), seed: int = 0):
         self.robot, self.timestep = robot, timestep
-        self.model = build_scene(robot.model, World(), timestep).compile()
+        spec = build_scene(robot.model, World(), timestep)
+        add_instruments(spec, instruments)
+        self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
+        self.loads = LoadApplier(self.model, loads)
+        self._errors = InstrumentErrors(instruments, seed)
+        self._readings = [(i.name, slice(int(self.model.sensor(i.name).adr[0]),
+                                         int(self.model.sensor(i.name).adr[0]) + INSTRUMENT_DIM)) for i in instruments]
+        self._values = np.zeros(INSTRUMENT_DIM * len(instruments))
         ids = [self.model.joint(n).id for n in robot.model.joint_names]
         self._q = np.array([self.model.jnt_qposadr[j] for j in ids])
         self._v = np.array([self.model.jnt_dofadr[j] for j in ids])
         self.joints, self.effort = len(ids), robot.model.limits.effort
         self._m = measured_joints(self.model, robot.model)
+        self._friction = self.model.dof_frictionloss[self._v].copy()
+
+    def brake(self):
+        if self.robot.model.brakes is None:
+            return False
+        engage_brakes(self.model, self._v, self._friction + self.robot.model.brakes)
+        return True
 
     def reset(self, q0):
         mujoco.mj_resetData(self.model, self.data)
+        self.model.dof_frictionloss[self._v] = self._friction
         self.data.qpos[self._q] = q0
         if isinstance(self.robot, PassiveJoints):  # a parallel mechanism: its passive joints close the loops
             for name, value in self.robot.passive_state(q0).items():
@@ -75,10 +105,18 @@ class MujocoPlant(Plant):
     def read_measured(self):
         return self.data.qpos[self._m]
 
+    def read_instruments(self):
+        out, data = self._values, self.data.sensordata
+        for k, (name, at) in enumerate(self._readings):
+            out[INSTRUMENT_DIM * k : INSTRUMENT_DIM * (k + 1)] = self._errors.apply(name, data[at].copy())
+        return out
+
     def apply(self, tau):
         self.data.qfrc_applied[self._v] = tau
 
     def advance(self):
+        if self.loads:
+            self.loads.apply(self.data, self.data.time)
         mujoco.mj_step(self.model, self.data)
 
     def gravity(self, q):

@@ -5,7 +5,10 @@ One datagram is one message, little-endian::
     header  magic 'RK' (2s) · version (B) · kind (B) · robot id (I) · sequence (I)
             · sent at (d, sender's monotonic clock [s]) · echo (d, the peer's last 'sent at' seen)
             · joint count n (H) · measured-only joint count m (H) · status bits (H) · held ticks (H)
-    body    STATE:   q, q̇, τ (3 × n doubles), then the m measured-only joints' positions
+            · instrument values k (H)
+    body    STATE:   q, q̇, τ (3 × n doubles), then the m measured-only joints' positions, then the k values of
+                     the robot's instruments (force-torque sensors, accelerometers: 3 each, in the order the
+                     run's sensors declare them, read by the plant at the tick that state closes)
             COMMAND: τ (n doubles; m = 0)
             CLOCK:   nothing (n = m = 0): in lock-step, the host's "advance to 'sent at'" and the bridge's
                      "done"; never applied, never dropped by a link impairment relay (it is the clock, not data)
@@ -35,9 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 4  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK
+VERSION = 5  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
+# 5: instrument values in STATE
 STATE, COMMAND, CLOCK = 1, 2, 3
-HEADER = struct.Struct("<2sBBIIddHHHH")
+HEADER = struct.Struct("<2sBBIIddHHHHH")
 CRC = struct.Struct("<I")
 
 # status bits (bridge → host)
@@ -46,8 +50,13 @@ ENABLED, HOLDING, ESTOPPED, WATCHDOG = 1, 2, 4, 8
 STALE = 16
 # the bridge's own limit check tripped (a joint beyond its range or speed by more than the bridge's margin)
 LIMIT = 32
+# the first session after a latched e-stop was cleared: the host must ramp in
+RAMP_IN = 64
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
+CMD_CLEAR = 8  # clear a latched e-stop (a person's deliberate act at the host: `rehabkit estop clear --bridge`)
+CMD_BRAKE = 32  # apply the holding brakes (the host's safety stop has turned the torque off)
+CMD_LATCH = 16  # latch the e-stop for the sessions to come; this session's stop is the host's (its stop category)
 
 
 @dataclass
@@ -63,6 +72,7 @@ class Message:
     held: int  # STATE: ticks held for want of a command since the reset, mod 2**16
     values: np.ndarray  # STATE: (3, n) rows q, qd, tau; COMMAND: (n,) torques
     measured: np.ndarray = field(default_factory=lambda: np.zeros(0))  # STATE: measured-only joint positions
+    instruments: np.ndarray = field(default_factory=lambda: np.zeros(0))  # STATE: instrument values
 
     @property
     def n(self) -> int:
@@ -70,20 +80,23 @@ class Message:
 
 
 def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
-           status: int = 0, held: int = 0, measured: np.ndarray | None = None) -> bytes:
-    """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND; ``measured``: STATE only)."""
+           status: int = 0, held: int = 0, measured: np.ndarray | None = None,
+           instruments: np.ndarray | None = None) -> bytes:
+    """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND; ``measured``, ``instruments``: STATE only)."""
     values = np.ascontiguousarray(values, dtype="<f8")
     extra = np.ascontiguousarray(np.zeros(0) if measured is None else measured, dtype="<f8").ravel()
+    readings = np.ascontiguousarray(np.zeros(0) if instruments is None else instruments, dtype="<f8").ravel()
     n = values.shape[-1]
     if kind == CLOCK:
         values = values.reshape(0)
     elif kind == STATE and values.shape != (3, n) or kind == COMMAND and values.shape != (n,):
         raise ValueError(f"kind {kind} takes {'(3, n)' if kind == STATE else '(n,)'} values, got {values.shape}")
-    if kind == COMMAND and len(extra):
-        raise ValueError("commands carry no measured-only joints")
+    if kind == COMMAND and (len(extra) or len(readings)):
+        raise ValueError("commands carry no measured-only joints or instruments")
     head = HEADER.pack(MAGIC, VERSION, kind, robot, seq & 0xFFFFFFFF,
-                       time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, held & 0xFFFF)
-    body = head + values.tobytes() + extra.tobytes()
+                       time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, held & 0xFFFF,
+                       len(readings))
+    body = head + values.tobytes() + extra.tobytes() + readings.tobytes()
     return body + CRC.pack(zlib.crc32(body))
 
 
@@ -110,6 +123,7 @@ class Receiver:
     robot: int
     joints: int
     measured: int = 0  # measured-only joints each STATE carries
+    instruments: int = 0  # instrument values each STATE carries
     max_age: float | None = None  # seconds; None: senders do not share our clock
     last_seq: int | None = None
     restart: int = 0  # status bits that open a new session: its sequence numbers start over
@@ -136,13 +150,15 @@ class Receiver:
 
     def _parse(self, data: bytes) -> tuple[Message | None, str]:
         per_joint = 3 if self.kind == STATE else 1
-        count = per_joint * self.joints + self.measured
+        count = per_joint * self.joints + self.measured + self.instruments
         expected = HEADER.size + 8 * count + CRC.size
-        if len(data) != expected:
-            return None, "length"
-        if CRC.unpack_from(data, expected - CRC.size)[0] != zlib.crc32(data[: expected - CRC.size]):
+        intact = len(data) >= HEADER.size + CRC.size and \
+            CRC.unpack_from(data, len(data) - CRC.size)[0] == zlib.crc32(data[: len(data) - CRC.size])
+        if len(data) != expected:  # an intact datagram of another size: say which count differs
+            return None, self._counts(data) if intact else "length"
+        if not intact:
             return None, "checksum"
-        magic, version, kind, robot, seq, sent_at, echo, n, m, status, held = HEADER.unpack_from(data)
+        magic, version, kind, robot, seq, sent_at, echo, n, m, status, held, k = HEADER.unpack_from(data)
         if magic != MAGIC:
             return None, "magic"
         if version != VERSION:
@@ -151,11 +167,20 @@ class Receiver:
             return None, "kind"
         if robot != self.robot:
             return None, "robot"
-        if n != self.joints or m != self.measured:
-            return None, "joints"
+        if n != self.joints or m != self.measured or k != self.instruments:
+            return None, self._counts(data)
         values = np.frombuffer(data, dtype="<f8", count=count, offset=HEADER.size)
         if not (np.all(np.isfinite(values)) and math.isfinite(sent_at) and math.isfinite(echo)):
             return None, "non-finite"
         head = values[: per_joint * n]
         head = head.reshape(3, n) if self.kind == STATE else head
-        return Message(kind, robot, seq, sent_at, echo, status, held, head.copy(), values[per_joint * n:].copy()), ""
+        rest = values[per_joint * n:]
+        return Message(kind, robot, seq, sent_at, echo, status, held, head.copy(), rest[:m].copy(), rest[m:].copy()), ""
+
+    def _counts(self, data: bytes) -> str:
+        """Why an intact datagram does not fit: another protocol version, joint count or instrument count."""
+        fields = HEADER.unpack_from(data)
+        if fields[0] != MAGIC or fields[1] != VERSION:
+            return "version"
+        n, m, k = fields[7], fields[8], fields[11]
+        return "instruments" if (n, m) == (self.joints, self.measured) and k != self.instruments else "joints"

@@ -60,6 +60,8 @@ class JointSpec(StrictModel):
     damping: float = Field(0.0, ge=0, description="viscous damping [N·m·s/rad]")
     armature: float = Field(0.0, ge=0, description="reflected rotor inertia of the drive [kg·m²]")
     stiffness: float = Field(0.0, ge=0, description="spring toward zero [N·m/rad] (passive joints)")
+    brake: float = Field(0.0, ge=0, description="holding brake [N·m or N], engaged when the torque goes off (safety "
+                                                "stop categories 0 and 1); 0: none")
 
     @model_validator(mode="after")
     def _one_unit(self) -> JointSpec:
@@ -134,5 +136,6 @@ def build_dh_robot(spec: DHRobotSpec, ee_site: str = "ee") -> RobotModel:
     return RobotModel(
         name=spec.name, mjcf=xml, joint_names=[j.name for j in spec.joints], limits=limits,
         ee_site=ee_site, base_pose=spec.base.matrix(), safe_stop=spec.safe_stop,
+        brakes=np.array([j.brake for j in spec.joints]) if any(j.brake for j in spec.joints) else None,
     )
 

@@ -76,6 +76,8 @@ class RobotModel:
             is the robot seen from its root body.
         support_geoms: Geoms whose contact with the floor is support (feet), not a collision.
         wearable: Where a simulated person's arm sits in the robot and where it is strapped to it.
+        brakes: Holding brakes per joint [N·m, or N], engaged when the torque goes off (safety stop categories 0
+            and 1); None: no brakes.
     """
 
     name: str
@@ -91,6 +93,7 @@ class RobotModel:
     floating: bool = False
     support_geoms: list[str] = field(default_factory=list)
     wearable: Wearable | None = None  # where a person's arm sits in it (exoskeletons)
+    brakes: np.ndarray | None = None
 
     @property
     def dof(self) -> int:

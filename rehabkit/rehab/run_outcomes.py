@@ -73,12 +73,14 @@ def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, 
     if person:
         own_weight = robot.gravity_torques(trace.q).reshape(trace.tau.shape)
         assist = assistance_ratio(trace.tau - own_weight, trace.tau_h, trace.qd, dt)
-        if trace.f_h is not None:  # measured in the scene: an embodied person's largest cuff force
-            magnitude = trace.f_h
-        else:  # the hand force equivalent to the person's joint torques
-            magnitude = np.linalg.norm(interaction_forces(HandForce(model).jacobians(trace.q), trace.tau_h), axis=1)
     else:  # nobody in the robot: whatever work was done, the robot did
-        assist, magnitude = (1.0 if len(trace.t) else float("nan")), np.zeros(len(trace.t))
+        assist = 1.0 if len(trace.t) else float("nan")
+    if trace.f_h is not None:  # measured: a force-torque sensor, an embodied person's largest cuff force
+        magnitude = trace.f_h
+    elif person:  # the hand force equivalent to the person's joint torques
+        magnitude = np.linalg.norm(interaction_forces(HandForce(model).jacobians(trace.q), trace.tau_h), axis=1)
+    else:
+        magnitude = np.zeros(len(trace.t))
     metrics = {
         "reaches": float(len(per_reach)), "reaches_completed": float(sum(r["reached"] for r in per_reach)),
         "sparc": mean("sparc"), "path_length_ratio": mean("path_length_ratio"),

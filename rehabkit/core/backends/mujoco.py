@@ -8,7 +8,8 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
-from rehabkit.core.backends.scene import INTEGRATORS, add_instruments, build_scene
+from rehabkit.core.backends.loads import LoadApplier
+from rehabkit.core.backends.scene import INTEGRATORS, InstrumentErrors, add_instruments, build_scene, engage_brakes
 from rehabkit.core.backends.scene_view import SceneView
 from rehabkit.core.capabilities import (
     BaseState,
@@ -22,8 +23,9 @@ from rehabkit.core.capabilities import (
     SceneGeometry,
     SceneObjects,
 )
+from rehabkit.core.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import Backend, Contact, Context, StrictModel
+from rehabkit.core.interfaces import Backend, BackendFaultError, Contact, Context, StrictModel
 
 
 class MujocoConfig(StrictModel):
@@ -58,9 +60,14 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self.data = mujoco.MjData(self.model)
         for body in self.bodies:
             body.bind(self.model, self.data)
+        self.loads = LoadApplier(self.model, context.world.loads if context.world is not None else ())
+        self._errors = InstrumentErrors(context.instruments, context.seed or 0)
+        self._latch = EStopLatch.named(f"sim-{robot.name}")  # a rehearsal's robot latches as the real one will
+        self.ramp_in_after_clear = 0.0
         jids = [self.model.joint(name).id for name in robot.joint_names]
         self._q = span(np.array([self.model.jnt_qposadr[j] for j in jids]))
         self._v = span(np.array([self.model.jnt_dofadr[j] for j in jids]))
+        self._friction = self.model.dof_frictionloss[self._v].copy()  # brakes off
         robot_bodies = {self.model.jnt_bodyid[j] for j in jids}
         # the fixed root and every body below it belong to the robot
         root = self.model.body(self.spec.worldbody.first_body().name).id
@@ -100,7 +107,11 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
                                         self.model.joint(f"{obj.name}_free").id)
 
     def reset(self, q0: np.ndarray) -> None:
+        if self._latch.latched() is not None:
+            raise BackendFaultError(self._latch.refusal(f"the simulated {self.robot.name}"))
+        self.ramp_in_after_clear = RAMP_IN_AFTER_CLEAR_S if self._latch.take_ramp_in() else 0.0
         mujoco.mj_resetData(self.model, self.data)
+        self.model.dof_frictionloss[self._v] = self._friction
         self.data.qpos[self._q] = q0
         mujoco.mj_forward(self.model, self.data)
         for body in self.bodies:  # fitted to the robot where it now stands
@@ -147,6 +158,16 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
     def command(self, tau: np.ndarray) -> None:
         self.data.qfrc_applied[self._v] = tau
 
+    def engage_brakes(self) -> bool:
+        if self.robot.brakes is None:
+            return False
+        engage_brakes(self.model, self._v, self._friction + self.robot.brakes)
+        return True
+
+    def latch_estop(self, reason: str) -> bool:
+        self._latch.press(reason, by="rehabkit (simulation)")
+        return True
+
     def hosted(self) -> list:
         return self.bodies
 
@@ -154,6 +175,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self.data.qfrc_applied[self._v] += tau  # on top of the command just sent
 
     def step(self, n: int = 1) -> None:
+        if self.loads:  # (held over the control period: a rig's push changes slowly)
+            self.loads.apply(self.data, self.data.time)
         if n == 1:
             mujoco.mj_step(self.model, self.data)  # the nstep keyword alone costs ~0.5 us
         else:
@@ -191,7 +214,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         if span is None:  # looked up once: a by-name lookup costs a few us, read at the control rate
             s = self.model.sensor(name)
             span = self._instruments[name] = slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
-        return self.data.sensordata[span].copy()
+        return self._errors.apply(name, self.data.sensordata[span].copy())
 
     def close(self) -> None:
         self.close_view()

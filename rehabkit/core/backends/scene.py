@@ -34,19 +34,56 @@ def camera_axes(cam) -> np.ndarray:
     return np.column_stack([x, np.cross(z, x), z])
 
 
-_INSTRUMENTS = {"accelerometer": mujoco.mjtSensor.mjSENS_ACCELEROMETER, "gyro": mujoco.mjtSensor.mjSENS_GYRO}
+_INSTRUMENTS = {"accelerometer": mujoco.mjtSensor.mjSENS_ACCELEROMETER, "gyro": mujoco.mjtSensor.mjSENS_GYRO,
+                "force": mujoco.mjtSensor.mjSENS_FORCE, "torque": mujoco.mjtSensor.mjSENS_TORQUE}
+MOUNT_KG = 0.001  # a force sensor's mount: light, so the sensor reads what pushes on it, not its inertia
 
 
 def add_instruments(spec: mujoco.MjSpec, instruments) -> None:
-    """A site (axes of its body) and a MuJoCo sensor on it for each instrument."""
+    """A site (axes of its body) and a MuJoCo sensor on it for each instrument; a force sensor's site on its mount,
+    a light body beyond it (MuJoCo's force and torque sensors read what the body of their site exerts on its
+    parent)."""
     for ins in instruments:
         body = spec.body(ins.body)
         if body is None:
             names = sorted(b.name for b in spec.bodies if b.name)
             raise ValueError(f"instrument '{ins.name}': no body '{ins.body}' in the scene; bodies: {', '.join(names)}")
-        body.add_site(name=f"{ins.name}_site", pos=ins.position, size=[0.006, 0, 0], rgba=[0.1, 0.8, 0.1, 1])
+        if ins.mount is not None:
+            mount = spec.body(ins.mount)
+            if mount is None:
+                mount = body.add_body(name=ins.mount, pos=ins.position, mass=MOUNT_KG,
+                                      inertia=[1e-7, 1e-7, 1e-7], explicitinertial=True)
+            site = mount.add_site(name=f"{ins.name}_site", size=[0.006, 0, 0], rgba=[0.9, 0.6, 0.1, 1])
+        else:
+            site = body.add_site(name=f"{ins.name}_site", pos=ins.position, size=[0.006, 0, 0], rgba=[0.1, 0.8, 0.1, 1])
         spec.add_sensor(name=ins.name, type=_INSTRUMENTS[ins.kind], objtype=mujoco.mjtObj.mjOBJ_SITE,
-                        objname=f"{ins.name}_site")
+                        objname=site.name)
+
+
+class InstrumentErrors:
+    """A simulated sensor's imperfections (each instrument's bias and white noise), from its own seeded stream."""
+
+    def __init__(self, instruments, seed: int = 0):
+        self.bias = {i.name: np.asarray(i.bias, float) for i in instruments if i.simulated_error}
+        self.noise = {i.name: i.noise for i in instruments if i.simulated_error}
+        self.rng = np.random.default_rng([seed, 0x5E45])
+
+    def apply(self, name: str, value: np.ndarray) -> np.ndarray:
+        bias = self.bias.get(name)
+        if bias is None:
+            return value
+        value += bias
+        if self.noise[name]:
+            value += self.rng.normal(0.0, self.noise[name], value.shape)
+        return value
+
+
+def engage_brakes(model: mujoco.MjModel, dofs, torque: np.ndarray) -> None:
+    """Holding brakes on ``dofs``: dry friction up to ``torque`` (MuJoCo's friction loss, solved with the
+    constraints), made hard — MuJoCo's default softness lets a loaded joint creep at degrees per second."""
+    model.dof_frictionloss[dofs] = torque
+    model.dof_solref[dofs] = [2 * model.opt.timestep, 1.0]
+    model.dof_solimp[dofs, :3] = [0.99, 0.999, 0.001]
 
 
 def build_scene(robot: RobotModel, world: World, timestep: float, integrator: str = "implicitfast") -> mujoco.MjSpec:

@@ -16,6 +16,7 @@ from pydantic import Field, create_model, model_validator
 from rehabkit.core.interfaces import StrictModel
 from rehabkit.core.plugins import PluginRegistry
 from rehabkit.core.scenario.learning import LearningSpec
+from rehabkit.core.scenario.loads import Load
 from rehabkit.core.scenario.patient import PatientBase
 from rehabkit.core.scenario.safety import SafetyConfig
 
@@ -75,10 +76,11 @@ class World(StrictModel):
     floor: bool = True
     objects: list[WorldObject] = []
     cameras: list[CameraSpec] = []
+    loads: list[Load] = Field([], description="test-rig forces on robot bodies (a push on the handle)")
 
     @model_validator(mode="after")
     def _unique_names(self) -> World:
-        names = [o.name for o in self.objects] + [c.name for c in self.cameras]
+        names = [o.name for o in self.objects] + [c.name for c in self.cameras] + [x.name for x in self.loads]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ValueError(f"world object names must be unique; repeated: {dup}")
@@ -131,7 +133,7 @@ class EventSpec(StrictModel):
 
     Triggers: ``at`` a time; when a target is ``reached``; or each time a sensed
     target has ``moved`` (stable for ``settle`` readings, then fires again on the
-    next move). Actions: ``replan``, ``stop``, or ``move`` a mocap object.
+    next move). Actions: ``replan``, ``stop``, ``move`` a mocap object, or ``estop``.
     """
 
     at: float | None = Field(None, ge=0, description="[s] from the start")
@@ -139,7 +141,8 @@ class EventSpec(StrictModel):
     moved: str | None = Field(None, description="fires whenever this sensor-driven target moves (repeating)")
     tolerance_m: float = Field(0.005, gt=0, description="distance for 'reached' / movement for 'moved' [m]")
     settle: int = Field(3, ge=1, description="'moved': readings the new position must hold before firing")
-    action: Literal["replan", "stop", "move"] = "replan"
+    action: Literal["replan", "stop", "move", "estop"] = Field("replan", description="'estop': an e-stop pressed "
+                                                               "(stopped in its category, latched at the robot)")
     sequence: list[str] | None = Field(None, description="replan through these targets (default: those of the plan "
                                                           "being followed not reached yet)")
     planner: dict[str, Any] | None = Field(None, description="'replan': settings of the scenario's planner for this "

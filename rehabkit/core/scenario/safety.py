@@ -7,6 +7,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
+from rehabkit.core.stopping import STOP_RULES
 from rehabkit.models.strict import StrictModel
 
 Vec3 = tuple[float, float, float]
@@ -69,6 +70,13 @@ class SafetyConfig(StrictModel):
     position_margin_deg: float = Field(0.5, ge=0, description="tolerance beyond a joint's range before tripping")
     velocity_factor: float = Field(1.0, gt=0, description="trip above this multiple of the velocity limit")
     torque_policy: Literal["clip", "stop"] = "clip"
+    stop_category: dict[Literal[STOP_RULES], Literal[0, 1, 2]] = Field(  # type: ignore[valid-type]
+        {}, description="stop category per rule (IEC 60204-1): 0 torque off, 1 controlled stop then torque off, 2 "
+        "controlled stop then hold; 'default' for the rules not named (default: 2, or 0 for a robot whose "
+        "safe_stop is zero-torque)")
+    stop_decel_deg_s2: float | None = Field(None, gt=0, description="a controlled stop's deceleration bound, each "
+                                            "joint [deg/s²; mm/s² for a sliding joint] (default: half what each "
+                                            "drive can give its joint at the trip)")
     hold_kp: float = Field(60.0, gt=0, description="hold stiffness after a trip [N·m/rad]")
     hold_kd: float = Field(6.0, gt=0, description="hold damping after a trip [N·m·s/rad]")
     stop_after_s: float = Field(0.5, ge=0, description="keep simulating this long after a trip, then end the run")

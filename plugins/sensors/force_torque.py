@@ -1,0 +1,180 @@
+"""A six-axis force-torque sensor between the robot and what the person holds or wears (a handle, a cuff).
+
+In a simulation it is a pair of MuJoCo force and torque sensors whose site sits on a light mount body
+beyond the sensor: whatever pushes on the mount (a strap, a test rig's ``world.loads``) is read. Over a
+hardware link the bridge sends the readings with each state (its plant reads the sensor: a real one,
+or the MuJoCo plant's). Either way the host then
+
+- removes the bias (tare): the mean of the first ``tare_s`` of readings, taken while the ramp-in holds the
+  robot at its start with nothing pushing — a real sensor's offset drifts between sessions;
+- filters the readings: a second-order Butterworth low-pass at ``cutoff_hz`` (scipy's design), run sample by
+  sample at the rate it is read;
+- gives the safety envelope its interaction force every control step (``interaction: true``), and the log
+  its readings at ``rate_hz``.
+
+Readings are what the person (or rig) puts on the robot, in the sensor's frame (the mount body's axes).
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.capabilities import Instruments
+from rehabkit.core.interfaces import Backend, Context, Instrument, InteractionForceSensor, SensorConfig, StrictModel
+from rehabkit.core.metric import Metric
+
+Vec3 = tuple[float, float, float]
+
+
+class SimulatedError(StrictModel):
+    """What a simulated sensor gets wrong (a real one brings its own): a constant offset and white noise."""
+
+    bias_n: Vec3 = Field((0.0, 0.0, 0.0), description="force offset [N]")
+    bias_nm: Vec3 = Field((0.0, 0.0, 0.0), description="torque offset [N·m]")
+    noise_n: float = Field(0.0, ge=0, description="force noise, standard deviation per axis [N]")
+    noise_nm: float = Field(0.0, ge=0, description="torque noise, standard deviation per axis [N·m]")
+
+
+class ForceTorqueConfig(SensorConfig):
+    """Where the sensor sits, how it is tared and filtered, and whether the safety envelope reads it."""
+
+    rate_hz: float = Field(100.0, gt=0, description="logging rate [Hz] (the envelope reads it every control step)")
+    name: str = Field("ft", description="the sensor's mount in the scene: the body a rig's load pushes on")
+    body: str | None = Field(None, description="robot body it is fixed to (default: the hand's, at the hand site)")
+    position: Vec3 | None = Field(None, description="where on that body [m] (default: the hand site's position)")
+    tare_s: float = Field(0.2, gt=0, description="bias removed: the mean reading over the first this-many seconds")
+    cutoff_hz: float = Field(30.0, ge=0, description="low-pass cut-off (2nd-order Butterworth; 0: unfiltered)")
+    interaction: bool = Field(True, description="the safety envelope's interaction-force limit reads this sensor")
+    simulated: SimulatedError = SimulatedError()
+
+
+class Biquads:
+    """A second-order-sections filter run one sample (a vector of channels) at a time (transposed direct form II)."""
+
+    def __init__(self, sos: np.ndarray, channels: int):
+        self.sos = sos
+        self.z = np.zeros((len(sos), 2, channels))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        for i, (b0, b1, b2, _, a1, a2) in enumerate(self.sos):
+            z = self.z[i]
+            y = b0 * x + z[0]
+            z[0] = b1 * x - a1 * y + z[1]
+            z[1] = b2 * x - a2 * y
+            x = y
+        return x
+
+    def settle(self, x: np.ndarray) -> None:
+        """Start at rest at ``x`` (no step response from zero)."""
+        from scipy.signal import sosfilt_zi
+
+        self.z[:] = sosfilt_zi(self.sos)[:, :, None] * x
+
+
+def hand_mount(mjcf: str, site: str) -> tuple[str, Vec3]:
+    """The body a site is on and its position there."""
+    spec = mujoco.MjSpec.from_string(mjcf)
+    s = spec.site(site)
+    return s.parent.name, tuple(float(v) for v in s.pos)
+
+
+class ForceTorqueSensor(InteractionForceSensor):
+    """Six-axis force-torque sensor: tared, low-pass filtered, read every control step by the safety envelope."""
+
+    requires = (Instruments,)
+    metrics = (
+        Metric("ft_bias_n", "N", description="force offset the tare removed (its magnitude)"),
+        Metric("ft_noise_n", "N", description="raw force noise during the tare, standard deviation per axis"),
+        Metric("ft_noise_filtered_n", "N", description="the same noise after the low-pass filter"),
+        Metric("ft_peak_force_n", "N", description="largest filtered force after the tare"),
+    )
+
+    def __init__(self, config: ForceTorqueConfig, context: Context):
+        self.config, self.rate_hz, self.interaction = config, config.rate_hz, config.interaction
+        model = context.robot.model
+        body, position = config.body, config.position
+        if body is None or position is None:
+            hand_body, hand_at = hand_mount(model.mjcf, model.ee_site)
+            body = body or hand_body
+            position = position if position is not None else (hand_at if body == hand_body else (0.0, 0.0, 0.0))
+        self.body, self.position = body, position
+        # read every control step when the envelope uses it, else at the logging rate
+        self.fs = 1.0 / context.control_dt if config.interaction else config.rate_hz
+        if config.cutoff_hz >= self.fs / 2:
+            raise ValueError(f"force-torque: cutoff_hz ({config.cutoff_hz:g}) must be below half the rate it is "
+                             f"read at ({self.fs:g} Hz)")
+        self._names = (f"{config.name}_force", f"{config.name}_torque")
+        self._tare_n = max(1, round(config.tare_s * self.fs))
+        self._tare: list[np.ndarray] = []
+        self.bias = np.zeros(6)
+        self.filter = None
+        if config.cutoff_hz > 0:
+            from scipy.signal import butter
+
+            self.filter = Biquads(butter(2, config.cutoff_hz, fs=self.fs, output="sos"), 6)
+        self.raw = self.value = np.zeros(6)
+        self.peak = 0.0
+        self._last_t = -1.0
+
+    def instruments(self) -> list[Instrument]:
+        sim, name = self.config.simulated, self.config.name
+        return [Instrument(self._names[0], "force", self.body, self.position, mount=name, bias=sim.bias_n,
+                           noise=sim.noise_n),
+                Instrument(self._names[1], "torque", self.body, self.position, mount=name, bias=sim.bias_nm,
+                           noise=sim.noise_nm)]
+
+    def sample(self, t: float, backend: Backend) -> np.ndarray:
+        """Read, tare and filter once (at most once per time ``t``); the force and torque on the robot, 6 values."""
+        if t == self._last_t:
+            return self.value
+        self._last_t = t
+        # MuJoCo's sensors give what the robot exerts on the mount: the person's push is its opposite
+        raw = -np.concatenate((backend.read_instrument(self._names[0]), backend.read_instrument(self._names[1])))
+        self.raw = raw
+        if len(self._tare) < self._tare_n:
+            self._tare.append(raw)
+            self.bias = np.mean(self._tare, axis=0)
+            if len(self._tare) == self._tare_n and self.filter is not None:
+                self.filter.settle(np.zeros(6))
+            self.value = raw - self.bias
+            return self.value
+        x = raw - self.bias
+        self.value = self.filter(x) if self.filter is not None else x
+        self.peak = max(self.peak, float(np.linalg.norm(self.value[:3])))
+        return self.value
+
+    def interaction_force(self, t: float, backend: Backend) -> np.ndarray:
+        return self.sample(t, backend)[:3]
+
+    def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
+        value = self.sample(t, backend) if not self.interaction else self.value  # (sampled by the loop already)
+        return {"force_n": value[:3].copy(), "torque_nm": value[3:].copy(), "raw_force_n": self.raw[:3].copy()}
+
+    def run_metrics(self, trace=None) -> dict[str, float]:
+        if len(self._tare) < 2:
+            return {}
+        tare = np.array(self._tare)
+        out = {"ft_bias_n": float(np.linalg.norm(self.bias[:3])),
+               "ft_noise_n": float(np.mean(np.std(tare[:, :3], axis=0))), "ft_peak_force_n": self.peak}
+        if self.filter is not None:
+            from scipy.signal import sosfilt
+
+            filtered = sosfilt(self.filter.sos, tare[:, :3] - self.bias[:3], axis=0)
+            settled = filtered[len(filtered) // 3:]  # past the filter's start-up
+            out["ft_noise_filtered_n"] = float(np.mean(np.std(settled, axis=0)))
+        return out
+
+    def report(self, metrics: dict[str, float]) -> str | None:
+        if "ft_bias_n" not in metrics:
+            return None
+        return (f"force-torque '{self.config.name}': bias {metrics['ft_bias_n']:.2f} N tared, noise "
+                f"{metrics['ft_noise_n']:.3f} N raw / {metrics.get('ft_noise_filtered_n', float('nan')):.3f} N "
+                f"filtered, peak {metrics['ft_peak_force_n']:.1f} N")
+
+
+@hookimpl
+def rehabkit_register_sensors(registry) -> None:
+    registry.add("force-torque", config=ForceTorqueConfig, factory=ForceTorqueSensor)

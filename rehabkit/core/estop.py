@@ -1,0 +1,101 @@
+"""The e-stop latch (ISO 13850): once pressed, an e-stop stays latched — across sessions, restarts of the program
+holding it, and power cycles of the machine keeping the file — until a person deliberately clears it; only then
+does the next session start, and it ramps in.
+
+A latch is a small JSON file, written whole (temp, then rename), under ``$REHABKIT_STATE/estop/`` (default
+``~/.local/state/rehabkit/estop/``), named for what it latches: ``<robot>-<robot id>`` for a robot behind a bridge
+(the bridge keeps it), ``sim-<robot>`` for a simulated robot (the MuJoCo backend keeps it, so that a rehearsal
+behaves as the robot will). ``rehabkit estop list`` shows them, ``rehabkit estop clear NAME --by WHO`` clears one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+from rehabkit.core.io import atomic_write_text
+
+RAMP_IN_AFTER_CLEAR_S = 1.0  # the first session after a clear ramps in at least this long
+
+
+def state_dir() -> Path:
+    """Where rehabkit keeps state across sessions on this machine."""
+    given = os.environ.get("REHABKIT_STATE")
+    return Path(given) if given else Path.home() / ".local" / "state" / "rehabkit"
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+class EStopLatch:
+    """One e-stop latch, kept in a file."""
+
+    def __init__(self, path: Path, name: str):
+        self.path, self.name = Path(path), name
+
+    @classmethod
+    def named(cls, name: str, path: str | Path | None = None) -> EStopLatch:
+        return cls(Path(path) if path else state_dir() / "estop" / f"{name}.json", name)
+
+    @classmethod
+    def for_robot(cls, robot: str, robot_id: int, path: str | Path | None = None) -> EStopLatch:
+        """The latch a bridge keeps for its robot."""
+        return cls.named(f"{robot}-{robot_id}", path)
+
+    def record(self) -> dict:
+        """The latch's record (``{}`` if it was never pressed)."""
+        try:
+            return json.loads(self.path.read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return {}
+
+    def latched(self) -> dict | None:
+        """The record of the press holding it latched, or None."""
+        rec = self.record()
+        return rec if rec.get("latched") else None
+
+    def press(self, reason: str, by: str) -> None:
+        """Latch (a press while latched keeps the first press's record)."""
+        if self.latched() is None:
+            self._write({"latched": True, "since": _now(), "reason": reason, "by": by, "ramp_in_pending": False})
+
+    def clear(self, by: str) -> dict | None:
+        """Clear it, deliberately (``by``: who); the next session must ramp in. The press cleared, or None."""
+        was = self.latched()
+        if was is not None:
+            self._write({"latched": False, "cleared": _now(), "cleared_by": by, "was": was, "ramp_in_pending": True})
+        return was
+
+    def take_ramp_in(self) -> bool:
+        """Whether this session is the first after a clear (it must ramp in); marks that it has been."""
+        rec = self.record()
+        if rec.get("ramp_in_pending") and not rec.get("latched"):
+            self._write({**rec, "ramp_in_pending": False, "ramped_in": _now()})
+            return True
+        return False
+
+    def describe(self) -> str:
+        rec = self.latched()
+        if rec is None:
+            return f"{self.name}: not latched"
+        return f"{self.name}: LATCHED since {rec['since']} by {rec['by']} ({rec['reason']})"
+
+    def refusal(self, where: str) -> str:
+        """Why a session does not start, and how to go on."""
+        rec = self.latched() or {}
+        return (f"the e-stop of {where} is latched (since {rec.get('since', '?')}, {rec.get('reason', 'pressed')}): "
+                f"deal with its cause, then clear it with `rehabkit estop clear {self.name} --by NAME`")
+
+    def _write(self, record: dict) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.path, json.dumps({**record, "name": self.name, "written": time.time()}, indent=1))
+
+
+def all_latches() -> list[EStopLatch]:
+    """Every latch kept on this machine."""
+    folder = state_dir() / "estop"
+    return [EStopLatch(p, p.stem) for p in sorted(folder.glob("*.json"))] if folder.is_dir() else []
