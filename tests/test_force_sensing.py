@@ -61,3 +61,18 @@ def test_a_load_on_a_body_the_scene_lacks_is_refused_with_the_closest_names(caps
     code = main(["validate", str(SAFETY / "hit_force.yaml"), "--set", "world.loads.0.body=handel"])
     err = capsys.readouterr().err
     assert code == 2 and "no body 'handel'" in err
+
+
+def test_a_sensor_at_a_cuff_reads_the_strapped_persons_cuff_force():
+    """The musculoskeletal patient's forearm strap is fastened to the sensor's mount (cuff_forearm): the sensor,
+    zeroed before the person was strapped in (tare_s: 0), reads that strap's constraint force."""
+    from rehabkit.core.runner import Runner
+
+    runner = Runner(load_scenario(SCENARIOS / "hit_myoarm.yaml", {
+        "sensors": {"cuff": {"type": "force-torque", "strap": "forearm", "cutoff_hz": 0, "tare_s": 0}},
+        "duration": 1.0}))
+    r = runner.run()
+    times, cuffs = runner.setup.patient.series()["patient/cuff_force_n/forearm"]
+    measured = np.interp(times, r.trace.t, r.trace.f_h)
+    assert cuffs.max() > 5.0  # the arm's weight and its effort
+    assert np.abs(measured - cuffs).max() < 0.05 * cuffs.max()

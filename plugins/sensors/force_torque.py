@@ -12,7 +12,9 @@ or the MuJoCo plant's). Either way the host then
 - gives the safety envelope its interaction force every control step (``interaction: true``), and the log
   its readings at ``rate_hz``.
 
-Readings are what the person (or rig) puts on the robot, in the sensor's frame (the mount body's axes).
+Readings are what the person (or rig) puts on the robot, in the sensor's frame (the mount body's axes). At a
+strap (``strap: forearm``) the mount is that strap's cuff, ``cuff_forearm``: a musculoskeletal patient's strap
+is fastened to it, and the sensor reads the cuff force.
 """
 
 from __future__ import annotations
@@ -42,10 +44,14 @@ class ForceTorqueConfig(SensorConfig):
     """Where the sensor sits, how it is tared and filtered, and whether the safety envelope reads it."""
 
     rate_hz: float = Field(100.0, gt=0, description="logging rate [Hz] (the envelope reads it every control step)")
-    name: str = Field("ft", description="the sensor's mount in the scene: the body a rig's load pushes on")
+    name: str | None = Field(None, description="the sensor's mount in the scene: the body a rig's load pushes on "
+                                               "(default: ft, or cuff_<strap> at a strap)")
+    strap: str | None = Field(None, description="at the cuff of this strap of the robot's wearable (upper_arm, "
+                                                "forearm): a strapped person's cuff force is what it reads")
     body: str | None = Field(None, description="robot body it is fixed to (default: the hand's, at the hand site)")
     position: Vec3 | None = Field(None, description="where on that body [m] (default: the hand site's position)")
-    tare_s: float = Field(0.2, gt=0, description="bias removed: the mean reading over the first this-many seconds")
+    tare_s: float = Field(0.2, ge=0, description="bias removed: the mean reading over the first this-many seconds "
+                                                 "(0: none, the sensor was zeroed before the person was strapped in)")
     cutoff_hz: float = Field(30.0, ge=0, description="low-pass cut-off (2nd-order Butterworth; 0: unfiltered)")
     interaction: bool = Field(True, description="the safety envelope's interaction-force limit reads this sensor")
     simulated: SimulatedError = SimulatedError()
@@ -96,6 +102,13 @@ class ForceTorqueSensor(InteractionForceSensor):
         self.config, self.rate_hz, self.interaction = config, config.rate_hz, config.interaction
         model = context.robot.model
         body, position = config.body, config.position
+        self.name = config.name or (f"cuff_{config.strap}" if config.strap else "ft")
+        if config.strap is not None:
+            straps = {s.segment: s for s in (model.wearable.straps if model.wearable else ())}
+            if config.strap not in straps:
+                raise ValueError(f"force-torque: strap '{config.strap}': robot '{model.name}' has "
+                                 f"{'straps ' + ', '.join(straps) if straps else 'no wearable straps'}")
+            body, position = straps[config.strap].body, straps[config.strap].position
         if body is None or position is None:
             hand_body, hand_at = hand_mount(model.mjcf, model.ee_site)
             body = body or hand_body
@@ -106,8 +119,8 @@ class ForceTorqueSensor(InteractionForceSensor):
         if config.cutoff_hz >= self.fs / 2:
             raise ValueError(f"force-torque: cutoff_hz ({config.cutoff_hz:g}) must be below half the rate it is "
                              f"read at ({self.fs:g} Hz)")
-        self._names = (f"{config.name}_force", f"{config.name}_torque")
-        self._tare_n = max(1, round(config.tare_s * self.fs))
+        self._names = (f"{self.name}_force", f"{self.name}_torque")
+        self._tare_n = round(config.tare_s * self.fs)
         self._tare: list[np.ndarray] = []
         self.bias = np.zeros(6)
         self.filter = None
@@ -115,12 +128,14 @@ class ForceTorqueSensor(InteractionForceSensor):
             from scipy.signal import butter
 
             self.filter = Biquads(butter(2, config.cutoff_hz, fs=self.fs, output="sos"), 6)
+            if not self._tare_n:
+                self.filter.settle(np.zeros(6))
         self.raw = self.value = np.zeros(6)
         self.peak = 0.0
         self._last_t = -1.0
 
     def instruments(self) -> list[Instrument]:
-        sim, name = self.config.simulated, self.config.name
+        sim, name = self.config.simulated, self.name
         return [Instrument(self._names[0], "force", self.body, self.position, mount=name, bias=sim.bias_n,
                            noise=sim.noise_n),
                 Instrument(self._names[1], "torque", self.body, self.position, mount=name, bias=sim.bias_nm,
@@ -170,7 +185,7 @@ class ForceTorqueSensor(InteractionForceSensor):
     def report(self, metrics: dict[str, float]) -> str | None:
         if "ft_bias_n" not in metrics:
             return None
-        return (f"force-torque '{self.config.name}': bias {metrics['ft_bias_n']:.2f} N tared, noise "
+        return (f"force-torque '{self.name}': bias {metrics['ft_bias_n']:.2f} N tared, noise "
                 f"{metrics['ft_noise_n']:.3f} N raw / {metrics.get('ft_noise_filtered_n', float('nan')):.3f} N "
                 f"filtered, peak {metrics['ft_peak_force_n']:.1f} N")
 

@@ -28,6 +28,9 @@ FIT_JOINTS = {"shoulder_plane": 0.0, "shoulder_elevation": 30.0, "shoulder_rotat
 # (the joints the fit turns, and where it starts them [deg]: the arm a little forward, the elbow bent)
 
 
+CUFF = "cuff_"  # a force-torque sensor named cuff_<segment> on a strap's body is that strap's cuff
+
+
 def compose(spec: mujoco.MjSpec, arm_spec: mujoco.MjSpec, wearable: Wearable, base_pose: np.ndarray,
             straps: tuple[Strap, ...], segment_bodies: dict[str, str]) -> None:
     """Attach the arm (turned to face the robot's way) and one soft ``connect`` equality per strap."""
@@ -40,9 +43,13 @@ def compose(spec: mujoco.MjSpec, arm_spec: mujoco.MjSpec, wearable: Wearable, ba
             bodies = sorted(b.name for b in spec.bodies if b.name and not b.name.startswith(PREFIX))
             raise ValueError(f"strap on the {strap.segment}: the robot has no body '{strap.body}'; its bodies: "
                              f"{', '.join(bodies)}")
+        holder, anchor = strap.body, np.asarray(strap.position, float)
+        cuff = spec.body(f"{CUFF}{strap.segment}")  # a force-torque sensor's mount: the strap is fastened to it
+        if cuff is not None and cuff.parent.name == strap.body:
+            holder, anchor = cuff.name, anchor - np.asarray(cuff.pos, float)
         spec.add_equality(type=mujoco.mjtEq.mjEQ_CONNECT, name=f"{PREFIX}strap_{strap.segment}",
-                          name1=strap.body, name2=segment_bodies[strap.segment], objtype=mujoco.mjtObj.mjOBJ_BODY,
-                          data=[*strap.position, *([0.0] * 9)],
+                          name1=holder, name2=segment_bodies[strap.segment], objtype=mujoco.mjtObj.mjOBJ_BODY,
+                          data=[*anchor, *([0.0] * 9)],
                           solimp=[STRAP_IMPEDANCE, STRAP_IMPEDANCE, 0.001, 0.5, 2.0])
 
 
@@ -98,8 +105,8 @@ def fit_arm(arm: HumanArm, wearable: Wearable, base_pose: np.ndarray, straps: tu
         a, b = arm.segment_line(segment)
         axis = (b - a) / np.linalg.norm(b - a)
         worst = max(worst, float(np.linalg.norm((p - a) - ((p - a) @ axis) * axis)))
-        human = m.eq_obj2id[eq]
-        m.eq_data[eq, 0:3] = s.position
+        human, holder = m.eq_obj2id[eq], m.eq_obj1id[eq]  # (the holder: the robot's body, or a cuff sensor's mount)
+        m.eq_data[eq, 0:3] = d.xmat[holder].reshape(3, 3).T @ (p - d.xpos[holder])
         m.eq_data[eq, 3:6] = d.xmat[human].reshape(3, 3).T @ (p - d.xpos[human])  # the tissue under the strap
     return dict(zip(names, x)), worst
 
