@@ -29,6 +29,9 @@ EXECUTED_ELSEWHERE = {
     "rehabkit schema": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema > rehabkit.schema.json": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit --version": "tests/test_user_robot_errors.py::test_contacts_are_said_and_the_version_is_known",
+    "rehabkit estop list": "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",
+    'rehabkit estop clear sim-hit --by "J. Doe"':
+        "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",
     "rehabkit plugins --fields musculoskeletal":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
     "rehabkit plugins --fields dh":
@@ -184,3 +187,12 @@ def test_the_learning_block_is_lexos_myoarms():
     block = yaml.safe_load(_block_after("## Learning: scenarios as Gymnasium environments", "yaml"))["learning"]
     scenario = yaml.safe_load((ROOT / "scenarios" / "lexos_myoarm.yaml").read_text())["learning"]
     assert block == {**scenario, "observation": {**scenario["observation"], "layout": "box"}}
+
+
+def test_the_force_sensing_block_is_the_force_skills():
+    block = yaml.safe_load(_block_after("**Force sensing.**", "yaml"))
+    scenario = yaml.safe_load((ROOT / "scenarios" / "safety" / "hit_force.yaml").read_text())
+    assert block["world"]["loads"] == scenario["world"]["loads"]
+    sensor = scenario["sensors"]["ft"]
+    assert block["sensors"]["ft"]["type"] == sensor["type"]
+    assert block["sensors"]["ft"]["simulated"].items() <= sensor["simulated"].items()

@@ -102,9 +102,9 @@ def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, caps
     with pytest.raises(SetupError, match=rf"latched.*rehabkit estop clear {name} --by NAME"):
         run_scenario(ESTOP, extra)  # a new session: refused before anything moves
     assert main(["estop", "list"]) == 0 and f"{name}: LATCHED" in capsys.readouterr().out
-    assert main(["estop", "clear", name, "--by", "a test"]) == 0
+    assert main(["estop", "clear", name, "--by", "J. Doe"]) == 0  # (the README's command)
     record = EStopLatch.named(name).record()
-    assert not record["latched"] and record["cleared_by"] == "a test" and record["was"]["reason"]
+    assert not record["latched"] and record["cleared_by"] == "J. Doe" and record["was"]["reason"]
     cleared = run_scenario(ESTOP, extra)  # the first session after the clear ramps in (at least 1 s)
     assert _ramp_in(cleared) == pytest.approx(1.0)
     assert EStopLatch.named(name).latched() is not None  # (its own e-stop latched it again)
