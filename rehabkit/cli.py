@@ -1,4 +1,4 @@
-"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, audit, estop.
+"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, audit, estop, assess.
 
 Exit codes: 0 success (all expectations met), 1 an expectation failed or the
 run stopped on a safety event, 2 invalid input. Errors are printed as
@@ -227,6 +227,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.estop_cli import add_parser as add_estop
 
     add_estop(sub)
+    from rehabkit.assess_cli import add_parser as add_assess
+
+    add_assess(sub)
     return p
 
 

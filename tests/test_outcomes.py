@@ -117,4 +117,9 @@ def test_interaction_force_recovers_the_hand_force():
     J = rng.normal(size=(20, 3, 4))
     F = rng.normal(size=(20, 3)) * 30
     tau = np.einsum("nij,ni->nj", J, F)  # τ = Jᵀ F
-    assert np.allclose(interaction_forces(J, tau), F, atol=1e-9)
+    got = interaction_forces(J, tau)
+    well = np.linalg.svd(J, compute_uv=False)[:, -1] > 0.3  # (damped least squares: within 0.5 % there)
+    assert well.sum() > 10 and np.allclose(got[well], F[well], rtol=5e-3, atol=0.02 * 30)
+    # a straight arm: torques its cuffs carry stay a finite hand force (plain least squares: unbounded)
+    straight = np.array([[[0.0, 0.0, 0.0, 0.0], [0.6, 0.3, 1e-6, 0.0], [0.0, 0.0, 0.0, 1e-6]]])
+    assert np.abs(interaction_forces(straight, np.array([[0.0, 0.0, 1.0, 1.0]]))).max() < 1.0  # (plain: 1e6 N)

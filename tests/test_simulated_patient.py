@@ -119,7 +119,8 @@ def test_no_voluntary_push_out_of_the_active_range(hit):
                                          "joints": {"elbow_1": {"passive_deg": [20, 120], "active_deg": [40, 95]}}})
     ctx = Context(Path("."), np.random.default_rng(0), DT, robot=hit, reference_space="joint", patient=profile)
     arm = SimulatedArm(SimulatedArmConfig.model_validate(
-        {"stiffness_nm_rad": 0.0, "damping_nms_rad": 0.0, "voluntary": {"stiffness": 50.0, "noise": 0.0}}), ctx)
+        {"stiffness_nm_rad": 0.0, "damping_nms_rad": 0.0, "end_range": {"torque_nm": 0.0},
+         "voluntary": {"stiffness": 50.0, "noise": 0.0}}), ctx)
     q = np.radians([0, 90, 95, 30, -90, 90])  # elbow_1 at the top of its active range
     tau = arm.torque(0.0, q, np.zeros(6), q + np.radians(10))  # every joint's goal 10° further
     assert tau[2] == 0.0 and np.all(np.delete(tau, 2) > 0)  # the elbow can't go further on its own; the rest push

@@ -8,10 +8,13 @@ Per joint, the person's torque is the sum of
 - voluntary effort toward the movement's goal as the person perceives it (``delay_s`` ago): a hand
   force F = K_v (x_goal − x) − D_v ẋ capped at the person's force, τ_v = Jᵀ F (or the joint-space
   form for joint-space tasks), capped at each joint's strength, not pushing a joint further out of
-  its active range, scaled by the remaining capacity and by signal-dependent noise (a band-limited
-  Gaussian process whose deviation is a fraction of the effort). The person goes for the goal at
+  its active range, weaker along the motion the faster the joint goes (none at ``speed_deg_s``),
+  scaled by the remaining capacity and by signal-dependent noise (a band-limited Gaussian process
+  whose deviation is a fraction of the effort). The person goes for the goal at
   their own pace, not along the robot's path: a stiff robot holds them back, a compliant one lets
   them do the work;
+- end-range stiffness: toward either end of the joint's passive range the tissue stiffens, τ_e = −T e^{(q − q_hi)/w}
+  + T e^{(q_lo − q)/w} (T at the end itself, e-fold per w degrees): the end-feel that bounds the passive range;
 - fatigue: the capacity falls with effort and recovers at rest, dc/dt = −r_f e + r_r (1 − c), with e
   the effort as a fraction of strength, so repetitions wear the person out.
 
@@ -31,6 +34,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.interfaces import Context, Patient, StrictModel
 from rehabkit.core.metric import Metric
+from rehabkit.core.scenario.patient import JointRom
 
 PerJoint = float | list[float]
 SERIES_EVERY = 10  # control steps between logged samples of the person's state
@@ -55,6 +59,8 @@ class Voluntary(StrictModel):
     noise: float = Field(0.15, ge=0, description="signal-dependent noise, deviation as a fraction of the effort")
     noise_hz: float = Field(4.0, gt=0, description="bandwidth of the noise process")
     participation: float = Field(1.0, ge=0, le=1, description="how much of their capacity the person uses")
+    speed_deg_s: float = Field(90.0, gt=0, description="the fastest the person moves a joint: their effort along the "
+                                                       "motion falls to none at this speed (force-velocity)")
 
 
 class Fatigue(StrictModel):
@@ -62,6 +68,13 @@ class Fatigue(StrictModel):
 
     rate_per_s: float = Field(0.02, ge=0, description="capacity lost per second at full effort")
     recovery_per_s: float = Field(0.005, ge=0, description="share of the lost capacity regained per second")
+
+
+class EndRange(StrictModel):
+    """The tissue's stiffening toward the ends of the passive range (the end-feel a therapist feels)."""
+
+    torque_nm: float = Field(2.0, ge=0, description="resistance at either end of the passive range [N·m]")
+    width_deg: float = Field(2.0, gt=0, description="how sharply it rises: e-fold per this many degrees")
 
 
 class SimulatedArmConfig(StrictModel):
@@ -73,6 +86,9 @@ class SimulatedArmConfig(StrictModel):
     spasticity: Spasticity = Spasticity()
     voluntary: Voluntary = Voluntary()
     fatigue: Fatigue = Fatigue()
+    end_range: EndRange = EndRange()
+    rom: dict[str, JointRom] | None = Field(None, description="the simulated person's own ranges per joint (default: "
+                                                              "the profile's): what an assessment measures")
 
 
 def _per_joint(value: PerJoint, n: int, name: str) -> np.ndarray:
@@ -101,14 +117,24 @@ class SimulatedArm(Patient):
         if not np.all(self.strength > 0):
             raise ValueError("simulated-arm: voluntary.strength_nm must be > 0")
         self.vol, self.fat = vol, fat
+        self.own_speed = math.radians(vol.speed_deg_s)
         self.delay_s = vol.delay_s
         lim = model.limits  # the effective limits: the profile's passive range is in them
         lo, hi = lim.lower.copy(), lim.upper.copy()
         profile = context.patient
+        own = config.rom if config.rom is not None else (profile.joints if profile is not None else {})
+        unknown = [name for name in own if name not in model.joint_names]
+        if unknown:
+            raise ValueError(f"simulated-arm: rom: no joint(s) {unknown} on robot '{model.name}' "
+                             f"(its joints: {', '.join(model.joint_names)})")
+        self.passive_lo, self.passive_hi = np.full(n, -np.inf), np.full(n, np.inf)
         for j, name in enumerate(model.joint_names):
-            rom = profile.joints.get(name) if profile is not None else None
-            if rom is not None and rom.active_deg is not None:
-                lo[j], hi[j] = np.radians(rom.active_deg)
+            rom = own.get(name)
+            if rom is not None:
+                self.passive_lo[j], self.passive_hi[j] = np.radians(rom.passive_deg)
+                if rom.active_deg is not None:
+                    lo[j], hi[j] = np.radians(rom.active_deg)
+        self.end_torque, self.end_width = config.end_range.torque_nm, np.radians(config.end_range.width_deg)
         self.active_lo, self.active_hi = lo, hi
         self.rest: np.ndarray | None = None  # None: the posture of the first step (the person sits relaxed)
         if config.rest_deg is not None:
@@ -146,6 +172,10 @@ class SimulatedArm(Patient):
         if self.rest is None:
             self.rest = q.copy()
         tau = -self.k * (q - self.rest) - self.b * qd
+        if self.end_torque:  # (bounded exponents: a joint driven far past its end must not overflow)
+            w = self.end_width
+            tau -= self.end_torque * np.exp(np.minimum((q - self.passive_hi) / w, 30.0))
+            tau += self.end_torque * np.exp(np.minimum((self.passive_lo - q) / w, 30.0))
         slot = self.step % len(self.reflex)
         qd_late = self.reflex[slot].copy()  # the velocity one reflex delay ago
         self.reflex[slot] = qd
@@ -164,8 +194,10 @@ class SimulatedArm(Patient):
             target = np.clip(goal, self.active_lo, self.active_hi)
             effort = vol.stiffness * (target - q) - vol.damping * qd
         np.clip(effort, -self.strength, self.strength, out=effort)
-        # no voluntary push further out of the active range
+        # no voluntary push further out of the active range, nor faster than the person moves
         effort[((q >= self.active_hi) & (effort > 0)) | ((q <= self.active_lo) & (effort < 0))] = 0.0
+        along = effort * qd > 0  # force-velocity: pushing along the motion, less the faster it goes (none at v_max)
+        effort[along] *= np.maximum(0.0, 1.0 - np.abs(qd[along]) / self.own_speed)
         self.noise_state = self.noise_a * self.noise_state + self.noise_b * self._white()
         effort *= self.capacity * vol.participation * (1.0 + vol.noise * self.noise_state)
         tau += effort

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rehabkit.models.hand_force import hand_forces
+
 
 def sparc(speed: np.ndarray, fs: float, pad_level: int = 4, fc: float = 10.0, amp_threshold: float = 0.05) -> float:
     """Spectral arc length of a speed profile (SPARC, Balasubramanian et al. 2015).
@@ -103,7 +105,8 @@ def assistance_ratio(tau_robot: np.ndarray, tau_person: np.ndarray, qd: np.ndarr
 
 
 def interaction_forces(jacobians: np.ndarray, tau_person: np.ndarray) -> np.ndarray:
-    """Hand forces F (N, 3) with Jᵀ F = τ in the least-squares sense, from position Jacobians (N, 3, dof).
+    """Hand forces F (N, 3) with Jᵀ F = τ in the (damped) least-squares sense, from position Jacobians (N, 3, dof)
+    (:func:`rehabkit.models.hand_force.hand_forces`).
 
     The least-squares force is the part of the person's torques that acts through the
     hand; torques in the arm's null space (e.g. about the elbow swivel) have no hand force.
@@ -111,4 +114,4 @@ def interaction_forces(jacobians: np.ndarray, tau_person: np.ndarray) -> np.ndar
     J = np.asarray(jacobians, float)
     if not len(J):
         return np.zeros((0, 3))
-    return np.einsum("nij,nj->ni", np.linalg.pinv(np.transpose(J, (0, 2, 1))), np.asarray(tau_person, float))
+    return hand_forces(J, tau_person)

@@ -56,6 +56,8 @@ class PatientBase(StrictModel):
                                                         "with a setting of the same name adapt to them")
     joints: dict[str, JointRom] = Field({}, description="range of motion per robot joint")
     comfort: Comfort = Comfort()
+    version: int = Field(1, ge=1, description="the profile's version (an assessment writes the next)")
+    assessed: dict[str, str] | None = Field(None, description="how and when its ranges were measured")
     outside_rom: Literal["refuse", "nearest"] = Field(
         "refuse", description="a target outside the range: refuse the scenario, or use the nearest admissible point")
 

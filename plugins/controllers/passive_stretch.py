@@ -1,0 +1,144 @@
+"""The passive part of a range-of-motion assessment: a slow robot-driven stretch of one joint at a time, stopped
+at the end-feel — where the joint's resistance stiffens beyond a threshold — or at a torque cap, whichever comes
+first; each end's angle is the passive range.
+
+From the start posture, for each joint: out toward the robot's upper limit at ``speed_deg_s``, back, out toward
+the lower limit, back; the other joints held. The joint follows a PD on the ramp with gravity compensation; the
+resistance is the PD's effort against the motion, its stiffness the slope of that effort over the last
+``window_deg`` of travel. The person should be relaxed (no voluntary effort) and the speed low (below their
+stretch reflex's threshold).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydantic import Field
+
+from rehabkit import hookimpl
+from rehabkit.core.interfaces import Context, Controller, StrictModel
+from rehabkit.core.metric import Metric
+
+MARGIN_DEG = 1.0  # the stretch stops this short of the robot's own limit
+
+
+class PassiveStretchConfig(StrictModel):
+    """Which joints, how fast, and what counts as the end of the range."""
+
+    joints: list[str] | None = Field(None, description="joints to stretch, in order (default: all)")
+    speed_deg_s: float = Field(10.0, gt=0, le=30, description="stretch speed (below the person's reflex threshold)")
+    return_speed_deg_s: float = Field(30.0, gt=0, description="speed back to the start posture")
+    end_feel_nm_deg: float = Field(1.0, gt=0, description="the end of the range: resistance stiffer than this")
+    max_torque_nm: float = Field(10.0, gt=0, description="the stretch never pushes harder than this")
+    window_deg: float = Field(1.0, gt=0, description="travel over which the stiffness is measured")
+    kp: float = Field(300.0, gt=0, description="tracking stiffness [N·m/rad]")
+    kd: float = Field(20.0, ge=0, description="tracking damping [N·m·s/rad]")
+    pause_s: float = Field(0.5, ge=0, description="rest at the start posture between stretches")
+
+
+class PassiveStretch(Controller):
+    """Stretches each joint to its end-feel and back (see the module docstring); reports the angles reached."""
+
+    own_reference = True
+    metrics = (Metric("passive_rom_deg_*", "deg", outcome=True,
+                      description="a joint's passive range end (lower_, upper_<joint>), where the stretch ended"),
+               Metric("passive_stop_*", "count",
+                      description="why each stretch ended: 0 end-feel, 1 torque cap, 2 the robot's own limit"))
+
+    def __init__(self, config: PassiveStretchConfig, context: Context):
+        model = context.robot.model
+        names = config.joints or model.joint_names
+        if unknown := [j for j in names if j not in model.joint_names]:
+            raise ValueError(f"passive-stretch: no joint(s) {unknown} on robot '{model.name}'")
+        self.c, self.dt, self.gravity = config, context.control_dt, context.robot.gravity_torque
+        margin = np.radians(MARGIN_DEG)
+        self.lo, self.hi = model.limits.lower + margin, model.limits.upper - margin
+        self.names = model.joint_names
+        # the moves: (joint, direction); each goes out until it ends, then back to the start
+        self.moves = [(model.joint_names.index(j), d) for j in names for d in (1, -1)]
+        self.found: dict[str, float] = {}
+        self.ended: dict[str, float] = {}
+        self.q0: np.ndarray | None = None
+        self.joint_reference = None
+        self._move, self._phase, self._pause = 0, "out", 0.0
+        self._samples: list[tuple[float, float]] = []  # (angle, resistance) on the way out
+
+    @staticmethod
+    def duration(q0: np.ndarray, lower: np.ndarray, upper: np.ndarray, joints: list[int], config) -> float:
+        """How long stretching ``joints`` from ``q0`` can take at most [s] (out to the robot's limits and back)."""
+        out = sum((upper[j] - q0[j]) + (q0[j] - lower[j]) for j in joints)
+        speed, back = math.radians(config.speed_deg_s), math.radians(config.return_speed_deg_s)
+        return out / speed + out / back + 2 * len(joints) * (config.pause_s + 0.5)
+
+    def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        if self.q0 is None:
+            self.q0, self.joint_reference = q.copy(), q.copy()
+        r, v = self.joint_reference, np.zeros_like(q)
+        if self._move < len(self.moves):
+            j, d = self.moves[self._move]
+            v[j] = self._advance(j, d, r, q)
+        push = self.c.kp * (r - q)
+        if self._move < len(self.moves) and self._phase == "out":
+            self._feel(j, d, q, float(push[j]))
+        return push + self.c.kd * (v - qd) + self.gravity(q)
+
+    def _advance(self, j: int, d: int, r: np.ndarray, q: np.ndarray) -> float:
+        """Move the reference one step; its speed."""
+        if self._phase == "out":
+            speed = math.radians(self.c.speed_deg_s)
+            r[j] += d * speed * self.dt
+            limit = self.hi[j] if d > 0 else self.lo[j]
+            if d * (r[j] - limit) >= 0:
+                r[j] = limit
+                self._end(j, d, q[j], 2)
+            return d * speed
+        if self._phase == "back":
+            speed = math.radians(self.c.return_speed_deg_s)
+            step = -d * speed * self.dt
+            if d * (r[j] + step - self.q0[j]) <= 0:
+                r[j], self._phase, self._pause = self.q0[j], "pause", 0.0
+                return 0.0
+            r[j] += step
+            return -d * speed
+        self._pause += self.dt  # resting at the start posture
+        if self._pause >= self.c.pause_s:
+            self._move, self._phase, self._samples = self._move + 1, "out", []
+        return 0.0
+
+    def _feel(self, j: int, d: int, q: np.ndarray, push: float) -> None:
+        """The resistance against the motion (the PD's static part: its damping part is the start's transient,
+        not the tissue) and its stiffness over the last window of travel, from one window past the start."""
+        resistance = d * push
+        angle = float(q[j])
+        if d * (angle - self.q0[j]) < math.radians(self.c.window_deg):
+            return
+        if resistance >= self.c.max_torque_nm:
+            self._end(j, d, angle, 1)
+            return
+        self._samples.append((angle, resistance))
+        window = math.radians(self.c.window_deg)
+        first = self._samples[0]
+        if d * (angle - first[0]) < window:
+            return
+        while len(self._samples) > 2 and d * (angle - self._samples[1][0]) >= window:
+            self._samples.pop(0)  # keep one window of travel
+        a0, r0 = self._samples[0]
+        stiffness = (resistance - r0) / abs(math.degrees(angle - a0))
+        if stiffness >= self.c.end_feel_nm_deg:  # measured over the window: where it was felt is the middle
+            self._end(j, d, angle - d * window / 2, 0)
+
+    def _end(self, j: int, d: int, angle: float, why: int) -> None:
+        side = "upper" if d > 0 else "lower"
+        self.found[f"passive_rom_deg_{side}_{self.names[j]}"] = math.degrees(angle)
+        self.ended[f"passive_stop_{side}_{self.names[j]}"] = float(why)
+        self._phase = "back"
+        self.joint_reference[j] = angle  # from where it is, not from where the ramp ran ahead
+
+    def run_metrics(self, trace=None) -> dict[str, float]:
+        return {**self.found, **self.ended}
+
+
+@hookimpl
+def rehabkit_register_controllers(registry) -> None:
+    registry.add("passive-stretch", config=PassiveStretchConfig, factory=PassiveStretch)

@@ -1,0 +1,46 @@
+"""``rehabkit assess``: measure the active and passive range of motion of the person in a scenario
+(:mod:`rehabkit.rehab.assess`) and write the next version of their profile."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
+
+
+def cmd_assess(args: argparse.Namespace) -> int:
+    from rehabkit.core.errors import SetupError
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.rehab.assess import assess
+
+    out = Path(args.out or f"out/{Path(args.scenario).stem}_assessment")
+    try:
+        result = assess(args.scenario, out, args.set, joints=args.joints.split(",") if args.joints else None,
+                        damping=args.damping)
+    except ScenarioError as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_INVALID
+    except SetupError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    print(f"{'joint':<16} {'active [deg]':>18} {'passive [deg]':>18}  passive ends by")
+    for name, (lo, hi) in result.passive.items():
+        a_lo, a_hi = result.active[name]
+        print(f"{name:<16} {a_lo:8.1f} .. {a_hi:6.1f} {lo:8.1f} .. {hi:6.1f}  {' / '.join(result.stopped_by[name])}")
+    print(f"wrote {result.profile_file} (next session: --set patient={result.profile_file}) and "
+          f"{out / 'assessment.json'}")
+    return EXIT_OK
+
+
+def add_parser(sub) -> None:
+    a = sub.add_parser("assess", help="measure a person's active and passive range of motion; write the next "
+                                      "version of their profile")
+    a.add_argument("scenario", help="a scenario with the robot, backend and patient (its task is not used)")
+    a.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario>_assessment)")
+    a.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    a.add_argument("--joints", metavar="A,B", help="joints to assess (default: the profile's)")
+    a.add_argument("--damping", type=float, default=0.0, metavar="NMS_RAD",
+                   help="viscous damping the transparent robot keeps (a person who would move it too fast)")
+    a.set_defaults(func=cmd_assess)

@@ -1,0 +1,184 @@
+"""Range-of-motion assessment, as clinical practice does it at the start of a session: two runs of the scenario's
+robot, backend and person, then a new version of the person's profile.
+
+1. **Active**: the robot transparent (gravity and friction compensated, no stiffness — the ``transparent``
+   controller) while the person is cued to move one joint at a time as far as they can each way (joint-space
+   goals at the robot's limits); each joint's active range is the span it reached while cued.
+2. **Passive**: the person relaxed; a slow robot-driven stretch of each joint out to the end-feel and back
+   (``passive-stretch``); each end where it stopped is the passive range.
+
+Both runs leave the profile's ranges out of the limits (they are what is measured: the robot's own, the
+envelope's and its checks stay in force); a simulated person keeps them as the truth it moves by. The measured
+ranges go into ``DIR/<id>.v<N>.yaml`` — the profile with ``version`` N and ``assessed`` filled in — which
+narrows the next session's limits (``--set patient=DIR/<id>.v<N>.yaml``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import date
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from rehabkit.core.errors import SetupError
+from rehabkit.core.interfaces import InteractionForceSensor
+from rehabkit.core.io import atomic_write_json, atomic_write_text
+from rehabkit.core.plugins import default_registry
+from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
+
+CUE_S = 3.0  # each cue (a joint to one end, to the other, back) [s]
+CUE_MARGIN = 0.08  # cues this share of a joint's range inside the robot's limits (the cue plan's spline swings past)
+
+
+@dataclass
+class Assessment:
+    """What an assessment measured [deg], per joint, and where it wrote it."""
+
+    active: dict[str, tuple[float, float]]
+    passive: dict[str, tuple[float, float]]
+    stopped_by: dict[str, tuple[str, str]]  # each passive end: end-feel, torque cap, the robot's limit
+    profile_file: Path
+    runs: dict[str, Any] = field(default_factory=dict)  # the two runs' results
+
+
+def _sessions_base(loaded: LoadedScenario) -> dict[str, Any]:
+    """Overrides every session of the assessment shares: the profile's ranges out of the limits (the simulated
+    person keeps them as its own), no task events, expectations, keep-in box (a task's workspace: the stretch goes
+    to the joints' ends) or sensors but force sensors; every other limit of the envelope stays."""
+    sc, registry, raw = loaded.model, default_registry(), loaded.source.data
+    profile = sc.patient
+
+    def drop(section: str, *keys: str) -> dict:  # (null removes a key that is there; one that is not, it would set)
+        return {k: None for k in keys if k in (raw.get(section) or {})}
+
+    over: dict[str, Any] = {"patient": drop("patient", "joints"), "expect": drop("expect", *sc.expect),
+                            "task": drop("task", "events", "sequence", "start"),
+                            "safety": {"ramp_out_s": 0.0, **drop("safety", "keep_in")}}
+    model = getattr(profile, "model", None)
+    if model is not None and "rom" in type(model).model_fields and model.rom is None and profile.joints:
+        over["patient"]["model"] = {"rom": {j: r.model_dump(mode="json") for j, r in profile.joints.items()}}
+    dropped = {name: None for name, cfg in sc.sensors.items()
+               if not issubclass(registry.get("sensor", cfg.type).factory, InteractionForceSensor)}
+    if dropped:
+        over["sensors"] = dropped
+    return over
+
+
+def _merge(a: dict, b: dict) -> dict:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _robot_and_start(path: Path, overrides) -> tuple[Any, np.ndarray]:
+    from rehabkit.core.assembly import assemble, start_posture
+    from rehabkit.core.lifecycle import default_extensions
+
+    loaded = load_scenario(path, overrides)
+    a = assemble(loaded, default_registry(), default_extensions(), upto="targets")
+    return a.robot.model, start_posture(a)
+
+
+def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: list[str] | None = None,
+           cue_s: float = CUE_S, damping: float = 0.0) -> Assessment:
+    """Assess the range of motion of the person in scenario ``path`` (see the module docstring); ``damping``: the
+    viscous damping the transparent robot keeps [N·m·s/rad]."""
+    from rehabkit.api import run_scenario
+
+    stretcher = default_registry().get("controller", "passive-stretch")  # (a plugin: found by name, not imported)
+
+    path, out = Path(path), Path(out_dir)
+    loaded = load_scenario(path, overrides)
+    profile = loaded.model.patient
+    if profile is None:
+        raise SetupError(f"{path}: an assessment needs a patient profile (patient: FILE)")
+    given = dict(overrides) if not isinstance(overrides, (list, tuple)) else dict(
+        (k, yaml.safe_load(v)) for k, _, v in (o.partition("=") for o in overrides))
+    base = _merge(given, _sessions_base(loaded))
+    _, q0 = _robot_and_start(path, given)  # where the scenario starts (within the profile's ranges)
+    model, _ = _robot_and_start(path, base)
+    names = joints or [j for j in model.joint_names if j in profile.joints] or model.joint_names
+    idx = [model.joint_names.index(j) for j in names]
+    lo, hi = model.limits.lower, model.limits.upper
+    margin = CUE_MARGIN * (hi - lo)
+
+    # 1. active: cued to each end of each joint in turn, the robot transparent
+    cues, start = [], {"name": "start", "joints_deg": np.degrees(q0).round(6).tolist()}
+    for j in idx:
+        for end in (hi[j] - margin[j], lo[j] + margin[j], q0[j]):
+            q = q0.copy()
+            q[j] = end
+            cues.append({"name": f"cue{len(cues)}", "joints_deg": np.degrees(q).round(6).tolist()})
+    active_over = _merge(base, {
+        "planner": {"type": "multi-cubic", "segment_durations": [cue_s] * len(cues)},
+        "controller": {"type": "transparent", "damping_nms_rad": damping},
+        "task": {"targets": [start, *cues]}, "duration": cue_s * (len(cues) + 1)})
+    active_run = run_scenario(path, active_over, out_dir=out / "active")
+    _not_stopped(active_run, "active")
+    t, q = active_run.trace.t, np.degrees(active_run.trace.q)
+    active = {}
+    for n, (name, j) in enumerate(zip(names, idx)):
+        window = (t >= cue_s * 3 * n) & (t < cue_s * 3 * (n + 1))
+        active[name] = (float(q[window, j].min()), float(q[window, j].max()))
+
+    # 2. passive: relaxed, stretched to the end-feel
+    stretch = stretcher.config.model_validate({"type": "passive-stretch", "joints": names})
+    passive_over = _merge(base, {
+        "patient": {"model": {"voluntary": {"participation": 0.0}}},
+        "planner": {"type": "multi-cubic", "segment_durations": [1.0]},
+        "controller": {"type": "passive-stretch", "joints": names},
+        "task": {"targets": [start, {"name": "hold", "same_as": "start"}]},  # (its reference is its own)
+        "duration": float(stretcher.factory.duration(q0, lo, hi, idx, stretch))})
+    passive_run = run_scenario(path, passive_over, out_dir=out / "passive")
+    _not_stopped(passive_run, "passive")
+    m = passive_run.summary["metrics"]
+    why = {0: "end-feel", 1: "torque cap", 2: "robot limit"}
+    passive, stopped = {}, {}
+    for name in names:
+        keys = [f"passive_rom_deg_{side}_{name}" for side in ("lower", "upper")]
+        if not all(k in m for k in keys):
+            raise SetupError(f"the passive stretch of {name} did not finish within the session (summary: "
+                             f"{out / 'passive' / 'summary.json'})")
+        passive[name] = (m[keys[0]], m[keys[1]])
+        stopped[name] = tuple(why[int(m[f"passive_stop_{side}_{name}"])] for side in ("lower", "upper"))
+
+    profile_file = write_profile(loaded, out, active, passive)
+    result = Assessment(active, passive, stopped, profile_file, {"active": active_run, "passive": passive_run})
+    atomic_write_json(out / "assessment.json", {
+        "scenario": str(path), "patient": profile.id, "profile": str(profile_file),
+        "active_deg": active, "passive_deg": passive, "passive_stopped_by": stopped,
+        "previous_deg": {j: {"active": list(r.active_deg) if r.active_deg else None, "passive": list(r.passive_deg)}
+                         for j, r in profile.joints.items()}})
+    return result
+
+
+def _not_stopped(run, which: str) -> None:
+    if events := run.summary["safety"]["events"]:
+        raise SetupError(f"the assessment's {which} session was stopped: {events[0]['message']} "
+                         f"({run.out_dir / 'summary.json'})")
+
+
+def write_profile(loaded: LoadedScenario, out: Path, active: dict, passive: dict) -> Path:
+    """The profile with the measured ranges, as its next version, written whole into ``out``."""
+    profile = loaded.model.patient
+    data = profile.model_dump(mode="json", exclude_unset=True)
+    version = int(data.get("version", 1)) + 1
+    joints = data.setdefault("joints", {})
+    for name, (p_lo, p_hi) in passive.items():
+        a_lo, a_hi = active[name]
+        entry = joints.setdefault(name, {})
+        entry["passive_deg"] = [round(p_lo, 1), round(p_hi, 1)]
+        # (the active range inside the passive one: an active reach past a passive end is the stretch's bound)
+        entry["active_deg"] = [round(max(a_lo, p_lo), 1), round(min(a_hi, p_hi), 1)]
+    data["version"] = version
+    data["assessed"] = {"date": date.today().isoformat(), "method": "rehabkit assess: active (transparent robot, "
+                        "cued), passive (stretch to the end-feel)", "scenario": str(loaded.path)}
+    path = out / f"{profile.id}.v{version}.yaml"
+    text = (f"# {profile.id}, version {version}: ranges measured by `rehabkit assess` on {date.today()}\n"
+            + yaml.safe_dump(data, sort_keys=False, allow_unicode=True))
+    atomic_write_text(path, text)
+    return path

@@ -1,0 +1,45 @@
+"""Range-of-motion assessment (rehabkit assess): the simulated person's own ranges recovered, a new version of
+their profile written, and that version narrowing the next session's limits."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import yaml
+
+from rehabkit.cli import main
+from rehabkit.core.assembly import assemble
+from rehabkit.core.lifecycle import default_extensions
+from rehabkit.core.plugins import default_registry
+from rehabkit.core.scenario.loader import load_scenario
+from tests.conftest import SCENARIOS
+
+PATIENT = SCENARIOS / "lexos_patient.yaml"
+
+
+def test_an_assessment_recovers_the_persons_ranges_and_narrows_the_next_session(tmp_path, capsys):
+    truth = yaml.safe_load((SCENARIOS / "patients" / "p01.yaml").read_text())["joints"]
+    assert main(["assess", str(PATIENT), "--out", str(tmp_path / "rom")]) == 0  # (the README's command)
+    assert "wrote" in capsys.readouterr().out
+    report = json.loads((tmp_path / "rom" / "assessment.json").read_text())
+    for joint, rom in truth.items():  # the spring-damper person: its profile's ranges, within 2°
+        for kind in ("active", "passive"):
+            measured, true = report[f"{kind}_deg"][joint], rom[f"{kind}_deg"]
+            assert max(abs(measured[0] - true[0]), abs(measured[1] - true[1])) < 2.0, (joint, kind, measured, true)
+    assert all(report["passive_stopped_by"][j] == ["end-feel", "end-feel"]
+               for j in ("q1_abduction", "q2_flexion", "q3_rotation"))  # (the elbow's ends are the robot's too)
+    new = tmp_path / "rom" / "P01.v2.yaml"
+    profile = yaml.safe_load(new.read_text())
+    assert profile["version"] == 2 and profile["assessed"]["date"] and profile["id"] == "P01"
+    # the next session's limits are the measured passive ranges
+    loaded = load_scenario(PATIENT, {"patient": str(new)})
+    a = assemble(loaded, default_registry(), default_extensions(), upto="targets")
+    j = a.robot.model.joint_names.index("q1_abduction")
+    assert math.degrees(a.limits.upper[j]) == profile["joints"]["q1_abduction"]["passive_deg"][1]
+    assert a.limit_sources.by_joint["q1_abduction"]["upper"][0] == "patient"
+
+
+def test_an_assessment_needs_a_person(capsys):
+    assert main(["assess", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", "/nonexistent/x"]) == 1
+    assert "needs a patient profile" in capsys.readouterr().err
