@@ -1,4 +1,5 @@
-"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, audit, estop, assess.
+"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, audit, estop, assess,
+safety-report.
 
 Exit codes: 0 success (all expectations met), 1 an expectation failed or the
 run stopped on a safety event, 2 invalid input. Errors are printed as
@@ -230,6 +231,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.assess_cli import add_parser as add_assess
 
     add_assess(sub)
+    from rehabkit.safety_report import add_parser as add_safety_report
+
+    add_safety_report(sub)
     return p
 
 

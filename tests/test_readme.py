@@ -31,6 +31,8 @@ EXECUTED_ELSEWHERE = {
     "rehabkit --version": "tests/test_user_robot_errors.py::test_contacts_are_said_and_the_version_is_known",
     "rehabkit assess scenarios/lexos_patient.yaml --out out/rom":
         "tests/test_assessment.py::test_an_assessment_recovers_the_persons_ranges_and_narrows_the_next_session",
+    "rehabkit safety-report":
+        "tests/test_safety_report.py::test_the_report_gives_every_skill_in_simulation_and_over_the_link",
     "rehabkit estop list": "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",
     'rehabkit estop clear sim-hit --by "J. Doe"':
         "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",

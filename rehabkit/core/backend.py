@@ -75,7 +75,11 @@ class BodyPoses:
 
 
 class BackendFaultError(RuntimeError):
-    """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason."""
+    """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason.
+    ``observable``: the robot side holds it and still reports its state, so the run watches it come to rest (the
+    safety stop's ``stop_after_s``) before ending."""
+
+    observable = False
 
 
 class Backend(ABC):

@@ -135,11 +135,12 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                 if push is not None:
                     push(tau_h[k])
                 step(sub)
-            except BackendFaultError as exc:  # the robot can't be driven any more: stop here, logs complete
+            except BackendFaultError as exc:  # the robot can't be driven any more: stop, logs complete
                 safety.trip(t, q, "backend", str(exc), qd)
-                k += 1
-                st.stopped = True
-                break
+                if not exc.observable:  # (else watched while the robot side stops it, as any safety stop)
+                    k += 1
+                    st.stopped = True
+                    break
             if contacts():
                 contact_steps += 1
             if k == next_log:

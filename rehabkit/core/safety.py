@@ -310,6 +310,9 @@ class SafetyLayer:
         digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
         text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
                                             if value is not None and not described else "")
+        if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
+            self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}))
+            return
         category = self._category.get(rule, self._category["default"])
         text += f"; {WORDS[category]}"
         event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category})

@@ -235,8 +235,10 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
         if not self._started:  # the timeline starts with the loop, not at the reset (setup work comes between)
             self._started = True
             self.deadline = self.last_state = self.t0 = self._now()
+        cut = self.config.cut_commands_at_s
         for _ in range(n):
-            self._send(self.tau, self._flags)
+            if cut is None or self._now() - self.t0 < cut:  # (a fault a safety-skill test injects: a cut link)
+                self._send(self.tau, self._flags)
             self.deadline += self.timestep
             self._got = False
             late = self._pace()
@@ -289,8 +291,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
         name = f"{self.robot_type}-{self.config.robot_id}"
         return (f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it "
                 f"with `rehabkit estop clear {name} --by NAME` on the bridge's machine (a bridge this run starts "
-                f"reads it from there), or `rehabkit estop clear --bridge {self.addr[0]}:{self.addr[1]} --robot-id "
-                f"{self.config.robot_id} --by NAME` while it runs")
+                f"reads it from there), or `rehabkit estop clear {name} --by NAME --bridge {self.addr[0]}:"
+                f"{self.addr[1]}` while it runs")
 
     @property
     def holding(self) -> bool:

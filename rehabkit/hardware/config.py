@@ -14,7 +14,10 @@ class LinkLostError(BackendFaultError):
 
 
 class BridgeHoldError(BackendFaultError):
-    """The bridge stopped the robot on its own (its command watchdog, or an e-stop at the robot)."""
+    """The bridge stopped the robot on its own (its command watchdog, or an e-stop at the robot); it still reports
+    the robot's state."""
+
+    observable = True
 
 
 class HardwareConfig(StrictModel):
@@ -36,3 +39,5 @@ class HardwareConfig(StrictModel):
     bridge_watchdog_ms: float = Field(50.0, gt=0, description="bridge holds the robot without commands this long")
     bridge_stale_ms: float = Field(10.0, gt=0, description="bridge holds the posture without a newer command this "
                                    "long, until the next one (no torque is applied open-loop for longer)")
+    cut_commands_at_s: float | None = Field(None, gt=0, description="a fault injected for a safety-skill test: "
+                                            "from this time on no command leaves the host (a cut link)")

@@ -30,7 +30,8 @@ from rehabkit.core.plugins import default_registry
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
 
 CUE_S = 3.0  # each cue (a joint to one end, to the other, back) [s]
-CUE_MARGIN = 0.08  # cues this share of a joint's range inside the robot's limits (the cue plan's spline swings past)
+CUE_MARGINS = (0.08, 0.12, 0.16, 0.2, 0.25)  # cues this share of a joint's range inside the robot's limits, the
+# first whose plan (a spline that swings past its via points) stays within them
 
 
 @dataclass
@@ -104,15 +105,10 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     names = joints or [j for j in model.joint_names if j in profile.joints] or model.joint_names
     idx = [model.joint_names.index(j) for j in names]
     lo, hi = model.limits.lower, model.limits.upper
-    margin = CUE_MARGIN * (hi - lo)
 
     # 1. active: cued to each end of each joint in turn, the robot transparent
-    cues, start = [], {"name": "start", "joints_deg": np.degrees(q0).round(6).tolist()}
-    for j in idx:
-        for end in (hi[j] - margin[j], lo[j] + margin[j], q0[j]):
-            q = q0.copy()
-            q[j] = end
-            cues.append({"name": f"cue{len(cues)}", "joints_deg": np.degrees(q).round(6).tolist()})
+    start = {"name": "start", "joints_deg": np.degrees(q0).round(6).tolist()}
+    cues = _cues(path, base, q0, idx, lo, hi, cue_s)
     active_over = _merge(base, {
         "planner": {"type": "multi-cubic", "segment_durations": [cue_s] * len(cues)},
         "controller": {"type": "transparent", "damping_nms_rad": damping},
@@ -154,6 +150,34 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         "previous_deg": {j: {"active": list(r.active_deg) if r.active_deg else None, "passive": list(r.passive_deg)}
                          for j, r in profile.joints.items()}})
     return result
+
+
+def _cues(path: Path, base: dict, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray,
+          cue_s: float) -> list[dict]:
+    """Joint-space cues to each end of each joint and back, as far out as the cue plan (a C2 spline through them,
+    which swings past its via points) stays within the robot's limits."""
+    from rehabkit.core.assembly import assemble
+    from rehabkit.core.interfaces import PlanRequest, Target
+    from rehabkit.core.lifecycle import default_extensions
+    from rehabkit.core.plan_gate import plan_breach
+
+    a = assemble(load_scenario(path, base), default_registry(), default_extensions(), upto="targets")
+    info = default_registry().get("planner", "multi-cubic")
+    for share in CUE_MARGINS:
+        margin = share * (hi - lo)
+        points = []
+        for j in idx:
+            for end in (hi[j] - margin[j], lo[j] + margin[j], q0[j]):
+                q = q0.copy()
+                q[j] = end
+                points.append(q)
+        planner = info.factory(info.config.model_validate({"type": "multi-cubic",
+                                                           "segment_durations": [cue_s] * len(points)}), a.context)
+        targets = [Target("start", q=q0), *(Target(f"cue{i}", q=p) for i, p in enumerate(points))]
+        plan = planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), targets, a.robot))
+        if plan_breach(plan, a.robot.model) is None:
+            return [{"name": f"cue{i}", "joints_deg": np.degrees(p).round(6).tolist()} for i, p in enumerate(points)]
+    raise SetupError("no cue plan within the robot's limits (its joints' ranges are too narrow to cue)")
 
 
 def _not_stopped(run, which: str) -> None:

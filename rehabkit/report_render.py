@@ -1,0 +1,111 @@
+"""The safety report's pages: a table per skill (simulation and link side by side) and a plot of each, as Markdown
+and as one self-contained HTML file (plots inline)."""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from pathlib import Path
+
+import numpy as np
+
+from rehabkit.core.io import atomic_write_text
+
+ROWS = [  # (label, how to get it from a SkillRun, format)
+    ("expectations met", lambda r: "yes" if r.passed else "NO", "{}"),
+    ("trigger", lambda r: r.trigger, "{}"),
+    ("limit crossed at [s]", lambda r: r.onset_s, "{:.3f}"),
+    ("stop triggered at [s]", lambda r: r.trip_s, "{:.3f}"),
+    ("reaction time [ms]", lambda r: r.reaction_ms, "{:.1f}"),
+    ("stop category", lambda r: r.category, "{}"),
+    ("time to standstill [s]", lambda r: r.figures.get("stop_time_s"), "{:.3f}"),
+    ("largest joint travel after the trigger [deg]", lambda r: r.figures.get("stop_distance_deg"), "{:.2f}"),
+    ("hand path after the trigger [mm]", lambda r: _mm(r.figures.get("stop_distance_m")), "{:.1f}"),
+    ("fastest joint after the trigger [deg/s]", lambda r: r.figures.get("stop_peak_speed_deg_s"), "{:.1f}"),
+    ("peak interaction force [N]", lambda r: r.figures.get("ft_peak_force_n",
+                                                           r.figures.get("peak_interaction_force_n")), "{:.1f}"),
+    ("force sensor bias tared [N]", lambda r: r.figures.get("ft_bias_n"), "{:.2f}"),
+    ("force sensor noise raw / filtered [N]", lambda r: _pair(r.figures, "ft_noise_n", "ft_noise_filtered_n"), "{}"),
+    ("ramp-in [s]", lambda r: r.figures.get("ramp_in_s"), "{:g}"),
+    ("largest torque rate [N·m/s]", lambda r: r.figures.get("torque_rate_max_nm_s"), "{:.0f}"),
+    ("notes", lambda r: "; ".join(r.notes) or None, "{}"),
+]
+
+
+def _mm(v):
+    return None if v is None or not math.isfinite(v) else 1e3 * v
+
+
+def _pair(f: dict, a: str, b: str):
+    return f"{f[a]:.3f} / {f[b]:.3f}" if a in f and b in f else None
+
+
+def _cell(run, get, fmt) -> str:
+    if run is None:
+        return "n/a"
+    v = get(run)
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    return fmt.format(v)
+
+
+def _plot(sim, link, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 4.2), sharex=True)
+    for run, style in ((sim, "-"), (link, "--")):
+        if run is None:
+            continue
+        tr = run.trace
+        top.plot(tr.t, np.degrees(np.abs(tr.qd)).max(axis=1), style, label=run.backend)
+        if tr.f_h is not None:
+            bottom.plot(tr.t, tr.f_h, style, label=run.backend)
+        else:
+            bottom.plot(tr.t, np.abs(tr.tau).max(axis=1), style, label=f"{run.backend} (largest |τ|, N·m)")
+        if run.trip_s is not None:
+            for ax in (top, bottom):
+                ax.axvline(run.trip_s, color="red", lw=0.8, ls=style)
+    top.set_ylabel("fastest joint [deg/s]")
+    bottom.set_ylabel("interaction force [N]")
+    bottom.set_xlabel("time [s]")
+    top.legend(loc="upper left", fontsize=8)
+    top.set_title((link or sim).scenario, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_report(runs: list, out: Path) -> tuple[Path, Path]:
+    """``out/safety_report.md`` and ``out/safety_report.html`` (plots as PNGs beside the Markdown, inline in the
+    HTML)."""
+    out.mkdir(parents=True, exist_ok=True)
+    md = ["# Safety skills: simulation and robot link", "",
+          "Each skill's scenario run in simulation (MuJoCo) and over the robot link (lock-step UDP to a bridge "
+          "driving the robot's MuJoCo model). Reaction: from the limit's first crossing in truth to the stop.", ""]
+    page = ["<!doctype html><meta charset='utf-8'><title>rehabkit safety report</title>",
+            "<style>body{font-family:sans-serif;max-width:60em}td,th{border:1px solid #ccc;padding:2px 8px}"
+            "table{border-collapse:collapse;margin-bottom:1em}</style>", "<h1>Safety skills: simulation and robot "
+            "link</h1>"]
+    for sim, link in runs:
+        name = (link or sim).scenario
+        png = out / f"{name}.png"
+        _plot(sim, link, png)
+        md += [f"## {name}", "", "| | simulation | link |", "|---|---|---|"]
+        page += [f"<h2>{html.escape(name)}</h2><table><tr><th></th><th>simulation</th><th>link</th></tr>"]
+        for label, get, fmt in ROWS:
+            a, b = _cell(sim, get, fmt), _cell(link, get, fmt)
+            if a in ("–", "n/a") and b in ("–", "n/a"):
+                continue
+            md.append(f"| {label} | {a} | {b} |")
+            page.append(f"<tr><td>{html.escape(label)}</td><td>{html.escape(a)}</td><td>{html.escape(b)}</td></tr>")
+        md += ["", f"![{name}]({png.name})", ""]
+        data = base64.b64encode(png.read_bytes()).decode()
+        page += ["</table>", f"<img alt='{html.escape(name)}' src='data:image/png;base64,{data}'>"]
+    md_path, html_path = out / "safety_report.md", out / "safety_report.html"
+    atomic_write_text(md_path, "\n".join(md) + "\n")
+    atomic_write_text(html_path, "\n".join(page) + "\n")
+    return md_path, html_path

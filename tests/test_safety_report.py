@@ -1,0 +1,35 @@
+"""rehabkit safety-report: every safety skill in simulation and over the link, side by side."""
+
+from __future__ import annotations
+
+import re
+
+from rehabkit.cli import main
+from tests.conftest import ROOT
+
+
+def _row(section: str, label: str) -> list[str]:
+    line = next(x for x in section.splitlines() if x.startswith(f"| {label} |"))
+    return [c.strip() for c in line.strip("|").split("|")][1:]
+
+
+def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(ROOT)  # (the README's command: the skills in scenarios/safety/)
+    assert main(["safety-report", "--out", str(tmp_path / "report")]) == 0
+    md = (tmp_path / "report" / "safety_report.md").read_text()
+    sections = dict(re.findall(r"^## (\S+)\n(.*?)(?=^## |\Z)", md, re.S | re.M))
+    assert set(sections) == {"hit-estop", "hit-force", "hit-link-loss", "hit-ramp-in", "hit-range", "hit-speed",
+                             "lexos-force"}
+    for name in ("hit-force", "lexos-force"):  # the force limit: the same force, the rig's push, both ways
+        sim, link = (float(c.split()[1]) for c in _row(sections[name], "trigger"))  # "interaction-force 30.03 (…"
+        assert abs(sim - link) < 0.1
+        assert all(0 < float(r) < 15 for r in _row(sections[name], "reaction time [ms]"))  # the filter's lag
+    for name in ("hit-range", "hit-speed", "hit-estop"):  # a stop is measured the same on both backends
+        a, b = (float(v) for v in _row(sections[name], "largest joint travel after the trigger [deg]"))
+        assert abs(a - b) < 0.2
+    assert "refused: e-stop latched" in _row(sections["hit-estop"], "notes")[0]
+    sim, link = _row(sections["hit-link-loss"], "reaction time [ms]")
+    assert sim == "n/a" and 5 <= float(link) <= 15  # the bridge's own hold, 10 ms after the last command
+    assert all(r == "yes" for s in sections.values() for r in _row(s, "expectations met") if r != "n/a")
+    html = (tmp_path / "report" / "safety_report.html").read_text()
+    assert html.count("data:image/png;base64,") == 7 and "<table>" in html
