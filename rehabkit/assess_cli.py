@@ -10,6 +10,13 @@ from pathlib import Path
 EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
 
 
+def _setting(text: str) -> tuple[str, object]:
+    import yaml
+
+    key, _, value = text.partition("=")
+    return key.strip(), yaml.safe_load(value)
+
+
 def cmd_assess(args: argparse.Namespace) -> int:
     from rehabkit.core.errors import SetupError
     from rehabkit.core.scenario.errors import ScenarioError
@@ -18,7 +25,7 @@ def cmd_assess(args: argparse.Namespace) -> int:
     out = Path(args.out or f"out/{Path(args.scenario).stem}_assessment")
     try:
         result = assess(args.scenario, out, args.set, joints=args.joints.split(",") if args.joints else None,
-                        damping=args.damping)
+                        damping=args.damping, stretch_settings=dict(_setting(s) for s in args.stretch))
     except ScenarioError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_INVALID
@@ -41,6 +48,8 @@ def add_parser(sub) -> None:
     a.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario>_assessment)")
     a.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a.add_argument("--joints", metavar="A,B", help="joints to assess (default: the profile's)")
+    a.add_argument("--stretch", action="append", default=[], metavar="KEY=VALUE",
+                   help="a setting of the passive stretch (see `rehabkit plugins --fields passive-stretch`)")
     a.add_argument("--damping", type=float, default=0.0, metavar="NMS_RAD",
                    help="viscous damping the transparent robot keeps (a person who would move it too fast)")
     a.set_defaults(func=cmd_assess)

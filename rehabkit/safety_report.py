@@ -81,8 +81,8 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     """Run one skill scenario on ``backend`` (``simulation`` or ``link``), its latches its own."""
     from rehabkit.api import run_scenario
     from rehabkit.core.errors import SetupError
+    from rehabkit.core.estop import own_state
     from rehabkit.core.scenario.loader import load_scenario
-    from rehabkit.testing import own_state
 
     overrides = LINK if backend == "link" else {}
     loaded = load_scenario(path, overrides)

@@ -25,14 +25,14 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
+
+from rehabkit.core.estop import own_state
 
 _RUNS = pytest.StashKey[dict[Path, Any]]()
 
@@ -49,19 +49,6 @@ def shared_run(config: pytest.Config, path: str | Path):
             runs[path] = run_scenario(path, out_dir=out)
     return runs[path]
 
-
-@contextlib.contextmanager
-def own_state(folder: Path):
-    """Keep rehabkit's state across sessions (e-stop latches) in ``folder`` meanwhile."""
-    before = os.environ.get("REHABKIT_STATE")
-    os.environ["REHABKIT_STATE"] = str(folder)
-    try:
-        yield
-    finally:
-        if before is None:
-            os.environ.pop("REHABKIT_STATE", None)
-        else:
-            os.environ["REHABKIT_STATE"] = before
 
 
 def _is_scenario(path: Path) -> bool:

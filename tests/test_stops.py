@@ -15,10 +15,9 @@ import pytest
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
 from rehabkit.core.errors import SetupError
-from rehabkit.core.estop import EStopLatch
+from rehabkit.core.estop import EStopLatch, own_state
 from rehabkit.core.safety import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
-from rehabkit.testing import own_state
 from tests.conftest import SCENARIOS
 
 ESTOP = SCENARIOS / "safety" / "hit_estop.yaml"

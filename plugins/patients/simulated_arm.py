@@ -101,6 +101,7 @@ def _per_joint(value: PerJoint, n: int, name: str) -> np.ndarray:
 class SimulatedArm(Patient):
     """Passive tissue + delayed stretch reflex + noisy, fatiguing voluntary effort; see the module docstring."""
 
+    relaxed = {"voluntary": {"participation": 0.0}}
     metrics = (Metric("patient_capacity_final", outcome=True, description="voluntary capacity left at the end"),
                Metric("patient_voluntary_work_j", "J", outcome=True, description="the person's positive work"))
 

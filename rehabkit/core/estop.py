@@ -10,9 +10,11 @@ behaves as the robot will). ``rehabkit estop list`` shows them, ``rehabkit estop
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
+from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -25,6 +27,20 @@ def state_dir() -> Path:
     """Where rehabkit keeps state across sessions on this machine."""
     given = os.environ.get("REHABKIT_STATE")
     return Path(given) if given else Path.home() / ".local" / "state" / "rehabkit"
+
+
+@contextlib.contextmanager
+def own_state(folder: Path) -> Iterator[None]:
+    """Keep rehabkit's state across sessions (e-stop latches) in ``folder`` meanwhile (a test, a report's runs)."""
+    before = os.environ.get("REHABKIT_STATE")
+    os.environ["REHABKIT_STATE"] = str(folder)
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("REHABKIT_STATE", None)
+        else:
+            os.environ["REHABKIT_STATE"] = before
 
 
 def _now() -> str:

@@ -23,6 +23,8 @@ class Patient(ABC):
 
     delay_s: float = 0.0
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    # settings (over the plugin's own) that leave the person relaxed, no voluntary effort: a passive assessment's
+    relaxed: ClassVar[dict[str, Any]] = {}
 
     @abstractmethod
     def torque(self, t: float, q: np.ndarray, qd: np.ndarray, goal: np.ndarray) -> np.ndarray:

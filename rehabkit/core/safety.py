@@ -22,44 +22,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from rehabkit.core.limits import LimitBreach
+from rehabkit.core.ramps import Ramps
+from rehabkit.core.safety_event import SafetyEvent
 from rehabkit.core.scenario.safety import SafetyConfig
-from rehabkit.core.stopping import STOP_RULES, WORDS, ControlledStop
+from rehabkit.core.stopping import STOP_RULES, WORDS, ControlledStop, StopActions
 from rehabkit.models.robot_model import RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
 _count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
 
 
-@dataclass
-class SafetyEvent:
-    """Why the safety layer acted: a trip, a clipping episode or a ramp."""
-
-    t: float
-    rule: str
-    joint: str | None
-    value: float | None
-    limit: float | None
-    message: str
-    data: dict = field(default_factory=dict)  # rule-specific values (a clipping episode's length, a box axis)
-
-    def as_dict(self) -> dict:
-        return asdict(self)
-
-
 AXES = "xyz"
 
 
-def _blend(s: float) -> float:
-    """Half-cosine from 0 to 1: no jump in the torque's rate at either end of a ramp."""
-    return 0.5 - 0.5 * math.cos(math.pi * min(max(s, 0.0), 1.0))
-
-
-class SafetyLayer:
+class SafetyLayer(StopActions, Ramps):
     """Checks every command (the rules: the module docstring) against the limits of ``robot`` (the runner narrows
     them first); ``hand(q)``: the hand's world position, for a keep-in box; ``dt`` tells one clipping episode from
     the next."""
@@ -195,51 +175,6 @@ class SafetyLayer:
         starts from (none: from rest)."""
         self._trip(t, q, rule, None, None, None, message, qd=qd)
 
-    @property
-    def categories(self) -> dict[str, int]:
-        """The stop category of each rule."""
-        return dict(self._category)
-
-    @property
-    def torque_off(self) -> bool:
-        """Tripped, and the torque has gone off (category 0, or 1 once stopped): the brakes are due."""
-        return self.tripped_at is not None and (self.category == 0 or self._limp)
-
-    def braked(self, t: float, engaged: bool) -> None:
-        """Record that the torque went off, and whether brakes hold the robot."""
-        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: torque off; " + (
-            "holding brakes engaged" if engaged else "no brakes: the robot is free to move (gravity, the person)"),
-            {"engaged": engaged}))
-
-    def require_ramp_in(self, seconds: float) -> None:
-        """Ramp in at least this long (the first session after an e-stop was cleared)."""
-        if seconds > self._ramp_in:
-            self._ramp_in, self._plain = seconds, False
-
-    def begin_ramp_out(self, t: float, q: np.ndarray) -> None:
-        """Start the soft stop: over ``ramp_out_s`` the torque blends into holding posture ``q``."""
-        if self._ramp_from is None and self.config.ramp_out_s > 0 and self.tripped_at is None:
-            self._ramp_from = (t, self.config.ramp_out_s, np.array(q, float))
-            self._plain = False
-            self._note(SafetyEvent(t, "ramp-out", None, None, None,
-                                   f"t={t:.3f}s: ramp-out over {self.config.ramp_out_s:g} s to holding the posture",
-                                   {"duration_s": self.config.ramp_out_s}))
-
-    def _ramp(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
-        if self._ramp_from is not None:
-            t0, length, posture = self._ramp_from
-            s = 1.0 - _blend((t - t0) / length)
-        else:
-            if not self._ramp_in_noted:
-                self._ramp_in_noted = True
-                self._note(SafetyEvent(t, "ramp-in", None, None, None,
-                                       f"t={t:.3f}s: ramp-in over {self._ramp_in:g} s from holding the start posture",
-                                       {"duration_s": self._ramp_in}))
-            posture, s = self._start_q, _blend(t / self._ramp_in)
-        hold = self._hold_torque(posture, q, qd)
-        tau *= s
-        tau += (1.0 - s) * hold
-
     def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
         """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
         lo, hi = self._box
@@ -324,31 +259,3 @@ class SafetyLayer:
         self.category = category
         if category:
             self._stop = ControlledStop.start(category, t, hold, qd, self._decel, self.effort, self._robot, self._dt)
-
-    def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
-        if self._gravity is not None:
-            tau += self._gravity(q)
-        return np.clip(tau, -self.effort, self.effort)
-
-    def _stop_torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        if self.category == 0 or self._limp:
-            return self._zero.copy()
-        q = np.where(np.isfinite(q), q, self._hold_q)
-        qd = np.where(np.isfinite(qd), qd, 0.0)
-        stop = self._stop
-        if stop is not None:
-            if not stop.over(t):  # on the deceleration ramp
-                q_r, qd_r = stop.reference(t)
-                tau = self.config.hold_kp * (q_r - q) + self.config.hold_kd * (qd_r - qd)
-                if stop.feedforward is not None:
-                    tau += stop.feedforward
-                if self._gravity is not None:
-                    tau += self._gravity(q)
-                return np.clip(tau, -self.effort, self.effort)
-            self._stop = None
-            if stop.category == 1:
-                self._limp = True
-                return self._zero.copy()
-            self._hold_q = np.clip(stop.end, self.lo, self.hi)
-        return self._hold_torque(self._hold_q, q, qd)

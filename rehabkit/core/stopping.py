@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rehabkit.core.safety_event import SafetyEvent
+
 STOP_RULES = ("default", "position", "velocity", "torque", "non-finite", "keep-in", "interaction-force", "e-stop",
               "plan", "plugin-error", "backend")
 STANDSTILL_DEG_S = 1.0  # every joint slower than this ...
@@ -99,3 +101,52 @@ def stop_figures(t: np.ndarray, q: np.ndarray, qd: np.ndarray, hand: np.ndarray 
     return {"stop_time_s": float(t[k1] - trip_t) if len(hits) else math.nan,
             "stop_distance_deg": float(travel.max()), "stop_distance_m": path,
             "stop_peak_speed_deg_s": float(speed.max())}
+
+
+class StopActions:
+    """What :class:`~rehabkit.core.safety.SafetyLayer` sends once tripped (its state: ``category``, ``_stop``,
+    ``_limp``, ``_hold_q``; its gains, effort limits and gravity)."""
+
+    @property
+    def categories(self) -> dict[str, int]:
+        """The stop category of each rule."""
+        return dict(self._category)
+
+    @property
+    def torque_off(self) -> bool:
+        """Tripped, and the torque has gone off (category 0, or 1 once stopped): the brakes are due."""
+        return self.tripped_at is not None and (self.category == 0 or self._limp)
+
+    def braked(self, t: float, engaged: bool) -> None:
+        """Record that the torque went off, and whether brakes hold the robot."""
+        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: torque off; " + (
+            "holding brakes engaged" if engaged else "no brakes: the robot is free to move (gravity, the person)"),
+            {"engaged": engaged}))
+
+    def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
+        if self._gravity is not None:
+            tau += self._gravity(q)
+        return np.clip(tau, -self.effort, self.effort)
+
+    def _stop_torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        if self.category == 0 or self._limp:
+            return self._zero.copy()
+        q = np.where(np.isfinite(q), q, self._hold_q)
+        qd = np.where(np.isfinite(qd), qd, 0.0)
+        stop = self._stop
+        if stop is not None:
+            if not stop.over(t):  # on the deceleration ramp
+                q_r, qd_r = stop.reference(t)
+                tau = self.config.hold_kp * (q_r - q) + self.config.hold_kd * (qd_r - qd)
+                if stop.feedforward is not None:
+                    tau += stop.feedforward
+                if self._gravity is not None:
+                    tau += self._gravity(q)
+                return np.clip(tau, -self.effort, self.effort)
+            self._stop = None
+            if stop.category == 1:
+                self._limp = True
+                return self._zero.copy()
+            self._hold_q = np.clip(stop.end, self.lo, self.hi)
+        return self._hold_torque(self._hold_q, q, qd)

@@ -85,11 +85,10 @@ def _robot_and_start(path: Path, overrides) -> tuple[Any, np.ndarray]:
 
 
 def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: list[str] | None = None,
-           cue_s: float = CUE_S, damping: float = 0.0) -> Assessment:
+           cue_s: float = CUE_S, damping: float = 0.0, stretch_settings: dict[str, Any] | None = None
+           ) -> Assessment:
     """Assess the range of motion of the person in scenario ``path`` (see the module docstring); ``damping``: the
-    viscous damping the transparent robot keeps [N·m·s/rad]."""
-    from rehabkit.api import run_scenario
-
+    viscous damping the transparent robot keeps [N·m·s/rad]; ``stretch_settings``: the passive stretch's."""
     stretcher = default_registry().get("controller", "passive-stretch")  # (a plugin: found by name, not imported)
 
     path, out = Path(path), Path(out_dir)
@@ -122,11 +121,11 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         active[name] = (float(q[window, j].min()), float(q[window, j].max()))
 
     # 2. passive: relaxed, stretched to the end-feel
-    stretch = stretcher.config.model_validate({"type": "passive-stretch", "joints": names})
+    stretch = stretcher.config.model_validate({**(stretch_settings or {}), "type": "passive-stretch", "joints": names})
     passive_over = _merge(base, {
-        "patient": {"model": {"voluntary": {"participation": 0.0}}},
+        "patient": {"model": _relaxed(profile)},
         "planner": {"type": "multi-cubic", "segment_durations": [1.0]},
-        "controller": {"type": "passive-stretch", "joints": names},
+        "controller": stretch.model_dump(mode="json"),
         "task": {"targets": [start, {"name": "hold", "same_as": "start"}]},  # (its reference is its own)
         "duration": float(stretcher.factory.duration(q0, lo, hi, idx, stretch))})
     passive_run = run_scenario(path, passive_over, out_dir=out / "passive")
@@ -150,6 +149,13 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         "previous_deg": {j: {"active": list(r.active_deg) if r.active_deg else None, "passive": list(r.passive_deg)}
                          for j, r in profile.joints.items()}})
     return result
+
+
+def run_scenario(path: Path, overrides: dict, out_dir: Path):
+    """One session of the assessment."""
+    from rehabkit.core.runner import Runner
+
+    return Runner(load_scenario(path, overrides), out_dir=out_dir).run()
 
 
 def _cues(path: Path, base: dict, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray,
@@ -178,6 +184,12 @@ def _cues(path: Path, base: dict, q0: np.ndarray, idx: list[int], lo: np.ndarray
         if plan_breach(plan, a.robot.model) is None:
             return [{"name": f"cue{i}", "joints_deg": np.degrees(p).round(6).tolist()} for i, p in enumerate(points)]
     raise SetupError("no cue plan within the robot's limits (its joints' ranges are too narrow to cue)")
+
+
+def _relaxed(profile) -> dict:
+    """The settings leaving the simulated person (if any) relaxed: the patient plugin says which."""
+    model = getattr(profile, "model", None)
+    return dict(default_registry().get("patient", model.type).factory.relaxed) if model is not None else {}
 
 
 def _not_stopped(run, which: str) -> None:
