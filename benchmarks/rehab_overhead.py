@@ -3,9 +3,10 @@
 The HIT round trip (8,500 steps at 1 kHz, no log) run plainly and with each piece of the rehab
 layer the loop runs every step: the keep-in box (forward kinematics of the hand), a simulated
 patient (its torques applied to the joints), the patient with an interaction-force limit (the
-hand force from the Jacobian, least squares), and the assist-as-needed controller in place of
-the joint PD. Repeats alternate the variants so drift affects all alike; the best loop time of
-each is compared with the plain run's.
+hand force from the Jacobian, least squares), the assist-as-needed controller in place of
+the joint PD, and a force-torque sensor read (tared, filtered) and checked every step. Repeats
+alternate the variants so drift affects all alike; the best loop time of each is compared with the
+plain run's.
 
     python benchmarks/rehab_overhead.py [--repeats 5]
 """
@@ -33,6 +34,7 @@ VARIANTS = {
     "simulated patient": {"patient": PATIENT},
     "patient + force limit": {"patient": {**PATIENT, "comfort": {"max_interaction_force_n": 1e6}}},
     "assist-as-needed": {"controller.type": "assist-as-needed"},
+    "force-torque + force limit": {"sensors": {"ft": {"type": "force-torque"}}, "safety": {"interaction_force_n": 1e6}},
 }
 
 

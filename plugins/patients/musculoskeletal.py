@@ -50,7 +50,7 @@ def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]],
 class Musculoskeletal(EmbodiedPatient):
     """A muscle-driven arm (MyoSuite's MyoArm or MyoElbow) in the scene, strapped to the robot; see the module."""
 
-    relaxed = {"drive": {"participation": 0.0, "own_weight": 0.0}}
+    relaxed = {"drive": {"participation": 0.0}}  # (still holding their own arm up: the robot carries itself only)
 
     metrics = (
         Metric("peak_cuff_force_n", "N", outcome=True, description="largest strap force over the run"),

@@ -196,6 +196,18 @@ CASES: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
                                  [("segment: forearm", "segment: upper_arm")]),
     "musculoskeletal_left_side": ("a left-side profile for the right-arm models", DYNO,
                                   [("side: right", "side: left")]),
+    "stop_category_rule_misspelt": ("a stop category for a rule that does not exist", ARM3,
+                                    [("duration: 4.5", "safety: {stop_category: {estop: 1}}\nduration: 4.5")]),
+    "stop_category_three": ("a stop category IEC 60204-1 does not have", ARM3,
+                            [("duration: 4.5", "safety: {stop_category: {default: 3}}\nduration: 4.5")]),
+    "load_on_missing_body": ("a test rig's load on a body the scene does not have", ARM3,
+                             [("duration: 4.5", "world:\n  loads: [{name: push, body: hand, force_n: [0, 0, -10]}]\n"
+                               "duration: 4.5")]),
+    "force_limit_without_source": ("an interaction-force limit with nothing to measure the force", ARM3,
+                                   [("duration: 4.5", "safety: {interaction_force_n: 40}\nduration: 4.5")]),
+    "force_sensor_unknown_strap": ("a force sensor at a strap the robot does not have", ARM3,
+                                   [("duration: 4.5", "sensors:\n  cuff: {type: force-torque, strap: forearm}\n"
+                                     "duration: 4.5")]),
 }
 
 
