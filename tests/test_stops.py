@@ -132,3 +132,26 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     finally:
         thread.join()
     assert json.loads(latch.path.read_text())["cleared_by"].startswith("host command from 127.0.0.1")
+
+
+def test_the_keypad_at_the_robot_presses_and_clears_the_estop(tmp_path):
+    import subprocess
+    import sys
+
+    latch = tmp_path / "hit-1.json"
+    proc = subprocess.Popen([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--keypad", "--duration", "20",
+                             "--latch-file", str(latch)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().startswith("bridge:")
+
+        def record_after(key: str) -> dict:
+            proc.stdin.write(key + "\n")
+            proc.stdin.flush()
+            assert proc.stdout.readline().startswith("keypad: e-stop")  # (said once done)
+            return json.loads(latch.read_text())
+
+        assert record_after("e")["reason"] == "the e-stop key of the keypad at the robot"
+        assert record_after("c")["cleared_by"] == "the keypad at the robot"
+    finally:
+        proc.kill()
+        proc.wait()

@@ -11,10 +11,10 @@ stall, lost packets) it holds the posture it is at (PD to it plus gravity; statu
 time, count here, so a bridge catching up after a stall of its own holds too. If no valid
 command arrives for ``watchdog_s`` while running, or an e-stop command comes, the hold is
 latched (status ``HOLDING``) and only a reset from the host re-enables the robot. An e-stop
-(a host's, or the button at the robot: :meth:`Bridge.press_estop`, or the bridge's keypad) is
+(a host's, or the button at the robot: :meth:`Bridge.press_estop`, or the bridge's keypad: ``e``) is
 latched further, in the bridge's latch file (:mod:`rehabkit.core.estop`): across sessions and
 restarts, resets are refused (status ``ESTOPPED``) until a person clears it (``CMD_CLEAR`` from
-``rehabkit estop clear --bridge``, the keypad, or the latch file cleared while the bridge is down);
+``rehabkit estop clear --bridge``, the keypad's ``c``, or the latch file cleared while the bridge is down);
 the session after that tells the host to ramp in (status ``RAMP_IN``). Given the
 run's joint limits, the bridge is also a backstop to the host's safety layer: a joint beyond
 its range or speed by more than a margin (wider than the host's, which acts first) latches
@@ -35,6 +35,7 @@ import numpy as np
 
 from rehabkit.core.estop import EStopLatch
 from rehabkit.hardware.clock import wait_readable, wait_until
+from rehabkit.hardware.keypad import Keypad, handle
 from rehabkit.hardware.plant import Plant
 from rehabkit.hardware.protocol import (
     CLOCK,
@@ -95,9 +96,9 @@ class Bridge:
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
                  watchdog_s: float = 0.005, stale_s: float = 0.010, limits: BridgeLimits | None = None,
-                 latch: EStopLatch | None = None):
+                 latch: EStopLatch | None = None, keypad: Keypad | None = None):
         self.plant, self.robot_id, self.watchdog_s, self.limits = plant, robot_id, watchdog_s, limits
-        self.latch = latch
+        self.latch, self.keypad = latch, keypad
         self.stale_ticks = max(1, round(stale_s / plant.timestep))
         self.since_command = 0  # plant ticks since the newest torque command
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
@@ -243,6 +244,8 @@ class Bridge:
                 ticks += 1
                 if parent is not None and ticks % 500 == 0 and os.getppid() != parent:
                     return
+                if self.keypad is not None and ticks % 50 == 0:
+                    handle(self, self.keypad.poll(), time.monotonic())
                 self.tick(time.monotonic())
                 deadline += period
                 wait_until(deadline)
@@ -269,6 +272,8 @@ class Bridge:
                     continue
                 if duration is not None and now >= duration:
                     return
+                if self.keypad is not None:
+                    handle(self, self.keypad.poll(), now)
                 self.tick(now, inbox)
                 inbox = []
                 self.seq += 1

@@ -59,8 +59,10 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     watchdog_ms = host["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
     stale_ms = host["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
     latch = EStopLatch.for_robot(args.robot, args.robot_id, args.latch_file)
+    from rehabkit.hardware.keypad import Keypad
+
     bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,
-                    limits=backstop, latch=latch)
+                    limits=backstop, latch=latch, keypad=Keypad() if args.keypad else None)
     print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
     from threadpoolctl import threadpool_limits
 
@@ -99,4 +101,6 @@ def add_parser(sub) -> None:
     b.add_argument("--latch-file", default=None, metavar="PATH",
                    help="where the e-stop latch is kept across bridge restarts (default: under $REHABKIT_STATE, "
                         "per robot and robot id)")
+    b.add_argument("--keypad", action="store_true",
+                   help="read keys at the robot from standard input, a line each: e presses the e-stop, c clears it")
     b.set_defaults(func=cmd_bridge)
