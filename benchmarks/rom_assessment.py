@@ -5,7 +5,8 @@ assessment should recover them (the test asks for 2°). The musculoskeletal pers
 `scenarios/lexos_myoarm.yaml`) does not read ranges from the profile: its ranges emerge from its muscles, weakness,
 contracture and straps — the figure shows how they compare with the typed profile. Each MyoArm joint is assessed on
 its own (a safety stop in one joint's session leaves the others measured), the transparent robot keeping 1 N·m·s/rad
-of damping and the stretch capped at 6 N·m; a session the safety envelope stopped is reported as such.
+of damping and the stretch capped at 6 N·m; a session the safety envelope stopped is reported as such (a passive
+end a safety stop cut short is the angle reached then, hatched: a bound on the range, not its end).
 
     python benchmarks/rom_assessment.py [--out benchmarks/results/rom_assessment.png]
 """
@@ -37,10 +38,14 @@ def measure(scenario: str, options: dict, per_joint: bool, joints: list[str], wo
     for group in groups:
         try:
             r = assess(ROOT / "scenarios" / scenario, work / "_".join(group), joints=group, **options)
-        except SetupError as exc:
+        except SetupError as exc:  # (the session could not even start)
             for j in group:
                 out[j] = str(exc).split(" (/")[0]
             continue
+        for which, run in r.runs.items():
+            if run.summary["safety"]["events"]:
+                print(f"  {'/'.join(group)}: the {which} session was stopped: "
+                      f"{run.summary['safety']['events'][0]['message']}")
         for j in group:
             out[j] = (r.active[j], r.passive[j], r.stopped_by[j])
     return out
@@ -66,9 +71,11 @@ def main() -> None:
             if isinstance(m, str):
                 print(f"{name:<26}{j:<14}{a[0]:7.1f}..{a[1]:6.1f}  not measured: {m}")
                 continue
-            (ma, mp, why) = m
-            print(f"{name:<26}{j:<14}{a[0]:7.1f}..{a[1]:6.1f}{ma[0]:8.1f}..{ma[1]:6.1f}{pv[0]:9.1f}..{pv[1]:6.1f}"
-                  f"{mp[0]:8.1f}..{mp[1]:6.1f}  {' / '.join(why)}")
+            ma, mp, why = m
+            act = f"{ma[0]:8.1f}..{ma[1]:6.1f}" if ma is not None else f"{'stopped':>16}"
+            pas = "..".join(f"{e:6.1f}" if e is not None else "     –" for e in mp)
+            print(f"{name:<26}{j:<14}{a[0]:7.1f}..{a[1]:6.1f}{act}{pv[0]:9.1f}..{pv[1]:6.1f}{pas:>16}"
+                  f"  {' / '.join(w or '–' for w in why)}")
     plot(results, Path(args.out))
     print(f"wrote {args.out}")
 
@@ -88,12 +95,13 @@ def plot(results: dict, path: Path) -> None:
                 ax.bar(x, hi - lo, bottom=lo, width=0.16, color=colour, alpha=0.35,
                        label=f"profile {kind}" if i == 0 else None)
                 m = got[j]
-                if not isinstance(m, str):
-                    mlo, mhi = m[0] if kind == "active" else m[1]
-                    ax.bar(x + 0.17, mhi - mlo, bottom=mlo, width=0.16, color=colour,
-                           label=f"measured {kind}" if i == 0 else None)
-                elif k == 0:
-                    ax.text(i, lo, "stopped", ha="center", va="top", fontsize=7, rotation=90)
+                span = None if isinstance(m, str) else (m[0] if kind == "active" else m[1])
+                if span is not None and None not in span:
+                    bound = kind == "passive" and any(w and w.startswith("safety") for w in m[2])
+                    ax.bar(x + 0.17, span[1] - span[0], bottom=span[0], width=0.16, color=colour,
+                           hatch="//" if bound else None, label=f"measured {kind}" if i == 0 else None)
+                else:
+                    ax.text(x + 0.17, lo, "stopped", ha="center", va="top", fontsize=6, rotation=90)
         ax.set_xticks(range(len(truth)), list(truth), rotation=20, fontsize=8)
         ax.set_title(name, fontsize=10)
         ax.grid(axis="y", alpha=0.3)

@@ -32,13 +32,18 @@ def cmd_assess(args: argparse.Namespace) -> int:
     except SetupError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_FAILED
-    print(f"{'joint':<16} {'active [deg]':>18} {'passive [deg]':>18}  passive ends by")
-    for name, (lo, hi) in result.passive.items():
-        a_lo, a_hi = result.active[name]
-        print(f"{name:<16} {a_lo:8.1f} .. {a_hi:6.1f} {lo:8.1f} .. {hi:6.1f}  {' / '.join(result.stopped_by[name])}")
+    print(f"{'joint':<16} {'active [deg]':>16} {'passive [deg]':>16}  passive ends by")
+    for name, ends in result.passive.items():
+        act = result.active[name]
+        a = f"{act[0]:7.1f} .. {act[1]:6.1f}" if act is not None else f"{'stopped':>17}"
+        p = " .. ".join(f"{e:6.1f}" if e is not None else "     –" for e in ends)
+        print(f"{name:<16} {a} {p:>17}  {' / '.join(w or '–' for w in result.stopped_by[name])}")
+    for which, run in result.runs.items():
+        if run.summary["safety"]["events"]:
+            print(f"the {which} session was stopped: {run.summary['safety']['events'][0]['message']}")
     print(f"wrote {result.profile_file} (next session: --set patient={result.profile_file}) and "
           f"{out / 'assessment.json'}")
-    return EXIT_OK
+    return EXIT_OK if result.complete else EXIT_FAILED
 
 
 def add_parser(sub) -> None:

@@ -43,3 +43,18 @@ def test_an_assessment_recovers_the_persons_ranges_and_narrows_the_next_session(
 def test_an_assessment_needs_a_person(capsys):
     assert main(["assess", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", "/nonexistent/x"]) == 1
     assert "needs a patient profile" in capsys.readouterr().err
+
+
+def test_a_session_the_envelope_stops_leaves_the_rest_measured_and_the_profile_as_it_was(tmp_path, capsys):
+    # a comfort force so low that the first stretch trips it: the angle reached is a bound, not the range's end
+    code = main(["assess", str(PATIENT), "--out", str(tmp_path / "rom"), "--joints", "q2_flexion,q4_elbow",
+                 "--set", "patient.comfort.max_interaction_force_n=6"])
+    out = capsys.readouterr().out
+    assert code == 1 and "session was stopped" in out
+    report = json.loads((tmp_path / "rom" / "assessment.json").read_text())
+    assert "passive" in report["sessions_stopped"]
+    whys = [w for ends in report["passive_stopped_by"].values() for w in ends]
+    assert "safety stop: interaction-force" in whys and None in whys  # cut short, then nothing more
+    previous = yaml.safe_load((SCENARIOS / "patients" / "p01.yaml").read_text())["joints"]["q4_elbow"]
+    written = yaml.safe_load((tmp_path / "rom" / "P01.v2.yaml").read_text())["joints"]["q4_elbow"]
+    assert written["passive_deg"] == previous["passive_deg"]  # not measured: kept as it was

@@ -38,11 +38,18 @@ CUE_MARGINS = (0.08, 0.12, 0.16, 0.2, 0.25)  # cues this share of a joint's rang
 class Assessment:
     """What an assessment measured [deg], per joint, and where it wrote it."""
 
-    active: dict[str, tuple[float, float]]
-    passive: dict[str, tuple[float, float]]
-    stopped_by: dict[str, tuple[str, str]]  # each passive end: end-feel, torque cap, the robot's limit
+    active: dict[str, tuple[float, float] | None]  # None: a safety stop ended the session before its cues did
+    passive: dict[str, tuple[float | None, float | None]]
+    stopped_by: dict[str, tuple[str | None, str | None]]  # each passive end: end-feel, torque cap, robot limit, or
+    # a safety stop (the angle reached then: a bound on the range)
     profile_file: Path
     runs: dict[str, Any] = field(default_factory=dict)  # the two runs' results
+
+    @property
+    def complete(self) -> bool:
+        """Every range measured (no session cut short by a safety stop)."""
+        return all(a is not None for a in self.active.values()) and all(
+            why in MEASURED for whys in self.stopped_by.values() for why in whys)
 
 
 def _sessions_base(loaded: LoadedScenario) -> dict[str, Any]:
@@ -113,12 +120,13 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         "controller": {"type": "transparent", "damping_nms_rad": damping},
         "task": {"targets": [start, *cues]}, "duration": cue_s * (len(cues) + 1)})
     active_run = run_scenario(path, active_over, out_dir=out / "active")
-    _not_stopped(active_run, "active")
     t, q = active_run.trace.t, np.degrees(active_run.trace.q)
-    active = {}
+    end = _stopped_at(active_run)
+    active: dict[str, tuple[float, float] | None] = {}
     for n, (name, j) in enumerate(zip(names, idx)):
         window = (t >= cue_s * 3 * n) & (t < cue_s * 3 * (n + 1))
-        active[name] = (float(q[window, j].min()), float(q[window, j].max()))
+        done = end is None or end >= cue_s * 3 * (n + 1)  # (a safety stop before its cues ended: not measured)
+        active[name] = (float(q[window, j].min()), float(q[window, j].max())) if done and window.any() else None
 
     # 2. passive: relaxed, stretched to the end-feel
     stretch = stretcher.config.model_validate({**(stretch_settings or {}), "type": "passive-stretch", "joints": names})
@@ -129,26 +137,49 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         "task": {"targets": [start, {"name": "hold", "same_as": "start"}]},  # (its reference is its own)
         "duration": float(stretcher.factory.duration(q0, lo, hi, idx, stretch))})
     passive_run = run_scenario(path, passive_over, out_dir=out / "passive")
-    _not_stopped(passive_run, "passive")
-    m = passive_run.summary["metrics"]
-    why = {0: "end-feel", 1: "torque cap", 2: "robot limit"}
-    passive, stopped = {}, {}
-    for name in names:
-        keys = [f"passive_rom_deg_{side}_{name}" for side in ("lower", "upper")]
-        if not all(k in m for k in keys):
-            raise SetupError(f"the passive stretch of {name} did not finish within the session (summary: "
-                             f"{out / 'passive' / 'summary.json'})")
-        passive[name] = (m[keys[0]], m[keys[1]])
-        stopped[name] = tuple(why[int(m[f"passive_stop_{side}_{name}"])] for side in ("lower", "upper"))
+    passive, stopped = _passive_ends(passive_run, names, idx)
 
-    profile_file = write_profile(loaded, out, active, passive)
+    profile_file = write_profile(loaded, out, active, passive, stopped)
     result = Assessment(active, passive, stopped, profile_file, {"active": active_run, "passive": passive_run})
     atomic_write_json(out / "assessment.json", {
         "scenario": str(path), "patient": profile.id, "profile": str(profile_file),
         "active_deg": active, "passive_deg": passive, "passive_stopped_by": stopped,
+        "sessions_stopped": {k: r.summary["safety"]["events"][0]["message"] for k, r in result.runs.items()
+                             if r.summary["safety"]["events"]},
         "previous_deg": {j: {"active": list(r.active_deg) if r.active_deg else None, "passive": list(r.passive_deg)}
                          for j, r in profile.joints.items()}})
     return result
+
+
+WHY = {0: "end-feel", 1: "torque cap", 2: "robot limit"}
+MEASURED = set(WHY.values())  # (a safety stop's angle is a bound on the range, not its end)
+
+
+def _stopped_at(run) -> float | None:
+    events = run.summary["safety"]["events"]
+    return events[0]["t"] if events else None
+
+
+def _passive_ends(run, names: list[str], idx: list[int]) -> tuple[dict, dict]:
+    """Each joint's (lower, upper) passive end and what ended it; the stretch under way when a safety stop ended the
+    session gets the angle it reached ("safety stop: <rule>"), the ones after it none."""
+    m, trip = run.summary["metrics"], _stopped_at(run)
+    passive: dict[str, list] = {}
+    stopped: dict[str, list] = {}
+    pending = True  # the first end missing is the stretch the safety stop cut short
+    for name, j in zip(names, idx):
+        ends, whys = [None, None], [None, None]
+        for k, side in ((1, "upper"), (0, "lower")):  # (the order of the stretches)
+            key = f"passive_rom_deg_{side}_{name}"
+            if key in m:
+                ends[k], whys[k] = m[key], WHY[int(m[f"passive_stop_{side}_{name}"])]
+            elif trip is not None and pending:
+                row = int(np.searchsorted(run.trace.t, trip))
+                ends[k] = float(np.degrees(run.trace.q[min(row, len(run.trace.t) - 1), j]))
+                whys[k] = f"safety stop: {run.summary['safety']['events'][0]['rule']}"
+                pending = False
+        passive[name], stopped[name] = tuple(ends), tuple(whys)
+    return passive, stopped
 
 
 def run_scenario(path: Path, overrides: dict, out_dir: Path):
@@ -192,24 +223,25 @@ def _relaxed(profile) -> dict:
     return dict(default_registry().get("patient", model.type).factory.relaxed) if model is not None else {}
 
 
-def _not_stopped(run, which: str) -> None:
-    if events := run.summary["safety"]["events"]:
-        raise SetupError(f"the assessment's {which} session was stopped: {events[0]['message']} "
-                         f"({run.out_dir / 'summary.json'})")
-
-
-def write_profile(loaded: LoadedScenario, out: Path, active: dict, passive: dict) -> Path:
-    """The profile with the measured ranges, as its next version, written whole into ``out``."""
+def write_profile(loaded: LoadedScenario, out: Path, active: dict, passive: dict, stopped: dict) -> Path:
+    """The profile with the measured ranges (those measured: a range cut short by a safety stop keeps its previous
+    value), as its next version, written whole into ``out``."""
     profile = loaded.model.patient
     data = profile.model_dump(mode="json", exclude_unset=True)
     version = int(data.get("version", 1)) + 1
     joints = data.setdefault("joints", {})
-    for name, (p_lo, p_hi) in passive.items():
-        a_lo, a_hi = active[name]
+    for name, ends in passive.items():
         entry = joints.setdefault(name, {})
-        entry["passive_deg"] = [round(p_lo, 1), round(p_hi, 1)]
-        # (the active range inside the passive one: an active reach past a passive end is the stretch's bound)
-        entry["active_deg"] = [round(max(a_lo, p_lo), 1), round(min(a_hi, p_hi), 1)]
+        old = entry.get("passive_deg", [None, None])
+        p = [round(e, 1) if e is not None and why in MEASURED else o for e, why, o in zip(ends, stopped[name], old)]
+        if None not in p:
+            entry["passive_deg"] = p
+        if active.get(name) is not None and "passive_deg" in entry:
+            a_lo, a_hi = active[name]  # (inside the passive range: an active reach past it is the stretch's bound)
+            lo_p, hi_p = entry["passive_deg"]
+            entry["active_deg"] = [round(max(a_lo, lo_p), 1), round(min(a_hi, hi_p), 1)]
+        if not entry:
+            del joints[name]
     data["version"] = version
     data["assessed"] = {"date": date.today().isoformat(), "method": "rehabkit assess: active (transparent robot, "
                         "cued), passive (stretch to the end-feel)", "scenario": str(loaded.path)}
