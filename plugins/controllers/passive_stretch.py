@@ -43,6 +43,7 @@ class PassiveStretch(Controller):
     own_reference = True
     metrics = (Metric("passive_rom_deg_*", "deg", outcome=True,
                       description="a joint's passive range end (lower_, upper_<joint>), where the stretch ended"),
+               Metric("passive_stop_t_*", "s", description="when each stretch ended"),
                Metric("passive_stop_*", "count",
                       description="why each stretch ended: 0 end-feel, 1 torque cap, 2 the robot's own limit"))
 
@@ -61,7 +62,7 @@ class PassiveStretch(Controller):
         self.ended: dict[str, float] = {}
         self.q0: np.ndarray | None = None
         self.joint_reference = None
-        self._move, self._phase, self._pause = 0, "out", 0.0
+        self._move, self._phase, self._pause, self._t = 0, "out", 0.0, 0.0
         self._samples: list[tuple[float, float]] = []  # (angle, resistance) on the way out
 
     @staticmethod
@@ -72,6 +73,7 @@ class PassiveStretch(Controller):
         return out / speed + out / back + 2 * len(joints) * (config.pause_s + 0.5)
 
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        self._t = t
         if self.q0 is None:
             self.q0, self.joint_reference = q.copy(), q.copy()
         r, v = self.joint_reference, np.zeros_like(q)
@@ -131,6 +133,7 @@ class PassiveStretch(Controller):
     def _end(self, j: int, d: int, angle: float, why: int) -> None:
         side = "upper" if d > 0 else "lower"
         self.found[f"passive_rom_deg_{side}_{self.names[j]}"] = math.degrees(angle)
+        self.found[f"passive_stop_t_{side}_{self.names[j]}"] = self._t
         self.ended[f"passive_stop_{side}_{self.names[j]}"] = float(why)
         self._phase = "back"
         self.joint_reference[j] = angle  # from where it is, not from where the ramp ran ahead

@@ -171,7 +171,7 @@ def _passive_ends(run, names: list[str], idx: list[int]) -> tuple[dict, dict]:
         ends, whys = [None, None], [None, None]
         for k, side in ((1, "upper"), (0, "lower")):  # (the order of the stretches)
             key = f"passive_rom_deg_{side}_{name}"
-            if key in m:
+            if key in m and (trip is None or m[f"passive_stop_t_{side}_{name}"] < trip):  # (not after the stop)
                 ends[k], whys[k] = m[key], WHY[int(m[f"passive_stop_{side}_{name}"])]
             elif trip is not None and pending:
                 row = int(np.searchsorted(run.trace.t, trip))
