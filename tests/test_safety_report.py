@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
+
 from rehabkit.cli import main
 from tests.conftest import ROOT
 
@@ -24,6 +26,11 @@ def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, 
         sim, link = (float(c.split()[1]) for c in _row(sections[name], "trigger"))  # "interaction-force 30.03 (…"
         assert abs(sim - link) < 0.1
         assert all(0 < float(r) < 15 for r in _row(sections[name], "reaction time [ms]"))  # the filter's lag
+        for raw_filtered in _row(sections[name], "force sensor noise raw / filtered [N]"):  # (0.3 N simulated)
+            raw, filtered = (float(v) for v in raw_filtered.split(" / "))
+            assert 0.25 < raw < 0.35 and filtered < raw / 3
+    bias = [float(v) for v in _row(sections["lexos-force"], "force sensor bias tared [N]")]
+    assert all(abs(b - float(np.linalg.norm([-1.2, 2.1, 0.7]))) < 0.1 for b in bias)  # lexos_force.yaml's offset
     for name in ("hit-range", "hit-speed", "hit-estop"):  # a stop is measured the same on both backends
         a, b = (float(v) for v in _row(sections[name], "largest joint travel after the trigger [deg]"))
         assert abs(a - b) < 0.2
