@@ -126,8 +126,9 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     if ev["rule"] == "backend" and held:  # the robot side held it first (its hold through a gap in the commands)
         trip = min(trip, held[0])
         notes.append(f"the bridge held the robot at {held[0]:.3f} s; the host learnt of it at {ev['t']:.3f} s")
-    value = f" {ev['value']:.4g} (limit {ev['limit']:.4g})" if ev.get("value") is not None else ""
-    trigger = f"{ev['rule']}{' ' + ev['joint'] if ev.get('joint') else ''}{value}"
+    # the event's own words, its time and the stop's category left out: "measured: elbow_2 beyond its position
+    # limit (45.6°, limit 45.5°)", "interaction force above its limit: 30.03 (limit 30)"
+    trigger = f"{ev['rule']}: " + ev["message"].split(": ", 1)[-1].rsplit("; ", 1)[0]
     return SkillRun(sc.name or path.stem, backend, result.passed, trigger, onset, trip,
                     ev["data"].get("category"), figures, notes, result.trace)
 

@@ -23,7 +23,7 @@ def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, 
     assert set(sections) == {"hit-estop", "hit-force", "hit-link-loss", "hit-ramp-in", "hit-range", "hit-speed",
                              "lexos-force"}
     for name in ("hit-force", "lexos-force"):  # the force limit: the same force, the rig's push, both ways
-        sim, link = (float(c.split()[1]) for c in _row(sections[name], "trigger"))  # "interaction-force 30.03 (…"
+        sim, link = (float(c.split(": ")[-1].split()[0]) for c in _row(sections[name], "trigger"))  # "…: 30.03 (…"
         assert abs(sim - link) < 0.1
         assert all(0 < float(r) < 15 for r in _row(sections[name], "reaction time [ms]"))  # the filter's lag
         for raw_filtered in _row(sections[name], "force sensor noise raw / filtered [N]"):  # (0.3 N simulated)
