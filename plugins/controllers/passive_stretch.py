@@ -5,7 +5,8 @@ first; each end's angle is the passive range.
 From the start posture, for each joint: out toward the robot's upper limit at ``speed_deg_s``, back, out toward
 the lower limit, back; the other joints held. The joint follows a PD on the ramp with gravity compensation; the
 resistance is the PD's effort against the motion, its stiffness the slope of that effort over the last
-``window_deg`` of travel. The person should be relaxed (no voluntary effort) and the speed low (below their
+``window_deg`` of travel; the torque cap counts from what holding the limb took as the stretch began (its weight).
+The person should be relaxed (no voluntary effort) and the speed low (below their
 stretch reflex's threshold).
 """
 
@@ -30,7 +31,8 @@ class PassiveStretchConfig(StrictModel):
     speed_deg_s: float = Field(10.0, gt=0, le=30, description="stretch speed (below the person's reflex threshold)")
     return_speed_deg_s: float = Field(30.0, gt=0, description="speed back to the start posture")
     end_feel_nm_deg: float = Field(1.0, gt=0, description="the end of the range: resistance stiffer than this")
-    max_torque_nm: float = Field(10.0, gt=0, description="the stretch never pushes harder than this")
+    max_torque_nm: float = Field(10.0, gt=0, description="the stretch never pushes harder than this beyond what "
+                                                        "holding the limb took as it began")
     window_deg: float = Field(1.0, gt=0, description="travel over which the stiffness is measured")
     kp: float = Field(300.0, gt=0, description="tracking stiffness [N·m/rad]")
     kd: float = Field(20.0, ge=0, description="tracking damping [N·m·s/rad]")
@@ -44,6 +46,7 @@ class PassiveStretch(Controller):
     metrics = (Metric("passive_rom_deg_*", "deg", outcome=True,
                       description="a joint's passive range end (lower_, upper_<joint>), where the stretch ended"),
                Metric("passive_stop_t_*", "s", description="when each stretch ended"),
+               Metric("passive_start_t_*", "s", description="when each stretch began"),
                Metric("passive_stop_*", "count",
                       description="why each stretch ended: 0 end-feel, 1 torque cap, 2 the robot's own limit"))
 
@@ -62,7 +65,7 @@ class PassiveStretch(Controller):
         self.ended: dict[str, float] = {}
         self.q0: np.ndarray | None = None
         self.joint_reference = None
-        self._move, self._phase, self._pause, self._t = 0, "out", 0.0, 0.0
+        self._move, self._phase, self._pause, self._t, self._baseline = 0, "out", 0.0, 0.0, 0.0
         self._samples: list[tuple[float, float]] = []  # (angle, resistance) on the way out
 
     @staticmethod
@@ -88,6 +91,8 @@ class PassiveStretch(Controller):
     def _advance(self, j: int, d: int, r: np.ndarray, q: np.ndarray) -> float:
         """Move the reference one step; its speed."""
         if self._phase == "out":
+            key = f"passive_start_t_{'upper' if d > 0 else 'lower'}_{self.names[j]}"
+            self.found.setdefault(key, self._t)  # (when this stretch began)
             speed = math.radians(self.c.speed_deg_s)
             r[j] += d * speed * self.dt
             limit = self.hi[j] if d > 0 else self.lo[j]
@@ -114,8 +119,9 @@ class PassiveStretch(Controller):
         resistance = d * push
         angle = float(q[j])
         if d * (angle - self.q0[j]) < math.radians(self.c.window_deg):
+            self._baseline = resistance  # what holding the limb took as the stretch began (its weight, say)
             return
-        if resistance >= self.c.max_torque_nm:
+        if resistance - self._baseline >= self.c.max_torque_nm:
             self._end(j, d, angle, 1)
             return
         self._samples.append((angle, resistance))
@@ -135,8 +141,7 @@ class PassiveStretch(Controller):
         self.found[f"passive_rom_deg_{side}_{self.names[j]}"] = math.degrees(angle)
         self.found[f"passive_stop_t_{side}_{self.names[j]}"] = self._t
         self.ended[f"passive_stop_{side}_{self.names[j]}"] = float(why)
-        self._phase = "back"
-        self.joint_reference[j] = angle  # from where it is, not from where the ramp ran ahead
+        self._phase = "back"  # (from where the reference is: a jump back would jerk the limb)
 
     def run_metrics(self, trace=None) -> dict[str, float]:
         return {**self.found, **self.ended}

@@ -161,8 +161,8 @@ def _stopped_at(run) -> float | None:
 
 
 def _passive_ends(run, names: list[str], idx: list[int]) -> tuple[dict, dict]:
-    """Each joint's (lower, upper) passive end and what ended it; the stretch under way when a safety stop ended the
-    session gets the angle it reached ("safety stop: <rule>"), the ones after it none."""
+    """Each joint's (lower, upper) passive end and what ended it; a stretch under way when a safety stop ended the
+    session gets the angle it reached ("safety stop: <rule>"), the ones not begun by then none."""
     m, trip = run.summary["metrics"], _stopped_at(run)
     passive: dict[str, list] = {}
     stopped: dict[str, list] = {}
@@ -173,7 +173,7 @@ def _passive_ends(run, names: list[str], idx: list[int]) -> tuple[dict, dict]:
             key = f"passive_rom_deg_{side}_{name}"
             if key in m and (trip is None or m[f"passive_stop_t_{side}_{name}"] < trip):  # (not after the stop)
                 ends[k], whys[k] = m[key], WHY[int(m[f"passive_stop_{side}_{name}"])]
-            elif trip is not None and pending:
+            elif trip is not None and pending and m.get(f"passive_start_t_{side}_{name}", np.inf) < trip:
                 row = int(np.searchsorted(run.trace.t, trip))
                 ends[k] = float(np.degrees(run.trace.q[min(row, len(run.trace.t) - 1), j]))
                 whys[k] = f"safety stop: {run.summary['safety']['events'][0]['rule']}"
