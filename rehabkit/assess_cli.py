@@ -41,6 +41,10 @@ def cmd_assess(args: argparse.Namespace) -> int:
     for which, run in result.runs.items():
         if run.summary["safety"]["events"]:
             print(f"the {which} session was stopped: {run.summary['safety']['events'][0]['message']}")
+        if steps := run.summary["metrics"].get("contact_steps"):
+            print(f"the {which} session's robot touched the scene ({steps} control steps): its ranges are the "
+                  "scene's, not the person's, and not kept (clear the workspace, or leave the objects out with "
+                  "--set world.objects=[])")
     print(f"wrote {result.profile_file} (next session: --set patient={result.profile_file}) and "
           f"{out / 'assessment.json'}")
     return EXIT_OK if result.complete else EXIT_FAILED

@@ -60,7 +60,8 @@ def cmd_estop(args: argparse.Namespace) -> int:
             print("no e-stop latch on this machine")
         return EXIT_OK
     if not args.name or not args.by:
-        print("error: `rehabkit estop clear NAME --by WHO` (NAME from `rehabkit estop list`)", file=sys.stderr)
+        print("error: clearing an e-stop is a person's act, recorded with their name: `rehabkit estop clear NAME --by "
+              "WHO` (NAME from `rehabkit estop list`)", file=sys.stderr)
         return EXIT_INVALID
     if args.bridge:
         robot, _, rid = args.name.rpartition("-")
@@ -76,10 +77,16 @@ def cmd_estop(args: argparse.Namespace) -> int:
         print(f"{args.name}: cleared at the bridge udp://{args.bridge} (by {args.by}); the next session ramps in")
         return EXIT_OK
     latch = EStopLatch.named(args.name)
+    if not latch.path.exists():  # (a misspelt name must not pass for a cleared e-stop)
+        from rehabkit.core.names import suggest
+
+        known = [x.name for x in all_latches()]
+        print(f"error: no e-stop latch named '{args.name}' on this machine{suggest(args.name, known)} (latches: "
+              f"{', '.join(known) or 'none'}; `rehabkit estop list`)", file=sys.stderr)
+        return EXIT_INVALID
     was = latch.clear(args.by)
     if was is None:
-        known = ", ".join(x.name for x in all_latches()) or "none"
-        print(f"{args.name}: not latched (latches here: {known})")
+        print(f"{args.name}: not latched")
         return EXIT_OK
     print(f"{args.name}: cleared by {args.by} (latched since {was['since']}: {was['reason']}); the next session "
           "ramps in")

@@ -70,7 +70,8 @@ def _plot(sim, link, path: Path) -> None:
             for ax in (top, bottom):
                 ax.axvline(run.trip_s, color="red", lw=0.8, ls=style)
     top.set_ylabel("fastest joint [deg/s]")
-    bottom.set_ylabel("interaction force [N]")
+    bottom.set_ylabel("force [N] (or largest |τ| [N·m])" if any(
+        r is not None and r.trace.f_h is None for r in (sim, link)) else "interaction force [N]")
     bottom.set_xlabel("time [s]")
     top.legend(loc="upper left", fontsize=8)
     top.set_title((link or sim).scenario, fontsize=10)

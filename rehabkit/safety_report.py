@@ -122,6 +122,11 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     if ev.get("joint") in names:
         ev["_joint_index"] = list(names).index(ev["joint"])
     onset, trip = _onset(sc, ev, result.trace), ev["t"]
+    for later in result.summary["safety"]["interventions"]:  # what else acted while it stopped (a bridge's backstop)
+        if later["t"] > ev["t"] and later["rule"] == "backend":
+            notes.append(f"then at {later['t']:.3f} s: {later['message'].split(': ', 1)[-1]}")
+    for brake in (e for e in result.summary["safety"]["interventions"] if e["rule"] == "brakes"):
+        notes.append(brake["message"].split(": ", 1)[-1])
     held = [e["t"] for e in result.summary["safety"]["interventions"] if e["rule"] == "stale-command"]
     if ev["rule"] == "backend" and held:  # the robot side held it first (its hold through a gap in the commands)
         trip = min(trip, held[0])

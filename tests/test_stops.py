@@ -101,6 +101,8 @@ def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, caps
     with pytest.raises(SetupError, match=rf"latched.*rehabkit estop clear {name} --by NAME"):
         run_scenario(ESTOP, extra)  # a new session: refused before anything moves
     assert main(["estop", "list"]) == 0 and f"{name}: LATCHED" in capsys.readouterr().out
+    assert main(["estop", "clear", name + "x", "--by", "J. Doe"]) == 2  # a misspelt name clears nothing
+    assert f"did you mean '{name}'" in capsys.readouterr().err
     assert main(["estop", "clear", name, "--by", "J. Doe"]) == 0  # (the README's command)
     record = EStopLatch.named(name).record()
     assert not record["latched"] and record["cleared_by"] == "J. Doe" and record["was"]["reason"]

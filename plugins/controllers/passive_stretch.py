@@ -3,7 +3,8 @@ at the end-feel — where the joint's resistance stiffens beyond a threshold —
 first; each end's angle is the passive range.
 
 From the start posture, for each joint: out toward the robot's upper limit at ``speed_deg_s``, back, out toward
-the lower limit, back; the other joints held. The joint follows a PD on the ramp with gravity compensation; the
+the lower limit, back; the other joints held. The joint follows a PD on the ramp (gains from its inertia) with
+gravity compensation; the
 resistance is the PD's effort against the motion, its stiffness the slope of that effort over the last
 ``window_deg`` of travel; the torque cap counts from what holding the limb took as the stretch began (its weight).
 The person should be relaxed (no voluntary effort) and the speed low (below their
@@ -15,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
@@ -34,8 +36,9 @@ class PassiveStretchConfig(StrictModel):
     max_torque_nm: float = Field(10.0, gt=0, description="the stretch never pushes harder than this beyond what "
                                                         "holding the limb took as it began")
     window_deg: float = Field(1.0, gt=0, description="travel over which the stiffness is measured")
-    kp: float = Field(300.0, gt=0, description="tracking stiffness [N·m/rad]")
-    kd: float = Field(20.0, ge=0, description="tracking damping [N·m·s/rad]")
+    bandwidth_hz: float = Field(8.0, gt=0, description="each joint's tracking bandwidth: stiffness M ω², damping 2 M ω "
+                                                       "from its inertia at the start (stable for light and heavy "
+                                                       "joints alike)")
     pause_s: float = Field(0.5, ge=0, description="rest at the start posture between stretches")
 
 
@@ -56,6 +59,7 @@ class PassiveStretch(Controller):
         if unknown := [j for j in names if j not in model.joint_names]:
             raise ValueError(f"passive-stretch: no joint(s) {unknown} on robot '{model.name}'")
         self.c, self.dt, self.gravity = config, context.control_dt, context.robot.gravity_torque
+        self._model = model.pin_model
         margin = np.radians(MARGIN_DEG)
         self.lo, self.hi = model.limits.lower + margin, model.limits.upper - margin
         self.names = model.joint_names
@@ -79,14 +83,17 @@ class PassiveStretch(Controller):
         self._t = t
         if self.q0 is None:
             self.q0, self.joint_reference = q.copy(), q.copy()
+            w = 2 * math.pi * self.c.bandwidth_hz
+            inertia = np.diag(pin.crba(self._model, self._model.createData(), q))
+            self.kp, self.kd = inertia * w * w, 2 * inertia * w
         r, v = self.joint_reference, np.zeros_like(q)
         if self._move < len(self.moves):
             j, d = self.moves[self._move]
             v[j] = self._advance(j, d, r, q)
-        push = self.c.kp * (r - q)
+        push = self.kp * (r - q)
         if self._move < len(self.moves) and self._phase == "out":
             self._feel(j, d, q, float(push[j]))
-        return push + self.c.kd * (v - qd) + self.gravity(q)
+        return push + self.kd * (v - qd) + self.gravity(q)
 
     def _advance(self, j: int, d: int, r: np.ndarray, q: np.ndarray) -> float:
         """Move the reference one step; its speed."""

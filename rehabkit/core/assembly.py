@@ -252,6 +252,11 @@ def _patient_and_safety(a: Assembly) -> None:
     a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
                            hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
+    off = sorted(r for r, c in a.safety.categories.items() if c < 2 and r in sc.safety.stop_category)
+    if off and a.robot.model.brakes is None and a.context.note is not None:
+        a.context.note(0.0, f"stop category 0/1 for {', '.join(off)}: the torque goes off, and robot "
+                            f"'{a.robot.model.name}' has no brakes: after such a stop it is free to move (its weight, "
+                            "the person)")
 
 
 def _force_source(a: Assembly, limit: float | None) -> None:

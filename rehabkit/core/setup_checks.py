@@ -59,12 +59,26 @@ def check_scene_names(a: Assembly) -> None:
                                        f"world.{kind}: the name '{item.name}' is taken by {owner}; rename it")
 
 
-def check_loads(a: Assembly) -> None:
-    """A test rig's load pushes on a robot body or a force sensor's mount: another name is refused where written."""
+def scene_bodies(a: Assembly) -> list[str]:
+    """The bodies of the run's scene: the robot's, the world's objects, the sensors' mounts."""
     import xml.etree.ElementTree as ET
 
     bodies = [e.get("name") for e in ET.fromstring(a.robot.model.mjcf).iter("body") if e.get("name")]
-    bodies += sorted({i.mount for i in a.context.instruments if i.mount})
+    bodies += [o.name for o in a.sc.world.objects if o.dynamic or o.mocap]
+    return bodies + sorted({i.mount for i in a.context.instruments if i.mount})
+
+
+def check_loads(a: Assembly) -> None:
+    """A test rig's load pushes on a robot body or a force sensor's mount, and a sensor's instruments sit on a body
+    of the scene: another name is refused where written."""
+    bodies = scene_bodies(a)
+    for name, sensor in a.sensors.items():
+        for ins in sensor.instruments():
+            if ins.body not in bodies:
+                cfg = a.sc.sensors[name]
+                at = ("sensors", name, "body") if getattr(cfg, "body", None) == ins.body else ("sensors", name)
+                raise PluginSetupError(a.loaded.source, at, (), f"sensor '{name}': no body '{ins.body}' in the "
+                                       f"scene{suggest(ins.body, bodies)}")
     for i, load in enumerate(a.sc.world.loads):
         if load.body not in bodies:
             raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"), (),

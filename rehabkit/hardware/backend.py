@@ -81,7 +81,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
         self.clock, self._clock_seq, self._answered = 0, 0, -1.0
         robot = context.robot
         self.n = robot.model.dof
-        self.robot_type = (context.robot_spec or {}).get("type", robot.model.name)
+        self.robot_name = robot.model.name  # (its e-stop latch at the bridge: <name>-<robot id>)
         self.brakes = robot.model.brakes is not None
         self._flags = 0  # sent with every command (the brakes, once applied)
         self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
@@ -288,11 +288,12 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
 
     def _latched_message(self) -> str:
         where = f"udp://{self.addr[0]}:{self.addr[1]}"
-        name = f"{self.robot_type}-{self.config.robot_id}"
+        name = f"{self.robot_name}-{self.config.robot_id}"
+        how = (f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this "
+               "machine)" if self.process is not None else f"`rehabkit estop clear {name} --by NAME --bridge "
+               f"{self.addr[0]}:{self.addr[1]}` while it runs, or the bridge's keypad")
         return (f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it "
-                f"with `rehabkit estop clear {name} --by NAME` on the bridge's machine (a bridge this run starts "
-                f"reads it from there), or `rehabkit estop clear {name} --by NAME --bridge {self.addr[0]}:"
-                f"{self.addr[1]}` while it runs")
+                f"with {how}")
 
     @property
     def holding(self) -> bool:

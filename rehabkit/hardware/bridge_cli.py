@@ -58,7 +58,7 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     host = HardwareConfig.model_fields
     watchdog_ms = host["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
     stale_ms = host["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
-    latch = EStopLatch.for_robot(args.robot, args.robot_id, args.latch_file)
+    latch = EStopLatch.for_robot(robot.model.name, args.robot_id, args.latch_file)  # (as the host names it)
     from rehabkit.hardware.keypad import Keypad
 
     bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,

@@ -47,7 +47,7 @@ class Assessment:
 
     @property
     def complete(self) -> bool:
-        """Every range measured (no session cut short by a safety stop)."""
+        """Every range measured (no session cut short by a safety stop, nor touching the scene)."""
         return all(a is not None for a in self.active.values()) and all(
             why in MEASURED for whys in self.stopped_by.values() for why in whys)
 
@@ -138,6 +138,12 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         "duration": float(stretcher.factory.duration(q0, lo, hi, idx, stretch))})
     passive_run = run_scenario(path, passive_over, out_dir=out / "passive")
     passive, stopped = _passive_ends(passive_run, names, idx)
+    # a robot touching the scene measures the scene, not the person: nothing of such a session is kept
+    if active_run.summary["metrics"].get("contact_steps"):
+        active = dict.fromkeys(active, None)
+    if passive_run.summary["metrics"].get("contact_steps"):
+        passive = {j: (None, None) for j in passive}
+        stopped = {j: ("contact", "contact") for j in stopped}
 
     profile_file = write_profile(loaded, out, active, passive, stopped)
     result = Assessment(active, passive, stopped, profile_file, {"active": active_run, "passive": passive_run})
@@ -146,6 +152,7 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
         "active_deg": active, "passive_deg": passive, "passive_stopped_by": stopped,
         "sessions_stopped": {k: r.summary["safety"]["events"][0]["message"] for k, r in result.runs.items()
                              if r.summary["safety"]["events"]},
+        "contact_steps": {k: r.summary["metrics"].get("contact_steps", 0) for k, r in result.runs.items()},
         "previous_deg": {j: {"active": list(r.active_deg) if r.active_deg else None, "passive": list(r.passive_deg)}
                          for j, r in profile.joints.items()}})
     return result

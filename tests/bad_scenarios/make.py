@@ -205,6 +205,12 @@ CASES: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
                                "duration: 4.5")]),
     "force_limit_without_source": ("an interaction-force limit with nothing to measure the force", ARM3,
                                    [("duration: 4.5", "safety: {interaction_force_n: 40}\nduration: 4.5")]),
+    "load_force_two_values": ("a force vector with two components, over an extended file's three", ARM3,
+                              [("duration: 4.5", "world:\n  loads: [{name: push, body: elbow_link, force_n: [0, 60]}]\n"
+                                "duration: 4.5")]),
+    "force_sensor_body_misspelt": ("a force sensor on a body the robot does not have", ARM3,
+                                   [("duration: 4.5", "sensors:\n  ft: {type: force-torque, body: elbow_lnk}\n"
+                                     "duration: 4.5")]),
     "force_sensor_unknown_strap": ("a force sensor at a strap the robot does not have", ARM3,
                                    [("duration: 4.5", "sensors:\n  cuff: {type: force-torque, strap: forearm}\n"
                                      "duration: 4.5")]),

@@ -96,9 +96,12 @@ def _locate(src: Source, loc: Iterable[Any], key: bool) -> tuple[KeyPath, Mark]:
     path: KeyPath = ()
     node: Any = src.data
     for part in loc:
-        if (*path, part) in src.value_marks:
+        # (the data must have it too: an extended file's marks outlive a list the extending file replaced)
+        present = part in node if isinstance(node, dict) else (
+            isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node))
+        if (*path, part) in src.value_marks and present:
             path = (*path, part)
-            node = node[part] if isinstance(node, (dict, list)) else None
+            node = node[part]
     key = key or isinstance(node, (dict, list))
     marks = src.key_marks if key and path in src.key_marks else src.value_marks
     return path, marks.get(path, src.value_marks[()])
@@ -218,6 +221,10 @@ def validate_source(src: Source, registry: PluginRegistry, file: Path) -> Scenar
             if err["type"] == "extra_forbidden":
                 allowed = _fields_at(model, loc[:-1]) or []
                 msg = f"unknown field '{loc[-1]}'{suggest(str(loc[-1]), allowed)}"
+            elif err["type"] == "missing" and isinstance(loc[-1], int):  # a fixed-length list one short
+                msg = f"too few values: {loc[-1]} given, value {loc[-1] + 1} is missing"
+                is_key = False
+                path, mark = _locate(src, loc[:-1], key=False)
             elif err["type"] == "missing":
                 msg = f"missing required field '{loc[-1]}'"
             # the path as the YAML spells it: pydantic's union tags (plugin names) left out
