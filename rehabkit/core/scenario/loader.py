@@ -11,6 +11,7 @@ mapped back to the longest key path the YAML actually has.
 
 from __future__ import annotations
 
+import re
 import types
 import typing
 import warnings
@@ -145,6 +146,9 @@ def _describe(err: dict[str, Any]) -> str:
         value = err["input"]
         if not isinstance(value, (dict, list)):
             msg += f" (got {value!r})"
+            if err["type"] == "literal_error" and isinstance(value, str):  # a misspelt choice: the nearest
+                choices = re.findall(r"'([^']*)'", err.get("ctx", {}).get("expected", ""))
+                msg += suggest(value, choices)
     return msg
 
 
