@@ -49,11 +49,14 @@ def test_an_assessment_needs_a_person(capsys):
 
 
 def test_a_session_the_envelope_stops_leaves_the_rest_measured_and_the_profile_as_it_was(tmp_path, capsys):
-    # a comfort force so low that the first stretch trips it: the angle reached is a bound, not the range's end
-    code = main(["assess", str(PATIENT), "--out", str(tmp_path / "rom"), "--joints", "q2_flexion,q4_elbow",
-                 "--set", "patient.comfort.max_interaction_force_n=6"])
-    out = capsys.readouterr().out
-    assert code == 1 and "session was stopped" in out
+    # a comfort force so low the first stretch presses past it: the stretch ends itself at 80 % of it (a force cap)
+    low = ["--set", "patient.comfort.max_interaction_force_n=6", "--joints", "q2_flexion,q4_elbow"]
+    assert main(["assess", str(PATIENT), "--out", str(tmp_path / "capped"), *low]) == 1  # (the active session trips)
+    capped = json.loads((tmp_path / "capped" / "assessment.json").read_text())
+    assert "force cap" in capped["passive_stopped_by"]["q2_flexion"] and "passive" not in capped["sessions_stopped"]
+    # told to press harder than the envelope allows, the stretch is cut short by the safety stop: a bound, not an end
+    assert main(["assess", str(PATIENT), "--out", str(tmp_path / "rom"), *low, "--stretch", "max_force_n=50"]) == 1
+    assert "session was stopped" in capsys.readouterr().out
     report = json.loads((tmp_path / "rom" / "assessment.json").read_text())
     assert "passive" in report["sessions_stopped"]
     whys = [w for ends in report["passive_stopped_by"].values() for w in ends]

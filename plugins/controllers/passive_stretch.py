@@ -1,14 +1,13 @@
 """The passive part of a range-of-motion assessment: a slow robot-driven stretch of one joint at a time, stopped
-at the end-feel — where the joint's resistance stiffens beyond a threshold — or at a torque cap, whichever comes
-first; each end's angle is the passive range.
+at the end-feel — where the joint's resistance stiffens beyond a threshold —, at a torque cap, or where the
+interaction force (a cuff's) reaches a cap, whichever comes first; each end's angle is the passive range.
 
 From the start posture, for each joint: out toward the robot's upper limit at ``speed_deg_s``, back, out toward
 the lower limit, back; the other joints held. The joint follows a PD on the ramp (gains from its inertia) with
-gravity compensation; the
-resistance is the PD's effort against the motion, its stiffness the slope of that effort over the last
-``window_deg`` of travel; the torque cap counts from what holding the limb took as the stretch began (its weight).
-The person should be relaxed (no voluntary effort) and the speed low (below their
-stretch reflex's threshold).
+gravity compensation; the resistance is the PD's effort against the motion, its stiffness the slope of that effort
+over the last ``window_deg`` of travel; the torque cap counts from what holding the limb took as the stretch began
+(its weight). The person should be relaxed (no voluntary effort) and the speed low (below their stretch reflex's
+threshold).
 """
 
 from __future__ import annotations
@@ -31,11 +30,13 @@ class PassiveStretchConfig(StrictModel):
 
     joints: list[str] | None = Field(None, description="joints to stretch, in order (default: all)")
     speed_deg_s: float = Field(10.0, gt=0, le=30, description="stretch speed (below the person's reflex threshold)")
-    return_speed_deg_s: float = Field(30.0, gt=0, description="speed back to the start posture")
+    return_speed_deg_s: float = Field(20.0, gt=0, description="speed back to the start posture")
     end_feel_nm_deg: float = Field(1.0, gt=0, description="the end of the range: resistance stiffer than this")
     max_torque_nm: float = Field(10.0, gt=0, description="the stretch never pushes harder than this beyond what "
                                                         "holding the limb took as it began")
     window_deg: float = Field(1.0, gt=0, description="travel over which the stiffness is measured")
+    max_force_n: float | None = Field(None, gt=0, description="the stretch also ends when the interaction force (a "
+                                      "cuff's, a sensor's) reaches this (default: 80 % of the run's force limit)")
     bandwidth_hz: float = Field(8.0, gt=0, description="each joint's tracking bandwidth: stiffness M ω², damping 2 M ω "
                                                        "from its inertia at the start (stable for light and heavy "
                                                        "joints alike)")
@@ -51,7 +52,8 @@ class PassiveStretch(Controller):
                Metric("passive_stop_t_*", "s", description="when each stretch ended"),
                Metric("passive_start_t_*", "s", description="when each stretch began"),
                Metric("passive_stop_*", "count",
-                      description="why each stretch ended: 0 end-feel, 1 torque cap, 2 the robot's own limit"))
+                      description="why each stretch ended: 0 end-feel, 1 torque cap, 2 the robot's own limit, "
+                                  "3 force cap"))
 
     def __init__(self, config: PassiveStretchConfig, context: Context):
         model = context.robot.model
@@ -65,6 +67,11 @@ class PassiveStretch(Controller):
         self.names = model.joint_names
         # the moves: (joint, direction); each goes out until it ends, then back to the start
         self.moves = [(model.joint_names.index(j), d) for j in names for d in (1, -1)]
+        self.force = context.interaction_force
+        limits = [v for v in (getattr(context.safety, "interaction_force_n", None),
+                              getattr(getattr(context.patient, "comfort", None), "max_interaction_force_n", None))
+                  if v is not None]
+        self.max_force = config.max_force_n or (0.8 * min(limits) if limits else None)
         self.found: dict[str, float] = {}
         self.ended: dict[str, float] = {}
         self.q0: np.ndarray | None = None
@@ -130,6 +137,10 @@ class PassiveStretch(Controller):
             return
         if resistance - self._baseline >= self.c.max_torque_nm:
             self._end(j, d, angle, 1)
+            return
+        if self.max_force is not None and self.force is not None and (f := self.force()) is not None \
+                and f @ f >= self.max_force**2:  # (the cuff pressing too hard: the range ends here for now)
+            self._end(j, d, angle, 3)
             return
         self._samples.append((angle, resistance))
         window = math.radians(self.c.window_deg)

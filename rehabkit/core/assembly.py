@@ -108,6 +108,7 @@ class Assembly:
     # embodied person's straps) or estimated from a simulated person's joint torques; ``measured`` says which
     force_source: Callable[[float, np.ndarray, np.ndarray | None], np.ndarray] | None = None
     force_measured: bool = False
+    last_force: np.ndarray | None = None  # the force source's last value (what ``Context.interaction_force`` gives)
     safety: SafetyLayer | None = None
     schedule: Schedule | None = None
 
@@ -165,7 +166,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         if ev.planner is not None:  # (the settings were validated with the scenario, each located)
             config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
             a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
-    a.context = replace(a.context, reference_space=a.planner.space)
+    a.context = replace(a.context, reference_space=a.planner.space, interaction_force=lambda: a.last_force)
     a.controller = a.make("controller", sc.controller, ("controller",))
     if a.planner.space != a.controller.reference:
         raise PluginSetupError(a.loaded.source, ("controller", "type"), (),

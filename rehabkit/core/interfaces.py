@@ -36,6 +36,9 @@ class Context:
             ``plan(t, q, qd, targets)`` asks the scenario's planner, checks, logs and returns
             the :class:`Plan`, or raises :class:`PlanningError`.
         note: ``note(t, text)`` keeps a message for people (an HMI display line) in the summary and log.
+        interaction_force: ``interaction_force()``: the force between person and robot the safety envelope checked
+            at the last control step [N] (a force-torque sensor's, a strapped person's, or estimated from a simulated
+            person's torques), or None where the run has no source of it.
     """
 
     scenario_dir: Path
@@ -54,6 +57,7 @@ class Context:
     patient: Any = None  # the scenario's patient profile (``rehabkit.rehab.patient.PatientBase``), if any
     dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
     bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
+    interaction_force: Callable[[], np.ndarray | None] | None = None
 
     def stream(self, name: str) -> np.random.Generator:
         """A random generator of its own for ``name``, from the scenario seed.

@@ -119,7 +119,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
             if force_at is not None:
-                force = force_at(t, q, tau_h[k] if person is not None else None)
+                force = a.last_force = force_at(t, q, tau_h[k] if person is not None else None)
                 if f_h is not None:
                     f_h[k] = math.sqrt(force @ force)
                 safety.check_force(t, q, force, qd)

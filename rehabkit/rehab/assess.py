@@ -158,7 +158,7 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     return result
 
 
-WHY = {0: "end-feel", 1: "torque cap", 2: "robot limit"}
+WHY = {0: "end-feel", 1: "torque cap", 2: "robot limit", 3: "force cap"}
 MEASURED = set(WHY.values())  # (a safety stop's angle is a bound on the range, not its end)
 
 
