@@ -23,6 +23,7 @@ from rehabkit.core.interfaces import Context, Controller, StrictModel
 from rehabkit.core.metric import Metric
 
 MARGIN_DEG = 1.0  # the stretch stops this short of the robot's own limit
+EASE_S = 0.5  # the return reaches its speed over this long
 
 
 class PassiveStretchConfig(StrictModel):
@@ -76,7 +77,7 @@ class PassiveStretch(Controller):
         self.ended: dict[str, float] = {}
         self.q0: np.ndarray | None = None
         self.joint_reference = None
-        self._move, self._phase, self._pause, self._t, self._baseline = 0, "out", 0.0, 0.0, 0.0
+        self._move, self._phase, self._pause, self._t, self._baseline, self._back_s = 0, "out", 0.0, 0.0, 0.0, 0.0
         self._samples: list[tuple[float, float]] = []  # (angle, resistance) on the way out
 
     @staticmethod
@@ -114,8 +115,9 @@ class PassiveStretch(Controller):
                 r[j] = limit
                 self._end(j, d, q[j], 2)
             return d * speed
-        if self._phase == "back":
-            speed = math.radians(self.c.return_speed_deg_s)
+        if self._phase == "back":  # (easing into the return: a sudden reversal jerks the limb and the cuffs)
+            self._back_s += self.dt
+            speed = math.radians(self.c.return_speed_deg_s) * min(1.0, self._back_s / EASE_S)
             step = -d * speed * self.dt
             if d * (r[j] + step - self.q0[j]) <= 0:
                 r[j], self._phase, self._pause = self.q0[j], "pause", 0.0
@@ -159,7 +161,7 @@ class PassiveStretch(Controller):
         self.found[f"passive_rom_deg_{side}_{self.names[j]}"] = math.degrees(angle)
         self.found[f"passive_stop_t_{side}_{self.names[j]}"] = self._t
         self.ended[f"passive_stop_{side}_{self.names[j]}"] = float(why)
-        self._phase = "back"  # (from where the reference is: a jump back would jerk the limb)
+        self._phase, self._back_s = "back", 0.0  # (from where the reference is: a jump back would jerk the limb)
 
     def run_metrics(self, trace=None) -> dict[str, float]:
         return {**self.found, **self.ended}
