@@ -10,24 +10,22 @@ from pathlib import Path
 EXIT_OK, EXIT_FAILED, EXIT_INVALID = 0, 1, 2
 
 
-def _setting(text: str) -> tuple[str, object]:
-    import yaml
-
-    key, _, value = text.partition("=")
-    return key.strip(), yaml.safe_load(value)
-
-
 def cmd_assess(args: argparse.Namespace) -> int:
     from rehabkit.core.errors import SetupError
     from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.core.scenario.source import parse_override
     from rehabkit.rehab.assess import assess
 
     out = Path(args.out or f"out/{Path(args.scenario).stem}_assessment")
     try:
         result = assess(args.scenario, out, args.set, joints=args.joints.split(",") if args.joints else None,
-                        damping=args.damping, stretch_settings=dict(_setting(s) for s in args.stretch))
+                        damping=args.damping, stretch_settings={".".join(key): value for key, value in
+                                                                 map(parse_override, args.stretch)})
     except ScenarioError as exc:
         print(str(exc), file=sys.stderr)
+        return EXIT_INVALID
+    except ValueError as exc:  # a --set or --stretch that is not key=value
+        print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except SetupError as exc:
         print(f"error: {exc}", file=sys.stderr)

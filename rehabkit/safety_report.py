@@ -82,13 +82,14 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     from rehabkit.api import run_scenario
     from rehabkit.core.errors import SetupError
     from rehabkit.core.estop import own_state
+    from rehabkit.core.runner import Runner
     from rehabkit.core.scenario.loader import load_scenario
 
     overrides = LINK if backend == "link" else {}
     loaded = load_scenario(path, overrides)
     sc = loaded.model
     with tempfile.TemporaryDirectory() as state, own_state(Path(state)):
-        result = run_scenario(path, overrides, out_dir=None)
+        result = Runner(loaded).run()  # (loaded once: the scenario is read for the onsets too)
         notes = []
         events = result.summary["safety"]["events"]
         if events and events[0]["rule"] == "e-stop":  # the latch: refused, cleared, ramped in

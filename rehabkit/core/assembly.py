@@ -265,7 +265,10 @@ def _force_source(a: Assembly, limit: float | None) -> None:
     embodied person's straps (measured in the scene), else a simulated person's joint torques (estimated at the
     hand); an interaction-force limit with none of them is refused."""
     sensing = [s for s in a.sensors.values() if isinstance(s, InteractionForceSensor) and s.interaction]
-    if sensing:
+    if len(sensing) == 1:  # (the common case: no list and max each control step)
+        sensor = sensing[0]
+        a.force_source, a.force_measured = (lambda t, q, tau_h: sensor.interaction_force(t, a.backend)), True
+    elif sensing:
         def measured(t, q, tau_h):  # the largest of them (a cuff per segment)
             forces = [s.interaction_force(t, a.backend) for s in sensing]
             return max(forces, key=lambda f: f @ f)

@@ -15,6 +15,7 @@ narrows the next session's limits (``--set patient=DIR/<id>.v<N>.yaml``).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import date
 from pathlib import Path
@@ -28,6 +29,7 @@ from rehabkit.core.interfaces import InteractionForceSensor
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.plugins import default_registry
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
+from rehabkit.core.scenario.source import parse_override
 
 CUE_S = 3.0  # each cue (a joint to one end, to the other, back) [s]
 CUE_MARGINS = (0.08, 0.12, 0.16, 0.2, 0.25)  # cues this share of a joint's range inside the robot's limits, the
@@ -76,19 +78,20 @@ def _sessions_base(loaded: LoadedScenario) -> dict[str, Any]:
 
 
 def _merge(a: dict, b: dict) -> dict:
+    """``b`` over ``a``, mappings merged; unlike the loader's ``deep_merge`` a null is kept, not applied: it is the
+    loader's own merge of these overrides onto the scenario that removes what a null marks."""
     out = dict(a)
     for k, v in b.items():
         out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
     return out
 
 
-def _robot_and_start(path: Path, overrides) -> tuple[Any, np.ndarray]:
-    from rehabkit.core.assembly import assemble, start_posture
+def _assembled(path: Path, overrides: dict):
+    """The run's setup up to its targets (robot built, limits narrowed): no plugin beyond the robot."""
+    from rehabkit.core.assembly import assemble
     from rehabkit.core.lifecycle import default_extensions
 
-    loaded = load_scenario(path, overrides)
-    a = assemble(loaded, default_registry(), default_extensions(), upto="targets")
-    return a.robot.model, start_posture(a)
+    return assemble(load_scenario(path, overrides), default_registry(), default_extensions(), upto="targets")
 
 
 def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: list[str] | None = None,
@@ -98,23 +101,27 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     viscous damping the transparent robot keeps [N·m·s/rad]; ``stretch_settings``: the passive stretch's."""
     stretcher = default_registry().get("controller", "passive-stretch")  # (a plugin: found by name, not imported)
 
+    from rehabkit.core.assembly import start_posture
+
     path, out = Path(path), Path(out_dir)
-    loaded = load_scenario(path, overrides)
-    profile = loaded.model.patient
+    given = dict(overrides) if isinstance(overrides, Mapping) else {
+        ".".join(key): value for key, value in map(parse_override, overrides)}
+    setup = _assembled(path, given)  # the scenario as given: where it starts, within the profile's ranges
+    loaded, profile, q0 = setup.loaded, setup.sc.patient, start_posture(setup)
     if profile is None:
         raise SetupError(f"{path}: an assessment needs a patient profile (patient: FILE)")
-    given = dict(overrides) if not isinstance(overrides, (list, tuple)) else dict(
-        (k, yaml.safe_load(v)) for k, _, v in (o.partition("=") for o in overrides))
+    if isinstance(given.get("patient"), str):  # a profile --set names: inlined, as the sessions change it
+        given["patient"] = loaded.source.data["patient"]
     base = _merge(given, _sessions_base(loaded))
-    _, q0 = _robot_and_start(path, given)  # where the scenario starts (within the profile's ranges)
-    model, _ = _robot_and_start(path, base)
+    sessions = _assembled(path, base)  # the profile's ranges out of the limits
+    model = sessions.robot.model
     names = joints or [j for j in model.joint_names if j in profile.joints] or model.joint_names
     idx = [model.joint_names.index(j) for j in names]
     lo, hi = model.limits.lower, model.limits.upper
 
     # 1. active: cued to each end of each joint in turn, the robot transparent
     start = {"name": "start", "joints_deg": np.degrees(q0).round(6).tolist()}
-    cues = _cues(path, base, q0, idx, lo, hi, cue_s)
+    cues = _cues(sessions, q0, idx, lo, hi, cue_s)
     active_over = _merge(base, {
         "planner": {"type": "multi-cubic", "segment_durations": [cue_s] * len(cues)},
         "controller": {"type": "transparent", "damping_nms_rad": damping},
@@ -196,16 +203,12 @@ def run_scenario(path: Path, overrides: dict, out_dir: Path):
     return Runner(load_scenario(path, overrides), out_dir=out_dir).run()
 
 
-def _cues(path: Path, base: dict, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray,
-          cue_s: float) -> list[dict]:
+def _cues(a, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray, cue_s: float) -> list[dict]:
     """Joint-space cues to each end of each joint and back, as far out as the cue plan (a C2 spline through them,
     which swings past its via points) stays within the robot's limits."""
-    from rehabkit.core.assembly import assemble
     from rehabkit.core.interfaces import PlanRequest, Target
-    from rehabkit.core.lifecycle import default_extensions
     from rehabkit.core.plan_gate import plan_breach
 
-    a = assemble(load_scenario(path, base), default_registry(), default_extensions(), upto="targets")
     info = default_registry().get("planner", "multi-cubic")
     for share in CUE_MARGINS:
         margin = share * (hi - lo)
