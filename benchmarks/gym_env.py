@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.gym.env import ScenarioEnv
 

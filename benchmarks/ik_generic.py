@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.core.interfaces import Context, Robot
-from rehabkit.core.targets import axis_error_deg
+from rehabkit.core.kinds.interfaces import Context, Robot
+from rehabkit.core.setup.targets import axis_error_deg
 
 ROOT = Path(__file__).resolve().parents[1]
 

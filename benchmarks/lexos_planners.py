@@ -151,7 +151,7 @@ def main() -> None:
 
     from rehabkit_plugins.controllers.clik_pd import ClikPD, ClikPDConfig
 
-    from rehabkit.core.interfaces import Context
+    from rehabkit.core.kinds.interfaces import Context
 
     ctrl = ClikPD(ClikPDConfig(), Context(Path("."), np.random.default_rng(0), 0.001, robot=robot))
     q = np.radians([20.0, -45.0, 0.0, -70.0])

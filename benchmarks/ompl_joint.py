@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.core.interfaces import Context, PlanningError, PlanRequest, Target
+from rehabkit.core.kinds.interfaces import Context, PlanningError, PlanRequest, Target
 from rehabkit.core.scenario.models import World
 from rehabkit.cspace.scene_check import SceneCollision
 

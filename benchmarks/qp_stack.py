@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from rehabkit.core.interfaces import Context, PlanRequest, Target
-from rehabkit.core.plugins import default_registry
+from rehabkit.core.kinds.interfaces import Context, PlanRequest, Target
+from rehabkit.core.plugins.registry import default_registry
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.wholebody.stack import Level, solve_weighted
 

@@ -19,7 +19,7 @@ import platform
 import warnings
 from pathlib import Path
 
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "hit_roundtrip.yaml"

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import yaml
 
-from rehabkit.core.errors import SetupError
+from rehabkit.core.setup.errors import SetupError
 from rehabkit.rehab.assess import assess
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -7,7 +7,7 @@ import sys
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
 
-from rehabkit.core.hookspecs import hookimpl  # noqa: E402
+from rehabkit.core.plugins.hookspecs import hookimpl  # noqa: E402
 from rehabkit.core.version import __version__  # noqa: E402
 
 
@@ -19,7 +19,7 @@ def __getattr__(name: str):
 
         return getattr(api, name)
     if name in ("load_scenario", "ScenarioError", "RunResult"):
-        from rehabkit.core.runner import RunResult
+        from rehabkit.core.run.runner import RunResult
         from rehabkit.core.scenario.errors import ScenarioError
         from rehabkit.core.scenario.loader import load_scenario
 

@@ -6,8 +6,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rehabkit.core.plugins import PluginRegistry
-from rehabkit.core.runner import Runner, RunResult
+from rehabkit.core.plugins.registry import PluginRegistry
+from rehabkit.core.run.runner import Runner, RunResult
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
 
 if TYPE_CHECKING:

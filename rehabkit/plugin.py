@@ -2,11 +2,11 @@
 
 A third-party package imports from here only (``from rehabkit.plugin import Planner, Plan, hookimpl``);
 what is not listed in ``__all__`` is internal and may change. The plugin kinds and what each
-returns are described in :mod:`rehabkit.core.hookspecs`; the run-lifecycle hooks an extension
-implements in :mod:`rehabkit.core.lifecycle`.
+returns are described in :mod:`rehabkit.core.plugins.hookspecs`; the run-lifecycle hooks an extension
+implements in :mod:`rehabkit.core.plugins.lifecycle`.
 """
 
-from rehabkit.core.capabilities import (
+from rehabkit.core.kinds.capabilities import (
     ClusterPoints,
     Contacts,
     ExternalTorques,
@@ -17,9 +17,7 @@ from rehabkit.core.capabilities import (
     RandomReach,
     WorkspaceTable,
 )
-from rehabkit.core.errors import SetupError
-from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import (
+from rehabkit.core.kinds.interfaces import (
     Backend,
     BackendFaultError,
     BodyPoses,
@@ -44,10 +42,12 @@ from rehabkit.core.interfaces import (
     Target,
     Trajectory,
 )
-from rehabkit.core.lifecycle import Contribution
-from rehabkit.core.limits import LimitBreach, Narrowing
-from rehabkit.core.metric import Metric
-from rehabkit.core.targets import JointWaypoints, joint_waypoints
+from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.plugins.lifecycle import Contribution
+from rehabkit.core.results.metric import Metric
+from rehabkit.core.setup.errors import SetupError
+from rehabkit.core.setup.limits import LimitBreach, Narrowing
+from rehabkit.core.setup.targets import JointWaypoints, joint_waypoints
 from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.models.wearable import Strap, Wearable
 
@@ -62,7 +62,7 @@ __all__ = [
     "joint_waypoints", "JointWaypoints",
     # what a robot declares it can do, and a plugin ``requires``
     "WorkspaceTable", "RandomReach", "PassiveJoints", "ClusterPoints", "FloatingBase", "LiftArmGripper",
-    # what a backend declares it can do (the rest: rehabkit.core.capabilities)
+    # what a backend declares it can do (the rest: rehabkit.core.kinds.capabilities)
     "ExternalTorques", "Contacts", "HostsBodies",
     # describing metrics; extensions' contributions and limits
     "Metric", "Contribution", "Narrowing", "LimitBreach",

@@ -32,7 +32,7 @@ from typing import Any
 import pytest
 import yaml
 
-from rehabkit.core.estop import own_state
+from rehabkit.core.safety.estop import own_state
 
 _RUNS = pytest.StashKey[dict[Path, Any]]()
 
@@ -146,13 +146,13 @@ def run_sweep(tmp_path: Path) -> Callable[..., Any]:
 @pytest.fixture(scope="session")
 def scenario_run(pytestconfig: pytest.Config) -> Callable[[str | Path], Any]:
     """The run of a scenario file as written, once per session (shared with its scenario test); a
-    :class:`rehabkit.core.runner.RunResult` with its outputs in ``out_dir``."""
+    :class:`rehabkit.core.run.runner.RunResult` with its outputs in ``out_dir``."""
     return lambda path: shared_run(pytestconfig, path)
 
 
 @pytest.fixture
 def run_scenario(tmp_path: Path) -> Callable[..., Any]:
-    """Run a scenario file with overrides; returns a :class:`rehabkit.core.runner.RunResult`."""
+    """Run a scenario file with overrides; returns a :class:`rehabkit.core.run.runner.RunResult`."""
     from rehabkit.api import run_scenario as _run
 
     counter = iter(range(1_000_000))

@@ -35,5 +35,5 @@ def rng():
 
 @pytest.fixture(autouse=True)
 def _own_state(tmp_path, monkeypatch):
-    """Each test keeps its e-stop latches to itself (rehabkit.core.estop: $REHABKIT_STATE)."""
+    """Each test keeps its e-stop latches to itself (rehabkit.core.safety.estop: $REHABKIT_STATE)."""
     monkeypatch.setenv("REHABKIT_STATE", str(tmp_path / "state"))

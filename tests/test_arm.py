@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from rehabkit_plugins.robots.arm import ArmConfig, ArmRobot
 
-from rehabkit.core.backends.scene import build_scene
 from rehabkit.core.scenario.models import World
+from rehabkit.sim.scene import build_scene
 
 
 @pytest.fixture(scope="module")

@@ -10,8 +10,8 @@ from rehabkit_plugins.planners.box_avoid import BoxAvoidConfig, BoxAvoidPlanner
 from rehabkit_plugins.robots.arm import ArmConfig, ArmRobot
 
 from rehabkit.api import run_scenario
-from rehabkit.core.interfaces import Context, PlanRequest, Target
-from rehabkit.core.runner import SetupError
+from rehabkit.core.kinds.interfaces import Context, PlanRequest, Target
+from rehabkit.core.run.runner import SetupError
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.models import World
@@ -80,7 +80,7 @@ def test_position_only_targets_keep_the_gripper_orientation(arm):
 
 
 def test_an_unreachable_or_buried_target_is_a_clear_planning_error(arm):
-    from rehabkit.core.interfaces import PlanningError
+    from rehabkit.core.kinds.interfaces import PlanningError
 
     planner = _planner(arm)
     inside = arm.fk(HOME)

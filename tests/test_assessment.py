@@ -9,10 +9,10 @@ import math
 import yaml
 
 from rehabkit.cli import main
-from rehabkit.core.assembly import assemble
-from rehabkit.core.lifecycle import default_extensions
-from rehabkit.core.plugins import default_registry
+from rehabkit.core.plugins.lifecycle import default_extensions
+from rehabkit.core.plugins.registry import default_registry
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.setup.assembly import assemble
 from tests.conftest import SCENARIOS
 
 PATIENT = SCENARIOS / "lexos_patient.yaml"

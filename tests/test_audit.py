@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from rehabkit.core.safety_log import LOG, chain, verify
+from rehabkit.core.log.safety_log import LOG, chain, verify
 from tests.conftest import SCENARIOS
 from tests.test_cli import cli
 

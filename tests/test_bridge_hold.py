@@ -183,7 +183,7 @@ def test_a_latched_bridge_is_reset_by_the_next_host_session(hit):
 
 
 def test_a_bridge_started_by_hand_has_the_hosts_watchdog_defaults():
-    from rehabkit.cli import parser
+    from rehabkit.cli.main import parser
     from rehabkit.hardware.config import HardwareConfig
 
     args = parser().parse_args(["bridge", "hit"])

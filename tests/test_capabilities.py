@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rehabkit.cli import main
-from rehabkit.core.capabilities import (
+from rehabkit.core.kinds.capabilities import (
     Cameras,
     ClusterPoints,
     Contacts,
@@ -17,9 +17,9 @@ from rehabkit.core.capabilities import (
     WorkspaceTable,
     missing_capabilities,
 )
-from rehabkit.core.errors import SetupError
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.setup.errors import SetupError
 from tests.conftest import SCENARIOS
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
@@ -55,7 +55,7 @@ def test_several_missing_capabilities_are_named_together():
 def test_the_built_in_robots_and_backends_declare_what_they_have(hit, lexos):
     from rehabkit_plugins.robots.capaman import CapamanConfig, CapamanRobot
 
-    from rehabkit.core.backends.mujoco import MujocoBackend
+    from rehabkit.sim.mujoco import MujocoBackend
 
     assert isinstance(lexos, WorkspaceTable) and not isinstance(hit, WorkspaceTable)
     assert isinstance(CapamanRobot(CapamanConfig()), ClusterPoints) and not isinstance(hit, FloatingBase)

@@ -73,7 +73,7 @@ task:
 duration: 3.5
 expect: {tracking_max_deg: {lt: 1.0}, final_position_error_m: {lt: 0.001}, safety_events: {eq: 0}}
 """)
-    from rehabkit.core.runner import Runner
+    from rehabkit.core.run.runner import Runner
     from rehabkit.core.scenario.loader import load_scenario
 
     runner = Runner(load_scenario(scenario))
@@ -88,9 +88,9 @@ expect: {tracking_max_deg: {lt: 1.0}, final_position_error_m: {lt: 0.001}, safet
 
 
 def test_gravity_model_holds_the_mechanism_still(capaman):
-    from rehabkit.core.backends.mujoco import MujocoBackend, MujocoConfig
-    from rehabkit.core.interfaces import Context
+    from rehabkit.core.kinds.interfaces import Context
     from rehabkit.core.scenario.models import World
+    from rehabkit.sim.mujoco import MujocoBackend, MujocoConfig
 
     ctx = Context(None, np.random.default_rng(0), 0.001, robot=capaman, world=World(floor=False))
     b = MujocoBackend(MujocoConfig(), ctx)

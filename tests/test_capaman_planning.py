@@ -30,8 +30,8 @@ def test_joint_matrix_agrees_with_mujoco_contacts(rng):
     import mujoco
     from rehabkit_plugins.robots.capaman import CapamanConfig, CapamanRobot
 
-    from rehabkit.core.backends.scene import build_scene
     from rehabkit.core.scenario.models import World
+    from rehabkit.sim.scene import build_scene
 
     robot = CapamanRobot(CapamanConfig(base={"position": [0, 0, 0.75]}))
     world = World(floor=False, objects=[WorldObject(name="obstacle", shape="cylinder", size=[0.015, 0.08],

@@ -4,7 +4,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from tests.conftest import SCENARIOS
 

@@ -8,9 +8,9 @@ import pinocchio as pin
 import pytest
 from rehabkit_plugins.robots.coman import ComanConfig, ComanRobot
 
-from rehabkit.core.backends.mujoco import MujocoBackend, MujocoConfig
-from rehabkit.core.interfaces import Context
+from rehabkit.core.kinds.interfaces import Context
 from rehabkit.core.scenario.models import World
+from rehabkit.sim.mujoco import MujocoBackend, MujocoConfig
 
 
 @pytest.fixture(scope="module")

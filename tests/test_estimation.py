@@ -66,7 +66,7 @@ def test_angular_velocity_ekf_is_far_better_than_the_algebraic_estimate():
 
 def test_mujoco_accelerometers_obey_the_rigid_body_model(tmp_path):
     """Noiseless MuJoCo readings at the mounting points reconstruct the origin's readings."""
-    from rehabkit.core.runner import Runner
+    from rehabkit.core.run.runner import Runner
     from rehabkit.core.scenario.loader import load_scenario
     from tests.conftest import SCENARIOS
 

@@ -8,10 +8,10 @@ import types
 import numpy as np
 import pytest
 
-from rehabkit.core.errors import SetupError
-from rehabkit.core.lifecycle import Extensions
-from rehabkit.core.runner import Runner
+from rehabkit.core.plugins.lifecycle import Extensions
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.setup.errors import SetupError
 from tests.conftest import ROOT, SCENARIOS
 
 SHORT = {"duration": 2.5, "planner.segment_durations": [1, 1], "task.sequence": ["A", "B", "A"], "expect": {}}

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rehabkit.core.interfaces import Context, Robot
-from rehabkit.core.plugins import default_registry
+from rehabkit.core.kinds.interfaces import Context, Robot
+from rehabkit.core.plugins.registry import default_registry
 from tests.conftest import DATA
 
 BUILT_IN = {"hit": {}, "lexos": {}, "arm": {}, "capaman": {}, "coman": {}}

@@ -43,7 +43,7 @@ def test_a_load_on_a_body_the_scene_lacks_is_refused_with_the_closest_names(caps
 def test_a_sensor_at_a_cuff_reads_the_strapped_persons_cuff_force():
     """The musculoskeletal patient's forearm strap is fastened to the sensor's mount (cuff_forearm): the sensor,
     zeroed before the person was strapped in (tare_s: 0), reads that strap's constraint force."""
-    from rehabkit.core.runner import Runner
+    from rehabkit.core.run.runner import Runner
 
     runner = Runner(load_scenario(SCENARIOS / "hit_myoarm.yaml", {
         "sensors": {"cuff": {"type": "force-torque", "strap": "forearm", "cutoff_hz": 0, "tare_s": 0}},

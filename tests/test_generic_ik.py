@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from plugins.robots.dh import DHRobot
-from rehabkit.core.targets import axis_error_deg
+from rehabkit.core.setup.targets import axis_error_deg
 from rehabkit.models.dh import DHRobotSpec
 from tests.test_cli import cli
 from tests.test_user_robot_errors import ARM3

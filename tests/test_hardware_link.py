@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rehabkit.api import run_scenario
-from rehabkit.core.interfaces import Context
+from rehabkit.core.kinds.interfaces import Context
 from rehabkit.hardware.backend import BridgeHoldError, HardwareBackend, HardwareConfig
 from rehabkit.hardware.protocol import COMMAND, ESTOPPED, WATCHDOG, encode
 from tests.conftest import SCENARIOS

@@ -5,7 +5,7 @@ import types
 import numpy as np
 import pytest
 
-from rehabkit.core.interfaces import Context, PlanningError, PlanRequest, Target
+from rehabkit.core.kinds.interfaces import Context, PlanningError, PlanRequest, Target
 from rehabkit.workspace.grid import INNER, UNREACHABLE, VoxelWorkspace
 from rehabkit.workspace.trajectory import Junction, TimedPath, resample, smooth_path, trapezoid
 

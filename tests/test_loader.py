@@ -135,7 +135,7 @@ def test_bad_set_override_is_reported_as_such():
 
 
 def test_scenario_model_json_schema_includes_plugins():
-    from rehabkit.core.plugins import default_registry
+    from rehabkit.core.plugins.registry import default_registry
     from rehabkit.core.scenario.models import scenario_model
 
     schema = scenario_model(default_registry()).model_json_schema()

@@ -8,7 +8,7 @@ from rehabkit_plugins.planners.multi_cubic import (
 )
 from scipy.interpolate import CubicSpline
 
-from rehabkit.core.interfaces import PlanningError, PlanRequest, Target
+from rehabkit.core.kinds.interfaces import PlanningError, PlanRequest, Target
 
 
 @pytest.mark.parametrize("m", [1, 2, 4, 7])

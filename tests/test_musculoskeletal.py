@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.musculo.dynamometer import MVC, RIGID, Dynamometer, isometric, tardieu
 from rehabkit.musculo.static_opt import StaticOptimisation

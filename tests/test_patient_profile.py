@@ -10,7 +10,7 @@ import yaml
 
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
-from rehabkit.core.runner import Runner, SetupError
+from rehabkit.core.run.runner import Runner, SetupError
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.safety import SafetyConfig

@@ -6,7 +6,7 @@ import pytest
 from pydantic import BaseModel
 
 from rehabkit import hookimpl
-from rehabkit.core.plugins import PluginConflictError, Provider, UnknownPluginError, load_plugins
+from rehabkit.core.plugins.registry import PluginConflictError, Provider, UnknownPluginError, load_plugins
 
 
 def test_built_in_plugins_come_from_entry_points():

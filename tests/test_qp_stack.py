@@ -8,9 +8,9 @@ import pytest
 from rehabkit_plugins.controllers.qp_stack import QpStack, QpStackConfig
 from rehabkit_plugins.robots.coman import ComanConfig, ComanRobot
 
-from rehabkit.core.backends.mujoco import MujocoBackend, MujocoConfig
-from rehabkit.core.interfaces import Context
+from rehabkit.core.kinds.interfaces import Context
 from rehabkit.core.scenario.models import World
+from rehabkit.sim.mujoco import MujocoBackend, MujocoConfig
 from rehabkit.wholebody.stack import Inequalities, Level, solve_cascade, solve_weighted
 
 ARM = ["RShSag", "RShLat", "RShYaw", "RElbj", "RForearmPlate", "RWrj1", "RWrj2"]

@@ -8,7 +8,7 @@ import pinocchio as pin
 import pytest
 
 from rehabkit.api import run_scenario
-from rehabkit.core.runner import SetupError
+from rehabkit.core.run.runner import SetupError
 from tests.conftest import DATA
 
 COMMON = """\
@@ -61,7 +61,7 @@ def test_mjcf_robot_runs_and_reads_limits_from_the_file(tmp_path, rng):
     assert r.passed, r.failures
     from rehabkit_plugins.robots.mjcf import MjcfRobot
 
-    from rehabkit.core.interfaces import Context
+    from rehabkit.core.kinds.interfaces import Context
     from rehabkit.models.mjcf_import import ModelFileConfig
 
     robot = MjcfRobot(ModelFileConfig(file=str(DATA / "arm3.xml"), ee_frame="tool", default_velocity_deg_s=120),

@@ -10,8 +10,8 @@ import pytest
 
 from rehabkit import hookimpl
 from rehabkit.api import run_scenario
-from rehabkit.core.interfaces import Controller, StrictModel
-from rehabkit.core.plugins import Provider, load_plugins
+from rehabkit.core.kinds.interfaces import Controller, StrictModel
+from rehabkit.core.plugins.registry import Provider, load_plugins
 from tests.conftest import SCENARIOS
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
@@ -152,7 +152,7 @@ def test_no_rrd_when_logging_is_off(tmp_path):
 
 
 def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):
-    from rehabkit.core.log import RerunLog
+    from rehabkit.core.log.rerun_log import RerunLog
 
     def broken_flush(self):
         raise OSError("disk full")

@@ -4,7 +4,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
 
 

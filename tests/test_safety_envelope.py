@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from rehabkit.api import run_scenario
-from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.safety import SafetyConfig
@@ -110,7 +110,7 @@ def test_ramp_in_starts_from_holding_and_ramp_out_ends_there(scenario_run):
 def test_heartbeat_sets_the_links_timing(hit):
     from pathlib import Path
 
-    from rehabkit.core.interfaces import Context
+    from rehabkit.core.kinds.interfaces import Context
     from rehabkit.hardware.backend import HardwareBackend, HardwareConfig
 
     safety = SafetyConfig.model_validate({"heartbeat": {"command_timeout_ms": 80, "state_timeout_ms": 150,
@@ -138,7 +138,7 @@ def test_the_patients_comfort_force_stops_a_session_that_presses_too_hard():
 
 
 def test_a_force_limit_without_a_force_source_is_refused():
-    from rehabkit.core.runner import SetupError
+    from rehabkit.core.run.runner import SetupError
 
     with pytest.raises(SetupError, match="needs a source of the force"):
         run_scenario(HIT, {"safety": {"interaction_force_n": 50}})

@@ -6,12 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rehabkit.core.backends.mujoco import MujocoBackend, MujocoConfig
-from rehabkit.core.interfaces import Context, Sensor
+from rehabkit.core.kinds.interfaces import Context, Sensor
+from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.scenario.loader import load_scenario
-from rehabkit.core.sensor_threads import SensorThreads
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.mirrored_scene import SceneMirror
+from rehabkit.sim.mujoco import MujocoBackend, MujocoConfig
 from tests.conftest import SCENARIOS
 
 

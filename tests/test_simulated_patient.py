@@ -10,7 +10,7 @@ from rehabkit_plugins.controllers.assist_as_needed import AssistAsNeeded, Assist
 from rehabkit_plugins.patients.simulated_arm import SimulatedArm, SimulatedArmConfig
 
 from rehabkit.api import run_scenario
-from rehabkit.core.interfaces import Context
+from rehabkit.core.kinds.interfaces import Context
 from tests.conftest import SCENARIOS
 
 DT = 1e-3

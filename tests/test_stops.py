@@ -14,10 +14,10 @@ import pytest
 
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
-from rehabkit.core.errors import SetupError
-from rehabkit.core.estop import EStopLatch, own_state
-from rehabkit.core.safety import SafetyLayer
+from rehabkit.core.safety.estop import EStopLatch, own_state
+from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
+from rehabkit.core.setup.errors import SetupError
 from tests.conftest import SCENARIOS
 
 ESTOP = SCENARIOS / "safety" / "hit_estop.yaml"
@@ -106,8 +106,8 @@ def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, caps
 
 
 def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
-    from rehabkit.core.estop import EStopLatch
-    from rehabkit.estop_cli import clear_over_link
+    from rehabkit.cli.estop import clear_over_link
+    from rehabkit.core.safety.estop import EStopLatch
     from rehabkit.hardware.bridge import Bridge
     from rehabkit.hardware.plant import MujocoPlant
     from rehabkit.hardware.protocol import ESTOPPED, HOLDING

@@ -7,9 +7,9 @@ import pytest
 from rehabkit_plugins.planners.throw_lwlr import ThrowConfig, ThrowPlanner
 from rehabkit_plugins.robots.coman import ComanConfig, ComanRobot
 
-from rehabkit.core.backends.mujoco import MujocoBackend, MujocoConfig
-from rehabkit.core.interfaces import Context
+from rehabkit.core.kinds.interfaces import Context
 from rehabkit.core.scenario.models import World
+from rehabkit.sim.mujoco import MujocoBackend, MujocoConfig
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import Throw, hand_path, parabola, plane_crossing, swing_angle
 

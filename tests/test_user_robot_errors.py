@@ -5,10 +5,10 @@ import json
 
 import pytest
 
-from rehabkit.core.errors import PluginSetupError, SetupError
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from tests.conftest import DATA
 from tests.test_cli import cli
 

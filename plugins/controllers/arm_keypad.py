@@ -21,9 +21,9 @@ from rehabkit_plugins.controllers.arm_keypad_jog import Jog, Jogger, Quintic
 from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S, check_timeline
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import LiftArmGripper
-from rehabkit.core.interfaces import Context, Controller, PlanningError, StrictModel, Target
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import LiftArmGripper
+from rehabkit.core.kinds.interfaces import Context, Controller, PlanningError, StrictModel, Target
+from rehabkit.core.results.metric import Metric
 from rehabkit.store.patches import Action, Patch, open_store
 
 SETTLE_S = 1.0  # after a replay ends, the error to the stored target is measured this much later

@@ -24,8 +24,8 @@ import pinocchio as pin
 from pydantic import Field, model_validator
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Controller, StrictModel
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
+from rehabkit.core.results.metric import Metric
 
 SERIES_EVERY = 10
 

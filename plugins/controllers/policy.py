@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Controller, StrictModel
+from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
 from rehabkit.models.policy import Policy
 
 CONTROLLER_TERMS = ("joint_state", "reference", "tracking_error", "phase")
@@ -112,7 +112,7 @@ class PolicyController(Controller):
 
 def _build(spec: dict[str, Any], context: Context) -> Controller:
     """The base controller from its section (type and settings), through the installed plugins."""
-    from rehabkit.core.plugins import default_registry
+    from rehabkit.core.plugins.registry import default_registry
 
     if "type" not in spec:
         raise ValueError("base: give the controller's type")

@@ -32,8 +32,8 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Patient, StrictModel
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.interfaces import Context, Patient, StrictModel
+from rehabkit.core.results.metric import Metric
 from rehabkit.core.scenario.patient import JointRom
 
 PerJoint = float | list[float]

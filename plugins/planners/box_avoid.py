@@ -22,9 +22,9 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.metric import Metric
-from rehabkit.core.targets import angular_distance
+from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.results.metric import Metric
+from rehabkit.core.setup.targets import angular_distance
 from rehabkit.geometry.box_avoid import NoPathError, plan_path
 from rehabkit.geometry.solids import Solid, make_solid
 from rehabkit.models.chain import rpy_to_matrix

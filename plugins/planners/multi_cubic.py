@@ -14,9 +14,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.metric import Metric
-from rehabkit.core.targets import joint_waypoints
+from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.results.metric import Metric
+from rehabkit.core.setup.targets import joint_waypoints
 
 
 def cubic_system(durations: np.ndarray) -> np.ndarray:

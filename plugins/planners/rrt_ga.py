@@ -22,10 +22,10 @@ from pydantic import Field
 from scipy import ndimage
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import ClusterPoints
-from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.metric import Metric
-from rehabkit.core.targets import joint_waypoints
+from rehabkit.core.kinds.capabilities import ClusterPoints
+from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.results.metric import Metric
+from rehabkit.core.setup.targets import joint_waypoints
 from rehabkit.cspace.genetic import GAConfig, PathGA, resample
 from rehabkit.cspace.joint_matrix import JointMatrix, build_joint_matrix
 from rehabkit.cspace.occupancy import rasterise

@@ -23,9 +23,9 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import FloatingBase
-from rehabkit.core.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import FloatingBase
+from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.core.results.metric import Metric
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
 from rehabkit.workspace.trajectory import blend_weight

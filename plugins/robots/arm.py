@@ -25,9 +25,9 @@ from pydantic import Field
 from rehabkit_plugins.robots.arm_kinematics import arm_ik, elbow_up
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import LiftArmGripper
-from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.core.io import load_yaml
+from rehabkit.core.kinds.capabilities import LiftArmGripper
+from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop

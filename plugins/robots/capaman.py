@@ -12,8 +12,8 @@ from pydantic import Field
 from scipy.optimize import least_squares
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import ClusterPoints, PassiveJoints
-from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.core.kinds.capabilities import ClusterPoints, PassiveJoints
+from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import matrix_to_quat_wxyz
 from rehabkit.models.dh import PoseSpec
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop

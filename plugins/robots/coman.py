@@ -21,8 +21,8 @@ from pydantic import Field
 from scipy.linalg.lapack import dgesv
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import FloatingBase
-from rehabkit.core.interfaces import Context, Robot, StrictModel
+from rehabkit.core.kinds.capabilities import FloatingBase
+from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import matrix_to_quat_wxyz, rpy_to_matrix
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
 

@@ -30,8 +30,8 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.core.io import load_yaml
+from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import DHRow, KinematicChain, inv_se3, mdh_transform
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.robot_model import SafeStop

@@ -26,9 +26,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import RandomReach, WorkspaceTable
-from rehabkit.core.interfaces import Context, Robot, StrictModel
 from rehabkit.core.io import load_yaml
+from rehabkit.core.kinds.capabilities import RandomReach, WorkspaceTable
+from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import KinematicChain, rot_x, trans
 from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
 from rehabkit.models.mjcf_builder import build_chain_mjcf

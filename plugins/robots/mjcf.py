@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from rehabkit import hookimpl
-from rehabkit.core.interfaces import Context, Robot
+from rehabkit.core.kinds.interfaces import Context, Robot
 from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
 
 

@@ -16,9 +16,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import Instruments
-from rehabkit.core.interfaces import Backend, Context, Instrument, Sensor, SensorConfig
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import Instruments
+from rehabkit.core.kinds.interfaces import Backend, Context, Instrument, Sensor, SensorConfig
+from rehabkit.core.results.metric import Metric
 from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank, rts_smooth
 from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
 

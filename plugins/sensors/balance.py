@@ -15,9 +15,9 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import BaseState, FloatingBase
-from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import BaseState, FloatingBase
+from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.core.results.metric import Metric
 
 
 class BalanceConfig(SensorConfig):

@@ -14,9 +14,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import SceneGeometry, SceneObjects
-from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import SceneGeometry, SceneObjects
+from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.core.results.metric import Metric
 from rehabkit.throwing.model import GRAVITY
 
 FIT_SAMPLES = 20  # samples after the release used to fit the flight's initial state

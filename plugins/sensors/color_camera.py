@@ -18,9 +18,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import Cameras
-from rehabkit.core.interfaces import Backend, Context, Sensor, SensorConfig
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import Cameras
+from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.core.results.metric import Metric
 
 HSV = tuple[int, int, int]
 

@@ -24,9 +24,16 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.capabilities import Instruments
-from rehabkit.core.interfaces import Backend, Context, Instrument, InteractionForceSensor, SensorConfig, StrictModel
-from rehabkit.core.metric import Metric
+from rehabkit.core.kinds.capabilities import Instruments
+from rehabkit.core.kinds.interfaces import (
+    Backend,
+    Context,
+    Instrument,
+    InteractionForceSensor,
+    SensorConfig,
+    StrictModel,
+)
+from rehabkit.core.results.metric import Metric
 
 Vec3 = tuple[float, float, float]
 

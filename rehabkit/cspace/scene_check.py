@@ -33,7 +33,7 @@ class SceneCollision:
     def __init__(self, robot: RobotModel, world, clearance_m: float = 0.0):
         import mujoco
 
-        from rehabkit.core.backends.scene import build_scene
+        from rehabkit.sim.scene import build_scene
 
         self._mj = mujoco
         spec = build_scene(robot, world, 0.002)

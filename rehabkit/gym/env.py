@@ -21,10 +21,10 @@ import gymnasium as gym
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from rehabkit.core.errors import PluginSetupError
-from rehabkit.core.loop import LoopState, run_loop
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.loop import LoopState, run_loop
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
+from rehabkit.core.setup.errors import PluginSetupError
 from rehabkit.gym.terms import Observer, RewardTerms
 
 

@@ -1,4 +1,4 @@
-"""What a policy sees and what it is paid, from a run's own record (:class:`~rehabkit.core.metrics.Trace`) and
+"""What a policy sees and what it is paid, from a run's own record (:class:`~rehabkit.core.results.metrics.Trace`) and
 reference: the observation at a step, the reward terms over a policy period (vectorised over its rows)."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rehabkit.core.errors import PluginSetupError
-from rehabkit.core.interfaces import EmbodiedPatient
-from rehabkit.core.runner import Runner
+from rehabkit.core.kinds.interfaces import EmbodiedPatient
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.learning import ObservationSpec
+from rehabkit.core.setup.errors import PluginSetupError
 from rehabkit.models.hand_force import HandForce
 from rehabkit.rehab.outcomes import interaction_forces
 

@@ -29,13 +29,13 @@ import time
 
 import numpy as np
 
-from rehabkit.core.capabilities import Instruments
-from rehabkit.core.estop import RAMP_IN_AFTER_CLEAR_S
-from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.interfaces import Backend, Context
-from rehabkit.core.limits import first_breach
-from rehabkit.core.safety import SafetyEvent
-from rehabkit.core.sensing import INSTRUMENT_DIM
+from rehabkit.core.kinds.capabilities import Instruments
+from rehabkit.core.kinds.interfaces import Backend, Context
+from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
+from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
+from rehabkit.core.safety.layer import SafetyEvent
+from rehabkit.core.setup.limits import first_breach
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
 from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkLostError

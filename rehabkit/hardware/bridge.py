@@ -12,7 +12,7 @@ time, count here, so a bridge catching up after a stall of its own holds too. If
 command arrives for ``watchdog_s`` while running, or an e-stop command comes, the hold is
 latched (status ``HOLDING``) and only a reset from the host re-enables the robot. An e-stop
 (a host's, or the button at the robot: :meth:`Bridge.press_estop`, or the bridge's keypad: ``e``) is
-latched further, in the bridge's latch file (:mod:`rehabkit.core.estop`): across sessions and
+latched further, in the bridge's latch file (:mod:`rehabkit.core.safety.estop`): across sessions and
 restarts, resets are refused (status ``ESTOPPED``) until a person clears it (``CMD_CLEAR`` from
 ``rehabkit estop clear --bridge``, the keypad's ``c``, or the latch file cleared while the bridge is down);
 the session after that tells the host to ramp in (status ``RAMP_IN``). Given the
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabkit.core.estop import EStopLatch
+from rehabkit.core.safety.estop import EStopLatch
 from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.keypad import Keypad, handle
 from rehabkit.hardware.plant import Plant

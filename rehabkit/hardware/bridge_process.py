@@ -10,7 +10,7 @@ import sys
 import tempfile
 from dataclasses import asdict
 
-from rehabkit.core.interfaces import Context
+from rehabkit.core.kinds.interfaces import Context
 
 
 def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:

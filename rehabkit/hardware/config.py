@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from rehabkit.core.interfaces import BackendFaultError, StrictModel
+from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
 
 
 class LinkLostError(BackendFaultError):

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from rehabkit.core.backends.scene_view import camera_renderer
+from rehabkit.sim.scene_view import camera_renderer
 
 
 def _serve(inp, out) -> None:  # pragma: no cover - runs in the server process

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabkit.core.metric import Metric
-from rehabkit.core.safety import SafetyEvent
+from rehabkit.core.results.metric import Metric
+from rehabkit.core.safety.layer import SafetyEvent
 from rehabkit.hardware.protocol import STALE
 
 METRICS = (

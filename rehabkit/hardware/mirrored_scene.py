@@ -9,13 +9,13 @@ import threading
 import mujoco
 import numpy as np
 
-from rehabkit.core.backends.scene import build_scene
-from rehabkit.core.backends.scene_view import SceneView, measured_joints
-from rehabkit.core.capabilities import Cameras, NamedJoints, SceneGeometry, SceneObjects
-from rehabkit.core.interfaces import BodyPoses, GeomVisual
+from rehabkit.core.kinds.capabilities import Cameras, NamedJoints, SceneGeometry, SceneObjects
+from rehabkit.core.kinds.interfaces import BodyPoses, GeomVisual
 from rehabkit.core.scenario.models import World
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.models.robot_model import RobotModel
+from rehabkit.sim.scene import build_scene
+from rehabkit.sim.scene_view import SceneView, measured_joints
 
 
 class SceneMirror(SceneView):

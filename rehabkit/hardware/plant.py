@@ -9,13 +9,13 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from rehabkit.core.backends.loads import LoadApplier
-from rehabkit.core.backends.scene import InstrumentErrors, add_instruments, build_scene, engage_brakes
-from rehabkit.core.backends.scene_view import measured_joints
-from rehabkit.core.capabilities import PassiveJoints
+from rehabkit.core.kinds.capabilities import PassiveJoints
+from rehabkit.core.kinds.sensor import INSTRUMENT_DIM, Instrument
 from rehabkit.core.scenario.loads import Load
 from rehabkit.core.scenario.models import World
-from rehabkit.core.sensing import INSTRUMENT_DIM, Instrument
+from rehabkit.sim.loads import LoadApplier
+from rehabkit.sim.scene import InstrumentErrors, add_instruments, build_scene, engage_brakes
+from rehabkit.sim.scene_view import measured_joints
 
 
 class Plant(ABC):

@@ -5,7 +5,7 @@ A target is a pose of the end-effector frame in the robot base frame, with some 
 free: ``free=""`` asks for the whole pose, ``"z"`` for the tool's z axis to point as the pose's does (turning
 about it is free), ``"xyz"`` for the position alone. Each start descends by pink's QP (joint ranges as
 constraints); a start that stalls or runs out of iterations is dropped. Robots with an analytic IK keep it
-(:meth:`rehabkit.core.interfaces.Robot.solve_ik` chooses).
+(:meth:`rehabkit.core.kinds.interfaces.Robot.solve_ik` chooses).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.core.runner import Runner
+from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 
 MVC = np.array([300.0])  # an elbow-flexion torque far beyond anyone's: the muscles give all they have [N·m]

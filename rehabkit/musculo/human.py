@@ -25,7 +25,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rehabkit.core.backends.mujoco import span
+from rehabkit.sim.mujoco import span
 
 PREFIX = "human/"
 

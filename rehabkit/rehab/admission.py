@@ -15,11 +15,11 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from rehabkit.core.interfaces import Robot, StrictModel, Target
-from rehabkit.core.limits import LimitBreach, LimitSources, Narrowing, outside, unknown_joint
+from rehabkit.core.kinds.interfaces import Robot, StrictModel, Target
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.models import TaskSpec
 from rehabkit.core.scenario.patient import PatientBase
+from rehabkit.core.setup.limits import LimitBreach, LimitSources, Narrowing, outside, unknown_joint
 from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.rehab.patient import patient_narrowings
 

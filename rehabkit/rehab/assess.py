@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from rehabkit.core.errors import SetupError
-from rehabkit.core.interfaces import InteractionForceSensor
 from rehabkit.core.io import atomic_write_json, atomic_write_text
-from rehabkit.core.plugins import default_registry
+from rehabkit.core.kinds.interfaces import InteractionForceSensor
+from rehabkit.core.plugins.registry import default_registry
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
 from rehabkit.core.scenario.source import parse_override
+from rehabkit.core.setup.errors import SetupError
 
 CUE_S = 3.0  # each cue (a joint to one end, to the other, back) [s]
 CUE_MARGINS = (0.08, 0.12, 0.16, 0.2, 0.25)  # cues this share of a joint's range inside the robot's limits, the
@@ -88,8 +88,8 @@ def _merge(a: dict, b: dict) -> dict:
 
 def _assembled(path: Path, overrides: dict):
     """The run's setup up to its targets (robot built, limits narrowed): no plugin beyond the robot."""
-    from rehabkit.core.assembly import assemble
-    from rehabkit.core.lifecycle import default_extensions
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.setup.assembly import assemble
 
     return assemble(load_scenario(path, overrides), default_registry(), default_extensions(), upto="targets")
 
@@ -101,7 +101,7 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     viscous damping the transparent robot keeps [N·m·s/rad]; ``stretch_settings``: the passive stretch's."""
     stretcher = default_registry().get("controller", "passive-stretch")  # (a plugin: found by name, not imported)
 
-    from rehabkit.core.assembly import start_posture
+    from rehabkit.core.setup.assembly import start_posture
 
     path, out = Path(path), Path(out_dir)
     given = dict(overrides) if isinstance(overrides, Mapping) else {
@@ -198,7 +198,7 @@ def _passive_ends(run, names: list[str], idx: list[int]) -> tuple[dict, dict]:
 
 def run_scenario(path: Path, overrides: dict, out_dir: Path):
     """One session of the assessment."""
-    from rehabkit.core.runner import Runner
+    from rehabkit.core.run.runner import Runner
 
     return Runner(load_scenario(path, overrides), out_dir=out_dir).run()
 
@@ -206,8 +206,8 @@ def run_scenario(path: Path, overrides: dict, out_dir: Path):
 def _cues(a, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray, cue_s: float) -> list[dict]:
     """Joint-space cues to each end of each joint and back, as far out as the cue plan (a C2 spline through them,
     which swings past its via points) stays within the robot's limits."""
-    from rehabkit.core.interfaces import PlanRequest, Target
-    from rehabkit.core.plan_gate import plan_breach
+    from rehabkit.core.kinds.interfaces import PlanRequest, Target
+    from rehabkit.core.run.plan_gate import plan_breach
 
     info = default_registry().get("planner", "multi-cubic")
     for share in CUE_MARGINS:

@@ -10,9 +10,9 @@ range of motion, assistance ratio, peak interaction force, interventions) and th
 
 from __future__ import annotations
 
-from rehabkit.core.hookspecs import hookimpl
-from rehabkit.core.lifecycle import Contribution
-from rehabkit.core.metric import Metric
+from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.plugins.lifecycle import Contribution
+from rehabkit.core.results.metric import Metric
 
 METRICS = (
     Metric("reaches", "count", outcome=True, description="planned movements counted as reaches"),

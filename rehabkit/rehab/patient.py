@@ -5,16 +5,16 @@ The profile itself (the scenario's ``patient:`` section) is part of the DSL:
 joint's passive range and comfortable speed, the whole arm's comfortable speed —
 and its comfortable interaction force. The run's effective limits are the tighter
 of the robot's, these and the safety envelope's, joint by joint
-(:func:`rehabkit.core.limits.narrow` says which one set each).
+(:func:`rehabkit.core.setup.limits.narrow` says which one set each).
 """
 
 from __future__ import annotations
 
 import math
 
-from rehabkit.core.limits import LimitSources, Narrowing, envelope_narrowings, narrow
 from rehabkit.core.scenario.patient import Comfort, JointRom, PatientBase
 from rehabkit.core.scenario.safety import SafetyConfig
+from rehabkit.core.setup.limits import LimitSources, Narrowing, envelope_narrowings, narrow
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 __all__ = ["Comfort", "JointRom", "PatientBase", "effective_limits", "interaction_force_limit",

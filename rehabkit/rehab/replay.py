@@ -18,9 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rehabkit.core.plugins import PluginRegistry
-from rehabkit.core.results import RunResult
-from rehabkit.core.runner import SNAPSHOT, Runner
+from rehabkit.core.plugins.registry import PluginRegistry
+from rehabkit.core.results.summary import RunResult
+from rehabkit.core.run.runner import SNAPSHOT, Runner
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 

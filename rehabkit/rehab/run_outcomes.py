@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from rehabkit.core.metrics import Trace
-from rehabkit.core.record import Movement
+from rehabkit.core.results.metrics import Trace
+from rehabkit.core.results.record import Movement
 from rehabkit.models.hand_force import HandForce
 from rehabkit.models.robot_model import RobotModel
 from rehabkit.rehab.outcomes import (

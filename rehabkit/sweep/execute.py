@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rehabkit.core.metric import wall_clock
+from rehabkit.core.results.metric import wall_clock
 
 
 # figures that measure the machine, not the run: they differ between any two executions
@@ -23,7 +23,7 @@ class RunTimeoutError(BaseException):
 
 def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None) -> dict[str, Any]:
     """Run the scenario with ``overrides``; the row (never raises for the run's own failures)."""
-    from rehabkit.core.runner import Runner  # in the worker: plugins load once per process
+    from rehabkit.core.run.runner import Runner  # in the worker: plugins load once per process
     from rehabkit.core.scenario.loader import load_scenario
 
     t0 = time.perf_counter()

@@ -18,8 +18,8 @@ import pinocchio as pin
 from pydantic import Field
 from scipy.spatial import ConvexHull
 
-from rehabkit.core.interfaces import StrictModel
-from rehabkit.core.names import suggest
+from rehabkit.core.kinds.interfaces import StrictModel
+from rehabkit.core.plugins.names import suggest
 from rehabkit.wholebody.stack import Inequalities
 
 AXIS = {"x": 0, "y": 1, "z": 2}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabkit.core.interfaces import PlanningError
+from rehabkit.core.kinds.interfaces import PlanningError
 from rehabkit.workspace.grid import VoxelWorkspace
 
 MAX_DRAWS = 10_000

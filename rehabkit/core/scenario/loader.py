@@ -22,8 +22,8 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from rehabkit.core.names import suggest
-from rehabkit.core.plugins import PluginError, PluginRegistry, default_registry
+from rehabkit.core.plugins.names import suggest
+from rehabkit.core.plugins.registry import PluginError, PluginRegistry, default_registry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.models import PLUGIN_SECTIONS, ScenarioBase, scenario_model
 from rehabkit.core.scenario.source import (  # noqa: F401 (deep_merge: part of this module's API)

@@ -13,8 +13,8 @@ from typing import Annotated, Any, Literal, Optional, Union
 
 from pydantic import Field, create_model, model_validator
 
-from rehabkit.core.interfaces import StrictModel
-from rehabkit.core.plugins import PluginRegistry
+from rehabkit.core.kinds.interfaces import StrictModel
+from rehabkit.core.plugins.registry import PluginRegistry
 from rehabkit.core.scenario.learning import LearningSpec
 from rehabkit.core.scenario.loads import Load
 from rehabkit.core.scenario.patient import PatientBase

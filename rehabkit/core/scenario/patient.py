@@ -15,7 +15,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from rehabkit.core.interfaces import StrictModel
+from rehabkit.core.kinds.interfaces import StrictModel
 
 Range = tuple[float, float]
 

@@ -1,5 +1,5 @@
 """The scenario's ``safety:`` section: the envelope every command passes (the DSL; the layer enforcing it is
-:mod:`rehabkit.core.safety`)."""
+:mod:`rehabkit.core.safety.layer`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from rehabkit.core.stopping import STOP_RULES
+from rehabkit.core.safety.stopping import STOP_RULES
 from rehabkit.models.strict import StrictModel
 
 Vec3 = tuple[float, float, float]

@@ -1,0 +1,5 @@
+"""``python -m rehabkit.cli``: the same as the ``rehabkit`` command."""
+
+from rehabkit.cli.main import entry
+
+entry()

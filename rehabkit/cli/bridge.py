@@ -1,0 +1,106 @@
+"""``rehabkit bridge``: serve a robot over UDP next to its drives (here: its MuJoCo model as the plant, with the run's
+instruments and a test rig's loads), and keep its e-stop latch."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from rehabkit.cli.exits import EXIT_INVALID, EXIT_OK
+
+
+def _err(msg: str) -> None:
+    print(msg, file=sys.stderr)
+
+
+def cmd_bridge(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from rehabkit.core.kinds.sensor import Instrument
+    from rehabkit.core.plugins.registry import default_registry
+    from rehabkit.core.safety.estop import EStopLatch
+    from rehabkit.core.scenario.loads import Load
+    from rehabkit.hardware.bridge import Bridge, BridgeLimits
+    from rehabkit.hardware.plant import MujocoPlant
+
+    registry = default_registry()
+    info = registry.get("robot", args.robot)
+    robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), None)
+    try:
+        instruments = [Instrument(**{**i, "position": tuple(i["position"]), "bias": tuple(i.get("bias", (0, 0, 0)))})
+                       for i in json.loads(args.instruments or "[]")]
+        loads = [Load.model_validate(x) for x in json.loads(args.loads or "[]")]
+        plant = MujocoPlant(robot, 1.0 / args.rate, instruments, loads, seed=args.seed)
+    except (ValueError, TypeError, KeyError) as exc:
+        _err(f"error: --instruments/--loads: {exc}")
+        return EXIT_INVALID
+    if args.effort is not None:
+        effort = np.asarray(json.loads(args.effort), float)
+        if effort.shape != plant.effort.shape or np.any(effort <= 0):
+            _err(f"error: --effort needs {len(plant.effort)} positive torques [N·m], got {args.effort}")
+            return EXIT_INVALID
+        plant.effort = np.minimum(plant.effort, effort)  # never above the robot's own
+    limits = robot.model.limits  # the robot's own, unless the host sends the run's (narrowed by patient, envelope)
+    lower, upper, velocity = limits.lower, limits.upper, limits.velocity
+    if args.limits is not None:
+        try:
+            given = json.loads(args.limits)
+            lower, upper, velocity = (np.asarray(given[k], float) for k in ("lower", "upper", "velocity"))
+            if not lower.shape == upper.shape == velocity.shape == (plant.joints,):
+                raise ValueError(f"each needs {plant.joints} values")
+        except (ValueError, KeyError, TypeError) as exc:
+            _err(f"error: --limits needs lower, upper and velocity per joint: {exc}")
+            return EXIT_INVALID
+    backstop = BridgeLimits(lower, upper, velocity, margin=np.radians(args.limit_margin_deg))
+    from rehabkit.hardware.config import HardwareConfig  # its defaults are the host's: a bridge by hand agrees
+
+    host = HardwareConfig.model_fields
+    watchdog_ms = host["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
+    stale_ms = host["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
+    latch = EStopLatch.for_robot(robot.model.name, args.robot_id, args.latch_file)  # (as the host names it)
+    from rehabkit.hardware.keypad import Keypad
+
+    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,
+                    limits=backstop, latch=latch, keypad=Keypad() if args.keypad else None)
+    print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
+        (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
+    return EXIT_OK
+
+
+def add_parser(sub) -> None:
+    b = sub.add_parser("bridge", help="serve a robot over UDP (its MuJoCo model as the plant), next to its drives")
+    b.add_argument("robot", help="robot plugin name")
+    b.add_argument("--port", type=int, default=0, help="UDP port (0: any free one; printed)")
+    b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section)")
+    b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
+    b.add_argument("--robot-id", type=int, default=1)
+    b.add_argument("--watchdog-ms", type=float, default=None,
+                   help="hold the robot without valid commands this long (default: the host backend's, 50 ms)")
+    b.add_argument("--stale-ms", type=float, default=None,
+                   help="hold the posture after this long without a newer command, until the next one")
+    b.add_argument("--limits", default=None, metavar="JSON",
+                   help="the run's joint limits {lower, upper, velocity} (default: the robot's); beyond them by the "
+                        "margin, or 25%% too fast, the bridge holds the robot on its own")
+    b.add_argument("--limit-margin-deg", type=float, default=2.0,
+                   help="how far beyond a joint's range the bridge's own check trips (the host's trips at 0.5°)")
+    b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
+    b.add_argument("--lockstep", action="store_true",
+                   help="tick once per host tick, on the host's clock (backend.clock: lockstep), not the wall's")
+    b.add_argument("--parent-pid", type=int, default=None, help="stop when this process (the host) is gone")
+    b.add_argument("--effort", default=None, metavar="JSON",
+                   help="torque limits per joint [N·m], tighter than the robot's (a safety envelope's)")
+    b.add_argument("--instruments", default=None, metavar="JSON",
+                   help="the run's instruments (force-torque sensors, accelerometers) the plant reads and each "
+                        "state carries, in the host's order")
+    b.add_argument("--loads", default=None, metavar="JSON", help="a test rig's loads on the plant (world.loads)")
+    b.add_argument("--seed", type=int, default=0, help="seed of the simulated instruments' noise")
+    b.add_argument("--latch-file", default=None, metavar="PATH",
+                   help="where the e-stop latch is kept across bridge restarts (default: under $REHABKIT_STATE, "
+                        "per robot and robot id)")
+    b.add_argument("--keypad", action="store_true",
+                   help="read keys at the robot from standard input, a line each: e presses the e-stop, c clears it")
+    b.set_defaults(func=cmd_bridge)

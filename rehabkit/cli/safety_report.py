@@ -1,0 +1,37 @@
+"""``rehabkit safety-report``: the safety skills in simulation and over the link, a table per skill."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
+
+
+def cmd_safety_report(args: argparse.Namespace) -> int:
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.safety_report.render import write_report
+    from rehabkit.safety_report.report import skill_runs
+
+    paths = [Path(p) for p in args.scenarios] or sorted(Path("scenarios/safety").glob("*.yaml"))
+    if not paths:
+        print("error: no safety-skill scenarios given (and none in scenarios/safety/)", file=sys.stderr)
+        return EXIT_INVALID
+    try:
+        runs = skill_runs(paths)
+    except ScenarioError as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_INVALID
+    md, html = write_report(runs, Path(args.out))
+    print(md.read_text())
+    print(f"wrote {md} and {html}")
+    return EXIT_OK if all(r.passed for pair in runs for r in pair if r is not None) else EXIT_FAILED
+
+
+def add_parser(sub) -> None:
+    r = sub.add_parser("safety-report", help="run safety-skill scenarios in simulation and over the link; write "
+                                             "a report per skill (Markdown and HTML with plots)")
+    r.add_argument("scenarios", nargs="*", help="skill scenarios (default: scenarios/safety/*.yaml)")
+    r.add_argument("--out", default="out/safety_report", metavar="DIR")
+    r.set_defaults(func=cmd_safety_report)

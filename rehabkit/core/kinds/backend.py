@@ -1,0 +1,140 @@
+"""The backend plugin kind: its stepping core, the faults it reports, and the scene types it draws with."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from rehabkit.core.results.metric import Metric
+
+
+@dataclass
+class Contact:
+    """A contact between the robot (or an object) and something else."""
+
+    geom1: str
+    geom2: str
+    position: np.ndarray
+    depth: float
+
+
+@dataclass(frozen=True)
+class GeomVisual:
+    """A primitive shape fixed to a body, for drawing.
+
+    Attributes:
+        body: Body name (its pose comes from :meth:`Backend.body_poses`).
+        name: Geom name.
+        shape: ``box`` (half-extents), ``sphere`` (radius), ``capsule``/``cylinder``
+            (radius, half-length along local z), ``plane`` (half-sizes x, y), ``mesh`` (see ``mesh``).
+        size: Shape parameters [m].
+        position: Offset in the body frame [m].
+        quat_wxyz: Orientation in the body frame.
+        rgba: Colour, 0..1.
+    """
+
+    body: str
+    name: str
+    shape: str
+    size: tuple[float, ...]
+    position: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+    rgba: tuple[float, float, float, float]
+    mesh: tuple[np.ndarray, np.ndarray] | None = None  # a mesh's vertices (n, 3) [m] and triangles (k, 3)
+
+
+@dataclass
+class Drawing:
+    """Shapes that change during a run (world frame), drawn at the log rate: polylines and arrows.
+
+    Attributes:
+        lines: Polylines, each (k, 3) [m].
+        line_rgba: One colour per polyline (n, 4), 0..1.
+        origins: Arrow tails (m, 3) [m].
+        vectors: Arrows (m, 3) [m].
+        arrow_rgba: One colour per arrow (m, 4), 0..1.
+    """
+
+    lines: list[np.ndarray] | None = None
+    line_rgba: np.ndarray | None = None
+    origins: np.ndarray | None = None
+    vectors: np.ndarray | None = None
+    arrow_rgba: np.ndarray | None = None
+
+
+@dataclass
+class BodyPoses:
+    """World poses of the drawn bodies: names, positions (n, 3), quaternions (n, 4) w-x-y-z."""
+
+    names: list[str]
+    positions: np.ndarray
+    quats_wxyz: np.ndarray
+
+
+class BackendFaultError(RuntimeError):
+    """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason.
+    ``observable``: the robot side holds it and still reports its state, so the run watches it come to rest (the
+    safety stop's ``stop_after_s``) before ending."""
+
+    observable = False
+
+
+class Backend(ABC):
+    """Where commands go and state comes from: a simulator or a robot link.
+
+    This is the stepping core every backend has. What only some backends can do — contacts, a scene to draw,
+    objects, cameras, instruments, a floating base, joints by name, external torques — are the protocols of
+    :mod:`rehabkit.core.kinds.capabilities` a backend derives from; plugins needing one list it in ``requires``.
+    """
+
+    timestep: float
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
+    real_person: bool = False  # drives a real robot (or its stand-in over the link): a person in it is not simulated
+    ramp_in_after_clear: float = 0.0  # set by reset: the first session after an e-stop was cleared ramps in this long
+
+    @abstractmethod
+    def reset(self, q0: np.ndarray) -> None:
+        """Put the robot at rest at ``q0``."""
+
+    @abstractmethod
+    def state(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Time [s], joint positions, joint velocities. Arrays may be views: copy to keep."""
+
+    @abstractmethod
+    def command(self, tau: np.ndarray) -> None:
+        """Set joint torques for the next steps (already checked by the safety layer)."""
+
+    @abstractmethod
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` timesteps."""
+
+    def run_metrics(self) -> dict[str, float]:
+        """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""
+        return {}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Time series only the backend knows, name → (times [s], values), for the log; default none."""
+        return {}
+
+    def engage_brakes(self) -> bool:
+        """Apply the robot's holding brakes (the torque has gone off: a stop of category 0 or 1); False where the
+        robot has none (the default)."""
+        return False
+
+    def latch_estop(self, reason: str) -> bool:
+        """Latch an e-stop at the robot: it holds across sessions until a person clears it
+        (:mod:`rehabkit.core.safety.estop`), and the next session's reset is refused meanwhile. False where this backend
+        keeps no latch (the default)."""
+        return False
+
+    def interventions(self) -> list:
+        """Safety events the robot side took on its own (``SafetyEvent``s, e.g. a hold through a gap in the
+        commands); default none."""
+        return []
+
+    def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
+        """Release resources."""

@@ -1,0 +1,317 @@
+"""Base classes of the plugin kinds (robot, planner, controller; sensor, backend and patient in
+:mod:`rehabkit.core.kinds.sensor`, :mod:`rehabkit.core.kinds.backend` and :mod:`rehabkit.core.kinds.patient`,
+re-exported here) and the small types they exchange. Third parties import all of them from :mod:`rehabkit.plugin`."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, Literal, Protocol
+
+import numpy as np
+
+from rehabkit.core.kinds.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
+from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
+from rehabkit.core.kinds.sensor import Instrument, InteractionForceSensor, Sensor, SensorConfig
+from rehabkit.core.results.metric import Metric
+from rehabkit.models.robot_model import RobotModel
+from rehabkit.models.strict import StrictModel
+
+
+@dataclass(frozen=True)
+class Context:
+    """What every plugin factory receives besides its own config (read-only: the run's setup makes a new one
+    as it learns more — the robot, the sensors' instruments, the planner's space).
+
+    Attributes:
+        scenario_dir: Folder of the scenario file; relative paths resolve from here.
+        rng: The run's random generator (seeded from the scenario's ``seed``).
+        control_dt: Controller period [s].
+        robot: The robot plugin instance, once built (robots themselves get ``None``).
+        world: The scenario's world section.
+        out_dir: Where the run writes its files (``None`` when it writes none).
+        plan: For controllers that plan on their own (e.g. an HMI replaying a stored target):
+            ``plan(t, q, qd, targets)`` asks the scenario's planner, checks, logs and returns
+            the :class:`Plan`, or raises :class:`PlanningError`.
+        note: ``note(t, text)`` keeps a message for people (an HMI display line) in the summary and log.
+        interaction_force: ``interaction_force()``: the force between person and robot the safety envelope checked
+            at the last control step [N] (a force-torque sensor's, a strapped person's, or estimated from a simulated
+            person's torques), or None where the run has no source of it.
+    """
+
+    scenario_dir: Path
+    rng: np.random.Generator
+    control_dt: float
+    robot: Robot | None = None
+    world: Any = None  # the scenario's world section (``rehabkit.core.scenario.models.World``)
+    instruments: list[Instrument] = field(default_factory=list)
+    out_dir: Path | None = None
+    robot_spec: dict[str, Any] | None = None  # the scenario's robot section (type + settings), e.g. for a bridge
+    plan: Callable[..., Plan] | None = None
+    note: Callable[[float, str], None] | None = None
+    reference_space: ReferenceSpace = "joint"  # what the scenario's planner produces (controllers taking either)
+    seed: int = 0
+    safety: Any = None  # the scenario's safety envelope (``SafetyConfig``), e.g. for a link's heartbeat
+    patient: Any = None  # the scenario's patient profile (``rehabkit.rehab.patient.PatientBase``), if any
+    dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
+    bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
+    interaction_force: Callable[[], np.ndarray | None] | None = None
+
+    def stream(self, name: str) -> np.random.Generator:
+        """A random generator of its own for ``name``, from the scenario seed.
+
+        Draws from it don't depend on what other plugins draw, so a counterfactual replay with another
+        controller sees the same patient noise and sensor noise.
+        """
+        return np.random.default_rng([self.seed, *name.encode()])
+
+    def resolve(self, path: str | Path) -> Path:
+        """A path from the scenario, made absolute relative to the scenario file."""
+        p = Path(path).expanduser()
+        return p if p.is_absolute() else (self.scenario_dir / p).resolve()
+
+
+class IKUnavailableError(NotImplementedError):
+    """The robot has no inverse kinematics for Cartesian targets."""
+
+
+class Robot(ABC):
+    """A robot plugin: its :class:`RobotModel` plus optional closed-form kinematics.
+
+    ``ik_kind`` says what :meth:`ik` matches: a full ``pose``, or the ``position``
+    alone (robots with three DoF, whose orientation follows).
+    """
+
+    model: RobotModel
+    ik_kind: ClassVar[Literal["pose", "position"]] = "pose"
+
+    def fk(self, q: np.ndarray) -> np.ndarray:
+        """End-effector pose (4x4) in the robot base frame. Default: Pinocchio."""
+        return self.model.ee_pose(np.asarray(q, dtype=float), self._data())
+
+    def fk_batch(self, qs: np.ndarray) -> np.ndarray:
+        """End-effector poses (N, 4, 4) for many configurations. Default: Pinocchio's model, vectorised over the
+        batch; a robot with kinematics of its own (an overridden :meth:`fk`) overrides this too, vectorised."""
+        if type(self).fk is Robot.fk:
+            return self.model.batch_fk(qs)
+        return np.array([self.fk(q) for q in np.atleast_2d(qs)])
+
+    def ee_world(self, qs: np.ndarray) -> np.ndarray:
+        """End-effector positions (N, 3) in the world for many configurations."""
+        base = self.model.base_pose
+        return self.fk_batch(qs)[:, :3, 3] @ base[:3, :3].T + base[:3, 3]
+
+    def body_poses(self, body: str, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (N, 3) and rotations (N, 3, 3) of a body in the base frame for configurations ``qs``.
+
+        Robots that can predict where a body is (e.g. for comparing sensors with the
+        planned motion) implement this; the default cannot.
+        """
+        raise NotImplementedError(f"robot '{self.model.name}' does not predict the pose of '{body}'")
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio RNEA."""
+        import pinocchio as pin
+
+        zero = np.zeros(self.model.dof)
+        return pin.rnea(self.model.pin_model, self._data(), np.asarray(q, float), zero, zero)
+
+    def gravity_torques(self, qs: np.ndarray) -> np.ndarray:
+        """:meth:`gravity_torque` for the rows of ``qs`` (N, dof). Default: Pinocchio's RNEA over the batch (in
+        C++); a robot with a gravity model of its own (an overridden :meth:`gravity_torque`) overrides this too."""
+        qs = np.atleast_2d(np.asarray(qs, float))
+        if type(self).gravity_torque is not Robot.gravity_torque:
+            return np.array([self.gravity_torque(q) for q in qs]).reshape(len(qs), -1)
+        import pinocchio as pin
+
+        m, zero = self.model.pin_model, np.zeros((self.model.dof, len(qs)))
+        return pin.rneaInParallel(1, pin.ModelPool(m, 1), np.ascontiguousarray(qs.T), zero, zero).T
+
+    def _data(self):
+        if getattr(self, "_pin_data", None) is None:
+            self._pin_data = self.model.new_pin_data()
+        return self._pin_data
+
+    def ik(self, pose: np.ndarray, reference: np.ndarray | None = None) -> list[np.ndarray]:
+        """Every joint solution reaching ``pose`` (4x4, base frame), nearest ``reference`` first. Default: the
+        numeric IK of :attr:`numeric_ik`; robots with an analytic IK override this (and set :attr:`ik_kind`).
+
+        ``reference`` is the current configuration, when there is one: joints the IK does not
+        solve for (a lift, a gripper) keep their values from it.
+        """
+        return self.numeric_ik.solve(pose, reference)
+
+    def solve_ik(self, pose: np.ndarray, reference: np.ndarray | None = None, free: str = "") -> list[np.ndarray]:
+        """Solutions for a pose whose tool rotation is free about the axes in ``free`` (``"xyz"``: position only):
+        the robot's own :meth:`ik` where it answers that question, else the numeric IK."""
+        own = type(self).ik is not Robot.ik
+        if own and (self.ik_kind == "position" or not free):
+            return self.ik(pose, reference)
+        return self.numeric_ik.solve(pose, reference, free)
+
+    @property
+    def numeric_ik(self):
+        """The generic IK from the robot's Pinocchio model (:class:`rehabkit.models.ik.NumericIK`); it reads
+        the joint limits in force (a patient's narrowed ranges) on each solve."""
+        if getattr(self, "_numeric_ik", None) is None:
+            from rehabkit.models.ik import NumericIK
+
+            try:
+                self._numeric_ik = NumericIK(self.model)
+            except Exception as exc:  # Pinocchio can't load closed kinematic loops, for one
+                raise IKUnavailableError(f"robot '{self.model.name}' has no inverse kinematics: its model does "
+                                         f"not load in Pinocchio ({exc})") from exc
+        return self._numeric_ik
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.model!r})"
+
+
+class Trajectory(Protocol):
+    """A reference in the planner's space (joint values, or hand positions in the robot base frame):
+    ``sample`` is vectorised over times [s] from its start."""
+
+    duration: float
+
+    def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities, accelerations, each ``(len(t), dof)``; held constant past the end."""
+        ...
+
+
+@dataclass
+class Target:
+    """A resolved task target.
+
+    Attributes:
+        name: Its name in the scenario.
+        q: Joint values [rad], when given in joint space or solved by IK.
+        pose: 4x4 base-frame pose, when Cartesian (orientation may be absent: ``position_only``).
+        position_only: The target constrains position only.
+    """
+
+    name: str
+    q: np.ndarray | None = None
+    pose: np.ndarray | None = None
+    position_only: bool = False
+    same_as: str | None = None  # resolved alias: reuse that target's joint solution
+    free_axes: str = ""  # tool axes the orientation may turn about (a pointing target: "z")
+
+    @property
+    def free(self) -> str:
+        """The tool rotation axes left free by this target: ``"xyz"`` for a position alone."""
+        return "xyz" if self.position_only else self.free_axes
+
+
+@dataclass
+class PlanRequest:
+    """What a planner is asked: from the current state, through the targets."""
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    targets: list[Target]
+    robot: Robot
+
+
+@dataclass
+class Plan:
+    """A planner's answer.
+
+    Attributes:
+        trajectory: The reference in the planner's space (see :class:`Planner`), from the request time.
+        diagnostics: Scalar figures merged into the run's metrics (e.g. continuity residuals).
+        waypoints: The via points actually used, in the planner's space (for the summary and the log).
+        details: Non-scalar results for the summary (e.g. an optimiser's history).
+        actions: Things to do to the scene while the plan runs: ``(t, "release" | "grasp", object)``,
+            ``t`` from the plan's start (e.g. a throw lets go of the ball at its release instant).
+        waypoint_times: When the trajectory passes each of ``waypoints`` [s from its start]; each stretch
+            between two is a reach for the outcome measures (default: the whole plan is one reach).
+    """
+
+    trajectory: Trajectory
+    diagnostics: dict[str, float] = field(default_factory=dict)
+    waypoints: np.ndarray | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+    actions: list[tuple[float, str, str]] = field(default_factory=list)
+    waypoint_times: np.ndarray | None = None  # when it passes each waypoint [s from its start]: the reaches counted
+
+
+class PlanningError(RuntimeError):
+    """A planner could not produce a plan; the message says why."""
+
+
+ReferenceSpace = Literal["joint", "cartesian"]
+
+
+class Planner(ABC):
+    """Computes a trajectory at start and on task events.
+
+    ``space`` says what the trajectory holds: joint values (``dof`` wide) or
+    end-effector positions in the robot base frame (3 wide).
+    """
+
+    space: ClassVar[ReferenceSpace] = "joint"
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of its diagnostics and run_metrics
+
+    @abstractmethod
+    def plan(self, request: PlanRequest) -> Plan:
+        """Plan from ``request.q`` through ``request.targets``."""
+
+    def run_metrics(self, trace: Any) -> dict[str, float]:
+        """Figures about the executed run only this planner can judge (default none)."""
+        return {}
+
+    def visuals(self) -> dict[str, np.ndarray]:
+        """Point sets worth drawing once (robot base frame), e.g. a workspace; default none."""
+        return {}
+
+    def joint_space_visuals(self) -> dict[str, np.ndarray]:
+        """Point sets in joint space [rad] worth drawing once (3-DoF robots), e.g. obstacles; default none."""
+        return {}
+
+
+class Controller(ABC):
+    """Turns a reference and the measured state into joint torques, at the control rate.
+
+    ``reference`` is the space of the references it takes (see :class:`Planner`).
+    A controller that builds its own joint reference (e.g. by closed-loop IK, or from
+    a user's key presses) exposes it as ``joint_reference`` so runs can record and plot it.
+    """
+
+    reference: ClassVar[ReferenceSpace] = "joint"
+    joint_reference: np.ndarray | None = None
+    own_reference: ClassVar[bool] = False  # it makes its own joint reference (e.g. an HMI), ignoring the runner's
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+
+    def run_metrics(self, trace: Any) -> dict[str, float]:
+        """Figures about the executed run only this controller can judge (default none)."""
+        return {}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Internal states over time for the log, name → (times [s], values); default none."""
+        return {}
+
+    tunable: ClassVar[tuple[str, ...]] = ()  # settings a learner may change during a run (see :meth:`tune`)
+
+    def tune(self, values: dict[str, float]) -> None:
+        """Change settings named in :attr:`tunable` from now on (a policy acting on the controller's parameters)."""
+        if unknown := [k for k in values if k not in self.tunable]:
+            raise ValueError(f"controller {type(self).__name__} cannot tune {', '.join(unknown)}; it tunes "
+                             f"{', '.join(self.tunable) or 'nothing'}")
+
+    @abstractmethod
+    def compute(
+        self, t: float, q: np.ndarray, qd: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, qdd_ref: np.ndarray
+    ) -> np.ndarray:
+        """Joint torques [N·m]; called in the hot loop, so keep it allocation-light."""
+
+
+__all__ = [  # the backend, sensor and patient kinds live in modules of their own; importable from here as before
+    "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "Drawing", "EmbodiedPatient",
+    "GeomVisual",
+    "IKUnavailableError",
+    "Instrument", "InteractionForceSensor", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest",
+    "ReferenceSpace", "Robot", "Sensor", "SensorConfig", "StrictModel", "Target", "Trajectory",
+]

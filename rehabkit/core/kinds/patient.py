@@ -1,0 +1,78 @@
+"""The patient plugin kind: a simulated person at the robot's joints (:class:`Patient`), or one simulated as a body
+in the backend's scene and strapped to the robot (:class:`EmbodiedPatient`). Re-exported by
+:mod:`rehabkit.core.kinds.interfaces` and :mod:`rehabkit.plugin`."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import numpy as np
+
+from rehabkit.core.kinds.backend import Drawing
+from rehabkit.core.results.metric import Metric
+
+
+class Patient(ABC):
+    """A simulated person at the robot's joints: the torques their arm applies, each control step.
+
+    ``delay_s`` is how late the person perceives the task: the runner passes the goal of the
+    movement under way (in the planner's space: a hand position or joint values) as it was that
+    long ago.
+    """
+
+    delay_s: float = 0.0
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    # settings (over the plugin's own) that leave the person relaxed, no voluntary effort: a passive assessment's
+    relaxed: ClassVar[dict[str, Any]] = {}
+
+    @abstractmethod
+    def torque(self, t: float, q: np.ndarray, qd: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """Joint torques [N·m] the person applies to the robot now (positive along each joint's axis)."""
+
+    def run_metrics(self, trace: Any) -> dict[str, float]:
+        """Figures about the person over the run (e.g. fatigue); default none."""
+        return {}
+
+    def inputs(self) -> dict[str, str]:
+        """Fingerprints of what drove the person (e.g. a digest of the noise drawn), for replays; default none."""
+        return {}
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Internal states over time for the log, name → (times [s], values); default none."""
+        return {}
+
+    def drawing(self) -> dict[str, Drawing]:
+        """What to draw of the person now (called at the log rate), name → shapes; default none."""
+        return {}
+
+    def state(self) -> np.ndarray:
+        """The simulated person's inner state now, a fixed-length vector (what a learning environment's
+        ``person_state`` term shows, e.g. fatigue); default empty."""
+        return np.zeros(0)
+
+
+class EmbodiedPatient(Patient):
+    """A person simulated as a body in the backend's scene (a musculoskeletal arm) and strapped to the robot.
+
+    A backend that hosts bodies (:class:`~rehabkit.core.kinds.capabilities.HostsBodies`) calls :meth:`compose` on its
+    scene description before building it, :meth:`bind` on the built scene, and :meth:`place` at each reset, the
+    robot at its start posture. :meth:`torque` then drives the person's own actuators for the coming control period
+    and returns the torque their straps put on the robot's joints, for the record: the scene applies it.
+    """
+
+    @abstractmethod
+    def compose(self, spec: Any) -> None:
+        """Add the person's body and the straps to the scene description (a ``mujoco.MjSpec``)."""
+
+    @abstractmethod
+    def bind(self, model: Any, data: Any) -> None:
+        """The built scene (``mujoco.MjModel``/``MjData``): look up what the steps will read and write."""
+
+    @abstractmethod
+    def place(self) -> None:
+        """Fit the person to the robot as it stands now (called by the backend's reset)."""
+
+    @abstractmethod
+    def interaction_force(self) -> np.ndarray:
+        """The largest strap force now, world frame [N]: what the safety envelope's force limit checks."""

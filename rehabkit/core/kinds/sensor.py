@@ -1,0 +1,93 @@
+"""The sensor plugin kind: what a sensor is, its settings' base, the instruments it puts in a simulated scene."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from pydantic import Field
+
+from rehabkit.core.results.metric import Metric
+from rehabkit.models.strict import StrictModel
+
+
+@dataclass(frozen=True)
+class Instrument:
+    """A physical sensing element a sensor plugin needs in the simulated scene.
+
+    Attributes:
+        name: Unique name (the backend reads it back by this name).
+        kind: ``accelerometer`` (specific force, site frame [m/s²]), ``gyro`` (angular velocity [rad/s]),
+            ``force`` [N] or ``torque`` [N·m] (what the body beyond the sensor exerts on the robot, site frame).
+        body: Body it is fixed to.
+        position: Where on that body (body frame) [m]; axes aligned with the body's.
+        mount: ``force``/``torque``: the body beyond the sensor (a handle, a cuff), made at ``position`` on ``body``
+            and weighing 1 g; what pushes on it (a strap, a test rig's load) is what the sensor reads. Instruments
+            naming the same mount share it.
+        bias: A simulated sensor's constant offset, added to every reading (a real one brings its own).
+        noise: A simulated sensor's white noise, standard deviation per axis.
+    """
+
+    name: str
+    kind: Literal["accelerometer", "gyro", "force", "torque"]
+    body: str
+    position: tuple[float, float, float]
+    mount: str | None = None
+    bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    noise: float = 0.0
+
+    @property
+    def simulated_error(self) -> bool:
+        return self.noise > 0 or any(self.bias)
+
+
+INSTRUMENT_DIM = 3  # every instrument reads a 3-vector
+
+
+class SensorConfig(StrictModel):
+    """Base of every sensor plugin's config: each sensor runs at its own rate."""
+
+    rate_hz: float = Field(100.0, gt=0, description="sampling rate [Hz]")
+
+
+class Sensor(ABC):
+    """Reads something at its own rate; readings go to the log and to ``Runner.observations``."""
+
+    rate_hz: float
+    metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time
+    #                         backend it is read in a thread of its own (``rehabkit.core.run.sensor_threads``)
+
+    @abstractmethod
+    def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Any) -> dict[str, Any]:
+        """One reading: name → value (arrays, scalars, or an image as ``HxWx3`` uint8).
+
+        A sensor that locates a task target reports it as ``target_position``
+        (robot base frame, [m]); ``None`` when it sees nothing.
+        """
+
+    def run_metrics(self, trace: Any = None) -> dict[str, float]:
+        """Figures about the whole run (e.g. estimation error), given the run's trace; default none."""
+        return {}
+
+    def report(self, metrics: dict[str, float]) -> str | None:
+        """A short text report for people (printed by ``rehabkit run``, kept in summary.json); default none."""
+        return None
+
+    def instruments(self) -> list[Instrument]:
+        """Sensing elements to put in the simulated scene (read with ``backend.read_instrument``)."""
+        return []
+
+
+class InteractionForceSensor(Sensor):
+    """A sensor of the force between the person and the robot (a force-torque sensor at a handle or cuff). When
+    ``interaction`` is set, the runner reads it every control step and the safety envelope's interaction-force limit
+    checks it, on every backend that reads its instruments (a simulation, or a robot link)."""
+
+    interaction: bool = True
+
+    @abstractmethod
+    def interaction_force(self, t: float, backend: Any) -> np.ndarray:
+        """The force the person (or a rig) puts on the robot now [N], 3 values; called every control step."""

@@ -1,0 +1,88 @@
+"""What a run draws in its Rerun recording: the scene, targets, plans, the joint series, the safety events.
+
+The joint series are sent in columns at the scenario's log rate, ``flush_samples``
+at a time (a send costs ~0.5 ms whatever its length: a file takes big batches, a
+live viewer ones small enough to follow the run); a planner whose joint space is worth looking at (it returns
+``joint_space_visuals``: a 3-DoF robot's collision map) gets that space drawn too,
+with every plan and the executed path in it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rehabkit.core.kinds.capabilities import SceneGeometry
+from rehabkit.core.kinds.interfaces import Plan
+from rehabkit.core.log.rerun_log import RerunLog
+from rehabkit.core.results.metrics import Trace
+from rehabkit.core.setup.assembly import Assembly
+
+LOG_FLUSH_SAMPLES = 2000  # log-rate samples buffered between column sends to a file
+LIVE_FLUSH_SAMPLES = 500  # ... and when a viewer shows the run as it goes
+LEVELS = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN", "stale-command": "WARN"}
+
+
+class RunView:
+    """The run's recording; every method is a no-op cost the caller avoids by checking ``view.log``."""
+
+    def __init__(self, setup: Assembly, spawn: bool = False):
+        self.setup, self.log = setup, None
+        self.flush_samples = LIVE_FLUSH_SAMPLES if spawn else LOG_FLUSH_SAMPLES
+        self._upto = 0
+        self._joint_space = False
+        sc, out = setup.sc, setup.out_dir
+        if out is None or not sc.logging.rrd:
+            return
+        out.mkdir(parents=True, exist_ok=True)
+        model = setup.robot.model
+        log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn)
+        if isinstance(setup.backend, SceneGeometry):
+            log.scene(setup.backend.visual_geoms())
+        named = [(n, t) for n, t in setup.targets.items() if t.pose is not None]
+        log.targets(0.0, [n for n, _ in named], model.to_world([t.pose[:3, 3] for _, t in named]))
+        for name, points in setup.planner.joint_space_visuals().items():
+            self._joint_space = True
+            log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
+        self.log = log
+
+    def planner_drawings(self) -> None:
+        """The planner's drawings; after the first plan, as some come from it (a throw's parabola)."""
+        for name, points in self.setup.planner.visuals().items():
+            self.log.points(f"world/planner/{name}", self.setup.robot.model.to_world(points), (120, 120, 200), 0.003)
+
+    def plan(self, t: float, plan: Plan, x: np.ndarray) -> None:
+        """A plan's hand path and waypoints (``x``: its reference at the control rate from ``t``)."""
+        a = self.setup
+        every, model = a.schedule.log_every, a.robot.model
+        way = plan.waypoints
+        if a.planner.space == "cartesian":
+            path, way_w = model.to_world(x[::every]), model.to_world(way if way is not None else np.zeros((0, 3)))
+        else:
+            path = a.robot.ee_world(x[::every])
+            way_w = a.robot.ee_world(way) if way is not None else np.zeros((0, 3))
+            if self._joint_space:
+                self.log.line("joint_space/plan", np.degrees(x[::every]), (60, 160, 255), 0.3, t)
+                if way is not None:
+                    self.log.points("joint_space/task_points", np.degrees(way), (60, 160, 255), 1.0, t)
+        self.log.plan(t, path, way_w)
+
+    def flush(self, trace: Trace, upto: int) -> None:
+        """Send the joint series recorded since the last flush, at the log rate, and the buffered poses."""
+        every = self.setup.schedule.log_every
+        sel = slice(self._upto, upto, every)
+        self.log.joint_series(trace.t[sel], trace.q[sel], trace.qd[sel], trace.tau[sel], trace.q_ref[sel])
+        self.log.flush()
+        self._upto = sel.start + len(trace.t[sel]) * every
+
+    def executed(self, trace: Trace, k: int) -> None:
+        """The rest of the joint series, and the executed path in the joint space where it is drawn."""
+        self.flush(trace, k)
+        if self._joint_space and k:
+            self.log.line("joint_space/executed", np.degrees(trace.q[:k:10]), (250, 180, 40), 0.3)
+
+    def finish(self, interventions: list, series: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+        """The safety layer's interventions as events, and the run's series (backend, plugins, extensions)."""
+        for ev in interventions:
+            self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=LEVELS.get(ev.rule, "ERROR"))
+        for path, (t, values) in series.items():
+            self.log.series(path, np.asarray(t, float), np.asarray(values, float))

@@ -1,0 +1,90 @@
+"""What a plugin is to the registry: who provided it, its settings' model, what went wrong loading one."""
+
+from __future__ import annotations
+
+import re
+import typing
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import BaseModel
+
+from rehabkit.core.plugins.names import suggest
+
+
+class PluginError(Exception):
+    """A plugin could not be registered or found."""
+
+
+class PluginConflictError(PluginError):
+    """Two packages registered the same kind and name."""
+
+
+class UnknownPluginError(PluginError):
+    """A scenario named a plugin that is not installed."""
+
+    def __init__(self, kind: str, name: str, available: list[str]):
+        self.kind, self.name, self.available = kind, name, available
+        super().__init__(f"unknown {kind} '{name}'{suggest(name, available)}")
+
+
+@dataclass(frozen=True)
+class Provider:
+    """The distribution that installed a plugin module."""
+
+    package: str
+    version: str
+    entry_point: str
+
+
+def _type_name(annotation: Any) -> str:
+    """``list[float]``, ``Literal['a', 'b']``, ``PoseSpec``: how a field's type reads in a listing."""
+    if typing.get_origin(annotation) is None and isinstance(annotation, type):
+        return annotation.__name__
+    return re.sub(r"\b(?:typing|[a-z_]+(?:\.[a-z_]+)*)\.([A-Za-z_]+)", r"\1", str(annotation))
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """One registered plugin.
+
+    Attributes:
+        kind: One of ``robot, planner, controller, sensor, backend``.
+        name: The ``type:`` value scenarios use.
+        config: Pydantic model validating its YAML section (with ``type`` added).
+        factory: ``factory(config, context)`` builds the plugin instance.
+        description: One line, from the argument or the factory's docstring.
+        provider: Package that registered it.
+    """
+
+    kind: str
+    name: str
+    config: type[BaseModel]
+    factory: Callable[..., Any]
+    description: str
+    provider: Provider
+
+    def fields(self) -> list[tuple[str, str, str]]:
+        """(name, type, default) for each config field except ``type``."""
+        out = []
+        for fname, f in self.config.model_fields.items():
+            if fname == "type":
+                continue
+            ann = _type_name(f.annotation)
+            default = "required" if f.is_required() else repr(f.get_default(call_default_factory=True))
+            out.append((fname, ann, default))
+        return out
+
+
+@dataclass(frozen=True)
+class BrokenPlugin:
+    """An entry point that failed to load, with why."""
+
+    provider: Provider
+    error: str
+    traceback: str
+
+
+class PluginLoadError(PluginError):
+    """A named plugin's module failed to import or to register what its entry point promised."""

@@ -1,0 +1,92 @@
+"""Run metrics from the recorded trace, and the ``expect:`` verdicts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.core.plugins.names import suggest
+from rehabkit.core.scenario.models import Bound
+from rehabkit.models.robot_model import RobotModel
+
+
+@dataclass
+class Trace:
+    """Everything recorded at the control rate, trimmed to the steps actually run."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    tau: np.ndarray
+    q_ref: np.ndarray
+    qd_ref: np.ndarray
+    x: np.ndarray | None = None  # end effector, robot base frame (Cartesian runs)
+    x_ref: np.ndarray | None = None
+    tau_h: np.ndarray | None = None  # torques a (simulated) person applied at the joints
+    f_h: np.ndarray | None = None  # interaction force measured [N] (a force-torque sensor, an embodied person's cuffs)
+
+    def trimmed(self, n: int) -> Trace:
+        return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]
+                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h", "f_h")))
+
+
+def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:
+    """Scalar metrics and per-joint figures of how the robot followed its reference."""
+    robot: RobotModel = robot_plugin.model
+    err = np.degrees(trace.q_ref - trace.q)
+    metrics = {
+        "tracking_rms_deg": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
+        "tracking_max_deg": float(np.abs(err).max()) if err.size else float("nan"),
+        "max_velocity_ratio": float(np.max(np.abs(trace.qd) / robot.limits.velocity)) if err.size else 0.0,
+        "max_torque_ratio": float(np.max(np.abs(trace.tau) / robot.limits.effort)) if err.size else 0.0,
+    }
+    per_joint = {
+        name: {
+            "tracking_rms_deg": float(np.sqrt(np.mean(err[:, j] ** 2))),
+            "tracking_max_deg": float(np.abs(err[:, j]).max()),
+            "range_deg": [float(np.degrees(trace.q[:, j].min())), float(np.degrees(trace.q[:, j].max()))],
+        }
+        for j, name in enumerate(robot.joint_names)
+    } if err.size else {}
+    metrics["joint_limit_excess_deg"] = joint_limit_excess(trace, robot)
+    if goal_q is not None and err.size:
+        q_end = trace.q[-1]
+        metrics["final_joint_error_deg"] = float(np.degrees(np.abs(goal_q - q_end)).max())
+        ee = robot_plugin.ee_world(np.vstack([goal_q, q_end]))
+        metrics["final_position_error_m"] = float(np.linalg.norm(ee[0] - ee[1]))
+    return metrics, per_joint
+
+
+def cartesian_metrics(trace: Trace) -> dict[str, float]:
+    """How the end effector followed a Cartesian reference."""
+    if trace.x is None or not len(trace.x):
+        return {}
+    err = np.linalg.norm(trace.x_ref - trace.x, axis=1)
+    return {
+        "cartesian_tracking_rms_mm": float(np.sqrt(np.mean(err**2)) * 1e3),
+        "cartesian_tracking_max_mm": float(err.max() * 1e3),
+        "final_position_error_m": float(err[-1]),
+    }
+
+
+def joint_limit_excess(trace: Trace, robot: RobotModel) -> float:
+    """Largest excursion of any joint beyond its range over the run [deg] (0 if none)."""
+    if not len(trace.q):
+        return 0.0
+    over = np.maximum(trace.q - robot.limits.upper, robot.limits.lower - trace.q)
+    return float(np.degrees(max(0.0, over.max())))
+
+
+def evaluate(expect: dict[str, Bound], metrics: dict[str, float]) -> list[dict]:
+    """One verdict per expectation; a metric the run did not produce fails, naming the closest ones."""
+    out = []
+    for key, bound in expect.items():
+        value = metrics.get(key)
+        entry = {"metric": key, "bound": bound.describe(), "value": value}
+        if value is None:
+            entry.update(passed=False, reason=f"the run produced no metric '{key}'{suggest(key, metrics)}")
+        else:
+            entry["passed"] = bound.check(float(value))
+        out.append(entry)
+    return out

@@ -1,0 +1,164 @@
+"""What a run produced: its metrics, the expectations' verdicts and the summary document.
+
+Everything here reads the assembled run (:class:`~rehabkit.core.setup.assembly.Assembly`:
+what it was made of) and its :class:`~rehabkit.core.results.record.RunRecord` (what
+happened); nothing writes back into either.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rehabkit.core.plugins.lifecycle import Contribution
+from rehabkit.core.results.metric import MetricCatalogue
+from rehabkit.core.results.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
+from rehabkit.core.results.record import RunRecord
+from rehabkit.core.safety.stopping import stop_figures
+from rehabkit.core.setup.assembly import Assembly
+from rehabkit.core.version import __version__
+
+
+@dataclass
+class RunResult:
+    """What a run produced.
+
+    Attributes:
+        summary: The content of ``summary.json``.
+        trace: Control-rate arrays of the run.
+        out_dir: Where files were written (``None`` when nothing was written).
+        refusal: When the task's first plan failed on the scenario as written (a target out of reach, a planner
+            setting that does not fit), that failure located in the file; the robot did not move.
+    """
+
+    summary: dict[str, Any]
+    trace: Trace
+    out_dir: Path | None
+    refusal: Any = None
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.summary["passed"])
+
+    @property
+    def metrics(self) -> dict[str, float]:
+        return self.summary["metrics"]
+
+    @property
+    def failures(self) -> list[dict]:
+        return [e for e in self.summary["expectations"] if not e["passed"]]
+
+
+def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str, Any]]:
+    """The core's and the plugins' metrics: tracking, plans, timing, contacts, safety."""
+    trace = r.trace
+    sim_time = len(trace.t) * a.schedule.control_dt
+    cart = a.planner.space == "cartesian"
+    own = a.controller.own_reference  # the runner's goal is not where such a controller went
+    metrics, per_joint = tracking_metrics(trace, a.robot, None if cart or own else r.goal)
+    if cart:
+        metrics.update(cartesian_metrics(trace))
+    metrics.update(r.plan_metrics)
+    metrics.update(a.planner.run_metrics(trace))
+    metrics.update(a.controller.run_metrics(trace))
+    metrics.update(a.backend.run_metrics())
+    for sensor in a.sensors.values():
+        metrics.update(sensor.run_metrics(trace))
+    if a.patient is not None:
+        metrics.update(a.patient.run_metrics(trace))
+    metrics.update(r.extra_metrics)
+    metrics.update({
+        "sim_time_s": sim_time, "wall_time_s": r.wall_s, "setup_time_s": r.setup_s,
+        "real_time_factor": sim_time / r.wall_s if r.wall_s > 0 else float("inf"),
+        "contact_steps": r.contact_steps, "safety_events": len(a.safety.events),
+        "torque_saturation_steps": a.safety.saturated_steps,
+    })
+    metrics.update(stop_metrics(a, trace))
+    return metrics, per_joint
+
+
+def stop_metrics(a: Assembly, trace) -> dict[str, float]:
+    """What the safety stop took (the first trip): its category, the time to standstill, the travel meanwhile."""
+    if a.safety.tripped_at is None or not len(trace.t):
+        return {}
+    k0 = int(np.searchsorted(trace.t, a.safety.tripped_at - 1e-12))
+    hand = np.full((len(trace.t), 3), np.nan)
+    hand[k0:] = a.robot.fk_batch(trace.q[k0:])[:, :3, 3]  # (the stop's steps only)
+    figures = stop_figures(trace.t, trace.q, trace.qd, hand, a.safety.tripped_at, a.robot.model.revolute)
+    return {"stop_category": float(a.safety.category), **figures}
+
+
+def plugin_versions(a: Assembly) -> dict[str, Any]:
+    """Type, package and version of every plugin the run used."""
+    sc, registry = a.sc, a.registry
+    out: dict[str, Any] = {}
+    for kind, cfg in (("robot", sc.robot), ("backend", sc.backend), ("planner", sc.planner),
+                      ("controller", sc.controller), ("patient", getattr(sc.patient, "model", None))):
+        if cfg is None:
+            continue
+        p = registry.get(kind, cfg.type).provider
+        out[kind] = {"type": cfg.type, "package": p.package, "version": p.version}
+    out["sensors"] = {n: {"type": c.type, **vars(registry.get("sensor", c.type).provider)}
+                      for n, c in sc.sensors.items()}
+    return out
+
+
+def run_inputs(a: Assembly, r: RunRecord) -> dict[str, Any]:
+    """Fingerprints of what drove the run besides its plugins, so a replay can tell whether they were the same."""
+    rng_state = json.dumps(a.context.rng.bit_generator.state, sort_keys=True, default=str).encode()
+    return {"seed": a.sc.seed, "target_timeline": [[f["t"], f["trigger"]] for f in r.fired],
+            "sensor_noise": hashlib.sha256(rng_state).hexdigest()[:16],
+            **(a.patient.inputs() if a.patient is not None else {})}
+
+
+def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[str, Any]:
+    """The summary document: metrics (the core's, the plugins', the extensions'), verdicts, safety, events,
+    plans, reports, and the extensions' sections; the interventions and series go to the log.
+
+    A safety stop fails the run unless the scenario's expectations are about safety events.
+    """
+    sc = a.sc
+    if robot_side := a.backend.interventions():
+        a.safety.interventions = sorted(a.safety.interventions + robot_side, key=lambda e: e.t)
+    metrics, per_joint = core_metrics(a, r)
+    contributions: list[Contribution] = [c for c in a.extensions.hook.rehabkit_run_finished(setup=a, record=r) if c]
+    sections: dict[str, Any] = dict(a.sections)
+    for c in contributions:
+        metrics.update(c.metrics)
+        sections.update(c.sections)
+    if view is not None and view.log:
+        series = {**a.backend.series(), **a.controller.series(),
+                  **(a.patient.series() if a.patient is not None else {})}
+        for c in contributions:
+            series.update(c.series)
+        view.finish(a.safety.interventions, series)
+    metrics = {k: _as_count(v) if catalogue.get(k).unit == "count" else v for k, v in metrics.items()}
+    verdicts = evaluate(sc.expect, metrics)
+    if r.no_plan is not None and "safety_events" not in sc.expect:  # (unless the scenario expects a stop)
+        # a robot that never moved has no tracking error: that passes nothing
+        for v in verdicts:
+            v.update(passed=False, reason=f"no plan ran ({r.no_plan})")
+    unexpected_trip = a.safety.tripped and "safety_events" not in sc.expect
+    return {
+        "scenario": str(a.loaded.path), "name": sc.name or a.loaded.path.stem,
+        "rehabkit_version": __version__, "seed": sc.seed, "plugins": plugin_versions(a),
+        "passed": all(v["passed"] for v in verdicts) and not unexpected_trip,
+        "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
+        "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
+                   "interventions": [e.as_dict() for e in a.safety.interventions],
+                   "plan_warnings": r.plan_warnings},
+        "inputs": run_inputs(a, r),
+        **sections,
+        "events": r.fired, "plans": r.plans, "notes": r.notes, "actions": r.acted,
+        "reports": {name: text for name, s in a.sensors.items() if (text := s.report(metrics))},
+    }
+
+
+def _as_count(value: Any) -> Any:
+    """A count as the integer it is (plugins often report counts as floats)."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value

@@ -1,0 +1,179 @@
+"""The control loop alone: state → (what is due) → controller → (person) → safety layer → backend.
+
+Each step's ``[q, qd, tau]`` is one row of the trace, written in place: the
+controller's torque goes into it and the safety layer overwrites it with what
+is sent. Everything that is not due every step (events, sensors, logging) is
+behind one integer comparison.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.core.kinds.capabilities import Contacts, SceneGeometry
+from rehabkit.core.kinds.interfaces import BackendFaultError, BodyPoses, EmbodiedPatient, Patient
+from rehabkit.core.log.run_view import RunView
+from rehabkit.core.results.metrics import Trace
+from rehabkit.core.run.reference import ReferenceBuffer
+from rehabkit.core.run.timeline import Timeline
+from rehabkit.core.setup.assembly import Assembly
+
+NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
+
+
+@dataclass
+class LoopState:
+    """Where a loop run in parts stands between them."""
+
+    k: int = 0  # the next step to run
+    due: int = 0  # the next step with something due besides the control (events, sensors)
+    contact_steps: int = 0
+    failed: bool = False  # the controller raised: the safety layer drives from then on
+    stopped: bool = False  # ended for good: a stop event, a backend fault, or the safety stop has run its course
+    braked: bool = False  # the torque went off after a trip and the brakes (if any) were applied
+    next_log: int | None = None  # the next step logged (None: from the start)
+
+
+@dataclass(frozen=True)
+class LoopResult:
+    steps: int  # steps run
+    wall_s: float
+    contact_steps: int
+    started: float  # perf_counter at its first step
+
+
+def _progress_bar(steps: int):
+    from tqdm import tqdm  # a terminal's run only
+
+    return tqdm(total=steps, unit="step", leave=False)
+
+
+def _idle(dof: int):
+    zero = np.zeros(dof)
+    return lambda *args: zero
+
+
+def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer, timeline: Timeline, view: RunView,
+             progress: bool = False, k_to: int | None = None, state: LoopState | None = None) -> LoopResult:
+    """Run the control loop until the end, a stop event, or the safety layer's stop has run its course — or, in
+    parts, from where ``state`` left it up to step ``k_to`` (a learning environment's policy period)."""
+    sch, backend, safety, controller = a.schedule, a.backend, a.safety, a.controller
+    n, dof, dt, sub = sch.steps, a.robot.model.dof, sch.control_dt, sch.substeps
+    st = state if state is not None else LoopState()
+    k_from, k_end = st.k, n if k_to is None else min(k_to, n)
+    ref_q, ref_qd, ref_qdd = ref.views()
+    state, compute, check = backend.state, controller.compute, safety.check_row
+    command, step = backend.command, backend.step
+    contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
+    log = view.log
+    tq, tqd, ttau = trace.q, trace.qd, trace.tau  # column views of ``packed``
+    log_every, flush_samples = sch.log_every, view.flush_samples
+    next_log = (0 if log else -1) if st.next_log is None else st.next_log
+    deferred_log = bool(log) and backend.realtime
+    if deferred_log:
+        log.deferred = True
+    cart = a.planner.space == "cartesian"
+    tx, tqr = trace.x, trace.q_ref
+    drawn = isinstance(backend, SceneGeometry)
+    ee = None if drawn else a.robot.ee_world  # the hand where the backend tracks it, else by the robot's FK
+    own_ref = controller.own_reference
+    person = a.patient.torque if a.patient is not None else None
+    late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
+    # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
+    push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
+    tau_h, force_at, goal_at, f_h = trace.tau_h, a.force_source, ref.goal_at, trace.f_h  # (f_h: when measured)
+    draws = a.patient.drawing if a.patient is not None and type(a.patient).drawing is not Patient.drawing else None
+    stop_after = a.sc.safety.stop_after_s
+    bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
+    # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
+    # (a full collection first would cost ~0.1 s of every run's start: only the youngest generation is swept)
+    gc.collect(0)
+    gc.freeze()
+    contact_steps, due, k = st.contact_steps, st.due, k_from
+    if st.failed:
+        compute = _idle(dof)
+    t_loop = time.perf_counter()
+    try:
+        for k in range(k_from, k_end):
+            t = k * dt
+            _, q, qd = state()
+            if k >= due:
+                due = timeline.due(k, t, q, qd)
+                if due < 0:
+                    st.stopped = True
+                    break
+            tq[k], tqd[k] = q, qd  # the row's columns, written one by one: cheaper than a concatenation
+            try:
+                ttau[k] = compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
+            except Exception as exc:  # a crashing controller must still leave the robot held
+                safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}", qd)
+                compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
+                st.failed = True
+                ttau[k] = 0.0
+            row = packed[k]
+            if person is not None:
+                tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
+            if force_at is not None:
+                force = a.last_force = force_at(t, q, tau_h[k] if person is not None else None)
+                if f_h is not None:
+                    f_h[k] = math.sqrt(force @ force)
+                safety.check_force(t, q, force, qd)
+            tau = check(t, row)
+            if cart:
+                tx[k] = ee(q[None])[0] if ee is not None else backend.ee_position()  # world; base frame at the end
+                if controller.joint_reference is not None:
+                    tqr[k] = controller.joint_reference
+            elif own_ref:
+                tqr[k] = controller.joint_reference
+            try:
+                command(tau)
+                if push is not None:
+                    push(tau_h[k])
+                step(sub)
+            except BackendFaultError as exc:  # the robot can't be driven any more: stop, logs complete
+                safety.trip(t, q, "backend", str(exc), qd)
+                if not exc.observable:  # (else watched while the robot side stops it, as any safety stop)
+                    k += 1
+                    st.stopped = True
+                    break
+            if contacts():
+                contact_steps += 1
+            if k == next_log:
+                next_log += log_every
+                if drawn:
+                    log.record(t, backend.body_poses(), backend.ee_position())
+                else:
+                    log.record(t, NO_BODIES, ee(q[None])[0])
+                if draws is not None:
+                    for name, shapes in draws().items():
+                        log.drawing(t, f"world/patient/{name}", shapes)
+                if log.pending >= flush_samples:
+                    view.flush(trace, k + 1)
+            if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
+                log.send_one()
+            if progress and k % 1000 == 999:
+                if bar is not None:
+                    bar.update(1000)
+                elif time.perf_counter() - t_loop > 1.0:
+                    bar = _progress_bar(n)
+                    bar.update(k + 1)
+            if safety.tripped_at is not None and not st.braked and safety.torque_off:
+                st.braked = True
+                safety.braked(t, backend.engage_brakes())
+            if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
+                k += 1
+                st.stopped = True
+                break
+        else:
+            k = k_end
+    finally:
+        st.k, st.due, st.contact_steps, st.next_log = k, due, contact_steps, next_log
+        gc.unfreeze()
+        if bar is not None:
+            bar.close()
+    return LoopResult(k, time.perf_counter() - t_loop, contact_steps, t_loop)

@@ -1,0 +1,77 @@
+"""Between the planner and the reference: every plan is asked for, checked and accounted for here.
+
+A joint-space plan that breaks a joint limit (the run's narrowed ones) or asks for a
+scene action the backend can't do is not executed. A plan whose hand path leaves
+the keep-in box is executed (the box is watched, not planned around) but the
+summary and the CLI say before it moves where and when the safety layer will stop it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rehabkit.core.kinds.capabilities import HeldObjects
+from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
+from rehabkit.core.results.metric import MetricCatalogue, combine
+from rehabkit.core.safety.layer import AXES
+from rehabkit.core.setup.limits import LimitBreach, first_breach
+
+CHECK_DT = 0.005  # plans are checked at this resolution [s]
+
+
+def plan_breach(plan: Plan, model) -> LimitBreach | None:
+    """The first joint limit of ``model`` a joint-space plan breaks, sampled every ``CHECK_DT``."""
+    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+    qs, qds, _ = plan.trajectory.sample(ts)
+    return first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
+
+
+class PlanGate:
+    """Asks the scenario's planner, checks what it answers, keeps the plans' diagnostics and warnings."""
+
+    def __init__(self, setup, catalogue: MetricCatalogue):
+        self.planner, self.robot, self.safety = setup.planner, setup.robot, setup.safety
+        self.cartesian = setup.planner.space == "cartesian"
+        self.scene_actions = ("grasp", "release") if isinstance(setup.backend, HeldObjects) else ()
+        self.catalogue = catalogue
+        self.metrics: dict[str, float] = {}
+        self.warnings: list[dict] = []
+
+    def ask(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target], planner=None) -> Plan:
+        """The plan from ``(q, qd)`` through ``targets`` by ``planner`` (default: the scenario's; an event's own
+        settings make another); its ``PlanningError`` passes through."""
+        return (planner or self.planner).plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
+
+    def problem(self, plan: Plan) -> tuple[str | None, LimitBreach | None]:
+        """Why the plan must not run (and the limit breach, when that is why), or ``(None, None)``."""
+        breach = self.limit_breach(plan)
+        if breach is not None:
+            return f"planned trajectory: {breach.describe()}", breach
+        bad = sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions})
+        if bad:
+            return f"plan action(s) {bad} unknown; the backend can do: {', '.join(self.scene_actions) or 'none'}", None
+        return None, None
+
+    def limit_breach(self, plan: Plan) -> LimitBreach | None:
+        """The first joint limit a joint-space plan breaks (Cartesian plans are mapped by the controller)."""
+        return None if self.cartesian else plan_breach(plan, self.robot.model)
+
+    def warn_box(self, t: float, plan: Plan, to_world) -> None:
+        """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""
+        if not self.safety.watches_box:
+            return
+        ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+        samples = plan.trajectory.sample(ts)[0]
+        hand = to_world(samples[:, :3]) if self.cartesian else self.robot.ee_world(samples)
+        found = self.safety.box_exit(hand)
+        if found is not None:
+            k, a, side, bound = found
+            self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "message": (
+                f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) "
+                f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")})
+
+    def account(self, plan: Plan) -> Plan:
+        """Merge the plan's diagnostics into the run's, each by its metric's rule (default: the worst)."""
+        for key, value in plan.diagnostics.items():
+            self.metrics[key] = combine(self.catalogue.get(key).combine, self.metrics.get(key), value)
+        return plan

@@ -1,0 +1,261 @@
+"""The safety layer between every controller and every backend: the scenario's ``safety:`` envelope.
+
+Each control step it checks the measured state and the commanded torques
+against the effective limits (the robot's, narrowed by the patient's profile and
+the envelope's per-joint limits). A non-finite value, a joint outside its range or
+faster than its speed limit, the hand outside the keep-in box or an interaction
+force above its limit trips a latched stop: from then on the controller is
+ignored and the robot stopped in the category the envelope sets for the rule
+(:mod:`rehabkit.core.safety.stopping`: 0 torque off; 1 and 2 a controlled stop with
+bounded deceleration, then torque off or the posture held, PD with gravity
+compensation within effort limits); by default 2, or 0 for a robot whose
+``safe_stop`` is ``zero-torque``. Torques beyond the effort limit
+are clipped (each episode an intervention) or trip the stop if the scenario asks.
+A ramp-in blends from holding the start posture to the controller's torque, a
+ramp-out back to holding the posture where it began.
+
+The layer runs on the host for every backend: a breach is the same event in
+simulation and over a hardware link (whose backends take the ``heartbeat`` timings).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from rehabkit.core.safety.event import SafetyEvent
+from rehabkit.core.safety.ramps import Ramps
+from rehabkit.core.safety.stopping import STOP_RULES, WORDS, ControlledStop, StopActions
+from rehabkit.core.scenario.safety import SafetyConfig
+from rehabkit.core.setup.limits import LimitBreach
+from rehabkit.models.robot_model import RobotModel
+
+# numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
+_count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
+
+
+AXES = "xyz"
+
+
+class SafetyLayer(StopActions, Ramps):
+    """Checks every command (the rules: the module docstring) against the limits of ``robot`` (the runner narrows
+    them first); ``hand(q)``: the hand's world position, for a keep-in box; ``dt`` tells one clipping episode from
+    the next."""
+
+    def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None,
+                 hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):
+        lim = robot.limits
+        margin = math.radians(config.position_margin_deg)
+        self.names = robot.joint_names
+        self._revolute = robot.revolute
+        self.lo, self.hi = lim.lower - margin, lim.upper + margin
+        self.vmax = lim.velocity * config.velocity_factor
+        self.effort = lim.effort
+        self.config = config
+        default = 2 if robot.safe_stop == "hold" else 0
+        self._category = {r: config.stop_category.get(r, config.stop_category.get("default", default))
+                          for r in STOP_RULES}
+        a = config.stop_decel_deg_s2
+        self._decel = None if a is None else np.where(robot.revolute, np.radians(a), a / 1e3)
+        self.category: int | None = None  # the stop under way's
+        self._stop: ControlledStop | None = None
+        self._robot = robot
+        self._limp = False
+        self.events: list[SafetyEvent] = []  # trips
+        self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
+        self.tripped_at: float | None = None
+        self.saturated_steps = 0
+        self._hold_q: np.ndarray | None = None
+        self._gravity = gravity
+        self._zero = np.zeros(robot.dof)
+        self._dt = dt
+        self._clip: SafetyEvent | None = None  # the clipping episode under way
+        self._box = None
+        if config.keep_in is not None:
+            if hand is None:
+                raise ValueError("safety.keep_in needs the hand's position; the runner passes it")
+            box = config.keep_in
+            lo, hi = np.array(box.min, float), np.array(box.max, float)
+            if box.frame == "base":  # kept in the world frame: the hand is measured there
+                corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+                base = robot.base_pose
+                w = corners @ base[:3, :3].T + base[:3, 3]
+                lo, hi = w.min(axis=0), w.max(axis=0)
+            self._box = (lo, hi)
+        self._hand = hand
+        self._ramp_in, self._ramp_in_noted = config.ramp_in_s, False
+        self._ramp_from: tuple[float, float, np.ndarray] | None = None  # ramp-out: (start, length, posture)
+        self._start_q: np.ndarray | None = None
+        # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
+        n = robot.dof
+        self._n = n
+        self._centre = np.concatenate([(self.lo + self.hi) / 2, np.zeros(2 * n)])
+        self._bound = np.concatenate([(self.hi - self.lo) / 2, self.vmax, self.effort])
+        self._fast = (np.empty(3 * n), self._centre, self._bound, np.empty(3 * n, dtype=bool), 3 * n,
+                      slice(2 * n, None))
+        self._plain = False  # set once the start is behind and no box or ramp needs a look each step
+
+    @property
+    def tripped(self) -> bool:
+        return self.tripped_at is not None
+
+    @property
+    def watches_box(self) -> bool:
+        return self._box is not None
+
+    def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
+        return self.check_row(t, np.concatenate((q, qd, tau)))
+
+    def check_row(self, t: float, row: np.ndarray) -> np.ndarray:
+        """Check a packed ``[q, qd, tau]`` row; its torque part is overwritten with what to send.
+
+        The runner records rows straight into its trace, so checking costs no copy.
+        """
+        if self.tripped_at is None:
+            buf, centre, bound, ok, width, torque = self._fast
+            np.abs(np.subtract(row, centre, out=buf), out=buf)
+            if _count_nonzero(np.less_equal(buf, bound, out=ok)) == width:  # (all(): 2 µs more)
+                tau = row[torque]
+                if self._plain:  # no keep-in box, started, ramp-in over, no ramp-out: nothing else to do
+                    return tau
+                n = self._n
+                self._plain = (self._box is None and self._start_q is not None and self._ramp_from is None
+                               and t >= self._ramp_in)
+                if self._box is not None and self._outside_box(t, row[:n], row[n : 2 * n]):
+                    tau[:] = self._stop_torque(t, row[:n], row[n : 2 * n])
+                    return tau
+                if self._start_q is None:
+                    self._start_q = row[:n].copy()
+                if t < self._ramp_in or self._ramp_from is not None:
+                    self._ramp(t, row[:n], row[n : 2 * n], tau)
+                return tau
+        n = self._n
+        q, qd, tau = row[:n], row[n : 2 * n], row[2 * n :]
+        if self.tripped_at is None:
+            # slow path: find out what went wrong
+            if (
+                math.isfinite(tau.sum() + q.sum() + qd.sum())
+                and not (q < self.lo).any()
+                and not (q > self.hi).any()
+                and not (np.abs(qd) > self.vmax).any()
+            ):
+                over = np.abs(tau) > self.effort
+                if not over.any():
+                    return tau
+                if self.config.torque_policy == "clip":
+                    self.saturated_steps += 1
+                    self._clipped(t, tau, over)
+                    np.clip(tau, -self.effort, self.effort, out=tau)
+                    if self._box is not None and self._outside_box(t, q, qd):
+                        tau[:] = self._stop_torque(t, q, qd)
+                    return tau
+                j = int(np.argmax(over))
+                self._breach(t, q, LimitBreach("torque", self.names[j], float(tau[j]), float(self.effort[j])),
+                             "commanded", qd)
+            else:
+                self._diagnose(t, q, qd, tau)
+        tau[:] = self._stop_torque(t, q, qd)
+        return tau
+
+    def check_force(self, t: float, q: np.ndarray, force: np.ndarray, qd: np.ndarray | None = None) -> None:
+        """Trip if the interaction force at the hand (world frame [N]) is above the envelope's limit."""
+        limit = self.config.interaction_force_n
+        if limit is None or self.tripped_at is not None:
+            return
+        magnitude = float(np.linalg.norm(force))
+        if not magnitude <= limit:  # NaN trips too
+            self._trip(t, q, "interaction-force", None, magnitude, limit, "interaction force above its limit",
+                       {"force_n": np.round(force, 3).tolist()}, qd=qd)
+
+    def trip(self, t: float, q: np.ndarray, rule: str, message: str, qd: np.ndarray | None = None) -> None:
+        """Trip from outside (a rejected plan, an external e-stop); ``qd``: the speed the controlled stop
+        starts from (none: from rest)."""
+        self._trip(t, q, rule, None, None, None, message, qd=qd)
+
+    def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
+        """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
+        lo, hi = self._box
+        out = (points < lo) | (points > hi)
+        rows = np.flatnonzero(out.any(axis=1))
+        if not len(rows):
+            return None
+        k = int(rows[0])
+        a = int(np.argmax(out[k]))
+        below = bool(points[k, a] < lo[a])
+        return k, a, "min" if below else "max", float(lo[a] if below else hi[a])
+
+    def _outside_box(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
+        x = self._hand(q)
+        lo, hi = self._box
+        if (x >= lo).all() and (x <= hi).all():  # the every-step case, kept cheap
+            return False
+        found = self.box_exit(x[None])
+        if found is None:  # NaN: the non-finite rule has it
+            return False
+        _, a, side, bound = found
+        self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
+                   {"axis": AXES[a], "hand_m": np.round(x, 5).tolist()}, qd=qd)
+        return True
+
+    def _clipped(self, t: float, tau: np.ndarray, over: np.ndarray) -> None:
+        """Clipping steps in a row are one intervention; its peak and length are kept."""
+        j = int(np.argmax(np.where(over, np.abs(tau) / self.effort, 0.0)))
+        ep = self._clip
+        if ep is not None and t - ep.data["until_s"] <= 1.5 * self._dt:
+            ep.data["until_s"], ep.data["steps"] = t, ep.data["steps"] + 1
+            if abs(tau[j]) / self.effort[j] > abs(ep.value) / ep.limit:
+                ep.joint, ep.value, ep.limit = self.names[j], float(tau[j]), float(self.effort[j])
+            return
+        self._clip = SafetyEvent(t, "torque-clip", self.names[j], float(tau[j]), float(self.effort[j]),
+                                 f"t={t:.3f}s: commanded torque clipped to the effort limit",
+                                 {"until_s": t, "steps": 1})
+        self._note(self._clip)
+
+    def _note(self, event: SafetyEvent) -> None:
+        self.interventions.append(event)
+
+    def _diagnose(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
+        for name, arr in (("state position", q), ("state velocity", qd), ("command torque", tau)):
+            bad = ~np.isfinite(arr)
+            if bad.any():
+                j = int(np.argmax(bad))
+                self._trip(t, q, "non-finite", j, None, None, f"non-finite {name} ({arr[j]})", qd=qd)
+                return
+        for j in range(len(q)):
+            if q[j] < self.lo[j] or q[j] > self.hi[j]:
+                limit = self.lo[j] if q[j] < self.lo[j] else self.hi[j]
+                self._breach(t, q, LimitBreach("position", self.names[j], float(q[j]), float(limit),
+                                               revolute=bool(self._revolute[j])), "measured", qd)
+                return
+        j = int(np.argmax(np.abs(qd) / self.vmax))
+        self._breach(t, q, LimitBreach("velocity", self.names[j], float(qd[j]), float(self.vmax[j]),
+                                       revolute=bool(self._revolute[j])), "measured", qd)
+
+    def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str, qd: np.ndarray) -> None:
+        """A limit rule's trip: the event's fields are the breach's, its message the breach's one wording."""
+        self._trip(t, q, breach.quantity, breach.joint, breach.value, breach.limit, f"{what}: {breach.describe()}",
+                   described=True, qd=qd)
+
+    def _trip(self, t, q, rule, joint, value, limit, message, data=None, described=False, qd=None) -> None:
+        name = self.names[joint] if isinstance(joint, int) else joint
+        subject = f"{name} = " if name else ""
+        digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
+        text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
+                                            if value is not None and not described else "")
+        if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
+            self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}))
+            return
+        category = self._category.get(rule, self._category["default"])
+        text += f"; {WORDS[category]}"
+        event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category})
+        self.events.append(event)
+        self._note(event)
+        self.tripped_at = t
+        hold = np.where(np.isfinite(q), q, 0.0)
+        self._hold_q = np.clip(hold, self.lo, self.hi)
+        self.category = category
+        if category:
+            self._stop = ControlledStop.start(category, t, hold, qd, self._decel, self.effort, self._robot, self._dt)

@@ -1,0 +1,152 @@
+"""How the robot stops after a trip: the stop categories of IEC 60204-1, and what a stop took.
+
+- **0**: torque off at once and the robot's brakes on (an uncontrolled stop: without brakes it coasts, or falls).
+- **1**: a controlled stop — every joint's speed brought to zero along a ramp whose deceleration is bounded
+  (``safety.stop_decel_deg_s2``, by default half what each drive can give its joint), all joints reaching zero
+  together — then torque off and the robot's brakes (if it has any) on.
+- **2**: the same controlled stop, then the posture held (PD to it plus gravity compensation).
+
+The ramp is a reference the hold gains track with gravity compensation, within the effort limits. What
+a stop took — time from the trigger to standstill, the joints' and the hand's travel meanwhile — is
+measured from the run's trace (:func:`stop_figures`), on every backend alike.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.core.safety.event import SafetyEvent
+
+STOP_RULES = ("default", "position", "velocity", "torque", "non-finite", "keep-in", "interaction-force", "e-stop",
+              "plan", "plugin-error", "backend")
+STANDSTILL_DEG_S = 1.0  # every joint slower than this ...
+STANDSTILL_FOR_S = 0.05  # ... for this long: at standstill
+WORDS = {0: "torque off (category 0)", 1: "controlled stop, then torque off (category 1)",
+         2: "controlled stop, then held (category 2)"}
+
+
+@dataclass
+class ControlledStop:
+    """The deceleration ramp of a category 1 or 2 stop, from the state at the trip."""
+
+    category: int
+    t0: float
+    q0: np.ndarray
+    v0: np.ndarray
+    duration: float  # until every joint's reference speed is zero [s]
+
+    feedforward: np.ndarray | None = None  # M(q₀) q̈: the torque of the ramp's constant deceleration
+
+    @classmethod
+    def start(cls, category: int, t: float, q: np.ndarray, qd: np.ndarray | None, decel: np.ndarray | None,
+              effort: np.ndarray, robot, dt: float) -> ControlledStop:
+        """The ramp from the state at the trip; ``decel`` [rad/s²] per joint, or None: half what each drive can give
+        its joint at this posture (effort / inertia), the quickest stop that keeps a margin for gravity."""
+        v0 = np.zeros_like(q) if qd is None else np.where(np.isfinite(qd), qd, 0.0)
+        inertia = _mass_matrix(robot, q)
+        if decel is None:
+            decel = 0.5 * effort / np.diag(inertia) if inertia is not None else np.full(len(q), np.radians(360.0))
+        duration = max(float(np.max(np.abs(v0) / decel)) if len(v0) else 0.0, dt)
+        stop = cls(category, t, q.copy(), v0, duration)
+        if inertia is not None:
+            stop.feedforward = inertia @ (-v0 / duration)  # (the posture changes little over a stop)
+        return stop
+
+    def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Position and speed of the ramp at ``t`` (held at its end afterwards)."""
+        s = min(max(t - self.t0, 0.0), self.duration)
+        return self.q0 + self.v0 * (s - s * s / (2 * self.duration)), self.v0 * (1.0 - s / self.duration)
+
+    def over(self, t: float) -> bool:
+        return t - self.t0 >= self.duration
+
+    @property
+    def end(self) -> np.ndarray:
+        return self.q0 + self.v0 * self.duration / 2
+
+
+def _mass_matrix(robot, q: np.ndarray) -> np.ndarray | None:
+    """The joint-space inertia at ``q`` (Pinocchio), or None for a robot without a dynamic model."""
+    try:
+        import pinocchio as pin
+
+        model = robot.pin_model
+        return pin.crba(model, model.createData(), np.asarray(q, float))
+    except Exception:  # noqa: BLE001 (no dynamic model: the gains alone track the ramp)
+        return None
+
+
+def stop_figures(t: np.ndarray, q: np.ndarray, qd: np.ndarray, hand: np.ndarray | None, trip_t: float,
+                 revolute: np.ndarray) -> dict[str, float]:
+    """Time from the trigger to standstill [s], the largest joint travel [deg, or mm for a sliding joint] and the
+    hand's path [m] meanwhile (up to the end of the record when it never came to rest: ``stop_time_s`` is then
+    NaN), and the peak speed after the trigger."""
+    k0 = int(np.searchsorted(t, trip_t - 1e-12))
+    if k0 >= len(t):
+        return {}
+    scale = np.where(revolute, np.degrees(1.0), 1e3)
+    speed = np.abs(qd[k0:]) * scale
+    still = (speed < STANDSTILL_DEG_S).all(axis=1)
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1e-3
+    need = max(1, math.ceil(STANDSTILL_FOR_S / dt - 1e-9))
+    # the first step of a run of `need` still steps
+    runs = np.convolve(still.astype(int), np.ones(need, int), mode="valid") == need
+    hits = np.flatnonzero(runs)
+    k1 = k0 + int(hits[0]) if len(hits) else len(t) - 1
+    travel = np.abs(q[k0 : k1 + 1] - q[k0]).max(axis=0) * scale
+    path = float(np.linalg.norm(np.diff(hand[k0 : k1 + 1], axis=0), axis=1).sum()) if hand is not None else math.nan
+    return {"stop_time_s": float(t[k1] - trip_t) if len(hits) else math.nan,
+            "stop_distance_deg": float(travel.max()), "stop_distance_m": path,
+            "stop_peak_speed_deg_s": float(speed.max())}
+
+
+class StopActions:
+    """What :class:`~rehabkit.core.safety.layer.SafetyLayer` sends once tripped (its state: ``category``, ``_stop``,
+    ``_limp``, ``_hold_q``; its gains, effort limits and gravity)."""
+
+    @property
+    def categories(self) -> dict[str, int]:
+        """The stop category of each rule."""
+        return dict(self._category)
+
+    @property
+    def torque_off(self) -> bool:
+        """Tripped, and the torque has gone off (category 0, or 1 once stopped): the brakes are due."""
+        return self.tripped_at is not None and (self.category == 0 or self._limp)
+
+    def braked(self, t: float, engaged: bool) -> None:
+        """Record that the torque went off, and whether brakes hold the robot."""
+        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: torque off; " + (
+            "holding brakes engaged" if engaged else "no brakes: the robot is free to move (gravity, the person)"),
+            {"engaged": engaged}))
+
+    def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
+        if self._gravity is not None:
+            tau += self._gravity(q)
+        return np.clip(tau, -self.effort, self.effort)
+
+    def _stop_torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        if self.category == 0 or self._limp:
+            return self._zero.copy()
+        q = np.where(np.isfinite(q), q, self._hold_q)
+        qd = np.where(np.isfinite(qd), qd, 0.0)
+        stop = self._stop
+        if stop is not None:
+            if not stop.over(t):  # on the deceleration ramp
+                q_r, qd_r = stop.reference(t)
+                tau = self.config.hold_kp * (q_r - q) + self.config.hold_kd * (qd_r - qd)
+                if stop.feedforward is not None:
+                    tau += stop.feedforward
+                if self._gravity is not None:
+                    tau += self._gravity(q)
+                return np.clip(tau, -self.effort, self.effort)
+            self._stop = None
+            if stop.category == 1:
+                self._limp = True
+                return self._zero.copy()
+            self._hold_q = np.clip(stop.end, self.lo, self.hi)
+        return self._hold_torque(self._hold_q, q, qd)

@@ -1,0 +1,352 @@
+"""Putting a run together: robot, limits, plugins, safety layer, targets.
+
+One function, :func:`assemble`, for ``rehabkit run`` and ``rehabkit validate``: the
+latter builds everything but the backend (``upto="plugins"``, a dry-run context) and
+then makes the first plan (:func:`check_first_plan`), and so refuses what a run's
+setup would. The order:
+
+1. extensions adapt the robot's settings (``rehabkit_configure_robot``); the robot is built;
+2. its limits are narrowed by the envelope and the extensions (``rehabkit_narrow_limits``)
+   and set on the model, so everything built after plans and checks within them;
+3. the robot's declared capabilities are checked against what the other plugins require;
+4. targets are resolved and admitted (``rehabkit_admit_targets``);
+5. sensors, planner, controller, patient, the interaction-force limit (``rehabkit_force_limit``), the safety
+   layer, and the backend last (its scene holds the sensors' instruments and an embodied patient's body).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from rehabkit.core.kinds.capabilities import ExternalTorques, HostsBodies
+from rehabkit.core.kinds.interfaces import (
+    Backend,
+    Context,
+    Controller,
+    EmbodiedPatient,
+    InteractionForceSensor,
+    Patient,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    Robot,
+    Sensor,
+    Target,
+)
+from rehabkit.core.plugins.lifecycle import Extensions
+from rehabkit.core.plugins.names import suggest
+from rehabkit.core.plugins.registry import PluginRegistry
+from rehabkit.core.results.metric import CORE_METRICS, MetricCatalogue
+from rehabkit.core.safety.layer import SafetyLayer
+from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
+from rehabkit.core.scenario.loader import LoadedScenario
+from rehabkit.core.setup.checks import (
+    at_target,
+    check_capabilities,
+    check_duration,
+    check_joint_targets,
+    check_loads,
+    check_scene_names,
+    has,
+)
+from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
+from rehabkit.core.setup.targets import resolve_targets
+from rehabkit.models.hand_force import HandForce, hand_in_world
+from rehabkit.models.robot_model import JointLimits
+
+REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The loop's timing, in control steps."""
+
+    control_dt: float
+    substeps: int
+    steps: int
+    log_every: int
+    reach_every: int
+    sensor_every: tuple[int, ...]
+
+
+@dataclass
+class Assembly:
+    """Everything a run is made of, built by :func:`assemble` (fields after ``robot`` only with ``upto="run"``).
+
+    ``robot_limits`` are the robot's own, ``limits`` the run's (narrowed; also set on ``robot.model``),
+    ``limit_sources`` who narrowed what. ``sections`` collects what extensions say for ``summary.json``,
+    ``extras`` what they keep between hooks.
+    """
+
+    loaded: LoadedScenario
+    registry: PluginRegistry
+    extensions: Extensions
+    out_dir: Path | None
+    robot_config: Any
+    context: Context
+    robot: Robot | None = None
+    robot_limits: JointLimits | None = None
+    limits: JointLimits | None = None
+    limit_sources: LimitSources = field(default_factory=LimitSources)
+    targets: dict[str, Target] = field(default_factory=dict)
+    replaced: list[dict] = field(default_factory=list)
+    sections: dict[str, Any] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)  # extensions' own state between their hooks
+    sensors: dict[str, Sensor] = field(default_factory=dict)
+    backend: Backend | None = None
+    planner: Planner | None = None
+    event_planners: dict[int, Planner] = field(default_factory=dict)  # replan events with planner settings
+    controller: Controller | None = None
+    patient: Patient | None = None
+    # the interaction force [N] each control step, (t, q, τ_person) → 3 values: measured (a force-torque sensor, an
+    # embodied person's straps) or estimated from a simulated person's joint torques; ``measured`` says which
+    force_source: Callable[[float, np.ndarray, np.ndarray | None], np.ndarray] | None = None
+    force_measured: bool = False
+    last_force: np.ndarray | None = None  # the force source's last value (what ``Context.interaction_force`` gives)
+    safety: SafetyLayer | None = None
+    schedule: Schedule | None = None
+
+    @property
+    def sc(self):
+        """The validated scenario."""
+        return self.loaded.model
+
+    def make(self, kind: str, config, path: tuple[str, ...]) -> Any:
+        """Build plugin ``config.type`` of ``kind`` from the section at ``path``; its ``ValueError`` or
+        ``PlanningError`` becomes a :class:`PluginSetupError` located in the scenario file."""
+        info = self.registry.get(kind, config.type)
+        try:
+            return info.factory(config, self.context)
+        except (ValueError, PlanningError) as exc:
+            raise PluginSetupError.refused(self.loaded.source, path, kind, config, exc) from exc
+
+
+def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
+             upto: Literal["targets", "plugins", "run"] = "run", plan: Callable | None = None,
+             note: Callable[[float, str], None] | None = None) -> Assembly:
+    """Build the run of ``loaded`` (see the module docstring); ``plan``/``note`` go to the controllers' context.
+
+    Raises:
+        ScenarioError: something the scenario got wrong, located in its file.
+        SetupError: the plugins can't be put together as configured.
+    """
+    sc = loaded.model
+    ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
+                  out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=sc.patient, plan=plan, note=note,
+                  dry_run=upto != "run")
+    a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx)
+    extensions.hook.rehabkit_configure_robot(setup=a)
+    a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
+    a.robot = a.make("robot", a.robot_config, ("robot",))
+    a.context = replace(a.context, robot=a.robot)
+    _narrow_limits(a)
+    check_capabilities(a)
+    check_scene_names(a)
+    try:
+        a.targets = resolve_targets(sc.task, a.robot, sc.seed)
+    except PlanningError as exc:
+        raise at_target(a, exc, "task") or SetupError(f"task: {exc}") from exc
+    extensions.hook.rehabkit_admit_targets(setup=a)
+    check_joint_targets(a)
+    check_duration(a)
+    if upto == "targets":
+        return a
+    # sensors before the backend: their instruments go into the scene it builds
+    a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
+    a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
+    check_loads(a)
+    a.planner = a.make("planner", sc.planner, ("planner",))
+    for i, ev in enumerate(sc.task.events):
+        if ev.planner is not None:  # (the settings were validated with the scenario, each located)
+            config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
+            a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
+    a.context = replace(a.context, reference_space=a.planner.space, interaction_force=lambda: a.last_force)
+    a.controller = a.make("controller", sc.controller, ("controller",))
+    if a.planner.space != a.controller.reference:
+        raise PluginSetupError(a.loaded.source, ("controller", "type"), (),
+                               f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
+                               f"'{sc.controller.type}' takes {a.controller.reference} references; pick a "
+                               "matching pair")
+    for t in sc.task.targets:
+        if t.sensor and t.sensor not in a.sensors:
+            raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
+                             f"{suggest(t.sensor, a.sensors)}")
+    _patient_and_safety(a)
+    if upto == "run":  # last: a backend may start processes (a hardware link's bridge); its scene holds the
+        # sensors' instruments and an embodied patient's body
+        bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()
+        a.context = replace(a.context, bodies=bodies)
+        a.backend = a.make("backend", sc.backend, ("backend",))
+    _check_expectations(a)
+    a.schedule = _schedule(a)
+    return a
+
+
+def metric_catalogue(a: Assembly) -> MetricCatalogue:
+    """Every metric the run can report, described: the core's, the extensions', each plugin's."""
+    catalogue = MetricCatalogue(CORE_METRICS)
+    catalogue.add(a.extensions.metrics())
+    backend = a.backend if a.backend is not None else a.registry.get("backend", a.sc.backend.type).factory
+    for plugin in (a.planner, a.controller, backend, a.patient, *a.sensors.values()):
+        catalogue.add(getattr(plugin, "metrics", ()) if plugin is not None else ())
+    return catalogue
+
+
+def _check_expectations(a: Assembly) -> None:
+    """An ``expect:`` on a metric nothing in this run reports could never be met: refused, with the nearest."""
+    catalogue = metric_catalogue(a)
+    for name in a.sc.expect:
+        if not catalogue.known(name):
+            raise PluginSetupError(a.loaded.source, ("expect", name), (),
+                                   f"expect: no plugin of this run reports a metric '{name}'"
+                                   f"{suggest(name, catalogue.names())} (see `rehabkit plugins` for each plugin's)")
+
+
+def _narrow_limits(a: Assembly) -> None:
+    """Robot ∩ extensions ∩ envelope, set on the robot model; joint names the robot lacks refused where written."""
+    sc, model, source = a.sc, a.robot.model, a.loaded.source
+    problems = [Diagnostic(source.key_marks.get(("safety", "joints", n), source.value_marks[()]),
+                           f"safety.joints.{n}", msg) for n in sc.safety.joints if (msg := unknown_joint(n, model))]
+    try:
+        asked = [nw for found in a.extensions.hook.rehabkit_narrow_limits(setup=a) for nw in found or ()]
+    except ScenarioError as exc:  # every misnamed joint at once, the extensions' and the envelope's
+        raise ScenarioError([*exc.diagnostics, *problems]) from None
+    if problems:
+        raise ScenarioError(problems)
+    a.robot_limits = model.limits
+    try:  # the extensions' first: a value both give is credited to the extension
+        a.limits, a.limit_sources = narrow(model, [*asked, *envelope_narrowings(sc.safety)])
+    except ValueError as exc:
+        raise SetupError(str(exc)) from exc
+    model.limits = a.limits
+
+
+def _patient_and_safety(a: Assembly) -> None:
+    sc = a.sc
+    backend = a.backend if a.backend is not None else a.registry.get("backend", sc.backend.type).factory
+    model_cfg = getattr(sc.patient, "model", None) if sc.patient is not None else None
+    if model_cfg is not None:
+        if getattr(backend, "real_person", False):
+            if a.context.note is not None:
+                a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
+                                    "backend: the person is real")
+        else:
+            factory = a.registry.get("patient", model_cfg.type).factory
+            embodied = isinstance(factory, type) and issubclass(factory, EmbodiedPatient)
+            need, what = (HostsBodies, "simulates a person's body in its scene") if embodied else \
+                (ExternalTorques, "applies a simulated person's torques")
+            if not has(backend, need):
+                raise PluginSetupError(a.loaded.source, ("patient", "model", "type"), (),
+                                       f"patient.model '{model_cfg.type}' needs a backend that {what}; backend "
+                                       f"'{sc.backend.type}' does not")
+            a.patient = a.make("patient", model_cfg, ("patient", "model"))
+    limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
+              if v is not None]
+    force_limit = min(limits) if limits else None
+    _force_source(a, force_limit)
+    a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
+                           gravity=a.robot.gravity_torque, dt=a.context.control_dt,
+                           hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
+    off = sorted(r for r, c in a.safety.categories.items() if c < 2 and r in sc.safety.stop_category)
+    if off and a.robot.model.brakes is None and a.context.note is not None:
+        a.context.note(0.0, f"stop category 0/1 for {', '.join(off)}: the torque goes off, and robot "
+                            f"'{a.robot.model.name}' has no brakes: after such a stop it is free to move (its weight, "
+                            "the person)")
+
+
+def _force_source(a: Assembly, limit: float | None) -> None:
+    """Where the interaction force comes from: force-torque sensors (measured, on any backend reading them), else an
+    embodied person's straps (measured in the scene), else a simulated person's joint torques (estimated at the
+    hand); an interaction-force limit with none of them is refused."""
+    sensing = [s for s in a.sensors.values() if isinstance(s, InteractionForceSensor) and s.interaction]
+    if len(sensing) == 1:  # (the common case: no list and max each control step)
+        sensor = sensing[0]
+        a.force_source, a.force_measured = (lambda t, q, tau_h: sensor.interaction_force(t, a.backend)), True
+    elif sensing:
+        def measured(t, q, tau_h):  # the largest of them (a cuff per segment)
+            forces = [s.interaction_force(t, a.backend) for s in sensing]
+            return max(forces, key=lambda f: f @ f)
+
+        a.force_source, a.force_measured = measured, True
+    elif isinstance(a.patient, EmbodiedPatient):
+        a.force_source, a.force_measured = (lambda t, q, tau_h: a.patient.interaction_force()), True
+    elif a.patient is not None and limit is not None:
+        estimate = HandForce(a.robot.model)
+        a.force_source = lambda t, q, tau_h: estimate(q, tau_h)
+    elif limit is not None:
+        at = ("safety", "interaction_force_n") if a.sc.safety.interaction_force_n is not None else ("patient",)
+        raise PluginSetupError(a.loaded.source, at, (),
+                               f"an interaction-force limit ({limit:g} N, from safety.interaction_force_n or "
+                               "patient.comfort) needs a source of the force: a force-torque sensor (sensors: {ft: "
+                               "{type: force-torque}}) or a simulated patient (patient.model); backend "
+                               f"'{a.sc.backend.type}' measures none")
+
+
+def _schedule(a: Assembly) -> Schedule:
+    sc = a.sc
+    dt = a.backend.timestep if a.backend is not None else sc.backend.timestep  # (validate builds no backend)
+    control_dt = 1.0 / sc.rates.control_hz
+    sub = control_dt / dt
+    if abs(sub - round(sub)) > 1e-6 or round(sub) < 1:
+        raise PluginSetupError(a.loaded.source, ("rates", "control_hz"), (),
+                               f"rates.control_hz = {sc.rates.control_hz:g} gives a period of {control_dt:g} s, not "
+                               f"a whole multiple of the backend timestep {dt:g} s")
+    every = tuple(max(1, round(sc.rates.control_hz / s.rate_hz)) for s in a.sensors.values())
+    return Schedule(control_dt, round(sub), int(round(sc.duration / control_dt)),
+                    max(1, round(sc.rates.control_hz / sc.logging.rate_hz)),
+                    max(1, round(sc.rates.control_hz / REACH_CHECK_HZ)), every)
+
+
+def start_posture(a: Assembly) -> np.ndarray:
+    """The task's start: a joint target's values, or a Cartesian one's first IK solution within the ranges."""
+    task = a.sc.task
+    name = task.start or task.order()[0]
+    target = a.targets[name]
+    if target.q is not None:
+        return target.q.copy()
+    try:
+        solutions = a.robot.solve_ik(target.pose, free=target.free) if target.pose is not None else []
+    except NotImplementedError:
+        solutions = []
+    lim = a.robot.model.limits
+    inside = [s for s in solutions if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
+    if not inside:
+        raise SetupError(f"task.start: target '{name}' is Cartesian and the robot's IK gives no configuration "
+                         "for it within the joint ranges; start from a joint-space target")
+    return inside[0]
+
+
+def check_first_plan(a: Assembly) -> None:
+    """Make the task's first plan without running it (``rehabkit validate``); a planner's refusal is located at
+    the setting it names. Skipped where the run alone can plan: sensed targets, a controller planning itself."""
+    sc = a.sc
+    names = sc.task.order()
+    sensed = any(t.sensor for t in sc.task.targets if t.name in names)
+    if not names or sensed or a.controller.own_reference:
+        return
+    q0 = start_posture(a)
+    try:
+        plan = a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
+    except PlanningError as exc:
+        raise first_plan_refusal(a, exc) from exc
+    if a.planner.space == "joint":  # as the run's plan gate checks it
+        from rehabkit.core.run.plan_gate import plan_breach
+
+        if (breach := plan_breach(plan, a.robot.model)) is not None:
+            raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
+
+
+def first_plan_refusal(a: Assembly, why: Exception | str) -> PluginSetupError:
+    """The task's first plan failed or broke a limit: bad input, located at the target it names, else at the
+    planner's setting it names, else at the planner."""
+    exc = why if isinstance(why, Exception) else PlanningError(why)
+    return at_target(a, exc) or PluginSetupError.refused(a.loaded.source, ("planner",), "planner", a.sc.planner,
+                                                          exc)
+
+

@@ -1,0 +1,132 @@
+"""What :func:`rehabkit.core.setup.assembly.assemble` checks before anything runs, each refusal located in the scenario
+file: the capabilities plugins need, names the scene already uses, a test rig's loads, a duration that fits in memory,
+joint targets within the ranges in force."""
+
+from __future__ import annotations
+
+import os
+import re
+from typing import Any
+
+import numpy as np
+
+from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
+from rehabkit.core.kinds.interfaces import PlanningError
+from rehabkit.core.plugins.names import suggest
+from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
+from rehabkit.core.setup.errors import PluginSetupError, SetupError
+
+Assembly = Any  # a rehabkit.core.setup.assembly.Assembly (which imports this module: no import back)
+
+
+def check_capabilities(a: Assembly) -> None:
+    """Plugins that need something of the robot or the backend (a workspace table, a floating base, cameras, …)
+    say so up front; so does the task (a simulated person, objects moved by events)."""
+    sc = a.sc
+    backend = a.registry.get("backend", sc.backend.type).factory  # checked on the class: not built yet
+    named = [("planner", sc.planner), ("controller", sc.controller), *(("sensor", c) for c in sc.sensors.values())]
+    paths = {"planner": ("planner", "type"), "controller": ("controller", "type")}
+    problems, at = [], None
+    for kind, cfg in named:
+        missing = missing_capabilities(a.registry.get(kind, cfg.type).factory, a.robot, backend)
+        if missing:
+            problems.append(f"{kind} '{cfg.type}' needs {' and '.join(missing)}")
+            section = paths.get(kind) or ("sensors", next(n for n, c in sc.sensors.items() if c is cfg), "type")
+            at = at or section
+    if any(e.action == "move" for e in sc.task.events) and not has(backend, SceneObjects):
+        problems.append("task events that 'move' objects need a backend with scene objects")
+        at = at or ("backend",)
+    if problems:
+        raise PluginSetupError(a.loaded.source, at, (), f"{'; '.join(problems)} (robot '{sc.robot.type}', "
+                               f"backend '{sc.backend.type}')")
+
+
+SCENE_NAMES = ("floor", "key_light")  # what the scene adds besides the robot and the world's objects
+
+
+def check_scene_names(a: Assembly) -> None:
+    """A world object or camera may not take a name the scene already uses (MuJoCo would refuse the merged scene,
+    pointing into XML the user never wrote)."""
+    import xml.etree.ElementTree as ET
+
+    robot = {e.get("name"): e.tag for e in ET.fromstring(a.robot.model.mjcf).iter() if e.get("name")}
+    for kind, items in (("objects", a.sc.world.objects), ("cameras", a.sc.world.cameras)):
+        for i, item in enumerate(items):
+            owner = "rehabkit's scene" if item.name in SCENE_NAMES else (
+                f"the robot's {robot[item.name]}" if item.name in robot else None)
+            if owner:
+                raise PluginSetupError(a.loaded.source, ("world", kind, i, "name"), (),
+                                       f"world.{kind}: the name '{item.name}' is taken by {owner}; rename it")
+
+
+def scene_bodies(a: Assembly) -> list[str]:
+    """The bodies of the run's scene: the robot's, the world's objects, the sensors' mounts."""
+    import xml.etree.ElementTree as ET
+
+    bodies = [e.get("name") for e in ET.fromstring(a.robot.model.mjcf).iter("body") if e.get("name")]
+    bodies += [o.name for o in a.sc.world.objects if o.dynamic or o.mocap]
+    return bodies + sorted({i.mount for i in a.context.instruments if i.mount})
+
+
+def check_loads(a: Assembly) -> None:
+    """A test rig's load pushes on a robot body or a force sensor's mount, and a sensor's instruments sit on a body
+    of the scene: another name is refused where written."""
+    bodies = scene_bodies(a)
+    for name, sensor in a.sensors.items():
+        for ins in sensor.instruments():
+            if ins.body not in bodies:
+                cfg = a.sc.sensors[name]
+                at = ("sensors", name, "body") if getattr(cfg, "body", None) == ins.body else ("sensors", name)
+                raise PluginSetupError(a.loaded.source, at, (), f"sensor '{name}': no body '{ins.body}' in the "
+                                       f"scene{suggest(ins.body, bodies)}")
+    for i, load in enumerate(a.sc.world.loads):
+        if load.body not in bodies:
+            raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"), (),
+                                   f"world.loads '{load.name}': no body '{load.body}' in the scene"
+                                   f"{suggest(load.body, bodies)} (a robot body, or a force-torque sensor's name)")
+
+
+def check_duration(a: Assembly) -> None:
+    """A run records every control step (about 8 rows of the robot's joints, 8-byte numbers): refuse, located, a
+    duration whose record would not fit in half this machine's memory (``duration: 1e9`` ended in MemoryError)."""
+    sc = a.sc
+    steps = sc.duration * sc.rates.control_hz
+    need = steps * (8 * a.robot.model.dof + 4) * 8
+    have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    if need > have / 2:
+        mark = a.loaded.source.key_marks.get(("duration",), a.loaded.source.value_marks[()])
+        raise ScenarioError([Diagnostic(mark, "duration", f"{sc.duration:g} s at {sc.rates.control_hz:g} Hz is "
+                            f"{steps:.3g} control steps, whose record needs ~{need / 2**30:.3g} GiB (this machine has "
+                            f"{have / 2**30:.3g} GiB); shorten the run or split it")])
+
+
+def has(backend: Any, capability: type) -> bool:
+    return issubclass(backend, capability) if isinstance(backend, type) else isinstance(backend, capability)
+
+
+def check_joint_targets(a: Assembly) -> None:
+    """Joint values a target gives within the joint ranges in force (after a patient's admission)."""
+    from rehabkit.core.setup.limits import first_breach
+
+    model = a.robot.model
+    for name, target in a.targets.items():
+        if target.q is None:
+            continue
+        breach = first_breach(model.limits, model.joint_names, target.q[None], None, np.zeros(1),
+                              revolute=model.revolute)
+        if breach is not None:
+            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}")
+            raise at_target(a, why, "task") or SetupError(str(why))
+
+
+def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetupError | None:
+    """A refusal naming one target (out of reach, say), located at where that target is given."""
+    named = re.match(r"target '([^']+)'", str(exc))
+    index = next((i for i, t in enumerate(a.sc.task.targets) if named and t.name == named[1]), None)
+    if index is None:
+        return None
+    spec = a.sc.task.targets[index]
+    key = next(k for k in ("position", "joints_deg", "joints_rad", "same_as", "random", "sensor")
+               if getattr(spec, k) is not None)
+    prefix = f"planner '{a.sc.planner.type}': " if kind == "planner" else ""
+    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), (), f"{prefix}{exc}")

@@ -1,0 +1,160 @@
+"""Joint limits of a run: how they are narrowed, and the one description of a breach.
+
+A run's limits start as the robot's; the safety envelope (``safety.joints``) and
+any extension (the rehab layer: the patient's range and comfort speed) may only
+tighten them, joint by joint. :class:`LimitSources` says who set each tightened
+value. Every place that finds a joint beyond a limit — the safety layer, the plan
+check, target admission, the bridge — describes it as a :class:`LimitBreach`, so
+the message reads the same everywhere and tests can assert on its fields.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from rehabkit.core.plugins.names import suggest
+from rehabkit.models.robot_model import JointLimits, RobotModel
+
+Key = Literal["lower", "upper", "velocity", "effort"]
+Quantity = Literal["position", "velocity", "torque"]
+
+
+@dataclass(frozen=True)
+class Narrowing:
+    """One proposed tighter limit: joint name, which limit, its value (SI: rad, rad/s, N·m) and who asks."""
+
+    joint: str
+    key: Key
+    value: float
+    source: str
+
+
+@dataclass
+class LimitSources:
+    """Which limits were tightened, joint → limit name → (source, value)."""
+
+    by_joint: dict[str, dict[str, tuple[str, float]]] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {j: {k: {"source": s, "value": round(v, 6)} for k, (s, v) in d.items()} for j, d in
+                self.by_joint.items()}
+
+    def range_narrowed(self, joint: str) -> bool:
+        return bool({"lower", "upper"} & set(self.by_joint.get(joint, {})))
+
+
+def unknown_joint(name: str, robot: RobotModel) -> str | None:
+    """The message for a joint name the robot doesn't have, with the closest ones (``None`` if it has it)."""
+    if name in robot.joint_names:
+        return None
+    return f"no joint '{name}' on robot '{robot.name}'{suggest(name, robot.joint_names)}"
+
+
+def narrow(robot: RobotModel, narrowings: Iterable[Narrowing]) -> tuple[JointLimits, LimitSources]:
+    """The robot's limits tightened by ``narrowings`` (in order; a wider value leaves the limit as it is).
+
+    Raises:
+        ValueError: a joint's range becomes empty.
+    """
+    lim = robot.limits
+    arrays = {"lower": lim.lower.copy(), "upper": lim.upper.copy(), "velocity": lim.velocity.copy(),
+              "effort": lim.effort.copy()}
+    sources = LimitSources()
+    index = {n: j for j, n in enumerate(robot.joint_names)}
+    for nw in narrowings:
+        j, arr = index[nw.joint], arrays[nw.key]
+        tighter = nw.value > arr[j] if nw.key == "lower" else nw.value < arr[j]
+        if tighter:
+            arr[j] = nw.value
+            sources.by_joint.setdefault(nw.joint, {})[nw.key] = (nw.source, nw.value)
+    bad = [robot.joint_names[j] for j in range(robot.dof) if arrays["lower"][j] >= arrays["upper"][j]]
+    if bad:
+        whose = sorted({s for n in bad for s, _ in sources.by_joint.get(n, {}).values()})
+        raise ValueError(f"the ranges of {' and '.join(whose) or 'the limits'} and the robot's do not overlap "
+                         f"for {bad}")
+    return JointLimits(**arrays), sources
+
+
+def envelope_narrowings(safety) -> list[Narrowing]:
+    """The safety envelope's per-joint limits (``safety.joints``) as narrowings, source ``"safety"``."""
+    out = []
+    for name, env in safety.joints.items():
+        if env.range_deg is not None:
+            out += [Narrowing(name, "lower", math.radians(env.range_deg[0]), "safety"),
+                    Narrowing(name, "upper", math.radians(env.range_deg[1]), "safety")]
+        if env.velocity_deg_s is not None:
+            out.append(Narrowing(name, "velocity", math.radians(env.velocity_deg_s), "safety"))
+        if env.torque_nm is not None:
+            out.append(Narrowing(name, "effort", env.torque_nm, "safety"))
+    return out
+
+
+@dataclass(frozen=True)
+class LimitBreach:
+    """A joint beyond one of its limits.
+
+    Attributes:
+        quantity: ``position``, ``velocity`` or ``torque``.
+        joint: The joint's name.
+        value: What it was (SI units; a speed or torque as a magnitude when compared with one).
+        limit: The limit it broke (the bound on the side it crossed).
+        at_s: When, in seconds from the start of what was checked (a plan), if known.
+        revolute: Report in degrees (positions and speeds) rather than metres.
+    """
+
+    quantity: Quantity
+    joint: str
+    value: float
+    limit: float
+    at_s: float | None = None
+    revolute: bool = True
+
+    def describe(self) -> str:
+        """``elbow beyond its position limit at t+0.250s (131.2°, limit 120.0°)``: the one wording of a breach."""
+        if self.quantity == "torque":
+            v, lim, unit = self.value, self.limit, " N·m"
+        elif self.revolute:
+            v, lim = math.degrees(self.value), math.degrees(self.limit)
+            unit = "°" if self.quantity == "position" else " °/s"
+        else:
+            v, lim, unit = self.value, self.limit, " m" if self.quantity == "position" else " m/s"
+        when = f" at t+{self.at_s:.3f}s" if self.at_s is not None else ""
+        return f"{self.joint} beyond its {self.quantity} limit{when} ({v:.1f}{unit}, limit {lim:.1f}{unit})"
+
+
+def first_breach(limits: JointLimits, names: list[str], q: np.ndarray, qd: np.ndarray | None = None,
+                 times: np.ndarray | None = None, tol: float = 1e-9,
+                 revolute: np.ndarray | None = None) -> LimitBreach | None:
+    """The first sample of ``q`` (n, dof) outside the range or of ``qd`` beyond the speed limit, if any.
+
+    Positions are checked before speeds (a sample breaking both reports its position). ``revolute`` says
+    which joints turn (reported in degrees; the others in metres); default all.
+    """
+    def turns(j: int) -> bool:
+        return True if revolute is None else bool(revolute[j])
+
+    q = np.atleast_2d(q)
+    bad_q = (q < limits.lower - tol) | (q > limits.upper + tol)
+    if bad_q.any():
+        k, j = np.argwhere(bad_q)[0]
+        limit = limits.lower[j] if q[k, j] < limits.lower[j] else limits.upper[j]
+        return LimitBreach("position", names[j], float(q[k, j]), float(limit),
+                           None if times is None else float(times[k]), turns(j))
+    if qd is not None:
+        qd = np.atleast_2d(qd)
+        bad_v = np.abs(qd) > limits.velocity
+        if bad_v.any():
+            k, j = np.argwhere(bad_v)[0]
+            return LimitBreach("velocity", names[j], float(abs(qd[k, j])), float(limits.velocity[j]),
+                               None if times is None else float(times[k]), turns(j))
+    return None
+
+
+def outside(q: np.ndarray, limits: JointLimits, tol: float = 1e-9) -> list[int]:
+    """Indices of joints of ``q`` outside ``limits``."""
+    return [j for j in range(len(q)) if q[j] < limits.lower[j] - tol or q[j] > limits.upper[j] + tol]
