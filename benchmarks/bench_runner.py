@@ -121,7 +121,7 @@ def main() -> None:
             best[name].append(loop)
             best_total[name].append(total)
             sim_time = runner.sc.duration
-        best["bare MuJoCo loop"].append(bare_loop(runner, runner.ref.views()))
+        best["bare MuJoCo loop"].append(bare_loop(runner, runner.session.ref.views()))
     bare = min(best["bare MuJoCo loop"])
     steps = int(round(sim_time * 1000))
     print(f"HIT round-trip, {sim_time} s simulated, {steps} steps at 1 kHz; best of {args.repeats}")

@@ -6,6 +6,7 @@ returns are described in :mod:`rehabkit.core.plugins.hookspecs`; the run-lifecyc
 implements in :mod:`rehabkit.core.plugins.lifecycle`.
 """
 
+from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import (
     ClusterPoints,
     Contacts,
@@ -43,12 +44,13 @@ from rehabkit.core.kinds.interfaces import (
     Trajectory,
 )
 from rehabkit.core.plugins.hookspecs import hookimpl
-from rehabkit.core.plugins.lifecycle import Contribution
+from rehabkit.core.plugins.lifecycle import Contribution, Section
 from rehabkit.core.results.metric import Metric
 from rehabkit.core.setup.errors import SetupError
 from rehabkit.core.setup.limits import LimitBreach, Narrowing
 from rehabkit.core.setup.targets import JointWaypoints, joint_waypoints
 from rehabkit.models.robot_model import JointLimits, RobotModel
+from rehabkit.models.strict import FilePath
 from rehabkit.models.wearable import Strap, Wearable
 
 __all__ = [
@@ -57,7 +59,8 @@ __all__ = [
     # the plugin kinds and what they exchange
     "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "InteractionForceSensor", "Backend",
-    "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "Wearable", "Strap",
+    "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "FilePath",
+    "Wearable", "Strap",
     # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked)
     "joint_waypoints", "JointWaypoints",
     # what a robot declares it can do, and a plugin ``requires``
@@ -65,7 +68,7 @@ __all__ = [
     # what a backend declares it can do (the rest: rehabkit.core.kinds.capabilities)
     "ExternalTorques", "Contacts", "HostsBodies",
     # describing metrics; extensions' contributions and limits
-    "Metric", "Contribution", "Narrowing", "LimitBreach",
+    "Metric", "Contribution", "Section", "Narrowing", "LimitBreach",
     # errors
-    "PlanningError", "IKUnavailableError", "BackendFaultError", "SetupError",
+    "PlanningError", "IKUnavailableError", "BackendFaultError", "EStopLatchedError", "SetupError",
 ]

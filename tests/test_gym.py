@@ -118,7 +118,7 @@ def test_a_policy_runs_as_a_controller_exactly_as_in_its_environment(tmp_path):
         obs, _, terminated, truncated, _ = env.step(actions[-1])
         if terminated or truncated:
             break
-    learned_q = env._runner.trace.q.copy()
+    learned_q = env._session.trace.q.copy()
     assert np.abs(np.array(actions)).max() > 0.3  # the policy did act
     env.close()
     run = run_scenario(HIT, {"duration": 2.0, "controller": {"type": "policy", "file": str(path)}})

@@ -142,3 +142,24 @@ def test_scenario_model_json_schema_includes_plugins():
     assert {"robot", "planner", "controller", "task", "expect"} <= set(schema["properties"])
     defs = str(schema["$defs"])
     assert "segment_durations" in defs and "counts_per_rev" in defs
+
+
+def test_extends_resolves_each_files_relative_paths_from_that_file(tmp_path):
+    """A base file's ``patient: patients/p01.yaml`` and a robot's ``file: arm4.urdf`` mean the files beside the
+    base, wherever the scenario extending it lives; the extending file's own relative paths stay its own."""
+    from rehabkit.core.run.runner import Runner
+
+    ROBOTS = SCENARIOS.parent / "examples" / "robots"
+    study = tmp_path / "study" / "deeper"
+    study.mkdir(parents=True)
+    (study / "lexos_again.yaml").write_text(f"extends: {SCENARIOS / 'lexos_patient.yaml'}\nduration: 1.0\n"
+                                            "expect: {}\n")
+    loaded = load_scenario(study / "lexos_again.yaml")
+    assert loaded.model.patient.id == "P01"  # from scenarios/patients/, not study/deeper/patients/
+    (study / "arm.yaml").write_text(f"extends: {ROBOTS / 'urdf_arm4.yaml'}\nduration: 0.5\nexpect: {{}}\n")
+    arm = load_scenario(study / "arm.yaml")
+    assert arm.model.robot.file == str((ROBOTS / "arm4.urdf").resolve())
+    assert Runner(arm).run().summary["metrics"]["sim_time_s"] == pytest.approx(0.5)
+    (study / "arm4.urdf").write_text((ROBOTS / "arm4.urdf").read_text())
+    (study / "own.yaml").write_text(f"extends: {ROBOTS / 'urdf_arm4.yaml'}\nrobot: {{file: arm4.urdf}}\n")
+    assert load_scenario(study / "own.yaml").model.robot.file == "arm4.urdf"  # its own: from its own folder

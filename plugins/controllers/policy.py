@@ -19,6 +19,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
 from rehabkit.models.policy import Policy
+from rehabkit.models.strict import FilePath
 
 CONTROLLER_TERMS = ("joint_state", "reference", "tracking_error", "phase")
 
@@ -26,7 +27,7 @@ CONTROLLER_TERMS = ("joint_state", "reference", "tracking_error", "phase")
 class PolicyConfig(StrictModel):
     """The policy file and, for a residual policy, the controller it acts on."""
 
-    file: str = Field(description="the policy (.npz) a training saved, relative to the scenario")
+    file: FilePath = Field(description="the policy (.npz) a training saved, relative to the scenario")
     base: dict[str, Any] | None = Field(None, description="the controller a residual acts on (type and settings; "
                                                            "default: the one it was trained on, kept in the file)")
 

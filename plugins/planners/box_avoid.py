@@ -130,7 +130,7 @@ class BoxAvoidPlanner(Planner):
             try:
                 result = plan_path(start[:3, 3], goal[:3, 3], self.obstacles, cfg.margin, cfg.clearance, self.floor)
             except NoPathError as exc:
-                raise PlanningError(f"target '{target.name}': {exc}") from None
+                raise PlanningError(f"target '{target.name}': {exc}", target=target.name) from None
             path_ms += (time.perf_counter() - t_path) * 1e3
             a, b = start[:3, 3], goal[:3, 3]
             blocked |= {o.name for o in self.obstacles if o.inflated(cfg.margin).hits_segment(a, b)}
@@ -184,7 +184,7 @@ class BoxAvoidPlanner(Planner):
             sols = [x for x in sols if np.all(x >= lim.lower) and np.all(x <= lim.upper)]
             if not sols:
                 raise PlanningError(f"target '{name}': the gripper cannot reach {np.round(pose[:3, 3], 3).tolist()} m "
-                                    "on the way (out of reach or joint limits)")
+                                    "on the way (out of reach or joint limits)", target=name)
             prev = min(sols, key=lambda x: float(np.abs(x - prev).max()))
             qs.append(prev)
         qs = np.array(qs)
@@ -192,7 +192,7 @@ class BoxAvoidPlanner(Planner):
         if jump > 0.35:
             raise PlanningError(f"target '{name}': the arm would flip its wrist near "
                                 f"{np.round(a + 0.5 * (b - a), 3).tolist()} m (a singular configuration); "
-                                "choose another gripper orientation")
+                                "choose another gripper orientation", target=name)
         times = u * duration
         spline = CubicSpline(times, qs, bc_type="clamped")
         fine = np.linspace(0.0, duration, 8 * n)

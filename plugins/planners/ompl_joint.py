@@ -122,7 +122,7 @@ class OmplJointPlanner(Planner):
         if not (ss.solve(self.config.time_limit_s) and ss.haveExactSolutionPath()):
             raise PlanningError(f"target '{name}': {self.config.algorithm} found no collision-free path in "
                                 f"{self.config.time_limit_s:g} s (raise planner.time_limit_s, or the target may "
-                                "be walled off)")
+                                "be walled off)", target=name)
         path = ss.getSolutionPath()
         if self.config.simplify:
             simplifier = og.PathSimplifier(si)
@@ -132,7 +132,8 @@ class OmplJointPlanner(Planner):
         points = np.array([[path.getState(k)[i] for i in range(n)] for k in range(path.getStateCount())])
         for p, q in zip(points[:-1], points[1:]):  # the simplifier checks too; this makes sure at our resolution
             if not self._segment_free(p, q, step):
-                raise PlanningError(f"target '{name}': the simplified path touches the world (internal check)")
+                raise PlanningError(f"target '{name}': the simplified path touches the world (internal check)",
+                                    target=name)
         return points
 
     def _segment_free(self, a: np.ndarray, b: np.ndarray, step: float) -> bool:

@@ -190,7 +190,7 @@ class ThrowPlanner(Planner):
         actions, throws, worst = [], [], 0.0
         for target in request.targets:
             if target.pose is None:
-                raise PlanningError(f"target '{target.name}' has no position to throw to")
+                raise PlanningError(f"target '{target.name}' has no position to throw to", target=target.name)
             catch = target.pose[:3, 3]
             t_gen = time.perf_counter()
             th, predicted = self.generate(catch)

@@ -21,8 +21,9 @@ import gymnasium as gym
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from rehabkit.core.run.loop import LoopState, run_loop
+from rehabkit.core.run.loop import run_loop
 from rehabkit.core.run.runner import Runner
+from rehabkit.core.run.session import RunSession
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
 from rehabkit.core.setup.errors import PluginSetupError
 from rehabkit.gym.terms import Observer, RewardTerms
@@ -44,7 +45,7 @@ class ScenarioEnv(gym.Env):
         self.every = _policy_every(loaded)
         self.render_mode, self.render_size = render_mode, render_size
         self._renderer = None
-        self._runner: Runner | None = None
+        self._session: RunSession | None = None
         self._blas = ThreadpoolController()  # found once: looking for the libraries costs ~1.4 ms a policy step
         self._open(sc.seed)
         n = len(self._tuned[0]) if self._tuned else self._dof
@@ -61,11 +62,9 @@ class ScenarioEnv(gym.Env):
         gc.collect()
         # the validated scenario with the episode's seed (a deep copy: a run's setup may adapt its sections)
         loaded = self._loaded
-        runner = Runner(replace(loaded, model=loaded.model.model_copy(update={"seed": seed}, deep=True)))
-        runner.start()
-        a = runner.setup
-        self._runner, self._a, self._dof = runner, a, a.robot.model.dof
-        self.state = LoopState()
+        session = Runner(replace(loaded, model=loaded.model.model_copy(update={"seed": seed}, deep=True))).start()
+        a = session.setup
+        self._session, self._a, self._dof = session, a, a.robot.model.dof
         self._ended = False
         limit = a.robot.model.limits.effort
         scale = self.spec_learning.action.scale
@@ -83,7 +82,7 @@ class ScenarioEnv(gym.Env):
                 controller.tune({})
                 controller.tune({n: action.parameters[n][0] for n in names})
             except ValueError as exc:
-                raise PluginSetupError(runner.loaded.source, ("learning", "action", "parameters"), (),
+                raise PluginSetupError(a.loaded.source, ("learning", "action", "parameters"), (),
                                        f"learning.action.parameters: {exc}") from None
             lo, hi = (np.array([action.parameters[n][i] for n in names]) for i in (0, 1))
             self._tuned = (names, lo, hi)
@@ -92,8 +91,8 @@ class ScenarioEnv(gym.Env):
         else:
             gravity = a.robot.gravity_torque
             controller.compute = lambda t, q, *rest: gravity(q) + self._u  # noqa: E731
-        self.observer = Observer(self.spec_learning.observation, runner)
-        self.rewards = RewardTerms(self.spec_learning.reward, runner, self.every)
+        self.observer = Observer(self.spec_learning.observation, session)
+        self.rewards = RewardTerms(self.spec_learning.reward, session, self.every)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
@@ -102,7 +101,7 @@ class ScenarioEnv(gym.Env):
         return self.observer.observe(0), {"seed": episode_seed, "t": 0.0}
 
     def step(self, action):
-        a, st = self._a, self.state
+        a, st = self._a, self._session.loop
         if self._ended:
             raise RuntimeError("the episode has ended: call reset()")
         action = np.clip(np.asarray(action, float), -1.0, 1.0)
@@ -113,8 +112,7 @@ class ScenarioEnv(gym.Env):
             self._u[:] = self._scale * action
         k0 = st.k
         with self._blas.limit(limits=1, user_api="blas"):  # (as in a run: BLAS threads only spin here)
-            run_loop(a, self._runner.trace, self._runner.packed, self._runner.ref, self._runner.timeline,
-                     self._runner.view, k_to=k0 + self.every, state=st)
+            run_loop(self._session, k_to=k0 + self.every)
         terms = self.rewards.terms(k0, st.k)
         reward = float(sum(terms.values()))
         terminated = a.safety.tripped_at is not None
@@ -160,9 +158,9 @@ class ScenarioEnv(gym.Env):
         return self._renderer.render()
 
     def close_run(self) -> None:
-        if self._runner is not None and self._runner.setup is not None:
-            self._runner.setup.backend.close()
-        self._runner = None
+        if self._session is not None:
+            self._session.setup.backend.close()
+        self._session = None
 
     def close(self) -> None:
         self.close_run()

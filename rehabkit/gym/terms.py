@@ -9,9 +9,9 @@ import gymnasium as gym
 import numpy as np
 
 from rehabkit.core.kinds.interfaces import EmbodiedPatient
-from rehabkit.core.run.runner import Runner
-from rehabkit.core.scenario.learning import ObservationSpec
+from rehabkit.core.run.session import RunSession
 from rehabkit.core.setup.errors import PluginSetupError
+from rehabkit.learning.section import ObservationSpec
 from rehabkit.models.hand_force import HandForce
 from rehabkit.rehab.outcomes import interaction_forces
 
@@ -21,20 +21,20 @@ JERK_SCALE = 1e-6  # squared joint jerk [(rad/s³)²] is large: its term is coun
 class Observer:
     """The observation terms of ``spec`` at a control step."""
 
-    def __init__(self, spec: ObservationSpec, runner: Runner):
-        self.spec, self.runner, a = spec, runner, runner.setup
-        self.a, self.trace = a, runner.trace
-        self.ref_q, self.ref_qd, _ = runner.ref.views()
-        self.goal_at = runner.ref.goal_at
+    def __init__(self, spec: ObservationSpec, session: RunSession):
+        self.spec, a = spec, session.setup
+        self.a, self.trace = a, session.trace
+        self.ref_q, self.ref_qd, _ = session.ref.views()
+        self.goal_at = session.ref.goal_at
         self.dof = a.robot.model.dof
-        self.cart = a.planner.space == "cartesian"
+        self.ref_space = a.space
         self.hand_force = HandForce(a.robot.model) if a.patient is not None else None
         self.sizes = {"joint_state": 2 * self.dof, "reference": 2 * self.ref_q.shape[1],
                       "tracking_error": self.ref_q.shape[1], "goal": self.goal_at.shape[1], "phase": 1,
                       "interaction_force": 1, "person_torque": self.dof,
                       "person_state": len(a.patient.state()) if a.patient is not None else 0}
         if "person_state" in spec.terms and not self.sizes["person_state"]:
-            raise PluginSetupError(runner.loaded.source, ("learning", "observation", "terms"), (),
+            raise PluginSetupError(a.loaded.source, ("learning", "observation", "terms"), (),
                                    "learning.observation.terms: person_state needs a simulated person with an inner "
                                    "state (patient.model)")
 
@@ -63,7 +63,7 @@ class Observer:
             elif term == "reference":
                 value = np.concatenate([self.ref_q[row], self.ref_qd[row]])
             elif term == "tracking_error":
-                value = self.ref_q[row] - (a.robot.fk(q)[:3, 3] if self.cart else q)
+                value = self.ref_q[row] - self.ref_space.point(q)  # (in the reference's space: joints, or the hand)
             elif term == "goal":
                 value = self.goal_at[row]
             elif term == "phase":  # (as the policy controller computes it: t over the episode's length)
@@ -96,14 +96,14 @@ class Observer:
 class RewardTerms:
     """The weighted reward terms over the control steps [k0, k1) of a policy period."""
 
-    def __init__(self, weights: dict[str, float], runner: Runner, every: int):
-        self.weights, self.runner, a = weights, runner, runner.setup
-        self.a, self.trace = a, runner.trace
+    def __init__(self, weights: dict[str, float], session: RunSession, every: int):
+        self.weights, a = weights, session.setup
+        self.a, self.trace, self.goal_at = a, session.trace, session.ref.goal_at
         self.dt = a.schedule.control_dt
         self.period = every * self.dt
-        self.hand_force = HandForce(a.robot.model) if a.patient is not None and runner.trace.f_h is None else None
+        self.hand_force = HandForce(a.robot.model) if a.patient is not None and session.trace.f_h is None else None
         self.tolerance = a.sc.outcomes.tolerance_m
-        self.cart = a.planner.space == "cartesian"
+        self.ref_space = a.space
         self.embodied = isinstance(a.patient, EmbodiedPatient)
 
     def terms(self, k0: int, k1: int) -> dict[str, float]:
@@ -116,8 +116,7 @@ class RewardTerms:
         return out
 
     def _tracking(self, tr, rows, k0, k1) -> float:
-        hand = self.a.robot.fk_batch(tr.q[rows])[:, :3, 3] if self.cart else None  # (the reference's frame)
-        err = tr.x_ref[rows] - hand if self.cart else tr.q_ref[rows] - tr.q[rows]
+        err = self.ref_space.planned(tr)[rows] - self.ref_space.points(tr.q[rows])
         return -float(np.mean(np.sum(err**2, axis=1)))
 
     def _interaction_force(self, tr, rows, k0, k1) -> float:
@@ -141,10 +140,6 @@ class RewardTerms:
         return -JERK_SCALE * float(np.mean(np.sum(jerk**2, axis=1)))
 
     def _reached(self, tr, rows, k0, k1) -> float:
-        goal = self.runner.ref.goal_at[k1 - 1]
-        if self.cart:
-            hand = self.a.robot.fk(tr.q[k1 - 1])[:3, 3]
-        else:
-            hand, goal = self.a.robot.fk(tr.q[k1 - 1])[:3, 3], self.a.robot.fk(goal)[:3, 3]
+        hand, goal = self.a.robot.fk(tr.q[k1 - 1])[:3, 3], self.ref_space.hand(self.goal_at[k1 - 1])
         return 1.0 / self.period if np.linalg.norm(hand - goal) < self.tolerance else 0.0
 

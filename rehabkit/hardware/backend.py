@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import Instruments
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
@@ -206,7 +207,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
             else:
                 self._tick_lockstep(0.2)
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
-                raise BridgeHoldError(self._latched_message())
+                raise EStopLatchedError(self._latched_message(), f"{self.robot_name}-{self.config.robot_id}",
+                                        f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
             if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
         else:

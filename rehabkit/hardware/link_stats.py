@@ -70,5 +70,6 @@ def stale_interventions(link) -> list[SafetyEvent]:
         ms = 1e3 * ticks * link.timestep
         out.append(SafetyEvent(start, "stale-command", None, ms, link.config.bridge_stale_ms,
                                f"t={start:.3f}s: no newer command for {link.config.bridge_stale_ms:g} ms: the "
-                               f"bridge held the posture for {ms:.0f} ms, until the next one", {"held_ticks": ticks}))
+                               f"bridge held the posture for {ms:.0f} ms, until the next one", {"held_ticks": ticks},
+                               level="WARN"))
     return out

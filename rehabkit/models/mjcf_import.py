@@ -20,7 +20,7 @@ from pydantic import Field
 from rehabkit.models.dh import PoseSpec
 from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
-from rehabkit.models.strict import StrictModel
+from rehabkit.models.strict import FilePath, StrictModel
 
 _MOVABLE = {int(mujoco.mjtJoint.mjJNT_HINGE): "revolute", int(mujoco.mjtJoint.mjJNT_SLIDE): "prismatic"}
 
@@ -38,7 +38,7 @@ class LimitOverride(StrictModel):
 class ModelFileConfig(StrictModel):
     """A robot from a model file (path relative to the scenario)."""
 
-    file: str
+    file: FilePath
     ee_frame: str = Field(description="site or body that is the end effector")
     base: PoseSpec = Field(PoseSpec(), description="robot base in the world")
     limits: dict[str, LimitOverride] = Field({}, description="per-joint limits by joint name")

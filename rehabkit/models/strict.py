@@ -2,10 +2,23 @@
 
 from __future__ import annotations
 
-from typing import Any, get_args
+from typing import Annotated, Any, get_args
 
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
+
+
+class _FileSetting:
+    """Marks a setting that names a file (see :data:`FilePath`)."""
+
+    def __repr__(self) -> str:
+        return "FilePath"
+
+
+FILE_SETTING = _FileSetting()
+# A setting naming a file, relative to the scenario file that writes it: a base file's (``extends:``) relative
+# path is made absolute from that file's folder by the loader, so it means the same file wherever it is extended.
+FilePath = Annotated[str, FILE_SETTING]
 
 BOOLEAN = "a number is needed here, not a boolean (YAML reads yes/no/on/off/true/false as booleans)"
 

@@ -10,9 +10,12 @@ range of motion, assistance ratio, peak interaction force, interventions) and th
 
 from __future__ import annotations
 
+from pydantic import Field
+
 from rehabkit.core.plugins.hookspecs import hookimpl
-from rehabkit.core.plugins.lifecycle import Contribution
+from rehabkit.core.plugins.lifecycle import Contribution, Section
 from rehabkit.core.results.metric import Metric
+from rehabkit.models.strict import StrictModel
 
 METRICS = (
     Metric("reaches", "count", outcome=True, description="planned movements counted as reaches"),
@@ -69,7 +72,7 @@ def rehabkit_admit_targets(setup) -> None:
 def rehabkit_run_finished(setup, record):
     from rehabkit.rehab.run_outcomes import outcome_series, run_outcomes
 
-    breaches = sum(e.rule not in ("ramp-in", "ramp-out") for e in setup.safety.interventions)
+    breaches = sum(e.rule not in ("ramp-in", "ramp-out") for e in record.interventions)
     metrics, details = run_outcomes(record.trace, setup.robot, record.movements, setup.schedule.control_dt,
                                     setup.sc.outcomes, breaches)
     return Contribution(
@@ -90,3 +93,17 @@ def patient_summary(setup) -> dict | None:
         out.update(id=p.id, side=p.side, segments=setup.extras.get("segments", {}),
                    simulated=None if setup.patient is None else p.model.type)
     return out
+
+
+class OutcomeSpec(StrictModel):
+    """How movements are cut into reaches for the outcome measures."""
+
+    tolerance_m: float = Field(0.01, gt=0, description="target radius: a reach ends when the hand is this close")
+    dwell_s: float = Field(0.2, ge=0, description="... and stays for this long")
+    min_reach_m: float = Field(0.02, ge=0, description="movements shorter than this are not counted as reaches")
+
+
+@hookimpl
+def rehabkit_scenario_sections(registry) -> dict[str, Section]:
+    return {"outcomes": Section(OutcomeSpec, OutcomeSpec(), "how movements are cut into reaches for the outcome "
+                                                          "measures")}

@@ -78,6 +78,7 @@ def _onset(sc, event: dict, trace) -> float | None:
 def run_skill(path: Path, backend: str) -> SkillRun:
     """Run one skill scenario on ``backend`` (``simulation`` or ``link``), its latches its own."""
     from rehabkit.api import run_scenario
+    from rehabkit.core.kinds.backend import EStopLatchedError
     from rehabkit.core.run.runner import Runner
     from rehabkit.core.safety.estop import own_state
     from rehabkit.core.scenario.loader import load_scenario
@@ -95,7 +96,8 @@ def run_skill(path: Path, backend: str) -> SkillRun:
                 run_scenario(path, overrides, out_dir=None)
                 notes.append("e-stop NOT latched: the next session ran")
             except SetupError as exc:
-                notes.append("the next session was refused: e-stop latched" if "latched" in str(exc) else str(exc))
+                latched = isinstance(exc.__cause__, EStopLatchedError)
+                notes.append("the next session was refused: e-stop latched" if latched else str(exc))
             from rehabkit.core.safety.estop import all_latches
 
             for latch in all_latches():
@@ -123,16 +125,16 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     onset, trip = _onset(sc, ev, result.trace), ev["t"]
     for later in result.summary["safety"]["interventions"]:  # what else acted while it stopped (a bridge's backstop)
         if later["t"] > ev["t"] and later["rule"] == "backend":
-            notes.append(f"then at {later['t']:.3f} s: {later['message'].split(': ', 1)[-1]}")
+            notes.append(f"then at {later['t']:.3f} s: {later['cause']}")
     for brake in (e for e in result.summary["safety"]["interventions"] if e["rule"] == "brakes"):
-        notes.append(brake["message"].split(": ", 1)[-1])
+        notes.append(brake["cause"])
     held = [e["t"] for e in result.summary["safety"]["interventions"] if e["rule"] == "stale-command"]
     if ev["rule"] == "backend" and held:  # the robot side held it first (its hold through a gap in the commands)
         trip = min(trip, held[0])
         notes.append(f"the bridge held the robot at {held[0]:.3f} s; the host learnt of it at {ev['t']:.3f} s")
-    # the event's own words, its time and the stop's category left out: "measured: elbow_2 beyond its position
-    # limit (45.6°, limit 45.5°)", "interaction force above its limit: 30.03 (limit 30)"
-    trigger = f"{ev['rule']}: " + ev["message"].split(": ", 1)[-1].rsplit("; ", 1)[0]
+    # the event's own words: "measured: elbow_2 beyond its position limit (45.6°, limit 45.5°)", "interaction force
+    # above its limit: 30.03 (limit 30)"
+    trigger = f"{ev['rule']}: {ev['cause']}"
     return SkillRun(sc.name or path.stem, backend, result.passed, trigger, onset, trip,
                     ev["data"].get("category"), figures, notes, result.trace)
 

@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
+from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import (
     BaseState,
     Cameras,
@@ -20,7 +21,7 @@ from rehabkit.core.kinds.capabilities import (
     SceneGeometry,
     SceneObjects,
 )
-from rehabkit.core.kinds.interfaces import Backend, BackendFaultError, Contact, Context, StrictModel
+from rehabkit.core.kinds.interfaces import Backend, Contact, Context, StrictModel
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.sim.loads import LoadApplier
@@ -108,7 +109,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
 
     def reset(self, q0: np.ndarray) -> None:
         if self._latch.latched() is not None:
-            raise BackendFaultError(self._latch.refusal(f"the simulated {self.robot.name}"))
+            where = f"the simulated {self.robot.name}"
+            raise EStopLatchedError(self._latch.refusal(where), self._latch.name, where)
         self.ramp_in_after_clear = RAMP_IN_AFTER_CLEAR_S if self._latch.take_ramp_in() else 0.0
         mujoco.mj_resetData(self.model, self.data)
         self.model.dof_frictionloss[self._v] = self._friction

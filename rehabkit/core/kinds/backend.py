@@ -82,6 +82,15 @@ class BackendFaultError(RuntimeError):
     observable = False
 
 
+class EStopLatchedError(BackendFaultError):
+    """No session starts: the robot's e-stop is latched (ISO 13850). ``latch`` names it as ``rehabkit estop clear``
+    takes it; ``where`` is the robot (simulated, or behind a bridge); the message says how to clear it."""
+
+    def __init__(self, message: str, latch: str, where: str):
+        super().__init__(message)
+        self.latch, self.where = latch, where
+
+
 class Backend(ABC):
     """Where commands go and state comes from: a simulator or a robot link.
 

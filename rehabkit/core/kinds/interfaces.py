@@ -239,7 +239,12 @@ class Plan:
 
 
 class PlanningError(RuntimeError):
-    """A planner could not produce a plan; the message says why."""
+    """A planner could not produce a plan; the message says why. ``target``: the target it could not plan for,
+    when it is one (the refusal of a run's first plan is then located where the scenario gives that target)."""
+
+    def __init__(self, message: str, target: str | None = None):
+        super().__init__(message)
+        self.target = target
 
 
 ReferenceSpace = Literal["joint", "cartesian"]

@@ -1,5 +1,8 @@
 """What a run draws in its Rerun recording: the scene, targets, plans, the joint series, the safety events.
 
+A run without a recording gets a :class:`NullView`: the same methods, doing nothing, so no caller asks whether
+there is a log (the loop reads ``active`` once, to log no step).
+
 The joint series are sent in columns at the scenario's log rate, ``flush_samples``
 at a time (a send costs ~0.5 ms whatever its length: a file takes big batches, a
 live viewer ones small enough to follow the run); a planner whose joint space is worth looking at (it returns
@@ -8,6 +11,8 @@ with every plan and the executed path in it.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -19,21 +24,27 @@ from rehabkit.core.setup.assembly import Assembly
 
 LOG_FLUSH_SAMPLES = 2000  # log-rate samples buffered between column sends to a file
 LIVE_FLUSH_SAMPLES = 500  # ... and when a viewer shows the run as it goes
-LEVELS = {"ramp-in": "INFO", "ramp-out": "INFO", "torque-clip": "WARN", "stale-command": "WARN"}
+
+
+def open_view(setup: Assembly, space, spawn: bool = False) -> RunView | NullView:
+    """The run's recording (``run.rrd`` in the run's folder, or a viewer with ``spawn``), or none."""
+    if setup.out_dir is None or not setup.sc.logging.rrd:
+        return NullView()
+    setup.out_dir.mkdir(parents=True, exist_ok=True)
+    return RunView(setup, space, spawn)
 
 
 class RunView:
-    """The run's recording; every method is a no-op cost the caller avoids by checking ``view.log``."""
+    """The run's recording."""
 
-    def __init__(self, setup: Assembly, spawn: bool = False):
-        self.setup, self.log = setup, None
+    active = True
+
+    def __init__(self, setup: Assembly, space, spawn: bool = False):
+        self.setup, self.space = setup, space
         self.flush_samples = LIVE_FLUSH_SAMPLES if spawn else LOG_FLUSH_SAMPLES
         self._upto = 0
         self._joint_space = False
         sc, out = setup.sc, setup.out_dir
-        if out is None or not sc.logging.rrd:
-            return
-        out.mkdir(parents=True, exist_ok=True)
         model = setup.robot.model
         log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn)
         if isinstance(setup.backend, SceneGeometry):
@@ -45,6 +56,17 @@ class RunView:
             log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
         self.log = log
 
+    def event(self, t: float, text: str, level: str = "INFO") -> None:
+        """A line in the recording's text log (an event, a note, a warning)."""
+        self.log.event(t, text, level=level)
+
+    def sensor(self, t: float, name: str, reading: dict) -> None:
+        """A sensor's reading, and where it saw a target."""
+        self.log.sensor(t, name, reading)
+        if reading.get("target_position") is not None:
+            self.log.points(f"world/sensed/{name}", self.setup.robot.model.to_world(reading["target_position"]),
+                            (40, 220, 40), 0.02, t)
+
     def planner_drawings(self) -> None:
         """The planner's drawings; after the first plan, as some come from it (a throw's parabola)."""
         for name, points in self.setup.planner.visuals().items():
@@ -52,18 +74,13 @@ class RunView:
 
     def plan(self, t: float, plan: Plan, x: np.ndarray) -> None:
         """A plan's hand path and waypoints (``x``: its reference at the control rate from ``t``)."""
-        a = self.setup
-        every, model = a.schedule.log_every, a.robot.model
-        way = plan.waypoints
-        if a.planner.space == "cartesian":
-            path, way_w = model.to_world(x[::every]), model.to_world(way if way is not None else np.zeros((0, 3)))
-        else:
-            path = a.robot.ee_world(x[::every])
-            way_w = a.robot.ee_world(way) if way is not None else np.zeros((0, 3))
-            if self._joint_space:
-                self.log.line("joint_space/plan", np.degrees(x[::every]), (60, 160, 255), 0.3, t)
-                if way is not None:
-                    self.log.points("joint_space/task_points", np.degrees(way), (60, 160, 255), 1.0, t)
+        every, way = self.setup.schedule.log_every, plan.waypoints
+        path = self.space.hand_world(x[::every])
+        way_w = self.space.hand_world(way) if way is not None else np.zeros((0, 3))
+        if self._joint_space:  # (a joint-space planner's own drawing)
+            self.log.line("joint_space/plan", np.degrees(x[::every]), (60, 160, 255), 0.3, t)
+            if way is not None:
+                self.log.points("joint_space/task_points", np.degrees(way), (60, 160, 255), 1.0, t)
         self.log.plan(t, path, way_w)
 
     def flush(self, trace: Trace, upto: int) -> None:
@@ -80,9 +97,34 @@ class RunView:
         if self._joint_space and k:
             self.log.line("joint_space/executed", np.degrees(trace.q[:k:10]), (250, 180, 40), 0.3)
 
-    def finish(self, interventions: list, series: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    def finish(self, interventions: list, series: Callable[[], dict[str, tuple[np.ndarray, np.ndarray]]]) -> None:
         """The safety layer's interventions as events, and the run's series (backend, plugins, extensions)."""
         for ev in interventions:
-            self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=LEVELS.get(ev.rule, "ERROR"))
-        for path, (t, values) in series.items():
+            self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=ev.level)
+        for path, (t, values) in series().items():
             self.log.series(path, np.asarray(t, float), np.asarray(values, float))
+
+    def close(self) -> dict[str, str]:
+        """The recording written whole; what the summary lists of it."""
+        self.log.close()
+        return {"rrd": "run.rrd"}
+
+    def discard(self) -> None:
+        """The run failed: no half-written recording is left."""
+        self.log.discard()
+
+
+class NullView:
+    """No recording: every method of :class:`RunView`, doing nothing."""
+
+    active = False
+    log = None
+    flush_samples = 0
+
+    def _nothing(self, *args, **kwargs) -> None:
+        return None
+
+    event = sensor = planner_drawings = plan = flush = executed = finish = discard = _nothing
+
+    def close(self) -> dict[str, str]:
+        return {}

@@ -103,7 +103,7 @@ def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dic
          "stop": model.safe_stop, "stop_category": a.safety.categories, "stop_decel_deg_s2": safety.stop_decel_deg_s2,
          "brakes_nm": model.brakes.tolist() if model.brakes is not None else None,
          "stop_after_s": safety.stop_after_s},
-        *({"kind": "intervention", **event.as_dict()} for event in a.safety.interventions),
+        *({"kind": "intervention", **event} for event in summary["safety"]["interventions"]),
         {"kind": "end", "passed": summary.get("passed"), "safety_events": summary["metrics"].get("safety_events"),
          "sim_time_s": summary["metrics"].get("sim_time_s")},
     ]

@@ -11,6 +11,8 @@ It implements any of the hooks below with ``@rehabkit.hookimpl``. Every installe
 extension takes part in every run (and in ``rehabkit validate``, as far as the
 setup goes there), in this order:
 
+0. :func:`rehabkit_scenario_sections` — the scenario sections the layer owns (validated, located, suggested and
+   in ``rehabkit schema`` as the core's own are: the scenario model is built with them);
 1. :func:`rehabkit_configure_robot` — before the robot is built (adapt its settings);
 2. :func:`rehabkit_narrow_limits` — the robot built: tighter joint limits;
 3. :func:`rehabkit_force_limit` — an interaction-force limit;
@@ -57,6 +59,21 @@ class Contribution:
     sections: dict[str, Any] = field(default_factory=dict)
     series: dict[str, tuple[Any, Any]] = field(default_factory=dict)
 
+
+@dataclass(frozen=True)
+class Section:
+    """A top-level scenario section an extension owns: its pydantic model (a ``StrictModel``), its value when a
+    scenario leaves it out (``None``: absent), and a line for the schema."""
+
+    model: type
+    default: Any = None
+    description: str = ""
+
+
+@hookspec
+def rehabkit_scenario_sections(registry: Any) -> dict[str, Section]:
+    """The top-level sections this layer owns: name → :class:`Section`. ``registry`` is the run's plugin registry
+    (:class:`~rehabkit.core.plugins.registry.PluginRegistry`), for a section holding plugin settings."""
 
 @hookspec
 def rehabkit_metrics() -> list[Metric]:
@@ -125,6 +142,17 @@ class Extensions:
 
     def metrics(self) -> list[Metric]:
         return [m for ms in self.hook.rehabkit_metrics() for m in ms]
+
+    def sections(self, registry: Any) -> dict[str, tuple[str, Section]]:
+        """Every extension's scenario sections: name → (extension, section); two claiming one name is an error."""
+        out: dict[str, tuple[str, Section]] = {}
+        for impl in self.hook.rehabkit_scenario_sections.get_hookimpls():
+            for name, section in impl.function(registry=registry).items():
+                if name in out:
+                    raise ValueError(f"scenario section '{name}' is claimed by extensions '{out[name][0]}' and "
+                                     f"'{impl.plugin_name}'; uninstall one")
+                out[name] = (impl.plugin_name, section)
+        return dict(sorted(out.items()))
 
 
 _DEFAULT: Extensions | None = None

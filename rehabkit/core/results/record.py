@@ -35,6 +35,8 @@ class RunRecord:
         fired: Task events as they fired; ``acted`` scene actions done; ``notes`` plugins' messages.
         plan_warnings: What plans were found to run into (the keep-in box) before they ran.
         no_plan: Why the first plan failed, if it did: the robot never moved, so no expectation counts as met.
+        interventions: Every time a command was changed, by this host's safety layer or the robot side (a bridge
+            holding a stale command), in time order.
     """
 
     trace: Trace
@@ -51,4 +53,5 @@ class RunRecord:
     plan_warnings: list[dict[str, Any]]
     extra_metrics: dict[str, float] = field(default_factory=dict)  # the loop's own (sensor-thread overruns)
     no_plan: str | None = None  # why the first plan was refused or failed: the robot never moved
+    interventions: list[Any] = field(default_factory=list)  # the safety layer's and the robot side's, in time order
 

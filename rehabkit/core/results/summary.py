@@ -17,7 +17,7 @@ import numpy as np
 
 from rehabkit.core.plugins.lifecycle import Contribution
 from rehabkit.core.results.metric import MetricCatalogue
-from rehabkit.core.results.metrics import Trace, cartesian_metrics, evaluate, tracking_metrics
+from rehabkit.core.results.metrics import Trace, evaluate, tracking_metrics
 from rehabkit.core.results.record import RunRecord
 from rehabkit.core.safety.stopping import stop_figures
 from rehabkit.core.setup.assembly import Assembly
@@ -58,11 +58,8 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
     """The core's and the plugins' metrics: tracking, plans, timing, contacts, safety."""
     trace = r.trace
     sim_time = len(trace.t) * a.schedule.control_dt
-    cart = a.planner.space == "cartesian"
-    own = a.controller.own_reference  # the runner's goal is not where such a controller went
-    metrics, per_joint = tracking_metrics(trace, a.robot, None if cart or own else r.goal)
-    if cart:
-        metrics.update(cartesian_metrics(trace))
+    metrics, per_joint = tracking_metrics(trace, a.robot, a.space.goal(r.goal))
+    metrics.update(a.space.metrics(trace))
     metrics.update(r.plan_metrics)
     metrics.update(a.planner.run_metrics(trace))
     metrics.update(a.controller.run_metrics(trace))
@@ -116,27 +113,27 @@ def run_inputs(a: Assembly, r: RunRecord) -> dict[str, Any]:
             **(a.patient.inputs() if a.patient is not None else {})}
 
 
-def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[str, Any]:
+def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[str, Any]:
     """The summary document: metrics (the core's, the plugins', the extensions'), verdicts, safety, events,
     plans, reports, and the extensions' sections; the interventions and series go to the log.
 
     A safety stop fails the run unless the scenario's expectations are about safety events.
     """
     sc = a.sc
-    if robot_side := a.backend.interventions():
-        a.safety.interventions = sorted(a.safety.interventions + robot_side, key=lambda e: e.t)
+    interventions = r.interventions
     metrics, per_joint = core_metrics(a, r)
     contributions: list[Contribution] = [c for c in a.extensions.hook.rehabkit_run_finished(setup=a, record=r) if c]
     sections: dict[str, Any] = dict(a.sections)
     for c in contributions:
         metrics.update(c.metrics)
         sections.update(c.sections)
-    if view is not None and view.log:
-        series = {**a.backend.series(), **a.controller.series(),
-                  **(a.patient.series() if a.patient is not None else {})}
+    def series() -> dict[str, tuple]:  # (gathered only for a recording)
+        out = {**a.backend.series(), **a.controller.series(), **(a.patient.series() if a.patient is not None else {})}
         for c in contributions:
-            series.update(c.series)
-        view.finish(a.safety.interventions, series)
+            out.update(c.series)
+        return out
+
+    view.finish(interventions, series)
     metrics = {k: _as_count(v) if catalogue.get(k).unit == "count" else v for k, v in metrics.items()}
     verdicts = evaluate(sc.expect, metrics)
     if r.no_plan is not None and "safety_events" not in sc.expect:  # (unless the scenario expects a stop)
@@ -150,7 +147,7 @@ def finish(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[
         "passed": all(v["passed"] for v in verdicts) and not unexpected_trip,
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
-                   "interventions": [e.as_dict() for e in a.safety.interventions],
+                   "interventions": [e.as_dict() for e in interventions],
                    "plan_warnings": r.plan_warnings},
         "inputs": run_inputs(a, r),
         **sections,

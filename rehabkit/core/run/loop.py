@@ -17,26 +17,9 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import Contacts, SceneGeometry
 from rehabkit.core.kinds.interfaces import BackendFaultError, BodyPoses, EmbodiedPatient, Patient
-from rehabkit.core.log.run_view import RunView
-from rehabkit.core.results.metrics import Trace
-from rehabkit.core.run.reference import ReferenceBuffer
-from rehabkit.core.run.timeline import Timeline
-from rehabkit.core.setup.assembly import Assembly
+from rehabkit.core.run.session import RunSession
 
 NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
-
-
-@dataclass
-class LoopState:
-    """Where a loop run in parts stands between them."""
-
-    k: int = 0  # the next step to run
-    due: int = 0  # the next step with something due besides the control (events, sensors)
-    contact_steps: int = 0
-    failed: bool = False  # the controller raised: the safety layer drives from then on
-    stopped: bool = False  # ended for good: a stop event, a backend fault, or the safety stop has run its course
-    braked: bool = False  # the torque went off after a trip and the brakes (if any) were applied
-    next_log: int | None = None  # the next step logged (None: from the start)
 
 
 @dataclass(frozen=True)
@@ -58,35 +41,30 @@ def _idle(dof: int):
     return lambda *args: zero
 
 
-def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer, timeline: Timeline, view: RunView,
-             progress: bool = False, k_to: int | None = None, state: LoopState | None = None) -> LoopResult:
-    """Run the control loop until the end, a stop event, or the safety layer's stop has run its course — or, in
-    parts, from where ``state`` left it up to step ``k_to`` (a learning environment's policy period)."""
+def run_loop(session: RunSession, progress: bool = False, k_to: int | None = None) -> LoopResult:
+    """Advance the session until the end, a stop event, or the safety layer's stop has run its course — or, run in
+    parts, from where it stands up to step ``k_to`` (a learning environment's policy period)."""
+    a, st, view, timeline, trace = session.setup, session.loop, session.view, session.timeline, session.trace
     sch, backend, safety, controller = a.schedule, a.backend, a.safety, a.controller
     n, dof, dt, sub = sch.steps, a.robot.model.dof, sch.control_dt, sch.substeps
-    st = state if state is not None else LoopState()
     k_from, k_end = st.k, n if k_to is None else min(k_to, n)
-    ref_q, ref_qd, ref_qdd = ref.views()
+    ref_q, ref_qd, ref_qdd = session.ref.views()
     state, compute, check = backend.state, controller.compute, safety.check_row
     command, step = backend.command, backend.step
     contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
-    log = view.log
-    tq, tqd, ttau = trace.q, trace.qd, trace.tau  # column views of ``packed``
-    log_every, flush_samples = sch.log_every, view.flush_samples
-    next_log = (0 if log else -1) if st.next_log is None else st.next_log
-    deferred_log = bool(log) and backend.realtime
+    tq, tqd, ttau, packed = trace.q, trace.qd, trace.tau, session.packed  # column views of ``packed``
+    record = a.space.recorder(trace, backend)  # what the reference's space records beside the joints
+    log, log_every, flush_samples = view.log, sch.log_every, view.flush_samples
+    next_log = (0 if view.active else -1) if st.next_log is None else st.next_log
+    deferred_log = view.active and backend.realtime
     if deferred_log:
         log.deferred = True
-    cart = a.planner.space == "cartesian"
-    tx, tqr = trace.x, trace.q_ref
-    drawn = isinstance(backend, SceneGeometry)
-    ee = None if drawn else a.robot.ee_world  # the hand where the backend tracks it, else by the robot's FK
-    own_ref = controller.own_reference
+    drawn = isinstance(backend, SceneGeometry)  # the backend tracks the bodies and the hand; else the robot's FK
     person = a.patient.torque if a.patient is not None else None
     late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
     # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
     push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
-    tau_h, force_at, goal_at, f_h = trace.tau_h, a.force_source, ref.goal_at, trace.f_h  # (f_h: when measured)
+    tau_h, force_at, goal_at, f_h = trace.tau_h, a.force_source, session.ref.goal_at, trace.f_h  # (f_h: measured)
     draws = a.patient.drawing if a.patient is not None and type(a.patient).drawing is not Patient.drawing else None
     stop_after = a.sc.safety.stop_after_s
     bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
@@ -103,7 +81,10 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             t = k * dt
             _, q, qd = state()
             if k >= due:
-                due = timeline.due(k, t, q, qd)
+                due, replans = timeline.due(k, t, q, qd)
+                if replans:
+                    session.act(k, t, q, qd, replans)
+                    due = k + 1 if due >= 0 else due  # (a new plan may have scene actions due at once)
                 if due < 0:
                     st.stopped = True
                     break
@@ -119,17 +100,13 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
             if force_at is not None:
-                force = a.last_force = force_at(t, q, tau_h[k] if person is not None else None)
+                force = force_at(t, q, tau_h[k] if person is not None else None)
                 if f_h is not None:
                     f_h[k] = math.sqrt(force @ force)
                 safety.check_force(t, q, force, qd)
             tau = check(t, row)
-            if cart:
-                tx[k] = ee(q[None])[0] if ee is not None else backend.ee_position()  # world; base frame at the end
-                if controller.joint_reference is not None:
-                    tqr[k] = controller.joint_reference
-            elif own_ref:
-                tqr[k] = controller.joint_reference
+            if record is not None:
+                record(k, q)
             try:
                 command(tau)
                 if push is not None:
@@ -148,7 +125,7 @@ def run_loop(a: Assembly, trace: Trace, packed: np.ndarray, ref: ReferenceBuffer
                 if drawn:
                     log.record(t, backend.body_poses(), backend.ee_position())
                 else:
-                    log.record(t, NO_BODIES, ee(q[None])[0])
+                    log.record(t, NO_BODIES, a.robot.ee_world(q[None])[0])
                 if draws is not None:
                     for name, shapes in draws().items():
                         log.drawing(t, f"world/patient/{name}", shapes)

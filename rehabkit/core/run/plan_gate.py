@@ -14,24 +14,15 @@ from rehabkit.core.kinds.capabilities import HeldObjects
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.results.metric import MetricCatalogue, combine
 from rehabkit.core.safety.layer import AXES
-from rehabkit.core.setup.limits import LimitBreach, first_breach
-
-CHECK_DT = 0.005  # plans are checked at this resolution [s]
-
-
-def plan_breach(plan: Plan, model) -> LimitBreach | None:
-    """The first joint limit of ``model`` a joint-space plan breaks, sampled every ``CHECK_DT``."""
-    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-    qs, qds, _ = plan.trajectory.sample(ts)
-    return first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
+from rehabkit.core.setup.limits import CHECK_DT, LimitBreach
+from rehabkit.core.setup.space import JointSpace
 
 
 class PlanGate:
     """Asks the scenario's planner, checks what it answers, keeps the plans' diagnostics and warnings."""
 
-    def __init__(self, setup, catalogue: MetricCatalogue):
-        self.planner, self.robot, self.safety = setup.planner, setup.robot, setup.safety
-        self.cartesian = setup.planner.space == "cartesian"
+    def __init__(self, setup, space: JointSpace, catalogue: MetricCatalogue):
+        self.planner, self.robot, self.safety, self.space = setup.planner, setup.robot, setup.safety, space
         self.scene_actions = ("grasp", "release") if isinstance(setup.backend, HeldObjects) else ()
         self.catalogue = catalogue
         self.metrics: dict[str, float] = {}
@@ -44,7 +35,7 @@ class PlanGate:
 
     def problem(self, plan: Plan) -> tuple[str | None, LimitBreach | None]:
         """Why the plan must not run (and the limit breach, when that is why), or ``(None, None)``."""
-        breach = self.limit_breach(plan)
+        breach = self.space.limit_breach(plan)
         if breach is not None:
             return f"planned trajectory: {breach.describe()}", breach
         bad = sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions})
@@ -52,18 +43,12 @@ class PlanGate:
             return f"plan action(s) {bad} unknown; the backend can do: {', '.join(self.scene_actions) or 'none'}", None
         return None, None
 
-    def limit_breach(self, plan: Plan) -> LimitBreach | None:
-        """The first joint limit a joint-space plan breaks (Cartesian plans are mapped by the controller)."""
-        return None if self.cartesian else plan_breach(plan, self.robot.model)
-
-    def warn_box(self, t: float, plan: Plan, to_world) -> None:
+    def warn_box(self, t: float, plan: Plan) -> None:
         """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""
         if not self.safety.watches_box:
             return
         ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-        samples = plan.trajectory.sample(ts)[0]
-        hand = to_world(samples[:, :3]) if self.cartesian else self.robot.ee_world(samples)
-        found = self.safety.box_exit(hand)
+        found = self.safety.box_exit(self.space.hand_world(plan.trajectory.sample(ts)[0]))
         if found is not None:
             k, a, side, bound = found
             self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "message": (

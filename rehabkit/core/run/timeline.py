@@ -4,12 +4,13 @@ The loop asks :meth:`Timeline.due` only at the step it last said something is du
 so a step with nothing to do costs one integer comparison. Events fire on a time
 (``at``), on the hand reaching a target (checked at ``REACH_CHECK_HZ``), or on a
 sensed target having moved and settled; they plan again, move an object, or stop
-(after a ramp-out, when the envelope has one).
+(after a ramp-out, when the envelope has one). A replan is not made here: :meth:`Timeline.due` returns the
+:class:`Replan` requests it found due, and the session makes them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -17,19 +18,25 @@ import numpy as np
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.setup.assembly import Assembly
 
-Replan = Callable[[int, float, np.ndarray, np.ndarray, list[str], int | None], None]
+
+@dataclass(frozen=True)
+class Replan:
+    """A plan due: through ``names`` (by event ``event``'s planner settings, if it has some); sensor-driven targets
+    at the positions last sensed (base frame), or ``unseen`` says which sensor has not seen one yet."""
+
+    names: list[str]
+    event: int | None = None
+    sensed: dict[str, np.ndarray] = field(default_factory=dict)
+    unseen: str | None = None
 
 
 class Timeline:
-    """Events, scene actions, sensors and the stop of one run.
+    """Events, scene actions, sensors and the stop of one run; ``view`` records events and readings."""
 
-    ``replan(k, t, q, qd, target_names, event)`` plans and installs (with the event's planner settings, if it has
-    some); ``log`` (may be ``None``) records events and readings.
-    """
-
-    def __init__(self, setup: Assembly, replan: Replan, log, threads: SensorThreads | None):
+    def __init__(self, setup: Assembly, view, threads: SensorThreads | None):
         sc, sch = setup.sc, setup.schedule
-        self.setup, self.replan, self.log, self.threads = setup, replan, log, threads
+        self.setup, self.view, self.threads = setup, view, threads
+        self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
         self.observations: dict[str, dict[str, Any]] = {}
@@ -75,8 +82,21 @@ class Timeline:
         pos = self.observations.get(self.specs[name].sensor, {}).get("target_position")
         return None if pos is None else np.asarray(pos, float)
 
-    def due(self, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> int:
-        """Do what is due at step ``k``; the next step anything is due, or -1 to stop the run."""
+    def request(self, names: list[str], event: int | None = None) -> Replan:
+        """A plan through ``names``, its sensor-driven targets where they were last sensed."""
+        sensed = {}
+        for name in names:
+            spec = self.specs[name]
+            if spec.sensor:
+                pos = self.sensed(name)
+                if pos is None:
+                    return Replan(list(names), event, unseen=f"target '{name}': sensor '{spec.sensor}' has not seen it")
+                sensed[name] = pos
+        return Replan(list(names), event, sensed)
+
+    def due(self, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> tuple[int, list[Replan]]:
+        """Do what is due at step ``k`` but planning: the next step anything is due (-1: stop the run), and the
+        plans due now."""
         a, sch = self.setup, self.setup.schedule
         try:
             while self._timed and self._timed[0][0] <= k:
@@ -85,8 +105,7 @@ class Timeline:
                 _, kind, obj = self.actions.pop(0)
                 getattr(a.backend, kind)(obj)  # one of the backend's scene_actions
                 self.acted.append({"t": round(t, 6), "action": kind, "object": obj})
-                if self.log:
-                    self.log.event(t, f"{kind} {obj}", level="INFO")
+                self.view.event(t, f"{kind} {obj}", level="INFO")
             if self._waiting and k >= self._next_reach:
                 self._next_reach = k + sch.reach_every
                 ee = a.robot.fk(q)[:3, 3]  # base frame, as target poses are
@@ -99,10 +118,11 @@ class Timeline:
                 a.safety.begin_ramp_out(t, q)
                 self._ramp_out_at = None
             if k >= self.stop_at:
-                return -1
+                return -1, self._take_replans()
             self._read_sensors(k, t, q, qd)
         except Exception as exc:
             a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
+        replans = self._take_replans()
         nxt = self.stop_at
         for d in self._sensor_due:
             if d < nxt:
@@ -116,8 +136,12 @@ class Timeline:
         if self._waiting and self._next_reach < nxt:
             nxt = self._next_reach
         if self.threads is not None and self.threads.busy:
-            return k + 1  # a sensor thread's reading is taken at the first tick after it is done
-        return nxt if nxt > k else k + 1
+            return k + 1, replans  # a sensor thread's reading is taken at the first tick after it is done
+        return (nxt if nxt > k else k + 1), replans
+
+    def _take_replans(self) -> list[Replan]:
+        replans, self._replans = self._replans, []
+        return replans
 
     def _read_sensors(self, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         backend, threads, due = self.setup.backend, self.threads, self._sensor_due
@@ -135,11 +159,7 @@ class Timeline:
     def _take(self, name: str, t_read: float, reading: dict, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         """A sensor's reading (started at ``t_read``) into the observations and the log; 'moved' events."""
         self.observations[name] = reading
-        if self.log:
-            self.log.sensor(t_read, name, reading)
-            if reading.get("target_position") is not None:
-                self.log.points(f"world/sensed/{name}", self.setup.robot.model.to_world(reading["target_position"]),
-                                (40, 220, 40), 0.02, t_read)
+        self.view.sensor(t_read, name, reading)
         if not self._watch:
             return
         for i, state in self._watch.items():
@@ -164,8 +184,7 @@ class Timeline:
         trigger = f"at {ev.at}" if ev.at is not None else (
             f"reached {ev.reached}" if ev.reached is not None else f"{ev.moved} moved")
         self.fired.append({"event": i, "t": round(t, 6), "action": ev.action, "trigger": trigger})
-        if self.log:
-            self.log.event(t, f"event {i}: {trigger} -> {ev.action}", level="INFO")
+        self.view.event(t, f"event {i}: {trigger} -> {ev.action}", level="INFO")
         if ev.action == "stop":  # with a ramp-out, the robot is eased into holding first
             self.stop_at = min(self.stop_at, k + self._ramp_steps)
             if self._ramp_steps:
@@ -174,15 +193,15 @@ class Timeline:
             a = self.setup
             why = f"e-stop pressed (event {i}, {trigger})"
             a.safety.trip(t, q, "e-stop", why, qd)
-            if not a.backend.latch_estop(why) and self.log:
-                self.log.event(t, f"backend '{a.sc.backend.type}' keeps no e-stop latch", level="WARN")
+            if not a.backend.latch_estop(why):
+                self.view.event(t, f"backend '{a.sc.backend.type}' keeps no e-stop latch", level="WARN")
         elif ev.action == "move":
             self.setup.backend.move_object(ev.object, np.asarray(ev.position, float))
         elif ev.moved is not None:  # a sensed target moved: reach it (the sequence) again
-            self.replan(k, t, q, qd, ev.sequence or self.setup.sc.task.order(), i)
+            self._replans.append(self.request(ev.sequence or self.setup.sc.task.order(), i))
         else:  # from where the arm is to what is left
             names = ev.sequence or self.remaining(ev.reached, t)
             if names:
-                self.replan(k, t, q, qd, names, i)
-            elif self.log:
-                self.log.event(t, f"event {i}: every target is reached; nothing to plan", level="INFO")
+                self._replans.append(self.request(names, i))
+            else:
+                self.view.event(t, f"event {i}: every target is reached; nothing to plan", level="INFO")

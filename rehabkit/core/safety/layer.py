@@ -211,7 +211,7 @@ class SafetyLayer(StopActions, Ramps):
             return
         self._clip = SafetyEvent(t, "torque-clip", self.names[j], float(tau[j]), float(self.effort[j]),
                                  f"t={t:.3f}s: commanded torque clipped to the effort limit",
-                                 {"until_s": t, "steps": 1})
+                                 {"until_s": t, "steps": 1}, level="WARN")
         self._note(self._clip)
 
     def _note(self, event: SafetyEvent) -> None:
@@ -243,14 +243,15 @@ class SafetyLayer(StopActions, Ramps):
         name = self.names[joint] if isinstance(joint, int) else joint
         subject = f"{name} = " if name else ""
         digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
-        text = f"t={t:.3f}s: {message}" + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
-                                            if value is not None and not described else "")
+        cause = message + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
+                           if value is not None and not described else "")
+        text = f"t={t:.3f}s: {cause}"
         if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
-            self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}))
+            self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}, cause=cause))
             return
         category = self._category.get(rule, self._category["default"])
         text += f"; {WORDS[category]}"
-        event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category})
+        event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category}, cause=cause)
         self.events.append(event)
         self._note(event)
         self.tripped_at = t

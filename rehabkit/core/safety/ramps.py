@@ -31,7 +31,7 @@ class Ramps:
             self._plain = False
             self._note(SafetyEvent(t, "ramp-out", None, None, None,
                                    f"t={t:.3f}s: ramp-out over {self.config.ramp_out_s:g} s to holding the posture",
-                                   {"duration_s": self.config.ramp_out_s}))
+                                   {"duration_s": self.config.ramp_out_s}, level="INFO"))
 
     def _ramp(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         if self._ramp_from is not None:
@@ -42,7 +42,7 @@ class Ramps:
                 self._ramp_in_noted = True
                 self._note(SafetyEvent(t, "ramp-in", None, None, None,
                                        f"t={t:.3f}s: ramp-in over {self._ramp_in:g} s from holding the start posture",
-                                       {"duration_s": self._ramp_in}))
+                                       {"duration_s": self._ramp_in}, level="INFO"))
             posture, s = self._start_q, _blend(t / self._ramp_in)
         hold = self._hold_torque(posture, q, qd)
         tau *= s

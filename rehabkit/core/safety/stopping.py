@@ -119,9 +119,10 @@ class StopActions:
 
     def braked(self, t: float, engaged: bool) -> None:
         """Record that the torque went off, and whether brakes hold the robot."""
-        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: torque off; " + (
-            "holding brakes engaged" if engaged else "no brakes: the robot is free to move (gravity, the person)"),
-            {"engaged": engaged}))
+        cause = "torque off; " + ("holding brakes engaged" if engaged else
+                                  "no brakes: the robot is free to move (gravity, the person)")
+        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: {cause}", {"engaged": engaged},
+                               cause=cause))
 
     def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd

@@ -22,6 +22,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from rehabkit.core.plugins.lifecycle import Extensions
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.registry import PluginError, PluginRegistry, default_registry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
@@ -36,6 +37,7 @@ from rehabkit.core.scenario.source import (  # noqa: F401 (deep_merge: part of t
     deep_merge,
     parse_override,
 )
+from rehabkit.models.strict import FILE_SETTING
 
 REQUIRED_PLUGIN_SECTIONS = ("robot", "planner", "controller")  # (backend: mujoco by default)
 
@@ -207,10 +209,11 @@ def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnosti
     return problems
 
 
-def validate_source(src: Source, registry: PluginRegistry, file: Path) -> ScenarioBase:
+def validate_source(src: Source, registry: PluginRegistry, file: Path,
+                    extensions: Extensions | None = None) -> ScenarioBase:
     """Validate merged data; raise :class:`ScenarioError` with every problem."""
     problems = _check_plugin_types(src, registry)
-    model = scenario_model(registry)
+    model = scenario_model(registry, extensions)
     try:
         result = model.model_validate(src.data)
     except ValidationError as exc:
@@ -275,6 +278,7 @@ def load_scenario(
     overrides: Iterable[str] | Mapping[str, Any] = (),
     registry: PluginRegistry | None = None,
     origin: Path | None = None,
+    extensions: Extensions | None = None,
 ) -> LoadedScenario:
     """Read, merge, override and validate a scenario file.
 
@@ -284,6 +288,7 @@ def load_scenario(
         registry: Plugins to validate against (default: the installed ones).
         origin: For a run's snapshot of a scenario: the file it was taken from (relative paths resolve
             from its folder, and the run reports it as its scenario).
+        extensions: The layers whose sections the scenario may have (default: the installed ones).
 
     Raises:
         ScenarioError: with one :class:`Diagnostic` per problem.
@@ -301,7 +306,45 @@ def load_scenario(
     _with_profile(src, path)  # --set patient=FILE (a sweep over profiles): from the scenario's folder, as in it
     _fit_new_types(src, overrides, registry)
     _relabel(src, path)
-    return LoadedScenario(validate_source(src, registry, path), (origin or path).resolve(), src)
+    scenario = validate_source(src, registry, path, extensions)
+    if _anchor_file_settings(src, scenario, path):  # a base file's relative paths, made absolute from its folder
+        scenario = validate_source(src, registry, path, extensions)
+    return LoadedScenario(scenario, (origin or path).resolve(), src)
+
+
+def _set_at(data: Any, loc: tuple, value: Any) -> None:
+    for key in loc[:-1]:
+        data = data[key]
+    data[loc[-1]] = value
+
+
+def _anchor_file_settings(src: Source, scenario: ScenarioBase, path: Path) -> bool:
+    """File settings (:data:`~rehabkit.models.strict.FilePath`) written relative in another file than the scenario
+    (an ``extends:`` base, a profile) made absolute from that file's folder; whether any was."""
+    here, changed = path.resolve(), False
+
+    def walk(node: Any, loc: tuple) -> None:
+        nonlocal changed
+        if isinstance(node, BaseModel):
+            for name, info in type(node).model_fields.items():
+                value = getattr(node, name)
+                if FILE_SETTING in info.metadata and isinstance(value, str):
+                    mark = src.value_marks.get((*loc, name))
+                    written = Path(mark.file).resolve() if mark is not None and not mark.file.startswith("<") else here
+                    if written != here and not Path(value).expanduser().is_absolute():
+                        _set_at(src.data, (*loc, name), str((written.parent / value).resolve()))
+                        changed = True
+                else:
+                    walk(value, (*loc, name))
+        elif isinstance(node, dict):
+            for key, value in node.items():
+                walk(value, (*loc, key))
+        elif isinstance(node, (list, tuple)):
+            for i, value in enumerate(node):
+                walk(value, (*loc, i))
+
+    walk(scenario, ())
+    return changed
 
 
 def _relabel(src: Source, path: Path) -> None:

@@ -14,8 +14,8 @@ from typing import Annotated, Any, Literal, Optional, Union
 from pydantic import Field, create_model, model_validator
 
 from rehabkit.core.kinds.interfaces import StrictModel
+from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginRegistry
-from rehabkit.core.scenario.learning import LearningSpec
 from rehabkit.core.scenario.loads import Load
 from rehabkit.core.scenario.patient import PatientBase
 from rehabkit.core.scenario.safety import SafetyConfig
@@ -237,26 +237,9 @@ class Bound(StrictModel):
         return " and ".join(f"{ops[k]} {getattr(self, k)}" for k in ops if getattr(self, k) is not None)
 
 
-class SweepSpec(StrictModel):
-    """A study over this scenario (``rehabkit sweep``): every combination of ``grid`` values × ``seeds`` runs."""
-
-    grid: dict[str, list[Any]] = Field({}, description="key path, as for --set → the values it takes")
-    seeds: int = Field(1, ge=1, description="runs per grid point, with scenario seeds 0..seeds-1")
-    timeout_s: float = Field(600.0, gt=0, description="a run taking longer is stopped and recorded as failed")
-    metrics: list[str] = Field([], description="metrics the aggregate table shows (besides the expect: ones)")
-    test_seeds: int | None = Field(None, ge=1, description="seeds the scenario's test runs (default: all)")
-
-
-class OutcomeSpec(StrictModel):
-    """How movements are cut into reaches for the outcome measures."""
-
-    tolerance_m: float = Field(0.01, gt=0, description="target radius: a reach ends when the hand is this close")
-    dwell_s: float = Field(0.2, ge=0, description="... and stays for this long")
-    min_reach_m: float = Field(0.02, ge=0, description="movements shorter than this are not counted as reaches")
-
-
 class ScenarioBase(StrictModel):
-    """The plugin-independent part of a scenario."""
+    """The plugin-independent part of a scenario: the core's sections (the layers' own are added by
+    :func:`scenario_model`, each from the extension that owns it)."""
 
     name: str | None = None
     description: str | None = None
@@ -268,10 +251,7 @@ class ScenarioBase(StrictModel):
     logging: Logging = Logging()
     safety: SafetyConfig = SafetyConfig()
     patient: PatientBase | None = Field(None, description="the patient's profile, inline or a file path")
-    outcomes: OutcomeSpec = OutcomeSpec()
     expect: dict[str, Bound] = {}
-    sweep: SweepSpec | None = None
-    learning: LearningSpec | None = Field(None, description="the scenario as a learning environment (rehabkit.gym)")
 
 
 PLUGIN_SECTIONS = {"robot": "robot", "backend": "backend", "planner": "planner", "controller": "controller"}
@@ -286,8 +266,8 @@ def _union(registry: PluginRegistry, kind: str):
     return Annotated[Union[configs], Field(discriminator="type")]  # noqa: UP007 (runtime-built union)
 
 
-def scenario_model(registry: PluginRegistry) -> type[ScenarioBase]:
-    """The full Scenario model for the installed plugins."""
+def scenario_model(registry: PluginRegistry, extensions: Extensions | None = None) -> type[ScenarioBase]:
+    """The full Scenario model for the installed plugins and the extensions' sections (default: the installed)."""
     fields = {}
     for section, kind in PLUGIN_SECTIONS.items():
         union = _union(registry, kind)
@@ -305,4 +285,9 @@ def scenario_model(registry: PluginRegistry) -> type[ScenarioBase]:
         profile = create_model("Patient", __base__=PatientBase,
                                model=(Optional[patient_union], Field(None, description="simulated behaviour")))  # noqa: UP045
         fields["patient"] = (Optional[profile], None)  # noqa: UP045 (runtime-built model)
+    for name, (owner, section) in (extensions or default_extensions()).sections(registry).items():
+        if name in ScenarioBase.model_fields or name in fields:
+            raise ValueError(f"extension '{owner}' declares the scenario section '{name}', which is the core's")
+        kind = section.model if section.default is not None else Optional[section.model]  # noqa: UP045
+        fields[name] = (kind, Field(section.default, description=section.description or None))
     return create_model("Scenario", __base__=ScenarioBase, **fields)

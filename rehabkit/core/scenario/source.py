@@ -154,7 +154,9 @@ def _with_profile(src: Source, path: Path) -> None:
     ref = src.data.get("patient")
     if not isinstance(ref, str):
         return
-    ppath = (path.parent / ref).resolve()
+    written = src.value_marks.get(("patient",))  # relative to the file that names it (a base file's, say)
+    folder = Path(written.file).parent if written is not None and not written.file.startswith("<") else path.parent
+    ppath = (folder / ref).resolve()
     if not ppath.exists():
         raise ScenarioError([Diagnostic(src.value_marks[("patient",)], "patient", f"profile not found: {ppath}")])
     prof = read_yaml(ppath)

@@ -29,7 +29,6 @@ from rehabkit.core.kinds.interfaces import (
     Context,
     Controller,
     EmbodiedPatient,
-    InteractionForceSensor,
     Patient,
     Planner,
     PlanningError,
@@ -55,9 +54,11 @@ from rehabkit.core.setup.checks import (
     has,
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.core.setup.force_source import ForceSource, force_source
 from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
+from rehabkit.core.setup.space import JointSpace, reference_space
 from rehabkit.core.setup.targets import resolve_targets
-from rehabkit.models.hand_force import HandForce, hand_in_world
+from rehabkit.models.hand_force import hand_in_world
 from rehabkit.models.robot_model import JointLimits
 
 REACH_CHECK_HZ = 100.0  # 'reached' events are tested at this rate, not every control step
@@ -104,11 +105,8 @@ class Assembly:
     event_planners: dict[int, Planner] = field(default_factory=dict)  # replan events with planner settings
     controller: Controller | None = None
     patient: Patient | None = None
-    # the interaction force [N] each control step, (t, q, τ_person) → 3 values: measured (a force-torque sensor, an
-    # embodied person's straps) or estimated from a simulated person's joint torques; ``measured`` says which
-    force_source: Callable[[float, np.ndarray, np.ndarray | None], np.ndarray] | None = None
-    force_measured: bool = False
-    last_force: np.ndarray | None = None  # the force source's last value (what ``Context.interaction_force`` gives)
+    space: JointSpace | None = None  # the reference's space (joint or Cartesian: a CartesianSpace)
+    force_source: ForceSource | None = None  # the interaction force each control step, and its last value
     safety: SafetyLayer | None = None
     schedule: Schedule | None = None
 
@@ -166,13 +164,15 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         if ev.planner is not None:  # (the settings were validated with the scenario, each located)
             config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
             a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
-    a.context = replace(a.context, reference_space=a.planner.space, interaction_force=lambda: a.last_force)
+    a.context = replace(a.context, reference_space=a.planner.space, interaction_force=lambda: (
+        a.force_source.last if a.force_source is not None else None))
     a.controller = a.make("controller", sc.controller, ("controller",))
     if a.planner.space != a.controller.reference:
         raise PluginSetupError(a.loaded.source, ("controller", "type"), (),
                                f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
                                f"'{sc.controller.type}' takes {a.controller.reference} references; pick a "
                                "matching pair")
+    a.space = reference_space(a)
     for t in sc.task.targets:
         if t.sensor and t.sensor not in a.sensors:
             raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
@@ -249,7 +249,7 @@ def _patient_and_safety(a: Assembly) -> None:
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
               if v is not None]
     force_limit = min(limits) if limits else None
-    _force_source(a, force_limit)
+    a.force_source = force_source(a, force_limit)
     a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
                            hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
@@ -258,34 +258,6 @@ def _patient_and_safety(a: Assembly) -> None:
         a.context.note(0.0, f"stop category 0/1 for {', '.join(off)}: the torque goes off, and robot "
                             f"'{a.robot.model.name}' has no brakes: after such a stop it is free to move (its weight, "
                             "the person)")
-
-
-def _force_source(a: Assembly, limit: float | None) -> None:
-    """Where the interaction force comes from: force-torque sensors (measured, on any backend reading them), else an
-    embodied person's straps (measured in the scene), else a simulated person's joint torques (estimated at the
-    hand); an interaction-force limit with none of them is refused."""
-    sensing = [s for s in a.sensors.values() if isinstance(s, InteractionForceSensor) and s.interaction]
-    if len(sensing) == 1:  # (the common case: no list and max each control step)
-        sensor = sensing[0]
-        a.force_source, a.force_measured = (lambda t, q, tau_h: sensor.interaction_force(t, a.backend)), True
-    elif sensing:
-        def measured(t, q, tau_h):  # the largest of them (a cuff per segment)
-            forces = [s.interaction_force(t, a.backend) for s in sensing]
-            return max(forces, key=lambda f: f @ f)
-
-        a.force_source, a.force_measured = measured, True
-    elif isinstance(a.patient, EmbodiedPatient):
-        a.force_source, a.force_measured = (lambda t, q, tau_h: a.patient.interaction_force()), True
-    elif a.patient is not None and limit is not None:
-        estimate = HandForce(a.robot.model)
-        a.force_source = lambda t, q, tau_h: estimate(q, tau_h)
-    elif limit is not None:
-        at = ("safety", "interaction_force_n") if a.sc.safety.interaction_force_n is not None else ("patient",)
-        raise PluginSetupError(a.loaded.source, at, (),
-                               f"an interaction-force limit ({limit:g} N, from safety.interaction_force_n or "
-                               "patient.comfort) needs a source of the force: a force-torque sensor (sensors: {ft: "
-                               "{type: force-torque}}) or a simulated patient (patient.model); backend "
-                               f"'{a.sc.backend.type}' measures none")
 
 
 def _schedule(a: Assembly) -> Schedule:
@@ -335,11 +307,8 @@ def check_first_plan(a: Assembly) -> None:
         plan = a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
     except PlanningError as exc:
         raise first_plan_refusal(a, exc) from exc
-    if a.planner.space == "joint":  # as the run's plan gate checks it
-        from rehabkit.core.run.plan_gate import plan_breach
-
-        if (breach := plan_breach(plan, a.robot.model)) is not None:
-            raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
+    if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
+        raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
 
 
 def first_plan_refusal(a: Assembly, why: Exception | str) -> PluginSetupError:

@@ -5,7 +5,6 @@ joint targets within the ranges in force."""
 from __future__ import annotations
 
 import os
-import re
 from typing import Any
 
 import numpy as np
@@ -115,14 +114,15 @@ def check_joint_targets(a: Assembly) -> None:
         breach = first_breach(model.limits, model.joint_names, target.q[None], None, np.zeros(1),
                               revolute=model.revolute)
         if breach is not None:
-            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}")
+            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}", target=name)
             raise at_target(a, why, "task") or SetupError(str(why))
 
 
 def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetupError | None:
-    """A refusal naming one target (out of reach, say), located at where that target is given."""
-    named = re.match(r"target '([^']+)'", str(exc))
-    index = next((i for i, t in enumerate(a.sc.task.targets) if named and t.name == named[1]), None)
+    """A refusal about one target (out of reach, say: a :class:`PlanningError` naming it), located at where that
+    target is given."""
+    target = exc.target if isinstance(exc, PlanningError) else None
+    index = next((i for i, t in enumerate(a.sc.task.targets) if target is not None and t.name == target), None)
     if index is None:
         return None
     spec = a.sc.task.targets[index]

@@ -158,3 +158,14 @@ def first_breach(limits: JointLimits, names: list[str], q: np.ndarray, qd: np.nd
 def outside(q: np.ndarray, limits: JointLimits, tol: float = 1e-9) -> list[int]:
     """Indices of joints of ``q`` outside ``limits``."""
     return [j for j in range(len(q)) if q[j] < limits.lower[j] - tol or q[j] > limits.upper[j] + tol]
+
+
+CHECK_DT = 0.005  # plans are checked at this resolution [s]
+
+
+def plan_breach(plan, model) -> LimitBreach | None:
+    """The first joint limit of ``model`` a joint-space plan (:class:`~rehabkit.core.kinds.interfaces.Plan`) breaks,
+    sampled every ``CHECK_DT``."""
+    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+    qs, qds, _ = plan.trajectory.sample(ts)
+    return first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)

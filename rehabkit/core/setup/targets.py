@@ -27,7 +27,7 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
         if name in out:
             return out[name]
         if name in stack:
-            raise PlanningError(f"target '{name}' refers to itself through {' -> '.join((*stack, name))}")
+            raise PlanningError(f"target '{name}' refers to itself through {' -> '.join((*stack, name))}", target=name)
         spec = specs[name]
         if spec.sensor:
             tgt = Target(name, position_only=True)  # its position arrives with the sensor's readings
@@ -39,13 +39,14 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
         elif spec.random is not None:
             if not isinstance(robot, RandomReach):
                 raise PlanningError(f"target '{name}': random targets need a robot that draws reachable points "
-                                    f"('{robot.model.name}' does not)")
+                                    f"('{robot.model.name}' does not)", target=name)
             rng = np.random.default_rng([seed, index[name]])
             start = None
             if spec.random.not_straight_from is not None:
                 ref = get(spec.random.not_straight_from, (*stack, name))
                 if ref.pose is None:
-                    raise PlanningError(f"target '{name}': '{spec.random.not_straight_from}' has no position")
+                    raise PlanningError(f"target '{name}': '{spec.random.not_straight_from}' has no position",
+                                        target=name)
                 start = ref.pose[:3, 3]
             point = robot.random_reach(rng, start)
             pose = np.eye(4)
@@ -54,7 +55,8 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
         elif spec.joints_deg is not None or spec.joints_rad is not None:
             q = np.radians(spec.joints_deg) if spec.joints_deg is not None else np.asarray(spec.joints_rad, float)
             if len(q) != robot.model.dof:
-                raise PlanningError(f"target '{name}' has {len(q)} joint values; robot has {robot.model.dof} joints")
+                raise PlanningError(f"target '{name}' has {len(q)} joint values; robot has {robot.model.dof} joints",
+                                    target=name)
             tgt = Target(name, q=q, pose=robot.fk(q))
         else:
             pose = np.eye(4)
@@ -63,7 +65,8 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
             if spec.orientation_of:
                 ref = get(spec.orientation_of, (*stack, name))
                 if ref.pose is None or ref.position_only:
-                    raise PlanningError(f"target '{name}': '{spec.orientation_of}' has no orientation to copy")
+                    raise PlanningError(f"target '{name}': '{spec.orientation_of}' has no orientation to copy",
+                                        target=name)
                 pose[:3, :3] = ref.pose[:3, :3]
             elif spec.rpy_deg is not None:
                 pose[:3, :3] = rpy_to_matrix(np.radians(spec.rpy_deg))
@@ -114,18 +117,20 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray,
             try:
                 sols = robot.solve_ik(tgt.pose, reference=prev, free=tgt.free)
             except NotImplementedError as exc:  # no IK of its own and a model Pinocchio can't load
-                raise PlanningError(f"target '{tgt.name}' is Cartesian: {exc}; give it as joint values") from exc
+                raise PlanningError(f"target '{tgt.name}' is Cartesian: {exc}; give it as joint values",
+                                    target=tgt.name) from exc
             if not sols:
-                raise PlanningError(unreachable(tgt, robot))
+                raise PlanningError(unreachable(tgt, robot), target=tgt.name)
             sols = [prev + angular_distance(s, prev) for s in sols]
             inside = [s for s in sols if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
             if not inside:
-                raise PlanningError(f"target '{tgt.name}': none of {len(sols)} IK solutions is within the joint limits")
+                raise PlanningError(f"target '{tgt.name}': none of {len(sols)} IK solutions is within the joint limits",
+                                    target=tgt.name)
             if accept is not None:
                 inside = [s for s in inside if accept(s)]
                 if not inside:
                     raise PlanningError(f"target '{tgt.name}': each of its IK solutions within the joint limits "
-                                        "touches the world (an obstacle or the floor)")
+                                        "touches the world (an obstacle or the floor)", target=tgt.name)
             q = min(inside, key=lambda s: float(np.linalg.norm(s - prev)))
             branches[tgt.name] = len(sols)
             reached = robot.fk(q)

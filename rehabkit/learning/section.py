@@ -1,8 +1,8 @@
 """The ``learning:`` section: the scenario as a reinforcement-learning environment (``rehabkit.gym``).
 
 What the policy does (``action``), what it sees (``observation``), what it is paid (``reward``, weighted terms) and
-how often it acts (``policy_hz``, over the control loop). The DSL only: the environment itself is
-:mod:`rehabkit.gym`, a layer above the core.
+how often it acts (``policy_hz``, over the control loop). The DSL only, contributed to every scenario through the
+``rehabkit_scenario_sections`` hook (an extension); the environment itself is :mod:`rehabkit.gym`.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
+from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.plugins.lifecycle import Section
 from rehabkit.models.strict import StrictModel
 
 OBSERVATION_TERMS = ("joint_state", "reference", "tracking_error", "goal", "phase", "interaction_force",
@@ -78,3 +80,8 @@ class LearningSpec(StrictModel):
                     "rad²), interaction_force (−mean force, N), assistance (−mean squared robot torque beyond its "
                     "gravity compensation, (N·m)²), jerk (−mean squared joint jerk, (rad/s³)², ×1e-6), reached "
                     "(+1 a step once the goal of the movement under way is within the outcome tolerance)")
+
+
+@hookimpl
+def rehabkit_scenario_sections(registry) -> dict[str, Section]:
+    return {"learning": Section(LearningSpec, None, "the scenario as a learning environment (rehabkit.gym)")}

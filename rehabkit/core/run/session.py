@@ -1,0 +1,206 @@
+"""One run's state, as MuJoCo's ``MjData`` is to its constant ``MjModel``: what changes while the run goes.
+
+The :class:`~rehabkit.core.setup.assembly.Assembly` is what the run is made of and does not change; a
+:class:`RunSession` is everything the run writes as it goes — the trace, the reference, the timeline, the plans,
+the recording, the notes, why a plan was refused, where the loop stands. :func:`open_session` makes one standing
+at the start with its first plan; :func:`~rehabkit.core.run.loop.run_loop` advances it; the runner's
+``finish`` turns it into the summary. Plans are made here: at the start, on what the timeline says is due, and
+when a controller asks for one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from rehabkit.core.kinds.capabilities import NamedJoints, PassiveJoints
+from rehabkit.core.kinds.interfaces import BackendFaultError, Plan, PlanningError, Target
+from rehabkit.core.log.rerun_log import encode_images
+from rehabkit.core.log.run_view import NullView, RunView, open_view
+from rehabkit.core.results.metric import MetricCatalogue
+from rehabkit.core.results.metrics import Trace
+from rehabkit.core.run.plan_gate import PlanGate
+from rehabkit.core.run.reference import ReferenceBuffer
+from rehabkit.core.run.sensor_threads import SensorThreads
+from rehabkit.core.run.timeline import Replan, Timeline
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.core.setup.assembly import Assembly, SetupError, first_plan_refusal, metric_catalogue, start_posture
+from rehabkit.core.setup.limits import LimitBreach
+
+
+@dataclass(frozen=True)
+class PlanRefusal:
+    """Why a plan did not run: what was said (the safety stop's message), the joint limit it would have broken
+    when that is why, the planner's own error when it failed, and — for the run's first plan — the refusal located
+    in the scenario file (the task as written can't be planned: bad input)."""
+
+    t: float
+    reason: str
+    breach: LimitBreach | None = None
+    error: PlanningError | None = None
+    unplannable: bool = False  # the planner failed or its plan must not run (not: a sensed target unseen)
+    first: bool = False
+    located: ScenarioError | None = None
+
+
+@dataclass
+class LoopState:
+    """Where a loop run in parts stands between them."""
+
+    k: int = 0  # the next step to run
+    due: int = 0  # the next step with something due besides the control (events, sensors)
+    contact_steps: int = 0
+    failed: bool = False  # the controller raised: the safety layer drives from then on
+    stopped: bool = False  # ended for good: a stop event, a backend fault, or the safety stop has run its course
+    braked: bool = False  # the torque went off after a trip and the brakes (if any) were applied
+    next_log: int | None = None  # the next step logged (None: from the start)
+
+
+@dataclass
+class RunSession:
+    """A run in progress (see the module's docstring); ``setup`` is what it runs."""
+
+    setup: Assembly
+    trace: Trace
+    packed: np.ndarray  # the trace's [q, qd, tau] rows side by side: the safety layer checks a row in place
+    ref: ReferenceBuffer
+    view: RunView | NullView
+    catalogue: MetricCatalogue
+    gate: PlanGate
+    q0: np.ndarray
+    timeline: Timeline | None = None
+    threads: SensorThreads | None = None
+    loop: LoopState = field(default_factory=LoopState)
+    plans: list[dict] = field(default_factory=list)
+    notes: list[dict] = field(default_factory=list)
+    refusal: PlanRefusal | None = None  # the last plan that did not run, and why (the first plan's, if it did not)
+
+    @property
+    def first_refusal(self) -> PlanRefusal | None:
+        """The run's first plan did not run: the robot never moved."""
+        return self.refusal if self.refusal is not None and self.refusal.first else None
+
+    # -- planning ------------------------------------------------------------------------------------------
+
+    def act(self, k: int, t: float, q: np.ndarray, qd: np.ndarray, replans: list[Replan]) -> None:
+        """Make the plans the timeline found due; a planner that crashes stops the robot, saying so."""
+        try:
+            for request in replans:
+                self.replan(k, t, q, qd, request)
+        except Exception as exc:
+            self.setup.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
+
+    def replan(self, k: int, t: float, q: np.ndarray, qd: np.ndarray, request: Replan, first: bool = False) -> None:
+        """Plan through the request's targets from the current state and follow it from step ``k`` (by the planner
+        with its event's settings, when it has some); a plan that can't be made or must not run stops the robot,
+        saying why."""
+        a = self.setup
+        if request.unseen is not None:
+            self._refuse(PlanRefusal(t, request.unseen, first=first), q)
+            return
+        for name, pos in request.sensed.items():  # sensor-driven targets at their latest sensed position
+            pose = np.eye(4)
+            pose[:3, 3] = pos
+            a.targets[name] = Target(name, pose=pose, position_only=True)
+        try:
+            plan = self.gate.ask(t, q, qd, [a.targets[n] for n in request.names], a.event_planners.get(request.event))
+        except PlanningError as exc:
+            self._refuse(PlanRefusal(t, f"planner failed: {exc}", error=exc, unplannable=True, first=first), q)
+            return
+        problem, breach = self.gate.problem(plan)
+        if problem:
+            self._refuse(PlanRefusal(t, problem, breach=breach, unplannable=True, first=first), q, "; not executed")
+            return
+        self.gate.warn_box(t, plan)
+        self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
+        self.timeline.following(request.names, t, plan.waypoint_times)
+
+    def _refuse(self, refusal: PlanRefusal, q: np.ndarray, then: str = "") -> None:
+        if refusal.first and refusal.unplannable:  # the task as written can't be planned: bad input, said where
+            failure = refusal.error if refusal.error is not None else refusal.reason
+            refusal = replace(refusal, located=first_plan_refusal(self.setup, failure))
+        if self.first_refusal is None:  # (the first plan's refusal is kept: the robot never moved)
+            self.refusal = refusal
+        self.setup.safety.trip(refusal.t, q, "plan", refusal.reason + then)
+
+    def plan_for_controller(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
+        """A plan a controller asks for (e.g. a keypad's replay); it follows the trajectory itself.
+
+        Checked against the joint limits, logged and listed in the summary like the run's own plans.
+        Raises :class:`PlanningError` with the reason when there is none.
+        """
+        plan = self.gate.ask(t, q, qd, targets)
+        problem, _ = self.gate.problem(plan)
+        if problem:
+            raise PlanningError(problem)
+        k0 = int(round(t / self.setup.schedule.control_dt))
+        x = self.ref.sample(plan, k0)
+        self.ref.add_movements(k0, plan, x)
+        self._announce(k0, self.gate.account(plan), x)
+        return plan
+
+    def _announce(self, k0: int, plan: Plan, x: np.ndarray) -> None:
+        """List a plan in the summary, schedule its scene actions and draw it."""
+        dt, space = self.setup.schedule.control_dt, self.setup.space
+        self.timeline.schedule_actions(k0, plan.actions)
+        entry = {"t": round(k0 * dt, 6), "duration_s": plan.trajectory.duration}
+        if plan.waypoints is not None:
+            entry[space.waypoint_key] = np.round(space.waypoint_scale(plan.waypoints), 6).tolist()
+        self.plans.append({**entry, **{k: v for k, v in plan.diagnostics.items() if isinstance(v, (int, float))},
+                           **plan.details})
+        self.view.plan(k0 * dt, plan, x)
+
+    def note(self, t: float, text: str) -> None:
+        """A plugin's message for people (an HMI display line): kept in the summary and the recording."""
+        self.notes.append({"t": round(t, 6), "text": text})
+        self.view.event(t, text, level="INFO")
+
+
+def open_session(a: Assembly, spawn: bool = False, notes: list[dict] | None = None) -> RunSession:
+    """The run standing at its start: the trace and reference allocated, the recording open, the robot at the
+    start posture (an e-stop cleared since the last session eases in), the first plan made. ``notes`` are those
+    said while the run was assembled."""
+    n, dof = a.schedule.steps, a.robot.model.dof
+    packed = np.zeros((n, 3 * dof))
+    trace = Trace(np.arange(n) * a.schedule.control_dt, packed[:, :dof], packed[:, dof : 2 * dof],
+                  packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)),
+                  tau_h=np.zeros((n, dof)) if a.patient is not None else None,
+                  f_h=np.zeros(n) if a.force_source is not None and a.force_source.measured else None)
+    view = open_view(a, a.space, spawn)
+    q0 = start_posture(a)
+    try:
+        a.backend.reset(q0)
+    except BackendFaultError as exc:
+        raise SetupError(f"backend '{a.sc.backend.type}': {exc}") from exc
+    if a.backend.ramp_in_after_clear:  # the first session after an e-stop was cleared eases in
+        a.safety.require_ramp_in(a.backend.ramp_in_after_clear)
+    if isinstance(a.robot, PassiveJoints) and isinstance(a.backend, NamedJoints):
+        # parallel mechanisms: the passive joints assembled too, where the backend sets joints by name
+        a.backend.set_joints(a.robot.passive_state(q0))
+    ref = ReferenceBuffer(n, a.space.point(q0), a.schedule.control_dt, a.space.hand)
+    ref_q, ref_qd, _ = ref.views()
+    a.space.allocate(trace, ref_q, ref_qd)
+    catalogue = metric_catalogue(a)
+    session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0,
+                         notes=list(notes or []))
+    threads = None
+    if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
+        threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
+                                prepare=encode_images if view.active else None)
+    session.threads = threads
+    session.timeline = Timeline(a, view, threads)
+    _first_plan(session)
+    return session
+
+
+def _first_plan(s: RunSession) -> None:
+    a = s.setup
+    s.replan(0, 0.0, s.q0, np.zeros(a.robot.model.dof), s.timeline.request(a.sc.task.order()), first=True)
+    if a.safety.tripped and s.refusal is None:  # (an e-stop still latched, say)
+        s.refusal = PlanRefusal(0.0, "stopped before it moved", first=True)
+    if a.safety.tripped and a.limit_sources.by_joint:
+        # refused before it runs (not stopped at t=0): the limits in force were narrowed, and said where
+        raise SetupError(f"{s.refusal.reason} (joint limits narrowed by the patient's profile or the safety "
+                         "envelope)", s.refusal.breach)
+    s.view.planner_drawings()

@@ -1,0 +1,60 @@
+"""Where a run's interaction force comes from, chosen once at setup, and its last value.
+
+The safety envelope checks the force between person and robot every control step; a controller reads the
+value checked last (``Context.interaction_force()``). The source is measured — force-torque sensors on any
+backend that reads them, or an embodied person's straps in the simulated scene — or estimated at the hand from
+a simulated person's joint torques. An interaction-force limit with no source is refused at the setting.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from rehabkit.core.kinds.interfaces import EmbodiedPatient, InteractionForceSensor
+from rehabkit.core.setup.errors import PluginSetupError
+from rehabkit.models.hand_force import HandForce
+
+Read = Callable[[float, np.ndarray, "np.ndarray | None"], np.ndarray]
+
+
+class ForceSource:
+    """``source(t, q, tau_person)`` → the interaction force [N] (3 values, world frame); ``last`` is the value it
+    gave last (None before the first step), ``measured`` whether it is measured or estimated."""
+
+    def __init__(self, read: Read, measured: bool):
+        self._read, self.measured = read, measured
+        self.last: np.ndarray | None = None
+
+    def __call__(self, t: float, q: np.ndarray, tau_h: np.ndarray | None) -> np.ndarray:
+        self.last = force = self._read(t, q, tau_h)
+        return force
+
+
+def force_source(a, limit: float | None) -> ForceSource | None:
+    """The source of the run's interaction force (``a``: the run's :class:`~rehabkit.core.setup.assembly.Assembly`,
+    its sensors, patient and backend built or about to be): force-torque sensors (the largest of several: a cuff per
+    segment), else an embodied person's straps, else a simulated person's torques where a limit needs them."""
+    sensing = [s for s in a.sensors.values() if isinstance(s, InteractionForceSensor) and s.interaction]
+    if len(sensing) == 1:  # (the common case: no list and max each control step)
+        sensor = sensing[0]
+        return ForceSource(lambda t, q, tau_h: sensor.interaction_force(t, a.backend), True)
+    if sensing:
+        def largest(t, q, tau_h):
+            forces = [s.interaction_force(t, a.backend) for s in sensing]
+            return max(forces, key=lambda f: f @ f)
+        return ForceSource(largest, True)
+    if isinstance(a.patient, EmbodiedPatient):
+        return ForceSource(lambda t, q, tau_h: a.patient.interaction_force(), True)
+    if a.patient is not None and limit is not None:
+        estimate = HandForce(a.robot.model)
+        return ForceSource(lambda t, q, tau_h: estimate(q, tau_h), False)
+    if limit is not None:
+        at = ("safety", "interaction_force_n") if a.sc.safety.interaction_force_n is not None else ("patient",)
+        raise PluginSetupError(a.loaded.source, at, (),
+                               f"an interaction-force limit ({limit:g} N, from safety.interaction_force_n or "
+                               "patient.comfort) needs a source of the force: a force-torque sensor (sensors: {ft: "
+                               "{type: force-torque}}) or a simulated patient (patient.model); backend "
+                               f"'{a.sc.backend.type}' measures none")
+    return None
