@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rehabkit.workspace.trajectory import blend_weight
+from rehabkit.models.time_laws import quintic
 
 AXES = {"x": 0, "y": 1, "z": 2, "roll": 0, "pitch": 1, "yaw": 2}
 SOFT_LIMIT_FRACTION = 0.002
@@ -35,7 +35,7 @@ class Quintic:
         self.q0, self.dq, self.duration = q0, q1 - q0, max(duration, 1e-3)
 
     def sample(self, t):
-        s, ds, dds = (w[:, None] for w in blend_weight(np.atleast_1d(t) / self.duration))
+        s, ds, dds = (w[:, None] for w in quintic(np.atleast_1d(t) / self.duration))
         return self.q0 + s * self.dq, ds / self.duration * self.dq, dds / self.duration**2 * self.dq
 
 

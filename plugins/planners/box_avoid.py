@@ -28,9 +28,8 @@ from rehabkit.core.setup.targets import angular_distance
 from rehabkit.geometry.box_avoid import NoPathError, plan_path
 from rehabkit.geometry.solids import Solid, make_solid
 from rehabkit.models.chain import rpy_to_matrix
-from rehabkit.workspace.trajectory import blend_weight
-
-PEAK = 1.875  # peak / mean speed of the minimum-jerk time law
+from rehabkit.models.time_laws import PEAK_VELOCITY as PEAK
+from rehabkit.models.time_laws import quintic
 
 
 class BoxAvoidConfig(StrictModel):
@@ -173,7 +172,7 @@ class BoxAvoidPlanner(Planner):
         duration = PEAK * seg / cfg.speed_m_s
         n = max(4, int(np.ceil(duration * cfg.sample_hz)) + 1)
         u = np.linspace(0.0, 1.0, n)
-        s = blend_weight(u)[0]
+        s = quintic(u)[0]
         rots = turn(f0 + (f1 - f0) * s).as_matrix()
         lim = robot.model.limits
         qs, prev = [], q

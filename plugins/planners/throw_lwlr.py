@@ -26,9 +26,9 @@ from rehabkit import hookimpl
 from rehabkit.core.kinds.capabilities import FloatingBase
 from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
 from rehabkit.core.results.metric import Metric
+from rehabkit.models.time_laws import quintic
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
-from rehabkit.workspace.trajectory import blend_weight
 
 RATE = 1000.0  # samples per second of the planned hand path
 
@@ -79,7 +79,7 @@ class _Phases:
 
 def _move(p0: np.ndarray, p1: np.ndarray, duration: float):
     """Rest-to-rest minimum-jerk straight line, sampled."""
-    s, ds, dds = (w[:, None] for w in blend_weight(np.arange(0.0, duration, 1.0 / RATE) / duration))
+    s, ds, dds = (w[:, None] for w in quintic(np.arange(0.0, duration, 1.0 / RATE) / duration))
     d = p1 - p0
     return p0 + s * d, ds / duration * d, dds / duration**2 * d
 

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-PEAK_VELOCITY = 1.875
-PEAK_ACCELERATION = 10.0 / np.sqrt(3.0)
+from rehabkit.models.time_laws import PEAK_ACCELERATION, PEAK_VELOCITY, quintic
 
 
 def rest_to_rest_durations(points: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray,
@@ -37,8 +36,7 @@ class RestToRestPath:
         seg = np.clip(np.searchsorted(self.breaks, t, side="right") - 1, 0, len(self.durations) - 1)
         T = self.durations[seg][:, None]
         tau = (t - self.breaks[seg])[:, None] / T
-        s = tau**3 * (10 - 15 * tau + 6 * tau**2)
-        sd = 30 * tau**2 * (1 - tau) ** 2 / T
-        sdd = 60 * tau * (1 - 3 * tau + 2 * tau**2) / T**2
+        s, sd, sdd = quintic(tau)
+        sd, sdd = sd / T, sdd / T**2
         delta = self.points[seg + 1] - self.points[seg]
         return self.points[seg] + s * delta, sd * delta, sdd * delta

@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from rehabkit.workspace.trajectory import blend_weight
+from rehabkit.models.time_laws import quintic
 
 GRAVITY = 9.81
 PARAMS = ("back", "release", "t_back", "t_fwd", "omega", "radius", "aim")  # angles [rad], times [s], [rad/s], [m]
@@ -74,7 +74,7 @@ def swing_angle(th: Throw, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _rest_to_rest(p0, p1, T, t):
-    s, ds, dds = blend_weight(t / T)
+    s, ds, dds = quintic(t / T)
     d = p1 - p0
     return p0 + d * s, d * ds / T, d * dds / T**2
 
@@ -88,7 +88,7 @@ def follow_through(th: Throw, shoulder: np.ndarray, t: np.ndarray) -> tuple[np.n
     """After the release the swing goes on along its arc, its speed fading to rest over ``t[-1]``."""
     T = float(t[-1]) if len(t) and t[-1] > 0 else 1.0
     u = np.clip(np.asarray(t, float) / T, 0.0, 1.0)
-    s, ds, _ = blend_weight(u)
+    s, ds, _ = quintic(u)
     ds = ds / T
     covered = u - (2.5 * u**4 - 3 * u**5 + u**6)  # ∫(1 − s) du
     return on_arc(th, shoulder, th.release + th.omega * T * covered, th.omega * (1 - s), -th.omega * ds)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
+from rehabkit.models.time_laws import quintic
+
 
 def smooth_path(points: np.ndarray, step: float = 0.001) -> np.ndarray:
     """A C2 cubic spline through ``points`` (chord-length parametrised), resampled every ``step`` [m]."""
@@ -106,10 +108,6 @@ class Sequence:
         return tuple(out)
 
 
-def blend_weight(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quintic smoothstep w(u) on [0, 1] and its first two derivatives (zero at both ends)."""
-    u = np.clip(u, 0.0, 1.0)
-    return 10 * u**3 - 15 * u**4 + 6 * u**5, 30 * u**2 - 60 * u**3 + 30 * u**4, 60 * u - 180 * u**2 + 120 * u**3
 
 
 class Junction:
@@ -127,7 +125,7 @@ class Junction:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         xo, vo, ao = self.old.sample(t + self.offset)
         xn, vn, an = self.new.sample(t)
-        w, wd, wdd = (a[:, None] for a in blend_weight(t / self.blend))
+        w, wd, wdd = (a[:, None] for a in quintic(t / self.blend))
         wd, wdd = wd / self.blend, wdd / self.blend**2
         x = (1 - w) * xo + w * xn
         v = (1 - w) * vo + w * vn + wd * (xn - xo)
