@@ -65,9 +65,18 @@ def pytest_collect_file(parent: pytest.Collector, file_path: Path):
     return None
 
 
+def group(path: str | Path) -> str:
+    """The ``xdist_group`` of a scenario's shared run: a test that reads it with ``scenario_run`` and is marked
+    ``@pytest.mark.xdist_group(group(path))`` runs on the same pytest-xdist worker as the scenario's own test
+    (``--dist loadgroup``), so the run is made once."""
+    return f"scenario:{Path(path).stem}"
+
+
 class ScenarioFile(pytest.File):
     def collect(self):
-        yield ScenarioItem.from_parent(self, name=self.path.stem)
+        item = ScenarioItem.from_parent(self, name=self.path.stem)
+        item.add_marker(pytest.mark.xdist_group(group(self.path)))  # with the tests that read its run
+        yield item
         with open(self.path) as f:
             if isinstance(head := yaml.safe_load(f), dict) and head.get("sweep"):
                 yield SweepItem.from_parent(self, name=f"{self.path.stem}[sweep]")

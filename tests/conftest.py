@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 DATA = Path(__file__).resolve().parent / "data"
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # every core has a worker: a lock-step link's ends wait asleep (polling would take the core the other end needs
+    # to answer); bridges the tests start inherit it
+    os.environ.setdefault("REHABKIT_LINK_POLL_S", "0")
 pytest_plugins = ["pytester"]  # (the README's scenario-test example runs in a pytest of its own, in-process)
 collect_ignore = ["bad_scenarios"]  # refused on purpose (tests/test_bad_corpus.py), not scenario tests
 

@@ -17,6 +17,7 @@ from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.models import World
 from rehabkit.geometry.solids import path_hits
 from rehabkit.models.dh import PoseSpec
+from rehabkit.testing import group
 from tests.conftest import ROOT, SCENARIOS
 
 SCENARIO = SCENARIOS / "arm_replay.yaml"
@@ -93,6 +94,7 @@ def test_an_unreachable_or_buried_target_is_a_clear_planning_error(arm):
         planner.plan(PlanRequest(0.0, HOME, np.zeros(8), [Target("far", pose=far)], arm))
 
 
+@pytest.mark.xdist_group(group("arm_replay.yaml"))
 def test_the_scenario_records_replays_and_draws_it(replay_run):
     result, summary, out = replay_run
     assert result.passed, result.failures
@@ -110,6 +112,7 @@ def test_the_scenario_records_replays_and_draws_it(replay_run):
         assert entity in text, entity
 
 
+@pytest.mark.xdist_group(group("arm_replay.yaml"))
 def test_patches_persist_into_the_next_run(replay_run):
     """A later session (a new run, same store) replays patch 3 straight from the menu."""
     _, _, out = replay_run

@@ -11,6 +11,7 @@ from rehabkit.core.scenario.models import Pose, WorldObject
 from rehabkit.cspace.joint_matrix import build_joint_matrix
 from rehabkit.cspace.occupancy import rasterise
 from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank
+from rehabkit.testing import group
 from tests.conftest import ROOT, SCENARIOS
 
 CAPAMAN = SCENARIOS / "capaman_obstacle.yaml"
@@ -85,6 +86,7 @@ def capaman_run(scenario_run):
     return scenario_run(CAPAMAN)  # the scenario's own run (its scenario test reads the same one)
 
 
+@pytest.mark.xdist_group(group(CAPAMAN))
 def test_obstacle_run_is_collision_free_both_ways_and_the_ga_improves(capaman_run):
     summary = capaman_run.summary
     assert capaman_run.passed, capaman_run.failures
@@ -98,6 +100,7 @@ def test_obstacle_run_is_collision_free_both_ways_and_the_ga_improves(capaman_ru
     assert m["accel_filter_gain"] >= 3 and m["omega_filter_gain"] >= 3
 
 
+@pytest.mark.xdist_group(group(CAPAMAN))
 def test_validation_report_compares_with_truth_and_plan(capaman_run):
     summary = capaman_run.summary
     m, report = summary["metrics"], summary["reports"]["imu"]
@@ -108,6 +111,7 @@ def test_validation_report_compares_with_truth_and_plan(capaman_run):
     assert m["accel_rms_raw_vs_planned_m_s2"] > 3 * m["accel_rms_filtered_vs_planned_m_s2"]
 
 
+@pytest.mark.xdist_group(group(CAPAMAN))
 def test_joint_space_is_in_the_log(capaman_run):
     import shutil
 
@@ -118,6 +122,7 @@ def test_joint_space_is_in_the_log(capaman_run):
         assert entity in text, entity
 
 
+@pytest.mark.xdist_group(group(CAPAMAN))
 def test_planning_is_deterministic_across_processes(capaman_run, tmp_path):
     """A fresh process plans what this one did (after whatever it planned before), and the CLI prints the
     validation report."""

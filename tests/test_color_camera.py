@@ -6,6 +6,7 @@ import pytest
 
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.testing import group
 from tests.conftest import SCENARIOS
 
 LEXOS = SCENARIOS / "lexos_reaching.yaml"
@@ -64,6 +65,7 @@ def test_pinhole_model_matches_mujocos_projection(scene):
     assert np.hypot(*(reading["pixel"] - [u, v])) < 0.5  # the ball's centre where the pinhole says
 
 
+@pytest.mark.xdist_group(group("lexos_reaching.yaml"))
 def test_move_events_drive_replanning_through_the_camera(scenario_run):
     r = scenario_run(LEXOS)  # the scenario's own run (its scenario test reads the same one)
     triggers = [(e["t"], e["trigger"]) for e in r.summary["events"]]

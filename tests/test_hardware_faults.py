@@ -93,6 +93,7 @@ def _stall_the_host(monkeypatch, at: float, seconds: float) -> None:
 
 
 @pytest.mark.realtime
+@pytest.mark.xdist_group("realtime")  # paced tests one after the other, not side by side
 def test_a_host_stall_mid_motion_is_held_through_not_pushed_through(monkeypatch, tmp_path):
     """No command for 100 ms while HIT moves (the host stalled): after 10 ms the bridge holds the posture, not the
     last torque; the host then skips the missed ticks (its timeline pauses) and the run goes on. Before the hold,

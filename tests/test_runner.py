@@ -87,7 +87,8 @@ def test_reached_event_fires_near_the_target():
 def test_too_fast_plan_is_rejected_before_the_robot_moves():
     r = run_scenario(HIT, {"planner.segment_durations": [0.2, 0.2, 0.2, 0.2]})
     (ev,) = r.summary["safety"]["events"]
-    assert ev["rule"] == "plan" and "velocity limit" in ev["message"]
+    assert ev["rule"] == "plan" and ev["data"]["quantity"] == "velocity" and ev["value"] > ev["limit"] > 0
+    assert ev["joint"] in r.summary["per_joint"] and ev["data"]["at_s"] is not None
     assert not r.passed
     assert np.abs(r.trace.q - r.trace.q[0]).max() < np.radians(1.0)  # held at A
 

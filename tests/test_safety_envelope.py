@@ -33,7 +33,7 @@ def test_keep_in_box_trips_when_the_hand_leaves_it(hit):
     layer.filter(0.5, _mid(hit), np.zeros(6), tau.copy())
     ev = layer.events[0]
     assert ev.rule == "keep-in" and ev.data["axis"] == "z" and ev.value == pytest.approx(0.52) and ev.limit == 0.5
-    assert "(z max)" in ev.message and layer.tripped
+    assert ev.data["side"] == "max" and layer.tripped
 
 
 def test_interaction_force_above_the_limit_trips(hit):
@@ -90,7 +90,8 @@ def test_hand_leaving_the_box_stops_the_run_in_simulation(box_run, hit):
     assert box_run.metrics["safety_interventions"] == 1
     # and it was said before moving: the plan's hand path, against the same box, leaves it where the hand did
     (warning,) = box_run.summary["safety"]["plan_warnings"]
-    assert warning["t"] == 0.0 and abs(warning["at_s"] - ev[0]["t"]) < 0.02 and "(z min" in warning["message"]
+    assert warning["t"] == 0.0 and abs(warning["at_s"] - ev[0]["t"]) < 0.02
+    assert (warning["axis"], warning["side"]) == (ev[0]["data"]["axis"], ev[0]["data"]["side"]) == ("z", "min")
 
 
 def test_ramp_in_starts_from_holding_and_ramp_out_ends_there(scenario_run):

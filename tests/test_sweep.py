@@ -14,6 +14,9 @@ from rehabkit.sweep.grid import expand, parse_grid
 from rehabkit.sweep.tables import reproducible
 from tests.conftest import SCENARIOS
 
+# one Ray at a time on this machine: the sweeps that start one run on the same pytest-xdist worker
+pytestmark = pytest.mark.xdist_group("ray")
+
 TRIAL = SCENARIOS / "lexos_planner_trial.yaml"
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import select
 import socket
 import time
@@ -9,7 +10,9 @@ import time
 SPIN_S = 2e-4  # sleep until this close to the deadline (the OS wakes a sleeper late), then spin
 # poll this long for a datagram before sleeping on it: a process woken by one takes ~0.3 ms on this VM (measured:
 # a UDP ping-pong between two processes 283 µs per exchange asleep, 28 µs polling), longer than a lock-step tick
-POLL_S = 1e-3
+# Polling pays only with a core to spare: on a machine whose cores are all busy (a test suite's parallel workers) the
+# poller takes the core the other end needs to answer; REHABKIT_LINK_POLL_S=0 then waits asleep from the start.
+POLL_S = float(os.environ.get("REHABKIT_LINK_POLL_S", 1e-3))
 
 
 def wait_until(deadline: float) -> None:
@@ -19,10 +22,10 @@ def wait_until(deadline: float) -> None:
             time.sleep(left - SPIN_S)
 
 
-def wait_readable(sock: socket.socket, timeout: float, poll: float = POLL_S) -> bool:
+def wait_readable(sock: socket.socket, timeout: float, poll: float | None = None) -> bool:
     """True once ``sock`` has a datagram to read, False after ``timeout`` seconds without one."""
     start = time.monotonic()
-    poll_end = start + min(poll, timeout)
+    poll_end = start + min(POLL_S if poll is None else poll, timeout)
     while time.monotonic() < poll_end:
         if select.select([sock], [], [], 0)[0]:
             return True

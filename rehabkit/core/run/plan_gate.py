@@ -38,10 +38,14 @@ class PlanGate:
         breach = self.space.limit_breach(plan)
         if breach is not None:
             return f"planned trajectory: {breach.describe()}", breach
-        bad = sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions})
+        bad = self.unknown_actions(plan)
         if bad:
             return f"plan action(s) {bad} unknown; the backend can do: {', '.join(self.scene_actions) or 'none'}", None
         return None, None
+
+    def unknown_actions(self, plan: Plan) -> list[str]:
+        """The plan's scene actions the backend can't do."""
+        return sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions})
 
     def warn_box(self, t: float, plan: Plan) -> None:
         """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""
@@ -51,7 +55,8 @@ class PlanGate:
         found = self.safety.box_exit(self.space.hand_world(plan.trajectory.sample(ts)[0]))
         if found is not None:
             k, a, side, bound = found
-            self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "message": (
+            self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "axis": AXES[a], "side": side,
+                                  "bound": bound, "message": (
                 f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) "
                 f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")})
 

@@ -40,6 +40,7 @@ class PlanRefusal:
     breach: LimitBreach | None = None
     error: PlanningError | None = None
     unplannable: bool = False  # the planner failed or its plan must not run (not: a sensed target unseen)
+    actions: tuple[str, ...] = ()  # scene actions the plan asked for that the backend can't do
     first: bool = False
     located: ScenarioError | None = None
 
@@ -110,7 +111,8 @@ class RunSession:
             return
         problem, breach = self.gate.problem(plan)
         if problem:
-            self._refuse(PlanRefusal(t, problem, breach=breach, unplannable=True, first=first), q, "; not executed")
+            self._refuse(PlanRefusal(t, problem, breach=breach, unplannable=True, first=first,
+                                     actions=tuple(self.gate.unknown_actions(plan))), q, "; not executed")
             return
         self.gate.warn_box(t, plan)
         self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
@@ -122,7 +124,8 @@ class RunSession:
             refusal = replace(refusal, located=first_plan_refusal(self.setup, failure))
         if self.first_refusal is None:  # (the first plan's refusal is kept: the robot never moved)
             self.refusal = refusal
-        self.setup.safety.trip(refusal.t, q, "plan", refusal.reason + then)
+        self.setup.safety.trip(refusal.t, q, "plan", refusal.reason + then, breach=refusal.breach,
+                               data={"actions": list(refusal.actions)} if refusal.actions else None)
 
     def plan_for_controller(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
         """A plan a controller asks for (e.g. a keypad's replay); it follows the trajectory itself.

@@ -170,10 +170,16 @@ class SafetyLayer(StopActions, Ramps):
             self._trip(t, q, "interaction-force", None, magnitude, limit, "interaction force above its limit",
                        {"force_n": np.round(force, 3).tolist()}, qd=qd)
 
-    def trip(self, t: float, q: np.ndarray, rule: str, message: str, qd: np.ndarray | None = None) -> None:
+    def trip(self, t: float, q: np.ndarray, rule: str, message: str, qd: np.ndarray | None = None,
+             breach: LimitBreach | None = None, data: dict | None = None) -> None:
         """Trip from outside (a rejected plan, an external e-stop); ``qd``: the speed the controlled stop
-        starts from (none: from rest)."""
-        self._trip(t, q, rule, None, None, None, message, qd=qd)
+        starts from (none: from rest); ``breach``: the limit a refused plan would have broken (its joint, value
+        and limit become the event's, its quantity ``data["quantity"]``); ``data``: the rule's own fields."""
+        if breach is not None:
+            self._trip(t, q, rule, breach.joint, breach.value, breach.limit, message,
+                       {**(data or {}), "quantity": breach.quantity, "at_s": breach.at_s}, described=True, qd=qd)
+        else:
+            self._trip(t, q, rule, None, None, None, message, data, qd=qd)
 
     def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
         """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
@@ -197,7 +203,7 @@ class SafetyLayer(StopActions, Ramps):
             return False
         _, a, side, bound = found
         self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
-                   {"axis": AXES[a], "hand_m": np.round(x, 5).tolist()}, qd=qd)
+                   {"axis": AXES[a], "side": side, "hand_m": np.round(x, 5).tolist()}, qd=qd)
         return True
 
     def _clipped(self, t: float, tau: np.ndarray, over: np.ndarray) -> None:
