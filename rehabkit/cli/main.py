@@ -114,7 +114,8 @@ def _admission(loaded) -> str:
     """The run's setup but its backend (robot, narrowed limits, capabilities, admitted targets, plugins) and its
     first plan, as `run` makes them; with a patient or envelope ranges, what became of the fixed targets."""
     from rehabkit.core.plugins.lifecycle import default_extensions
-    from rehabkit.core.setup.assembly import assemble, check_first_plan
+    from rehabkit.core.setup.assembly import assemble
+    from rehabkit.core.setup.first_plan import check_first_plan
 
     setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins")
     check_first_plan(setup)

@@ -101,7 +101,7 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     viscous damping the transparent robot keeps [N·m·s/rad]; ``stretch_settings``: the passive stretch's."""
     stretcher = default_registry().get("controller", "passive-stretch")  # (a plugin: found by name, not imported)
 
-    from rehabkit.core.setup.assembly import start_posture
+    from rehabkit.core.setup.first_plan import start_posture
 
     path, out = Path(path), Path(out_dir)
     given = dict(overrides) if isinstance(overrides, Mapping) else {

@@ -27,7 +27,7 @@ import numpy as np
 
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.ramps import Ramps
-from rehabkit.core.safety.stopping import STOP_RULES, WORDS, ControlledStop, StopActions
+from rehabkit.core.safety.stopping import WORDS, Stopping
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.core.setup.limits import LimitBreach
 from rehabkit.models.robot_model import RobotModel
@@ -39,10 +39,11 @@ _count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
 AXES = "xyz"
 
 
-class SafetyLayer(StopActions, Ramps):
+class SafetyLayer:
     """Checks every command (the rules: the module docstring) against the limits of ``robot`` (the runner narrows
     them first); ``hand(q)``: the hand's world position, for a keep-in box; ``dt`` tells one clipping episode from
-    the next."""
+    the next. How it stops the robot is its ``stopping`` (:class:`~rehabkit.core.safety.stopping.Stopping`), its soft
+    start and stop its ``ramps`` (:class:`~rehabkit.core.safety.ramps.Ramps`)."""
 
     def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None,
                  hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):
@@ -54,22 +55,12 @@ class SafetyLayer(StopActions, Ramps):
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
         self.config = config
-        default = 2 if robot.safe_stop == "hold" else 0
-        self._category = {r: config.stop_category.get(r, config.stop_category.get("default", default))
-                          for r in STOP_RULES}
-        a = config.stop_decel_deg_s2
-        self._decel = None if a is None else np.where(robot.revolute, np.radians(a), a / 1e3)
-        self.category: int | None = None  # the stop under way's
-        self._stop: ControlledStop | None = None
-        self._robot = robot
-        self._limp = False
+        self.stopping = Stopping(robot, config, self.lo, self.hi, gravity, dt, self._note)
+        self.ramps = Ramps(config, self.stopping.hold_torque, self._note)
         self.events: list[SafetyEvent] = []  # trips
         self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
         self.tripped_at: float | None = None
         self.saturated_steps = 0
-        self._hold_q: np.ndarray | None = None
-        self._gravity = gravity
-        self._zero = np.zeros(robot.dof)
         self._dt = dt
         self._clip: SafetyEvent | None = None  # the clipping episode under way
         self._box = None
@@ -85,9 +76,6 @@ class SafetyLayer(StopActions, Ramps):
                 lo, hi = w.min(axis=0), w.max(axis=0)
             self._box = (lo, hi)
         self._hand = hand
-        self._ramp_in, self._ramp_in_noted = config.ramp_in_s, False
-        self._ramp_from: tuple[float, float, np.ndarray] | None = None  # ramp-out: (start, length, posture)
-        self._start_q: np.ndarray | None = None
         # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
         n = robot.dof
         self._n = n
@@ -100,6 +88,35 @@ class SafetyLayer(StopActions, Ramps):
     @property
     def tripped(self) -> bool:
         return self.tripped_at is not None
+
+    @property
+    def category(self) -> int | None:
+        """The category of the stop under way (None before a trip)."""
+        return self.stopping.category
+
+    @property
+    def categories(self) -> dict[str, int]:
+        """The stop category of each rule."""
+        return dict(self.stopping.by_rule)
+
+    @property
+    def torque_off(self) -> bool:
+        """Tripped, and the torque has gone off (category 0, or 1 once stopped): the brakes are due."""
+        return self.tripped_at is not None and self.stopping.torque_off
+
+    def braked(self, t: float, engaged: bool) -> None:
+        """Record that the torque went off, and whether brakes hold the robot."""
+        self.stopping.braked(t, engaged)
+
+    def require_ramp_in(self, seconds: float) -> None:
+        """Ramp in at least this long (the first session after an e-stop was cleared)."""
+        if self.ramps.require_ramp_in(seconds):
+            self._plain = False
+
+    def begin_ramp_out(self, t: float, q: np.ndarray) -> None:
+        """Start the soft stop: over ``ramp_out_s`` the torque blends into holding posture ``q``."""
+        if self.tripped_at is None and self.ramps.begin_ramp_out(t, q):
+            self._plain = False
 
     @property
     def watches_box(self) -> bool:
@@ -121,16 +138,15 @@ class SafetyLayer(StopActions, Ramps):
                 tau = row[torque]
                 if self._plain:  # no keep-in box, started, ramp-in over, no ramp-out: nothing else to do
                     return tau
-                n = self._n
-                self._plain = (self._box is None and self._start_q is not None and self._ramp_from is None
-                               and t >= self._ramp_in)
+                n, ramps = self._n, self.ramps
+                self._plain = self._box is None and ramps.start_q is not None and not ramps.due(t)
                 if self._box is not None and self._outside_box(t, row[:n], row[n : 2 * n]):
-                    tau[:] = self._stop_torque(t, row[:n], row[n : 2 * n])
+                    tau[:] = self.stopping.torque(t, row[:n], row[n : 2 * n])
                     return tau
-                if self._start_q is None:
-                    self._start_q = row[:n].copy()
-                if t < self._ramp_in or self._ramp_from is not None:
-                    self._ramp(t, row[:n], row[n : 2 * n], tau)
+                if ramps.start_q is None:
+                    ramps.start_q = row[:n].copy()
+                if ramps.due(t):
+                    ramps.apply(t, row[:n], row[n : 2 * n], tau)
                 return tau
         n = self._n
         q, qd, tau = row[:n], row[n : 2 * n], row[2 * n :]
@@ -150,14 +166,14 @@ class SafetyLayer(StopActions, Ramps):
                     self._clipped(t, tau, over)
                     np.clip(tau, -self.effort, self.effort, out=tau)
                     if self._box is not None and self._outside_box(t, q, qd):
-                        tau[:] = self._stop_torque(t, q, qd)
+                        tau[:] = self.stopping.torque(t, q, qd)
                     return tau
                 j = int(np.argmax(over))
                 self._breach(t, q, LimitBreach("torque", self.names[j], float(tau[j]), float(self.effort[j])),
                              "commanded", qd)
             else:
                 self._diagnose(t, q, qd, tau)
-        tau[:] = self._stop_torque(t, q, qd)
+        tau[:] = self.stopping.torque(t, q, qd)
         return tau
 
     def check_force(self, t: float, q: np.ndarray, force: np.ndarray, qd: np.ndarray | None = None) -> None:
@@ -255,14 +271,10 @@ class SafetyLayer(StopActions, Ramps):
         if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
             self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}, cause=cause))
             return
-        category = self._category.get(rule, self._category["default"])
+        category = self.stopping.category_of(rule)
         text += f"; {WORDS[category]}"
         event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category}, cause=cause)
         self.events.append(event)
         self._note(event)
         self.tripped_at = t
-        hold = np.where(np.isfinite(q), q, 0.0)
-        self._hold_q = np.clip(hold, self.lo, self.hi)
-        self.category = category
-        if category:
-            self._stop = ControlledStop.start(category, t, hold, qd, self._decel, self.effort, self._robot, self._dt)
+        self.stopping.begin(t, category, q, qd)

@@ -103,51 +103,72 @@ def stop_figures(t: np.ndarray, q: np.ndarray, qd: np.ndarray, hand: np.ndarray 
             "stop_peak_speed_deg_s": float(speed.max())}
 
 
-class StopActions:
-    """What :class:`~rehabkit.core.safety.layer.SafetyLayer` sends once tripped (its state: ``category``, ``_stop``,
-    ``_limp``, ``_hold_q``; its gains, effort limits and gravity)."""
+class Stopping:
+    """How :class:`~rehabkit.core.safety.layer.SafetyLayer` stops the robot once it has tripped: the category each
+    rule gets, the controlled stop's ramp, the hold, the torque going off; ``note`` keeps its interventions."""
 
-    @property
-    def categories(self) -> dict[str, int]:
-        """The stop category of each rule."""
-        return dict(self._category)
+    def __init__(self, robot, config, lo: np.ndarray, hi: np.ndarray, gravity, dt: float, note):
+        self.config, self.lo, self.hi, self.gravity, self.dt, self.note = config, lo, hi, gravity, dt, note
+        self.robot, self.effort, self.zero = robot, robot.limits.effort, np.zeros(robot.dof)
+        default = 2 if robot.safe_stop == "hold" else 0
+        self.by_rule = {r: config.stop_category.get(r, config.stop_category.get("default", default))
+                        for r in STOP_RULES}
+        a = config.stop_decel_deg_s2
+        self.decel = None if a is None else np.where(robot.revolute, np.radians(a), a / 1e3)
+        self.category: int | None = None  # the stop under way's
+        self.ramp: ControlledStop | None = None
+        self.limp = False  # category 1 at standstill: the torque is off
+        self.hold_q: np.ndarray | None = None
+
+    def category_of(self, rule: str) -> int:
+        return self.by_rule.get(rule, self.by_rule["default"])
+
+    def begin(self, t: float, category: int, q: np.ndarray, qd: np.ndarray | None) -> None:
+        """The stop starts at ``t`` from state ``(q, qd)`` in ``category``."""
+        hold = np.where(np.isfinite(q), q, 0.0)
+        self.hold_q = np.clip(hold, self.lo, self.hi)
+        self.category = category
+        if category:
+            self.ramp = ControlledStop.start(category, t, hold, qd, self.decel, self.effort, self.robot, self.dt)
 
     @property
     def torque_off(self) -> bool:
-        """Tripped, and the torque has gone off (category 0, or 1 once stopped): the brakes are due."""
-        return self.tripped_at is not None and (self.category == 0 or self._limp)
+        """The torque has gone off (category 0, or 1 once stopped)."""
+        return self.category == 0 or self.limp
 
     def braked(self, t: float, engaged: bool) -> None:
         """Record that the torque went off, and whether brakes hold the robot."""
         cause = "torque off; " + ("holding brakes engaged" if engaged else
                                   "no brakes: the robot is free to move (gravity, the person)")
-        self._note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: {cause}", {"engaged": engaged},
-                               cause=cause))
+        self.note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: {cause}", {"engaged": engaged},
+                              cause=cause))
 
-    def _hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """PD to ``posture`` with gravity compensation, within the effort limits."""
         tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
-        if self._gravity is not None:
-            tau += self._gravity(q)
+        if self.gravity is not None:
+            tau += self.gravity(q)
         return np.clip(tau, -self.effort, self.effort)
 
-    def _stop_torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        if self.category == 0 or self._limp:
-            return self._zero.copy()
-        q = np.where(np.isfinite(q), q, self._hold_q)
+    def torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """What to send at ``t`` while stopping: along the ramp, then held or off."""
+        if self.category == 0 or self.limp:
+            return self.zero.copy()
+        q = np.where(np.isfinite(q), q, self.hold_q)
         qd = np.where(np.isfinite(qd), qd, 0.0)
-        stop = self._stop
+        stop = self.ramp
         if stop is not None:
             if not stop.over(t):  # on the deceleration ramp
                 q_r, qd_r = stop.reference(t)
                 tau = self.config.hold_kp * (q_r - q) + self.config.hold_kd * (qd_r - qd)
                 if stop.feedforward is not None:
                     tau += stop.feedforward
-                if self._gravity is not None:
-                    tau += self._gravity(q)
+                if self.gravity is not None:
+                    tau += self.gravity(q)
                 return np.clip(tau, -self.effort, self.effort)
-            self._stop = None
+            self.ramp = None
             if stop.category == 1:
-                self._limp = True
-                return self._zero.copy()
-            self._hold_q = np.clip(stop.end, self.lo, self.hi)
-        return self._hold_torque(self._hold_q, q, qd)
+                self.limp = True
+                return self.zero.copy()
+            self.hold_q = np.clip(stop.end, self.lo, self.hi)
+        return self.hold_torque(self.hold_q, q, qd)

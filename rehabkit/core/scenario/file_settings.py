@@ -1,0 +1,51 @@
+"""File settings (:data:`~rehabkit.models.strict.FilePath`) mean the file beside the scenario file that writes them.
+
+A base file (``extends:``) that names ``file: arm4.urdf`` means the URDF beside the base, wherever the scenario
+extending it lives: such a relative path is made absolute from the folder of the file it was written in (its
+value's mark). The scenario's own relative paths stay as written (its run's snapshot keeps them portable).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel
+
+from rehabkit.core.scenario.source import Source
+from rehabkit.models.strict import FILE_SETTING
+
+
+def _set_at(data: Any, loc: tuple, value: Any) -> None:
+    for key in loc[:-1]:
+        data = data[key]
+    data[loc[-1]] = value
+
+
+def anchor_file_settings(src: Source, scenario: BaseModel, path: Path) -> bool:
+    """File settings (:data:`~rehabkit.models.strict.FilePath`) written relative in another file than the scenario
+    (an ``extends:`` base, a profile) made absolute from that file's folder; whether any was."""
+    here, changed = path.resolve(), False
+
+    def walk(node: Any, loc: tuple) -> None:
+        nonlocal changed
+        if isinstance(node, BaseModel):
+            for name, info in type(node).model_fields.items():
+                value = getattr(node, name)
+                if FILE_SETTING in info.metadata and isinstance(value, str):
+                    mark = src.value_marks.get((*loc, name))
+                    written = Path(mark.file).resolve() if mark is not None and not mark.file.startswith("<") else here
+                    if written != here and not Path(value).expanduser().is_absolute():
+                        _set_at(src.data, (*loc, name), str((written.parent / value).resolve()))
+                        changed = True
+                else:
+                    walk(value, (*loc, name))
+        elif isinstance(node, dict):
+            for key, value in node.items():
+                walk(value, (*loc, key))
+        elif isinstance(node, (list, tuple)):
+            for i, value in enumerate(node):
+                walk(value, (*loc, i))
+
+    walk(scenario, ())
+    return changed

@@ -1,0 +1,57 @@
+"""Where a run starts and its first plan: made by ``rehabkit validate`` without running it, so that a task the
+planner refuses is bad input, located in the scenario file, before anything moves."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rehabkit.core.kinds.interfaces import PlanningError, PlanRequest
+from rehabkit.core.setup.assembly import Assembly
+from rehabkit.core.setup.checks import at_target
+from rehabkit.core.setup.errors import PluginSetupError, SetupError
+
+
+def start_posture(a: Assembly) -> np.ndarray:
+    """The task's start: a joint target's values, or a Cartesian one's first IK solution within the ranges."""
+    task = a.sc.task
+    name = task.start or task.order()[0]
+    target = a.targets[name]
+    if target.q is not None:
+        return target.q.copy()
+    try:
+        solutions = a.robot.solve_ik(target.pose, free=target.free) if target.pose is not None else []
+    except NotImplementedError:
+        solutions = []
+    lim = a.robot.model.limits
+    inside = [s for s in solutions if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
+    if not inside:
+        raise SetupError(f"task.start: target '{name}' is Cartesian and the robot's IK gives no configuration "
+                         "for it within the joint ranges; start from a joint-space target")
+    return inside[0]
+
+
+def check_first_plan(a: Assembly) -> None:
+    """Make the task's first plan without running it (``rehabkit validate``); a planner's refusal is located at
+    the setting it names. Skipped where the run alone can plan: sensed targets, a controller planning itself."""
+    sc = a.sc
+    names = sc.task.order()
+    sensed = any(t.sensor for t in sc.task.targets if t.name in names)
+    if not names or sensed or a.controller.own_reference:
+        return
+    q0 = start_posture(a)
+    try:
+        plan = a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
+    except PlanningError as exc:
+        raise first_plan_refusal(a, exc) from exc
+    if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
+        raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
+
+
+def first_plan_refusal(a: Assembly, why: Exception | str) -> PluginSetupError:
+    """The task's first plan failed or broke a limit: bad input, located at the target it names, else at the
+    planner's setting it names, else at the planner."""
+    exc = why if isinstance(why, Exception) else PlanningError(why)
+    return at_target(a, exc) or PluginSetupError.refused(a.loaded.source, ("planner",), "planner", a.sc.planner,
+                                                          exc)
+
+
