@@ -37,8 +37,12 @@ def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
     line = proc.stdout.readline()  # "bridge: <robot> on udp://host:port"
     if not line.startswith("bridge:"):
         proc.kill()
+        proc.wait()
+        proc.stdout.close()
         log.seek(0)
-        raise ValueError(f"the bridge did not start: {line.strip() or log.read().strip()[-2000:]}")
+        with log:
+            raise ValueError(f"the bridge did not start: {line.strip() or log.read().strip()[-2000:]}")
+    log.close()  # (the bridge writes to its own copy; this one was for a bridge that does not start)
     return proc, int(line.rsplit(":", 1)[1])
 
 
@@ -51,3 +55,6 @@ def stop_bridge(process: subprocess.Popen | None) -> None:
         process.wait(timeout=2)
     except subprocess.TimeoutExpired:
         process.kill()
+        process.wait()
+    if process.stdout is not None:
+        process.stdout.close()

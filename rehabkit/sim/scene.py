@@ -102,8 +102,8 @@ def build_scene(robot: RobotModel, world: World, timestep: float, integrator: st
     spec.option.integrator = INTEGRATORS[integrator]
     spec.option.gravity = robot.gravity
     spec.visual.global_.offwidth, spec.visual.global_.offheight = 1920, 1440  # room for camera sensors
-    # a 1024² shadow map instead of MuJoCo's 4096²: the same frames to 0.02 grey levels on average, 2.3x faster
-    # on a CPU renderer (L-Exos's 640x480 camera frame: 71 -> 31 ms), where the shadow pass is most of the cost
+    # a 1024² shadow map instead of MuJoCo's 4096²: the same frames to 0.02 grey levels on average, at less than
+    # half the cost on a CPU renderer, where the shadow pass is most of a frame
     spec.visual.quality.shadowsize = 1024
     spec.worldbody.add_light(name="key_light", pos=[0, -1.0, 3.0], dir=[0, 0.3, -1], diffuse=[0.8, 0.8, 0.8])
     if world.floor:

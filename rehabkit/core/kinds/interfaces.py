@@ -86,6 +86,8 @@ class Robot(ABC):
 
     model: RobotModel
     ik_kind: ClassVar[Literal["pose", "position"]] = "pose"
+    _pin_data: Any = None  # made on first use (Pinocchio's workspace for the default kinematics)
+    _numeric_ik: Any = None  # made on first use (the generic IK)
 
     def fk(self, q: np.ndarray) -> np.ndarray:
         """End-effector pose (4x4) in the robot base frame. Default: Pinocchio."""
@@ -130,7 +132,7 @@ class Robot(ABC):
         return pin.rneaInParallel(1, pin.ModelPool(m, 1), np.ascontiguousarray(qs.T), zero, zero).T
 
     def _data(self):
-        if getattr(self, "_pin_data", None) is None:
+        if self._pin_data is None:
             self._pin_data = self.model.new_pin_data()
         return self._pin_data
 
@@ -152,10 +154,15 @@ class Robot(ABC):
         return self.numeric_ik.solve(pose, reference, free)
 
     @property
+    def ik_closest_m(self) -> float:
+        """How near the generic IK's last unsuccessful solve came to its target [m] (NaN before it has run)."""
+        return self._numeric_ik.closest_m if self._numeric_ik is not None else float("nan")
+
+    @property
     def numeric_ik(self):
         """The generic IK from the robot's Pinocchio model (:class:`rehabkit.models.ik.NumericIK`); it reads
         the joint limits in force (a patient's narrowed ranges) on each solve."""
-        if getattr(self, "_numeric_ik", None) is None:
+        if self._numeric_ik is None:
             from rehabkit.models.ik import NumericIK
 
             try:

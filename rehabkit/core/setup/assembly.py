@@ -192,8 +192,9 @@ def metric_catalogue(a: Assembly) -> MetricCatalogue:
     catalogue = MetricCatalogue(CORE_METRICS)
     catalogue.add(a.extensions.metrics())
     backend = a.backend if a.backend is not None else a.registry.get("backend", a.sc.backend.type).factory
-    for plugin in (a.planner, a.controller, backend, a.patient, *a.sensors.values()):
-        catalogue.add(getattr(plugin, "metrics", ()) if plugin is not None else ())
+    for plugin in (a.planner, a.controller, a.patient, *a.sensors.values()):
+        catalogue.add(plugin.metrics if plugin is not None else ())
+    catalogue.add(getattr(backend, "metrics", ()))  # (validate builds no backend: its factory's, if it says)
     return catalogue
 
 

@@ -171,7 +171,7 @@ def unreachable(target: Target, robot: Robot) -> str:
     """Why ``target`` has no joint solution, with how near the numeric IK came when it tried."""
     where = np.round(target.pose[:3, 3], 4).tolist()
     what = "position" if target.position_only else "pose"
-    closest = getattr(getattr(robot, "_numeric_ik", None), "closest_m", float("nan"))
+    closest = robot.ik_closest_m
     near = f"; the closest the hand came is {closest * 1000:.0f} mm away" if np.isfinite(closest) and \
         closest > 1e-3 else ""
     return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
