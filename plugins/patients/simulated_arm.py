@@ -34,7 +34,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.core.kinds.interfaces import Context, Patient, StrictModel
 from rehabkit.core.results.metric import Metric
-from rehabkit.core.scenario.patient import JointRom
+from rehabkit.rehab.profile import JointRom
 
 PerJoint = float | list[float]
 SERIES_EVERY = 10  # control steps between logged samples of the person's state

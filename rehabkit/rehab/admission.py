@@ -18,10 +18,10 @@ import numpy as np
 from rehabkit.core.kinds.interfaces import Robot, StrictModel, Target
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.models import TaskSpec
-from rehabkit.core.scenario.patient import PatientBase
 from rehabkit.core.setup.limits import LimitBreach, LimitSources, Narrowing, outside, unknown_joint
 from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.rehab.patient import patient_narrowings
+from rehabkit.rehab.profile import PatientBase
 
 
 def adapt_segments(robot_cfg: StrictModel, profile: PatientBase | None, source) -> tuple[StrictModel, dict[str, str]]:

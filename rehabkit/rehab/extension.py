@@ -105,5 +105,9 @@ class OutcomeSpec(StrictModel):
 
 @hookimpl
 def rehabkit_scenario_sections(registry) -> dict[str, Section]:
+    from rehabkit.rehab.profile import profile_model
+
     return {"outcomes": Section(OutcomeSpec, OutcomeSpec(), "how movements are cut into reaches for the outcome "
-                                                          "measures")}
+                                                          "measures"),
+            "patient": Section(profile_model(registry), None, "the patient's profile, inline or a file path",
+                               file=True, plugins={"model": "patient"})}

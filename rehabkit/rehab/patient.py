@@ -1,7 +1,7 @@
 """What a patient's profile does to a run's limits.
 
 The profile itself (the scenario's ``patient:`` section) is part of the DSL:
-:mod:`rehabkit.core.scenario.patient`. Here: the tighter limits it asks for — each
+:mod:`rehabkit.rehab.profile`. Here: the tighter limits it asks for — each
 joint's passive range and comfortable speed, the whole arm's comfortable speed —
 and its comfortable interaction force. The run's effective limits are the tighter
 of the robot's, these and the safety envelope's, joint by joint
@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import math
 
-from rehabkit.core.scenario.patient import Comfort, JointRom, PatientBase
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.core.setup.limits import LimitSources, Narrowing, envelope_narrowings, narrow
 from rehabkit.models.robot_model import JointLimits, RobotModel
+from rehabkit.rehab.profile import Comfort, JointRom, PatientBase
 
 __all__ = ["Comfort", "JointRom", "PatientBase", "effective_limits", "interaction_force_limit",
            "patient_narrowings"]

@@ -54,7 +54,7 @@ class Context:
     reference_space: ReferenceSpace = "joint"  # what the scenario's planner produces (controllers taking either)
     seed: int = 0
     safety: Any = None  # the scenario's safety envelope (``SafetyConfig``), e.g. for a link's heartbeat
-    patient: Any = None  # the scenario's patient profile (``rehabkit.rehab.patient.PatientBase``), if any
+    patient: Any = None  # the section holding the simulated patient's settings: the rehab layer's profile, if any
     dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
     bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
     interaction_force: Callable[[], np.ndarray | None] | None = None

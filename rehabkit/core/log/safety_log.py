@@ -80,7 +80,7 @@ def verify(path: Path, key: bytes | None = None) -> tuple[list[dict[str, Any]], 
 
 def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dict[str, Any]]:
     """The records of a finished run (``a``: its :class:`~rehabkit.core.setup.assembly.Assembly`)."""
-    sc, patient = a.sc, a.sc.patient
+    sc, patient = a.sc, summary.get("patient") or {}  # (the rehab layer's section says who the run was for)
     used = summary["plugins"]  # (results.plugin_versions: kind → type, package, version; sensors by name)
     plugins = {f"{kind}:{p['type']}": f"{p['package']} {p['version']}" for kind, p in used.items() if kind != "sensors"}
     plugins.update({f"sensor:{p['type']}": f"{p['package']} {p['version']}" for p in used["sensors"].values()})
@@ -96,7 +96,7 @@ def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dic
         {"kind": "run", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
          "software": {"rehabkit": summary["rehabkit_version"]},
          "scenario": {"file": str(a.loaded.path), "sha256": hashlib.sha256(scenario_text.encode()).hexdigest()},
-         "plugins": plugins, "patient": patient.id if patient is not None else None, "backend": sc.backend.type,
+         "plugins": plugins, "patient": patient.get("id"), "backend": sc.backend.type,
          "seed": sc.seed, "keyed": audit_key() is not None},
         {"kind": "limits", "joints": joints, "interaction_force_n": safety.interaction_force_n,
          "keep_in": safety.keep_in.model_dump(mode="json") if safety.keep_in is not None else None,

@@ -63,11 +63,16 @@ class Contribution:
 @dataclass(frozen=True)
 class Section:
     """A top-level scenario section an extension owns: its pydantic model (a ``StrictModel``), its value when a
-    scenario leaves it out (``None``: absent), and a line for the schema."""
+    scenario leaves it out (``None``: absent), and a line for the schema. ``file``: the section may be given as the
+    path of a YAML file holding it (relative to the file naming it; errors point into that file). ``plugins``: keys
+    of the section holding a plugin's settings → the plugin kind (``{"model": "patient"}``): their ``type`` is
+    checked, suggested and swapped with ``--set`` as the core's plugin sections are, and the run builds the plugin."""
 
     model: type
     default: Any = None
     description: str = ""
+    file: bool = False
+    plugins: dict[str, str] = field(default_factory=dict)
 
 
 @hookspec
@@ -153,6 +158,11 @@ class Extensions:
                                      f"'{impl.plugin_name}'; uninstall one")
                 out[name] = (impl.plugin_name, section)
         return dict(sorted(out.items()))
+
+    def plugin_slots(self, registry: Any) -> dict[tuple[str, str], str]:
+        """(section, key) → plugin kind, for every extension section holding a plugin's settings."""
+        return {(name, key): kind for name, (_, section) in self.sections(registry).items()
+                for key, kind in section.plugins.items()}
 
 
 _DEFAULT: Extensions | None = None

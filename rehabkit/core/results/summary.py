@@ -95,7 +95,7 @@ def plugin_versions(a: Assembly) -> dict[str, Any]:
     sc, registry = a.sc, a.registry
     out: dict[str, Any] = {}
     for kind, cfg in (("robot", sc.robot), ("backend", sc.backend), ("planner", sc.planner),
-                      ("controller", sc.controller), ("patient", getattr(sc.patient, "model", None))):
+                      ("controller", sc.controller), ("patient", a.patient_slot.config if a.patient_slot else None)):
         if cfg is None:
             continue
         p = registry.get(kind, cfg.type).provider

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rehabkit.core.plugins.lifecycle import Extensions
+from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginRegistry, default_registry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.file_settings import anchor_file_settings
@@ -27,10 +27,10 @@ from rehabkit.core.scenario.source import (  # noqa: F401 (deep_merge: part of t
     Source,
     _dotted,
     _with_extends,
-    _with_profile,
     apply_overrides,
     deep_merge,
     parse_override,
+    with_file_sections,
 )
 from rehabkit.core.scenario.validation import validate_source
 
@@ -48,14 +48,18 @@ class LoadedScenario:
         return self.path.parent
 
 
-def _plugin_kind(path: list[str]) -> str | None:
-    """The plugin kind of a section path (``controller``, ``sensors.camera``, ``patient.model``), if it is one."""
+def plugin_kind(path: list[str], slots: Mapping[tuple[str, str], str]) -> str | None:
+    """The plugin kind of a section path (``controller``, ``sensors.camera``, a layer's slot such as
+    ``patient.model``), if it is one."""
     if len(path) == 1 and path[0] in PLUGIN_SECTIONS:
         return PLUGIN_SECTIONS[path[0]]
-    return {("sensors",): "sensor", ("patient",): "patient"}.get(tuple(path[:1])) if len(path) == 2 else None
+    if len(path) == 2:
+        return "sensor" if path[0] == "sensors" else slots.get((path[0], path[1]))
+    return None
 
 
-def _fit_new_types(src: Source, overrides: Iterable[str] | Mapping[str, Any], registry: PluginRegistry) -> None:
+def _fit_new_types(src: Source, overrides: Iterable[str] | Mapping[str, Any], registry: PluginRegistry,
+                   slots: Mapping[tuple[str, str], str]) -> None:
     """``--set controller.type=other``: settings the other plugin has no field for are dropped, with a warning.
 
     Shared settings stay (a planner's speed limits when switching planners); the new plugin's
@@ -64,7 +68,7 @@ def _fit_new_types(src: Source, overrides: Iterable[str] | Mapping[str, Any], re
     items = overrides.items() if isinstance(overrides, Mapping) else (parse_override(o) for o in overrides)
     for key, value in items:
         parts = key.split(".") if isinstance(key, str) else list(key)
-        kind = _plugin_kind(parts[:-1]) if parts[-1:] == ["type"] else None
+        kind = plugin_kind(parts[:-1], slots) if parts[-1:] == ["type"] else None
         info = registry.find(kind, value) if kind and isinstance(value, str) else None
         node: Any = src.data
         for part in parts[:-1]:
@@ -77,11 +81,6 @@ def _fit_new_types(src: Source, overrides: Iterable[str] | Mapping[str, Any], re
         if dropped:
             warnings.warn(f"--set {'.'.join(parts)}={value}: dropped {', '.join(dropped)} ('{value}' has no such "
                           f"settings; its defaults apply)", stacklevel=2)
-
-
-# ---------------------------------------------------------------------------
-# Mapping validation errors back to the YAML
-# ---------------------------------------------------------------------------
 
 
 def load_scenario(
@@ -108,14 +107,17 @@ def load_scenario(
     if not path.exists():
         raise ScenarioError([Diagnostic(Mark(str(path), 0, 0), "", "no such file")])
     registry = registry or default_registry()
+    extensions = extensions or default_extensions()
+    sections = extensions.sections(registry)
+    as_files = [name for name, (_, section) in sections.items() if section.file]
     src = _with_extends(path)
-    _with_profile(src, path)
+    with_file_sections(src, path, as_files)
     try:
         apply_overrides(src, overrides)
     except ValueError as exc:
         raise ScenarioError([Diagnostic(Mark("<--set>", 0, 0), "", str(exc))]) from None
-    _with_profile(src, path)  # --set patient=FILE (a sweep over profiles): from the scenario's folder, as in it
-    _fit_new_types(src, overrides, registry)
+    with_file_sections(src, path, as_files)  # --set patient=FILE (a sweep over profiles), from the scenario's folder
+    _fit_new_types(src, overrides, registry, extensions.plugin_slots(registry))
     _relabel(src, path)
     scenario = validate_source(src, registry, path, extensions)
     if anchor_file_settings(src, scenario, path):  # a base file's relative paths, made absolute from its folder

@@ -17,7 +17,6 @@ from rehabkit.core.kinds.interfaces import StrictModel
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginRegistry
 from rehabkit.core.scenario.loads import Load
-from rehabkit.core.scenario.patient import PatientBase
 from rehabkit.core.scenario.safety import SafetyConfig
 
 Vec3 = tuple[float, float, float]
@@ -250,14 +249,14 @@ class ScenarioBase(StrictModel):
     seed: int = 0
     logging: Logging = Logging()
     safety: SafetyConfig = SafetyConfig()
-    patient: PatientBase | None = Field(None, description="the patient's profile, inline or a file path")
     expect: dict[str, Bound] = {}
 
 
 PLUGIN_SECTIONS = {"robot": "robot", "backend": "backend", "planner": "planner", "controller": "controller"}
 
 
-def _union(registry: PluginRegistry, kind: str):
+def plugin_union(registry: PluginRegistry, kind: str):
+    """The settings models of every installed plugin of ``kind``, told apart by ``type`` (None: there is none)."""
     configs = tuple(info.config for info in registry.plugins[kind].values())
     if not configs:
         return None
@@ -270,21 +269,16 @@ def scenario_model(registry: PluginRegistry, extensions: Extensions | None = Non
     """The full Scenario model for the installed plugins and the extensions' sections (default: the installed)."""
     fields = {}
     for section, kind in PLUGIN_SECTIONS.items():
-        union = _union(registry, kind)
+        union = plugin_union(registry, kind)
         if union is None:
             continue
         if kind == "backend":
             fields[section] = (union, Field(default={"type": "mujoco"}, validate_default=True))
         else:
             fields[section] = (union, ...)
-    sensor_union = _union(registry, "sensor")
+    sensor_union = plugin_union(registry, "sensor")
     # no sensor plugin loaded: the scenario names none (a named one is loaded, or refused as unknown first)
     fields["sensors"] = (dict[str, sensor_union] if sensor_union is not None else dict[str, Any], {})
-    patient_union = _union(registry, "patient")
-    if patient_union is not None:
-        profile = create_model("Patient", __base__=PatientBase,
-                               model=(Optional[patient_union], Field(None, description="simulated behaviour")))  # noqa: UP045
-        fields["patient"] = (Optional[profile], None)  # noqa: UP045 (runtime-built model)
     for name, (owner, section) in (extensions or default_extensions()).sections(registry).items():
         if name in ScenarioBase.model_fields or name in fields:
             raise ValueError(f"extension '{owner}' declares the scenario section '{name}', which is the core's")

@@ -149,21 +149,24 @@ def _with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
     return Source(deep_merge(merged_data, src.data), keys, values, [*files, path])
 
 
-def _with_profile(src: Source, path: Path) -> None:
-    """``patient: some/profile.yaml`` → that file's mapping, its marks kept (errors point into the profile)."""
-    ref = src.data.get("patient")
-    if not isinstance(ref, str):
-        return
-    written = src.value_marks.get(("patient",))  # relative to the file that names it (a base file's, say)
-    folder = Path(written.file).parent if written is not None and not written.file.startswith("<") else path.parent
-    ppath = (folder / ref).resolve()
-    if not ppath.exists():
-        raise ScenarioError([Diagnostic(src.value_marks[("patient",)], "patient", f"profile not found: {ppath}")])
-    prof = read_yaml(ppath)
-    src.data["patient"] = prof.data
-    for marks, theirs in ((src.key_marks, prof.key_marks), (src.value_marks, prof.value_marks)):
-        marks.update({("patient", *k): m for k, m in theirs.items()})
-    src.files.append(ppath)
+def with_file_sections(src: Source, path: Path, names: Iterable[str]) -> None:
+    """``patient: some/profile.yaml`` (a section that may be a file) → that file's mapping, its marks kept (errors
+    point into it); the path is relative to the file naming it (a base file's, say; ``--set``: the scenario's)."""
+    for name in names:
+        ref = src.data.get(name)
+        if not isinstance(ref, str):
+            continue
+        written = src.value_marks.get((name,))
+        folder = Path(written.file).parent if written is not None and not written.file.startswith("<") else \
+            path.parent
+        ppath = (folder / ref).resolve()
+        if not ppath.exists():
+            raise ScenarioError([Diagnostic(src.value_marks[(name,)], name, f"file not found: {ppath}")])
+        held = read_yaml(ppath)
+        src.data[name] = held.data
+        for marks, theirs in ((src.key_marks, held.key_marks), (src.value_marks, held.value_marks)):
+            marks.update({(name, *k): m for k, m in theirs.items()})
+        src.files.append(ppath)
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:

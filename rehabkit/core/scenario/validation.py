@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from rehabkit.core.plugins.lifecycle import Extensions
+from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.registry import PluginError, PluginRegistry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
@@ -86,7 +86,7 @@ def _describe(err: dict[str, Any]) -> str:
     return msg
 
 
-def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnostic]:
+def _check_plugin_types(src: Source, registry: PluginRegistry, slots: dict[tuple[str, str], str]) -> list[Diagnostic]:
     """Unknown or missing plugin ``type`` values, with the closest installed names; the named plugins imported
     (only those: the scenario's model is built from them), a broken or conflicting one reported where named."""
     problems: list[Diagnostic] = []
@@ -99,9 +99,10 @@ def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnosti
     sensors = src.data.get("sensors")
     if isinstance(sensors, dict):
         sections += [(("sensors", name), "sensor") for name in sensors]
-    patient = src.data.get("patient")
-    if isinstance(patient, dict) and "model" in patient:
-        sections.append((("patient", "model"), "patient"))
+    for (name, key), kind in slots.items():  # a layer's section holding a plugin's settings (patient.model)
+        held = src.data.get(name)
+        if isinstance(held, dict) and key in held:
+            sections.append(((name, key), kind))
     for path, kind in sections:
         node: Any = src.data
         for p in path:
@@ -144,7 +145,8 @@ def _check_plugin_types(src: Source, registry: PluginRegistry) -> list[Diagnosti
 def validate_source(src: Source, registry: PluginRegistry, file: Path,
                     extensions: Extensions | None = None) -> ScenarioBase:
     """Validate merged data; raise :class:`ScenarioError` with every problem."""
-    problems = _check_plugin_types(src, registry)
+    extensions = extensions or default_extensions()
+    problems = _check_plugin_types(src, registry, extensions.plugin_slots(registry))
     model = scenario_model(registry, extensions)
     try:
         result = model.model_validate(src.data)

@@ -108,6 +108,7 @@ class Assembly:
     force_source: ForceSource | None = None  # the interaction force each control step, and its last value
     safety: SafetyLayer | None = None
     schedule: Schedule | None = None
+    patient_slot: Any = None  # where the scenario holds the simulated patient's settings (a PatientSlot), if it does
 
     @property
     def sc(self):
@@ -134,10 +135,11 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         SetupError: the plugins can't be put together as configured.
     """
     sc = loaded.model
+    slot = patient_slot(sc, registry, extensions)
     ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
-                  out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=sc.patient, plan=plan, note=note,
-                  dry_run=upto != "run")
-    a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx)
+                  out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=slot.section if slot else None, plan=plan,
+                  note=note, dry_run=upto != "run")
+    a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx, patient_slot=slot)
     extensions.hook.rehabkit_configure_robot(setup=a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
     a.robot = a.make("robot", a.robot_config, ("robot",))
@@ -227,14 +229,34 @@ def _narrow_limits(a: Assembly) -> None:
     model.limits = a.limits
 
 
+@dataclass(frozen=True)
+class PatientSlot:
+    """Where a layer's section holds the simulated patient plugin's settings (the rehab layer's ``patient.model``):
+    the section's value, the settings (None: no simulated person) and their key path."""
+
+    section: Any
+    config: Any
+    path: tuple[str, str]
+
+
+def patient_slot(sc, registry: PluginRegistry, extensions: Extensions) -> PatientSlot | None:
+    """The scenario's patient plugin slot, when a layer declares one and the scenario fills its section."""
+    for (name, key), kind in extensions.plugin_slots(registry).items():
+        section = getattr(sc, name, None)  # (a field of the scenario's model, from the same extensions)
+        if kind == "patient" and section is not None:
+            return PatientSlot(section, getattr(section, key, None), (name, key))
+    return None
+
+
 def _patient_and_safety(a: Assembly) -> None:
-    sc = a.sc
+    sc, slot = a.sc, a.patient_slot
     backend = a.backend if a.backend is not None else a.registry.get("backend", sc.backend.type).factory
-    model_cfg = getattr(sc.patient, "model", None) if sc.patient is not None else None
+    model_cfg = slot.config if slot is not None else None
     if model_cfg is not None:
+        where = ".".join(slot.path)
         if getattr(backend, "real_person", False):
             if a.context.note is not None:
-                a.context.note(0.0, f"patient.model '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
+                a.context.note(0.0, f"{where} '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
                                     "backend: the person is real")
         else:
             factory = a.registry.get("patient", model_cfg.type).factory
@@ -242,10 +264,10 @@ def _patient_and_safety(a: Assembly) -> None:
             need, what = (HostsBodies, "simulates a person's body in its scene") if embodied else \
                 (ExternalTorques, "applies a simulated person's torques")
             if not has(backend, need):
-                raise PluginSetupError(a.loaded.source, ("patient", "model", "type"), (),
-                                       f"patient.model '{model_cfg.type}' needs a backend that {what}; backend "
+                raise PluginSetupError(a.loaded.source, (*slot.path, "type"), (),
+                                       f"{where} '{model_cfg.type}' needs a backend that {what}; backend "
                                        f"'{sc.backend.type}' does not")
-            a.patient = a.make("patient", model_cfg, ("patient", "model"))
+            a.patient = a.make("patient", model_cfg, slot.path)
     limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
               if v is not None]
     force_limit = min(limits) if limits else None

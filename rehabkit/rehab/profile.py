@@ -1,4 +1,4 @@
-"""The patient profile: the scenario's ``patient:`` section (the DSL only).
+"""The patient profile: the scenario's ``patient:`` section, the rehab layer's (the DSL only).
 
 A profile is pseudonymous (an id, never a name), says which side is treated,
 the segment lengths a robot can adapt to, each joint's range of motion (what the
@@ -6,7 +6,7 @@ person moves on their own, ``active``, and what the joint can be moved through,
 ``passive``), and comfort limits on speed and interaction force. What a run does
 with it (narrowed limits, admitted targets, adapted segments) is the rehab
 extension's (:mod:`rehabkit.rehab.extension`); the ``model`` section, when
-present, is a simulated-patient plugin.
+present, is a simulated-patient plugin (a core plugin kind: the section declares it as its plugin slot).
 """
 
 from __future__ import annotations
@@ -67,3 +67,18 @@ class PatientBase(StrictModel):
         if bad:
             raise ValueError(f"segment lengths must be > 0: {bad}")
         return self
+
+
+def profile_model(registry) -> type[PatientBase]:
+    """The ``patient:`` section's model: the profile, and ``model:`` taking any installed patient plugin's settings."""
+    from typing import Optional
+
+    from pydantic import create_model
+
+    from rehabkit.core.scenario.models import plugin_union
+
+    union = plugin_union(registry, "patient")
+    if union is None:
+        return PatientBase
+    return create_model("Patient", __base__=PatientBase,
+                        model=(Optional[union], Field(None, description="simulated behaviour")))  # noqa: UP045
