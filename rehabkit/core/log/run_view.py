@@ -17,11 +17,12 @@ from collections.abc import Callable
 import numpy as np
 
 from rehabkit.core.kinds.capabilities import SceneGeometry
-from rehabkit.core.kinds.interfaces import Plan
+from rehabkit.core.kinds.interfaces import BodyPoses, Patient, Plan
 from rehabkit.core.log.rerun_log import RerunLog
 from rehabkit.core.results.metrics import Trace
 from rehabkit.core.setup.assembly import Assembly
 
+NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
 LOG_FLUSH_SAMPLES = 2000  # log-rate samples buffered between column sends to a file
 LIVE_FLUSH_SAMPLES = 500  # ... and when a viewer shows the run as it goes
 
@@ -55,6 +56,20 @@ class RunView:
             self._joint_space = True
             log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
         self.log = log
+
+    def record_step(self, t: float, k: int, q: np.ndarray, trace: Trace) -> None:
+        """A logged step: the bodies' poses and the hand (the backend's, where it tracks them; else the robot's
+        kinematics), a simulated person's drawings, and the joint series when enough are buffered."""
+        a, log = self.setup, self.log
+        if isinstance(a.backend, SceneGeometry):
+            log.record(t, a.backend.body_poses(), a.backend.ee_position())
+        else:
+            log.record(t, NO_BODIES, a.robot.ee_world(q[None])[0])
+        if a.patient is not None and type(a.patient).drawing is not Patient.drawing:
+            for name, shapes in a.patient.drawing().items():
+                log.drawing(t, f"world/patient/{name}", shapes)
+        if log.pending >= self.flush_samples:
+            self.flush(trace, k + 1)
 
     def event(self, t: float, text: str, level: str = "INFO") -> None:
         """A line in the recording's text log (an event, a note, a warning)."""
@@ -124,7 +139,7 @@ class NullView:
     def _nothing(self, *args, **kwargs) -> None:
         return None
 
-    event = sensor = planner_drawings = plan = flush = executed = finish = discard = _nothing
+    record_step = event = sensor = planner_drawings = plan = flush = executed = finish = discard = _nothing
 
     def close(self) -> dict[str, str]:
         return {}

@@ -15,11 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabkit.core.kinds.capabilities import Contacts, SceneGeometry
-from rehabkit.core.kinds.interfaces import BackendFaultError, BodyPoses, EmbodiedPatient, Patient
+from rehabkit.core.kinds.capabilities import Contacts
+from rehabkit.core.kinds.interfaces import BackendFaultError, EmbodiedPatient
 from rehabkit.core.run.session import RunSession
-
-NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
 
 
 @dataclass(frozen=True)
@@ -30,10 +28,33 @@ class LoopResult:
     started: float  # perf_counter at its first step
 
 
-def _progress_bar(steps: int):
-    from tqdm import tqdm  # a terminal's run only
+class _Progress:
+    """A terminal's progress bar, made once the loop has run a second: a short run never imports tqdm (~60 ms)."""
 
-    return tqdm(total=steps, unit="step", leave=False)
+    def __init__(self, steps: int):
+        self.steps, self.bar = steps, None
+
+    def tick(self, k: int, t_loop: float) -> None:
+        if self.bar is not None:
+            self.bar.update(1000)
+        elif time.perf_counter() - t_loop > 1.0:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=self.steps, unit="step", leave=False)
+            self.bar.update(k + 1)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _stopped(st, safety, backend, t: float, dt: float, stop_after: float) -> bool:
+    """After a trip: the brakes once the torque is off; whether the stop has run its course (the run ends)."""
+    if not st.braked and safety.torque_off:
+        st.braked = True
+        safety.braked(t, backend.engage_brakes())
+    st.stopped = t + dt - safety.tripped_at >= stop_after - 1e-9
+    return st.stopped
 
 
 def _idle(dof: int):
@@ -54,20 +75,18 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
     contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
     tq, tqd, ttau, packed = trace.q, trace.qd, trace.tau, session.packed  # column views of ``packed``
     record = a.space.recorder(trace, backend)  # what the reference's space records beside the joints
-    log, log_every, flush_samples = view.log, sch.log_every, view.flush_samples
+    log, log_every = view.log, sch.log_every
     next_log = (0 if view.active else -1) if st.next_log is None else st.next_log
     deferred_log = view.active and backend.realtime
     if deferred_log:
         log.deferred = True
-    drawn = isinstance(backend, SceneGeometry)  # the backend tracks the bodies and the hand; else the robot's FK
     person = a.patient.torque if a.patient is not None else None
     late = int(round(a.patient.delay_s / dt)) if person else 0  # the person sees the cue this many steps late
     # a person at the joints is pushed through the backend; an embodied one acts through its straps in the scene
     push = backend.external_torque if person is not None and not isinstance(a.patient, EmbodiedPatient) else None
     tau_h, force_at, goal_at, f_h = trace.tau_h, a.force_source, session.ref.goal_at, trace.f_h  # (f_h: measured)
-    draws = a.patient.drawing if a.patient is not None and type(a.patient).drawing is not Patient.drawing else None
     stop_after = a.sc.safety.stop_after_s
-    bar = None  # made once the loop has run a second: a short run never imports tqdm (~60 ms with its lock)
+    bar = _Progress(n) if progress else None
     # everything built so far lives for the whole run: frozen, the collector no longer walks it in the loop
     # (a full collection first would cost ~0.1 s of every run's start: only the youngest generation is swept)
     gc.collect(0)
@@ -93,10 +112,7 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                 ttau[k] = compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
             except Exception as exc:  # a crashing controller must still leave the robot held
                 safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}", qd)
-                compute = _idle(dof)  # once tripped, the safety layer drives; don't call it again
-                st.failed = True
-                ttau[k] = 0.0
-            row = packed[k]
+                compute, st.failed, ttau[k] = _idle(dof), True, 0.0  # the safety layer drives from now on
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
             if force_at is not None:
@@ -104,7 +120,7 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                 if f_h is not None:
                     f_h[k] = math.sqrt(force @ force)
                 safety.check_force(t, q, force, qd)
-            tau = check(t, row)
+            tau = check(t, packed[k])
             if record is not None:
                 record(k, q)
             try:
@@ -122,29 +138,13 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                 contact_steps += 1
             if k == next_log:
                 next_log += log_every
-                if drawn:
-                    log.record(t, backend.body_poses(), backend.ee_position())
-                else:
-                    log.record(t, NO_BODIES, a.robot.ee_world(q[None])[0])
-                if draws is not None:
-                    for name, shapes in draws().items():
-                        log.drawing(t, f"world/patient/{name}", shapes)
-                if log.pending >= flush_samples:
-                    view.flush(trace, k + 1)
+                view.record_step(t, k, q, trace)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
                 log.send_one()
-            if progress and k % 1000 == 999:
-                if bar is not None:
-                    bar.update(1000)
-                elif time.perf_counter() - t_loop > 1.0:
-                    bar = _progress_bar(n)
-                    bar.update(k + 1)
-            if safety.tripped_at is not None and not st.braked and safety.torque_off:
-                st.braked = True
-                safety.braked(t, backend.engage_brakes())
-            if safety.tripped_at is not None and t + dt - safety.tripped_at >= stop_after - 1e-9:
+            if bar is not None and k % 1000 == 999:
+                bar.tick(k, t_loop)
+            if safety.tripped_at is not None and _stopped(st, safety, backend, t, dt, stop_after):
                 k += 1
-                st.stopped = True
                 break
         else:
             k = k_end
