@@ -94,6 +94,7 @@ def test_plugins_and_schema_commands():
     r = cli("plugins")
     assert r.returncode == 0
     assert "planner    multi-cubic      rehabkit 0.1.0" in r.stdout and "segment_durations: list[float]" in r.stdout
+    assert "extension  rehab            sections outcomes:, patient:" in r.stdout  # the layers and their sections
     schema = json.loads(cli("schema").stdout)
     assert schema["title"] == "rehabkit scenario" and "planner" in schema["properties"]
     listed = json.loads(cli("plugins", "--json").stdout)

@@ -159,6 +159,16 @@ def cmd_plugins(args: argparse.Namespace) -> int:
         print(f"BROKEN     {b.provider.entry_point:<16} {b.provider.package} {b.provider.version}  — {b.error}")
     for text in conflicts:
         print(f"CONFLICT   {text}")
+    from rehabkit.core.plugins.lifecycle import default_extensions
+
+    extensions = default_extensions()
+    owned: dict[str, list[str]] = {}
+    for section, (owner, _) in extensions.sections(reg).items():
+        owned.setdefault(owner, []).append(f"{section}:")
+    for name in extensions.names():  # the layers around every run, and the scenario sections each owns
+        print(f"{'extension':<10} {name:<16} " + (f"sections {', '.join(owned[name])}" if name in owned else ""))
+    for b in extensions.broken:
+        print(f"BROKEN     extension {b.name:<6} — {b.error}")
     return EXIT_OK
 
 
