@@ -79,3 +79,15 @@ def test_the_cycle_finder_finds_a_cycle():
             return self.edges[m]
 
     assert _cycles(Graph()) == [["a", "b", "c"]]
+
+
+def test_each_folder_of_the_package_is_one_stage_of_a_dozen_modules_at_most():
+    """The core grouped by stage, every folder small enough to take in at once (``__init__`` not counted)."""
+    package = ROOT / "rehabkit"
+    sizes = {str(d.relative_to(ROOT)): len([p for p in d.glob("*.py") if not p.name.startswith("__")])
+             for d in [package, *package.rglob("*")] if d.is_dir() and d.name != "__pycache__"}
+    assert {d: n for d, n in sizes.items() if n > 12} == {}
+    stages = {"kinds", "plugins", "scenario", "setup", "run", "safety", "results", "log"}
+    core = package / "core"
+    assert stages <= {d.name for d in core.iterdir() if d.is_dir()}
+    assert sorted(p.name for p in core.glob("*.py")) == ["__init__.py", "io.py", "version.py"]
