@@ -253,6 +253,7 @@ class ScenarioBase(StrictModel):
 
 
 PLUGIN_SECTIONS = {"robot": "robot", "backend": "backend", "planner": "planner", "controller": "controller"}
+DEFAULT_BACKEND = "mujoco"  # a scenario without a backend: section runs on this one (the DSL's one default plugin)
 
 
 def plugin_union(registry: PluginRegistry, kind: str):
@@ -273,7 +274,7 @@ def scenario_model(registry: PluginRegistry, extensions: Extensions | None = Non
         if union is None:
             continue
         if kind == "backend":
-            fields[section] = (union, Field(default={"type": "mujoco"}, validate_default=True))
+            fields[section] = (union, Field(default={"type": DEFAULT_BACKEND}, validate_default=True))
         else:
             fields[section] = (union, ...)
     sensor_union = plugin_union(registry, "sensor")

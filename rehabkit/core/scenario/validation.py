@@ -17,7 +17,7 @@ from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.registry import PluginError, PluginRegistry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
-from rehabkit.core.scenario.models import PLUGIN_SECTIONS, ScenarioBase, scenario_model
+from rehabkit.core.scenario.models import DEFAULT_BACKEND, PLUGIN_SECTIONS, ScenarioBase, scenario_model
 from rehabkit.core.scenario.source import KeyPath, Source, _dotted
 
 REQUIRED_PLUGIN_SECTIONS = ("robot", "planner", "controller")  # (backend: mujoco by default)
@@ -91,7 +91,7 @@ def _check_plugin_types(src: Source, registry: PluginRegistry, slots: dict[tuple
     (only those: the scenario's model is built from them), a broken or conflicting one reported where named."""
     problems: list[Diagnostic] = []
     if not isinstance(src.data.get("backend"), dict):  # the default backend
-        registry.find("backend", "mujoco")
+        registry.find("backend", DEFAULT_BACKEND)
     for section in REQUIRED_PLUGIN_SECTIONS:
         if section not in src.data:
             problems.append(Diagnostic(src.value_marks[()], section, f"missing required field '{section}'"))
