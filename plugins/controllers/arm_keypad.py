@@ -17,11 +17,8 @@ from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S
 from rehabkit_plugins.controllers.arm_keypad_patches import Auto, PatchBook
 from rehabkit_plugins.controllers.arm_keypad_settings import ArmKeypadConfig
 
-from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import LiftArmGripper
-from rehabkit.core.kinds.interfaces import Context, Controller
-from rehabkit.core.results.metric import Metric
 from rehabkit.models.time_laws import PEAK_VELOCITY
+from rehabkit.plugin import Context, Controller, LiftArmGripper, Metric, hookimpl
 from rehabkit.store.patches import open_store
 
 

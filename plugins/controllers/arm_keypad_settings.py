@@ -7,7 +7,7 @@ from pydantic import Field, ValidationError, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 from rehabkit_plugins.controllers.arm_keypad_menu import check_timeline
 
-from rehabkit.core.kinds.interfaces import StrictModel
+from rehabkit.plugin import StrictModel
 
 
 class KeyPress(StrictModel):

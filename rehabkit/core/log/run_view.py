@@ -27,12 +27,12 @@ LOG_FLUSH_SAMPLES = 2000  # log-rate samples buffered between column sends to a 
 LIVE_FLUSH_SAMPLES = 500  # ... and when a viewer shows the run as it goes
 
 
-def open_view(setup: Assembly, space, spawn: bool = False) -> RunView | NullView:
+def open_view(setup: Assembly, spawn: bool = False) -> RunView | NullView:
     """The run's recording (``run.rrd`` in the run's folder, or a viewer with ``spawn``), or none."""
     if setup.out_dir is None or not setup.sc.logging.rrd:
         return NullView()
     setup.out_dir.mkdir(parents=True, exist_ok=True)
-    return RunView(setup, space, spawn)
+    return RunView(setup, spawn)
 
 
 class RunView:
@@ -40,15 +40,19 @@ class RunView:
 
     active = True
 
-    def __init__(self, setup: Assembly, space, spawn: bool = False):
-        self.setup, self.space = setup, space
+    def __init__(self, setup: Assembly, spawn: bool = False):
+        self.setup, self.space = setup, setup.space
+        # a logged step's poses: the backend's where it tracks the bodies and the hand, else the robot's kinematics
+        self._drawn = isinstance(setup.backend, SceneGeometry)
+        patient = setup.patient
+        self._draws = patient.drawing if patient is not None and type(patient).drawing is not Patient.drawing else None
         self.flush_samples = LIVE_FLUSH_SAMPLES if spawn else LOG_FLUSH_SAMPLES
         self._upto = 0
         self._joint_space = False
         sc, out = setup.sc, setup.out_dir
         model = setup.robot.model
         log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn)
-        if isinstance(setup.backend, SceneGeometry):
+        if self._drawn:
             log.scene(setup.backend.visual_geoms())
         named = [(n, t) for n, t in setup.targets.items() if t.pose is not None]
         log.targets(0.0, [n for n, _ in named], model.to_world([t.pose[:3, 3] for _, t in named]))
@@ -61,12 +65,12 @@ class RunView:
         """A logged step: the bodies' poses and the hand (the backend's, where it tracks them; else the robot's
         kinematics), a simulated person's drawings, and the joint series when enough are buffered."""
         a, log = self.setup, self.log
-        if isinstance(a.backend, SceneGeometry):
+        if self._drawn:
             log.record(t, a.backend.body_poses(), a.backend.ee_position())
         else:
             log.record(t, NO_BODIES, a.robot.ee_world(q[None])[0])
-        if a.patient is not None and type(a.patient).drawing is not Patient.drawing:
-            for name, shapes in a.patient.drawing().items():
+        if self._draws is not None:
+            for name, shapes in self._draws().items():
                 log.drawing(t, f"world/patient/{name}", shapes)
         if log.pending >= self.flush_samples:
             self.flush(trace, k + 1)

@@ -120,6 +120,7 @@ class Extensions:
     def __init__(self, modules: Iterable[tuple[str, object]] = (), entry_points: bool = True):
         self.pm = pluggy.PluginManager(PROJECT)
         self.pm.add_hookspecs(sys.modules[__name__])
+        self._sections: tuple[Any, dict] | None = None  # (the registry's state, its sections): see sections()
         self.broken: list[BrokenExtension] = []
         found: list[tuple[str, Any]] = []
         if entry_points:
@@ -149,7 +150,14 @@ class Extensions:
         return [m for ms in self.hook.rehabkit_metrics() for m in ms]
 
     def sections(self, registry: Any) -> dict[str, tuple[str, Section]]:
-        """Every extension's scenario sections: name → (extension, section); two claiming one name is an error."""
+        """Every extension's scenario sections: name → (extension, section); two claiming one name is an error.
+
+        Asked for by each stage of a scenario's load and setup; made again only when ``registry`` has loaded more
+        plugins since (a section's model may take the settings of a plugin kind: the patient profile's ``model``).
+        """
+        state = (id(registry), tuple(len(loaded) for loaded in registry.plugins.values()))
+        if self._sections is not None and self._sections[0] == state:
+            return self._sections[1]
         out: dict[str, tuple[str, Section]] = {}
         for impl in self.hook.rehabkit_scenario_sections.get_hookimpls():
             for name, section in impl.function(registry=registry).items():
@@ -157,7 +165,8 @@ class Extensions:
                     raise ValueError(f"scenario section '{name}' is claimed by extensions '{out[name][0]}' and "
                                      f"'{impl.plugin_name}'; uninstall one")
                 out[name] = (impl.plugin_name, section)
-        return dict(sorted(out.items()))
+        self._sections = state, dict(sorted(out.items()))
+        return self._sections[1]
 
     def plugin_slots(self, registry: Any) -> dict[tuple[str, str], str]:
         """(section, key) → plugin kind, for every extension section holding a plugin's settings."""

@@ -33,19 +33,17 @@ class PlanGate:
         settings make another); its ``PlanningError`` passes through."""
         return (planner or self.planner).plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
 
-    def problem(self, plan: Plan) -> tuple[str | None, LimitBreach | None]:
-        """Why the plan must not run (and the limit breach, when that is why), or ``(None, None)``."""
+    def problem(self, plan: Plan) -> tuple[str | None, LimitBreach | None, tuple[str, ...]]:
+        """Why the plan must not run, with the limit breach or the scene actions the backend can't do when that is
+        why; ``(None, None, ())`` when it may run."""
         breach = self.space.limit_breach(plan)
         if breach is not None:
-            return f"planned trajectory: {breach.describe()}", breach
-        bad = self.unknown_actions(plan)
+            return f"planned trajectory: {breach.describe()}", breach, ()
+        bad = tuple(sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions}))
         if bad:
-            return f"plan action(s) {bad} unknown; the backend can do: {', '.join(self.scene_actions) or 'none'}", None
-        return None, None
-
-    def unknown_actions(self, plan: Plan) -> list[str]:
-        """The plan's scene actions the backend can't do."""
-        return sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions})
+            can = ", ".join(self.scene_actions) or "none"
+            return f"plan action(s) {list(bad)} unknown; the backend can do: {can}", None, bad
+        return None, None, ()
 
     def warn_box(self, t: float, plan: Plan) -> None:
         """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""

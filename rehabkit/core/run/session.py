@@ -40,10 +40,14 @@ class PlanRefusal:
     reason: str
     breach: LimitBreach | None = None
     error: PlanningError | None = None
-    unplannable: bool = False  # the planner failed or its plan must not run (not: a sensed target unseen)
     actions: tuple[str, ...] = ()  # scene actions the plan asked for that the backend can't do
     first: bool = False
     located: ScenarioError | None = None
+
+    @property
+    def unplannable(self) -> bool:
+        """The planner failed, or its plan must not run (not: a sensed target not seen yet)."""
+        return self.error is not None or self.breach is not None or bool(self.actions)
 
 
 @dataclass
@@ -108,12 +112,11 @@ class RunSession:
         try:
             plan = self.gate.ask(t, q, qd, [a.targets[n] for n in request.names], a.event_planners.get(request.event))
         except PlanningError as exc:
-            self._refuse(PlanRefusal(t, f"planner failed: {exc}", error=exc, unplannable=True, first=first), q)
+            self._refuse(PlanRefusal(t, f"planner failed: {exc}", error=exc, first=first), q)
             return
-        problem, breach = self.gate.problem(plan)
+        problem, breach, actions = self.gate.problem(plan)
         if problem:
-            self._refuse(PlanRefusal(t, problem, breach=breach, unplannable=True, first=first,
-                                     actions=tuple(self.gate.unknown_actions(plan))), q, "; not executed")
+            self._refuse(PlanRefusal(t, problem, breach=breach, actions=actions, first=first), q, "; not executed")
             return
         self.gate.warn_box(t, plan)
         self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
@@ -135,7 +138,7 @@ class RunSession:
         Raises :class:`PlanningError` with the reason when there is none.
         """
         plan = self.gate.ask(t, q, qd, targets)
-        problem, _ = self.gate.problem(plan)
+        problem, _, _ = self.gate.problem(plan)
         if problem:
             raise PlanningError(problem)
         k0 = int(round(t / self.setup.schedule.control_dt))
@@ -171,7 +174,7 @@ def open_session(a: Assembly, spawn: bool = False, notes: list[dict] | None = No
                   packed[:, 2 * dof :], np.zeros((n, dof)), np.zeros((n, dof)),
                   tau_h=np.zeros((n, dof)) if a.patient is not None else None,
                   f_h=np.zeros(n) if a.force_source is not None and a.force_source.measured else None)
-    view = open_view(a, a.space, spawn)
+    view = open_view(a, spawn)
     q0 = start_posture(a)
     try:
         a.backend.reset(q0)

@@ -18,6 +18,8 @@ import numpy as np
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.setup.assembly import Assembly
 
+NO_REPLANS: list = []  # never appended to: what due() returns when no plan is due
+
 
 @dataclass(frozen=True)
 class Replan:
@@ -140,6 +142,8 @@ class Timeline:
         return (nxt if nxt > k else k + 1), replans
 
     def _take_replans(self) -> list[Replan]:
+        if not self._replans:  # (the common case: no new list each time)
+            return NO_REPLANS
         replans, self._replans = self._replans, []
         return replans
 

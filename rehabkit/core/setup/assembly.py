@@ -2,7 +2,7 @@
 
 One function, :func:`assemble`, for ``rehabkit run`` and ``rehabkit validate``: the
 latter builds everything but the backend (``upto="plugins"``, a dry-run context) and
-then makes the first plan (:func:`check_first_plan`), and so refuses what a run's
+then makes the first plan (:func:`rehabkit.core.setup.first_plan.check_first_plan`), and so refuses what a run's
 setup would. The order:
 
 1. extensions adapt the robot's settings (``rehabkit_configure_robot``); the robot is built;
