@@ -117,6 +117,7 @@ class SimulatedArm(Patient):
         self.strength = _per_joint(vol.strength_nm, n, "voluntary.strength_nm")
         if not np.all(self.strength > 0):
             raise ValueError("simulated-arm: voluntary.strength_nm must be > 0")
+        self.inv_strength = 1.0 / self.strength
         self.vol, self.fat = vol, fat
         self.own_speed = math.radians(vol.speed_deg_s)
         self.delay_s = vol.delay_s
@@ -170,6 +171,7 @@ class SimulatedArm(Patient):
         return w
 
     def torque(self, t, q, qd, goal):
+        # (each control step: in-place ufuncs and scalar math, numpy's dispatch would cost more than the model)
         if self.rest is None:
             self.rest = q.copy()
         tau = -self.k * (q - self.rest) - self.b * qd
@@ -187,30 +189,31 @@ class SimulatedArm(Patient):
             J = pin.computeFrameJacobian(self.pin_model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
             x = self.data.oMf[self.frame].translation
             force = vol.stiffness * (goal - x) - vol.damping * (J @ qd)
-            size = float(np.linalg.norm(force))
+            size = math.sqrt(force @ force)
             if size > vol.hand_force_n:
                 force *= vol.hand_force_n / size
             effort = J.T @ force
         else:
-            target = np.clip(goal, self.active_lo, self.active_hi)
+            target = np.minimum(np.maximum(goal, self.active_lo), self.active_hi)
             effort = vol.stiffness * (target - q) - vol.damping * qd
-        np.clip(effort, -self.strength, self.strength, out=effort)
+        np.minimum(np.maximum(effort, -self.strength, out=effort), self.strength, out=effort)
         # no voluntary push further out of the active range, nor faster than the person moves
         effort[((q >= self.active_hi) & (effort > 0)) | ((q <= self.active_lo) & (effort < 0))] = 0.0
         along = effort * qd > 0  # force-velocity: pushing along the motion, less the faster it goes (none at v_max)
-        effort[along] *= np.maximum(0.0, 1.0 - np.abs(qd[along]) / self.own_speed)
+        if along.any():
+            effort[along] *= np.maximum(0.0, 1.0 - np.abs(qd[along]) / self.own_speed)
         self.noise_state = self.noise_a * self.noise_state + self.noise_b * self._white()
         effort *= self.capacity * vol.participation * (1.0 + vol.noise * self.noise_state)
         tau += effort
 
-        load = float(np.mean(np.abs(effort) / self.strength))
+        load = float(np.abs(effort) @ self.inv_strength) / self.n
         fat = self.fat
         self.capacity += self.dt * (-fat.rate_per_s * load + fat.recovery_per_s * (1.0 - self.capacity))
         self.capacity = min(1.0, max(0.0, self.capacity))
         self.voluntary_work += max(0.0, float(effort @ qd)) * self.dt
         if self.step % SERIES_EVERY == 0:
             self._log_t.append(t)
-            self._log.append((self.capacity, float(np.linalg.norm(effort)), load))
+            self._log.append((self.capacity, math.sqrt(effort @ effort), load))
         self.step += 1
         return tau
 

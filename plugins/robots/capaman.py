@@ -7,6 +7,8 @@ mechanism for given cranks come from its forward kinematics.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydantic import Field
 from scipy.optimize import least_squares
@@ -18,7 +20,7 @@ from rehabkit.models.chain import matrix_to_quat_wxyz
 from rehabkit.models.dh import PoseSpec
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
 
-from .capaman_kinematics import CapamanGeometry, forward, inverse
+from .capaman_kinematics import CapamanGeometry, forward, forward_jacobian, inverse
 from .capaman_mjcf import MASS, build_capaman_mjcf
 
 
@@ -100,16 +102,31 @@ class CapamanRobot(Robot, PassiveJoints, ClusterPoints):
         """
         goal = np.asarray(pose, float)[:3, 3]
         lim = self.model.limits
+        solved: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+        def pose_at(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            key = a.tobytes()
+            if key not in solved:
+                p, R, _ = forward(self.geo, a[None])
+                solved.clear()
+                solved[key] = p[0], R[0]
+            return solved[key]
+
+        def error(a: np.ndarray) -> np.ndarray:
+            p, R = pose_at(a)
+            return p + R @ self.tool - goal
+
+        def jacobian(a: np.ndarray) -> np.ndarray:
+            # the tool tip p + R t moves by dp − (R t)× dφ: analytic, one forward solve a step instead of four
+            p, R = pose_at(a)
+            d = forward_jacobian(self.geo, a, p, R)
+            rt = R @ self.tool
+            return d[:3] - np.cross(rt, d[3:].T).T
+
         found: list[np.ndarray] = []
         for start in (np.full(3, 1.4), np.full(3, 1.75), np.array([1.3, 1.6, 1.9]), np.array([1.9, 1.6, 1.3])):
-            sol = least_squares(
-                lambda a: self.fk(a)[:3, 3] - goal,
-                start,
-                bounds=(lim.lower, lim.upper),
-                xtol=1e-15,
-                ftol=1e-15,
-                gtol=1e-15,
-            )
+            sol = least_squares(error, start, jac=jacobian, bounds=(lim.lower, lim.upper), xtol=1e-15, ftol=1e-15,
+                                gtol=1e-15)
             if np.linalg.norm(sol.fun) < 1e-9 and all(np.abs(sol.x - f).max() > 1e-6 for f in found):
                 found.append(sol.x)
         return found
@@ -200,13 +217,22 @@ class CapamanRobot(Robot, PassiveJoints, ClusterPoints):
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """Gravity torques, trilinear in a 5° table over the crank range (the exact version takes 0.5 ms)."""
-        table, lower, step, last, corners = self._gravity_table()
-        x = (np.asarray(q, float) - lower) / step
-        i = np.clip(np.floor(x).astype(int), 0, last)
-        f = x - i
-        idx = i + corners
-        weights = np.prod(np.where(corners, f, 1.0 - f), axis=1)
-        return weights @ table[idx[:, 0], idx[:, 1], idx[:, 2]]
+        table, lower, step, last, _ = self._gravity_table()
+        # one crank triple each control step: scalar arithmetic, the eight corners by flat index
+        idx, frac = [], []
+        for v, lo, h, top in zip(np.asarray(q, float).tolist(), lower.tolist(), step.tolist(), last.tolist()):
+            x = (v - lo) / h
+            i = min(max(math.floor(x), 0), top)
+            idx.append(i)
+            frac.append(x - i)
+        (fx, fy, fz), (i0, i1, i2) = frac, idx
+        n1, n2 = table.shape[1], table.shape[2]
+        a = (i0 * n1 + i1) * n2 + i2
+        b, c = a + n2, a + n1 * n2
+        gx, gy, gz = 1.0 - fx, 1.0 - fy, 1.0 - fz
+        w = np.array([gx * gy * gz, gx * fy * gz, fx * gy * gz, fx * fy * gz, gx * gy * fz, gx * fy * fz,
+                      fx * gy * fz, fx * fy * fz])
+        return w @ table.reshape(-1, 3)[[a, b, c, c + n2, a + 1, b + 1, c + 1, c + n2 + 1]]
 
     def gravity_torques(self, qs: np.ndarray) -> np.ndarray:
         """:meth:`gravity_torque` for the rows of ``qs``, vectorised."""

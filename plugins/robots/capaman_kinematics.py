@@ -139,3 +139,18 @@ def forward(geo: CapamanGeometry, alpha: np.ndarray, p0: np.ndarray | None = Non
         p = p + step[:, :3]
         R = expmap(step[:, 3:]) @ R
     return p, R, np.abs(residual).max(axis=1)
+
+
+def forward_jacobian(geo: CapamanGeometry, alpha: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """∂(p, φ)/∂α (6, 3) at a solved pose: the plate's position and its rotation (a left increment, as
+    :func:`forward` applies) per unit of each crank angle, by implicit differentiation of the leg equations."""
+    rc = R @ geo.plate_points.T  # (3, legs): R c_k
+    dirs = np.concatenate([geo.tangent, np.tile([0.0, 0.0, 1.0], (3, 1))])
+    J = np.zeros((6, 6))
+    J[:, :3] = dirs
+    J[:, 3:] = np.cross(np.concatenate([rc.T, rc.T]), dirs)
+    alpha = np.asarray(alpha, float)
+    d_target = np.zeros((6, 3))  # ∂target/∂α: −b sin α_k in leg k's tangent row, b cos α_k in its vertical row
+    d_target[np.arange(3), np.arange(3)] = -geo.b * np.sin(alpha)
+    d_target[3 + np.arange(3), np.arange(3)] = geo.b * np.cos(alpha)
+    return np.linalg.solve(J, d_target)

@@ -12,6 +12,8 @@ estimate advanced by α dt.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from rehabkit.estimation.recursions import ekf_omega
@@ -48,18 +50,21 @@ class AccelerometerArray:
 
     def omega(self, z: np.ndarray, dt: float) -> np.ndarray:
         """Angular velocity from z's quadratic terms, its sign kept continuous over calls."""
-        sq = np.sqrt(np.maximum(z[6:9], 0.0))
-        xy, yz, xz = z[9:12]
+        # (scalar math: called every control step with twelve numbers, numpy's per-call cost would dominate)
+        xx, yy, zz, xy, yz, xz = z[6:12].tolist()
+        sq = (math.sqrt(max(xx, 0.0)), math.sqrt(max(yy, 0.0)), math.sqrt(max(zz, 0.0)))
         # choose signs of (ω_y, ω_z) relative to ω_x to match the products, using the largest component
-        signs = np.array([1.0, np.sign(xy) or 1.0, np.sign(xz) or 1.0])
-        if sq[0] < 1e-9:
-            signs = np.array([1.0, 1.0, np.sign(yz) or 1.0])
-        w = sq * signs
-        expected = None if self._omega is None else self._omega + z[3:6] * dt
-        if expected is not None and w @ expected < 0:
+        signs = (1.0, 1.0, _sign(yz)) if sq[0] < 1e-9 else (1.0, _sign(xy), _sign(xz))
+        w = np.array([sq[0] * signs[0], sq[1] * signs[1], sq[2] * signs[2]])
+        if self._omega is not None and w @ (self._omega + z[3:6] * dt) < 0:
             w = -w
         self._omega = w
         return w
+
+
+def _sign(x: float) -> float:
+    """The sign of a product, +1 for zero (either sign fits it)."""
+    return -1.0 if x < 0 else 1.0
 
 
 class AngularVelocityEKF:
