@@ -20,6 +20,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
+from rehabkit.numerics.spd3 import solve_spd3
 
 
 class ClikPDConfig(StrictModel):
@@ -56,7 +57,7 @@ class ClikPD(Controller):
         self.kp = np.broadcast_to(np.asarray(config.kp, float), (n,)).copy()
         self.kv = np.broadcast_to(np.asarray(config.kv, float), (n,)).copy()
         self.gravity = config.gravity_compensation
-        self.eye_n, self.eye3, self.zero = np.eye(n), np.eye(3), np.zeros(n)
+        self.zero = np.zeros(n)
         self.joint_reference: np.ndarray | None = None
         self.qd_r = np.zeros(n)
 
@@ -67,9 +68,9 @@ class ClikPD(Controller):
         J = pin.computeFrameJacobian(self.model, self.data, q_r, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
         e = x_r - self.data.oMf[self.frame].translation
         JW = J * self.w_inv  # J W⁻¹
-        J_pinv = JW.T @ np.linalg.inv(JW @ J.T + self.lam2 * self.eye3)
         qd0 = -self.k0 * 2.0 * (q_r - self.centre) / self.span2
-        qd_r = J_pinv @ (xd_r + self.k * e) + (self.eye_n - J_pinv @ J) @ qd0
+        # J⁺ v + (I − J⁺J) qd0 = qd0 + J⁺ (v − J qd0), with J⁺ = W⁻¹Jᵀ (J W⁻¹ Jᵀ + λ²I)⁻¹: one 3×3 solve
+        qd_r = qd0 + JW.T @ solve_spd3(JW @ J.T, xd_r + self.k * e - J @ qd0, self.lam2)
         np.clip(qd_r, -self.vmax, self.vmax, out=qd_r)
         q_r += qd_r * self.dt
         np.clip(q_r, self.lower, self.upper, out=q_r)

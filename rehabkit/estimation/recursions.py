@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from rehabkit.numerics import backward_solve, cholesky, forward_solve
+from rehabkit.numerics.triangular import backward_solve, cholesky, forward_solve
 
 
 @njit(cache=True, nogil=True)

@@ -7,6 +7,7 @@ from collections.abc import Callable
 import numpy as np
 
 from rehabkit.models.robot_model import RobotModel
+from rehabkit.numerics.spd3 import solve_spd3
 
 DAMPING_M = 0.02  # damped least squares: near a straight arm the plain one grows without bound
 
@@ -44,19 +45,6 @@ class HandForce:
         """Force [N] in the robot base frame's axes (a 3×3 solve each control step)."""
         J = self.jacobian(q)
         return solve_spd3(J @ J.T, J @ tau, DAMPING_M**2)
-
-
-def solve_spd3(A: np.ndarray, b: np.ndarray, shift: float = 0.0) -> np.ndarray:
-    """x with (A + shift·I) x = b for one symmetric 3×3 A, by its adjugate: a control step's solve, where
-    ``numpy.linalg.solve``'s dispatch costs ten times the arithmetic."""
-    (a, d, e), (_, b2, f), (_, _, c) = A.tolist()
-    a, b2, c = a + shift, b2 + shift, c + shift
-    x, y, z = b.tolist()
-    # cofactors of the symmetric matrix [[a, d, e], [d, b2, f], [e, f, c]]
-    c00, c01, c02 = b2 * c - f * f, e * f - d * c, d * f - b2 * e
-    c11, c12, c22 = a * c - e * e, d * e - a * f, a * b2 - d * d
-    det = a * c00 + d * c01 + e * c02
-    return np.array([c00 * x + c01 * y + c02 * z, c01 * x + c11 * y + c12 * z, c02 * x + c12 * y + c22 * z]) / det
 
 
 def hand_in_world(robot) -> Callable[[np.ndarray], np.ndarray]:

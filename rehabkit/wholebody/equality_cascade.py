@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from rehabkit.numerics import backward_solve, cholesky, forward_solve
+from rehabkit.numerics.triangular import backward_solve, cholesky, forward_solve
 
 FEASIBLE_TOL = 1e-9
 CONSISTENT_TOL = 1e-7
