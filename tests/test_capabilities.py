@@ -17,6 +17,7 @@ from rehabkit.core.kinds.capabilities import (
     WorkspaceTable,
     missing_capabilities,
 )
+from rehabkit.core.plugins.types import Declared
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.setup.errors import SetupError
@@ -72,5 +73,7 @@ def test_a_third_party_robot_states_a_capability_by_deriving_from_it(hit):
             return np.zeros((2, 2, 2))
 
     arm = TableArm.__new__(TableArm)
-    assert missing_capabilities(Planner, arm) == []
-    assert missing_capabilities(Planner, hit) == ["a robot that has a workspace look-up table (robot.workspace)"]
+    requires = Declared.of(Planner).requires  # (what the registry reads of a plugin class when it registers)
+    assert requires == (WorkspaceTable,)
+    assert missing_capabilities(requires, arm) == []
+    assert missing_capabilities(requires, hit) == ["a robot that has a workspace look-up table (robot.workspace)"]

@@ -49,12 +49,12 @@ def plugin_reference(info: Any) -> str:
     lines = [f"{info.kind} '{info.name}' ({info.provider.package} {info.provider.version}) — {info.description}",
              "settings:"]
     lines += field_lines(info.config) or ["  (none)"]
-    metrics = getattr(info.factory, "metrics", ())
+    metrics = info.declared.metrics
     if metrics:
         lines.append("metrics it reports (for expect:):")
         lines += [f"  {m.name} [{m.unit}]{' (wall clock)' if m.clock == 'wall' else ''} — {m.description}"
                   for m in metrics]
-    requires = getattr(info.factory, "requires", ())
+    requires = info.declared.requires
     if requires:
         lines.append("needs of the robot or backend: " + ", ".join(getattr(r, "__name__", str(r)) for r in requires))
     return "\n".join(lines)

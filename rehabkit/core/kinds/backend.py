@@ -102,7 +102,7 @@ class Backend(ABC):
     timestep: float
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
-    real_person: bool = False  # drives a real robot (or its stand-in over the link): a person in it is not simulated
+    real_person: ClassVar[bool] = False  # drives a real robot (or its stand-in over a link): its person is real
     ramp_in_after_clear: float = 0.0  # set by reset: the first session after an e-stop was cleared ramps in this long
 
     @abstractmethod

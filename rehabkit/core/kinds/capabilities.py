@@ -10,6 +10,7 @@ name, before anything runs.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -217,11 +218,12 @@ BACKEND_ABILITY: dict[type, str] = {
 }
 
 
-def missing_capabilities(factory: Any, robot: Any, backend: Any = None) -> list[str]:
-    """What ``factory`` (a plugin class with ``requires``) needs of ``robot`` and ``backend`` (an instance or its
-    class: these protocols hold methods only) that they lack, in words."""
+def missing_capabilities(requires: Iterable[type], robot: Any, backend: Any = None) -> list[str]:
+    """What a plugin that ``requires`` these capabilities (its declaration, ``PluginInfo.declared.requires``) needs
+    of ``robot`` and ``backend`` (an instance or its class: these protocols hold methods only) that they lack, in
+    words."""
     missing = []
-    for cap in getattr(factory, "requires", ()):
+    for cap in requires:
         if cap in BACKEND_ABILITY:
             if backend is None:
                 continue

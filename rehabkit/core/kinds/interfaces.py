@@ -266,6 +266,7 @@ class Planner(ABC):
 
     space: ClassVar[ReferenceSpace] = "joint"
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of its diagnostics and run_metrics
+    requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
 
     @abstractmethod
     def plan(self, request: PlanRequest) -> Plan:
@@ -296,6 +297,7 @@ class Controller(ABC):
     joint_reference: np.ndarray | None = None
     own_reference: ClassVar[bool] = False  # it makes its own joint reference (e.g. an HMI), ignoring the runner's
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
 
     def run_metrics(self, trace: Any) -> dict[str, float]:
         """Figures about the executed run only this controller can judge (default none)."""

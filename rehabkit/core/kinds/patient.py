@@ -23,6 +23,7 @@ class Patient(ABC):
 
     delay_s: float = 0.0
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
     # settings (over the plugin's own) that leave the person relaxed, no voluntary effort: a passive assessment's
     relaxed: ClassVar[dict[str, Any]] = {}
 

@@ -57,6 +57,7 @@ class Sensor(ABC):
 
     rate_hz: float
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
+    requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
     blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time
     #                         backend it is read in a thread of its own (``rehabkit.core.run.sensor_threads``)
 

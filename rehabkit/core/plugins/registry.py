@@ -27,6 +27,7 @@ from rehabkit.core.plugins.hookspecs import KINDS
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.types import (
     BrokenPlugin,
+    Declared,
     PluginConflictError,
     PluginError,
     PluginInfo,
@@ -86,7 +87,7 @@ class Registrar:
         typed.model_config = ConfigDict(**{**config.model_config, "extra": "forbid"})
         typed.model_rebuild(force=True)
         self._registry._staged.append(PluginInfo(self.kind, name, typed, factory, description.strip(),
-                                                 self._registry._current))
+                                                 self._registry._current, Declared.of(factory)))
 
 
 @dataclass(frozen=True)

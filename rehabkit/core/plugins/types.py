@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 import typing
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from pydantic import BaseModel
@@ -27,6 +27,27 @@ class UnknownPluginError(PluginError):
     def __init__(self, kind: str, name: str, available: list[str]):
         self.kind, self.name, self.available = kind, name, available
         super().__init__(f"unknown {kind} '{name}'{suggest(name, available)}")
+
+
+@dataclass(frozen=True)
+class Declared:
+    """What a plugin declares as class attributes of its kind's base class, known before one is built:
+
+    ``requires`` (capabilities it needs of the robot or backend), ``metrics`` (what its ``run_metrics`` reports,
+    for ``expect:``), and of a backend ``real_person`` (it drives a real robot: a person in it is not simulated)."""
+
+    requires: tuple[type, ...] = ()
+    metrics: tuple[Any, ...] = ()
+    real_person: bool = False
+
+    @classmethod
+    def of(cls, factory: Callable[..., Any]) -> Declared:
+        """The declarations of ``factory``: a plugin class's own or its base class's defaults; a factory function
+        declares nothing."""
+        if not isinstance(factory, type):
+            return cls()
+        return cls(tuple(getattr(factory, "requires", ())), tuple(getattr(factory, "metrics", ())),
+                   bool(getattr(factory, "real_person", False)))
 
 
 @dataclass(frozen=True)
@@ -56,6 +77,7 @@ class PluginInfo:
         factory: ``factory(config, context)`` builds the plugin instance.
         description: One line, from the argument or the factory's docstring.
         provider: Package that registered it.
+        declared: What the plugin declares of itself (:class:`Declared`), read once when it registered.
     """
 
     kind: str
@@ -64,6 +86,7 @@ class PluginInfo:
     factory: Callable[..., Any]
     description: str
     provider: Provider
+    declared: Declared = field(default_factory=lambda: Declared())
 
     def fields(self) -> list[tuple[str, str, str]]:
         """(name, type, default) for each config field except ``type``."""

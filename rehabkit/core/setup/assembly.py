@@ -193,10 +193,9 @@ def metric_catalogue(a: Assembly) -> MetricCatalogue:
     """Every metric the run can report, described: the core's, the extensions', each plugin's."""
     catalogue = MetricCatalogue(CORE_METRICS)
     catalogue.add(a.extensions.metrics())
-    backend = a.backend if a.backend is not None else a.registry.get("backend", a.sc.backend.type).factory
     for plugin in (a.planner, a.controller, a.patient, *a.sensors.values()):
         catalogue.add(plugin.metrics if plugin is not None else ())
-    catalogue.add(getattr(backend, "metrics", ()))  # (validate builds no backend: its factory's, if it says)
+    catalogue.add(a.registry.get("backend", a.sc.backend.type).declared.metrics)  # (validate builds no backend)
     return catalogue
 
 
@@ -250,11 +249,13 @@ def patient_slot(sc, registry: PluginRegistry, extensions: Extensions) -> Patien
 
 def _patient_and_safety(a: Assembly) -> None:
     sc, slot = a.sc, a.patient_slot
-    backend = a.backend if a.backend is not None else a.registry.get("backend", sc.backend.type).factory
+    info = a.registry.get("backend", sc.backend.type)
+    backend = a.backend if a.backend is not None else info.factory  # (validate builds no backend: its class)
+    real_person = info.declared.real_person
     model_cfg = slot.config if slot is not None else None
     if model_cfg is not None:
         where = ".".join(slot.path)
-        if getattr(backend, "real_person", False):
+        if real_person:
             if a.context.note is not None:
                 a.context.note(0.0, f"{where} '{model_cfg.type}' is not simulated on the '{sc.backend.type}' "
                                     "backend: the person is real")

@@ -27,7 +27,7 @@ def check_capabilities(a: Assembly) -> None:
     paths = {"planner": ("planner", "type"), "controller": ("controller", "type")}
     problems, at = [], None
     for kind, cfg in named:
-        missing = missing_capabilities(a.registry.get(kind, cfg.type).factory, a.robot, backend)
+        missing = missing_capabilities(a.registry.get(kind, cfg.type).declared.requires, a.robot, backend)
         if missing:
             problems.append(f"{kind} '{cfg.type}' needs {' and '.join(missing)}")
             section = paths.get(kind) or ("sensors", next(n for n, c in sc.sensors.items() if c is cfg), "type")
