@@ -10,7 +10,7 @@ name, before anything runs.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -131,6 +131,14 @@ class HeldObjects(Protocol):
     def release(self, name: str) -> None:
         """Let go of a held object: from now on it moves freely."""
         ...
+
+
+def scene_actions(backend: Any) -> dict[str, Callable[[str], None]]:
+    """The actions a plan may schedule on this backend's scene, by name (``Plan.actions``), each the method doing
+    it: ``grasp`` and ``release`` where it holds objects, none elsewhere."""
+    if isinstance(backend, HeldObjects):
+        return {"grasp": backend.grasp, "release": backend.release}
+    return {}
 
 
 @runtime_checkable

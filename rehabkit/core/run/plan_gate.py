@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabkit.core.kinds.capabilities import HeldObjects
+from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.results.metric import MetricCatalogue, combine
 from rehabkit.core.safety.layer import AXES
@@ -23,7 +23,7 @@ class PlanGate:
 
     def __init__(self, setup, space: JointSpace, catalogue: MetricCatalogue):
         self.planner, self.robot, self.safety, self.space = setup.planner, setup.robot, setup.safety, space
-        self.scene_actions = ("grasp", "release") if isinstance(setup.backend, HeldObjects) else ()
+        self.scene_actions = tuple(scene_actions(setup.backend))
         self.catalogue = catalogue
         self.metrics: dict[str, float] = {}
         self.warnings: list[dict] = []

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.setup.assembly import Assembly
 
@@ -46,6 +47,7 @@ class Timeline:
         self._following: tuple[list[str], float, np.ndarray | None] = ([], 0.0, None)
         self.acted: list[dict] = []
         self.actions: list[tuple[int, str, str]] = []  # (step, 'release' | 'grasp', object)
+        self._perform = scene_actions(setup.backend)  # (a plan's actions were checked against these names)
         self._timed = sorted((round(e.at / sch.control_dt), i) for i, e in enumerate(self.events) if e.at is not None)
         self._waiting = [i for i, e in enumerate(self.events) if e.reached is not None]
         # 'moved' events: [position last planned for, candidate new position, readings it has held]
@@ -105,7 +107,7 @@ class Timeline:
                 self._fire(self._timed.pop(0)[1], k, t, q, qd)
             while self.actions and self.actions[0][0] <= k:
                 _, kind, obj = self.actions.pop(0)
-                getattr(a.backend, kind)(obj)  # one of the backend's scene_actions
+                self._perform[kind](obj)
                 self.acted.append({"t": round(t, 6), "action": kind, "object": obj})
                 self.view.event(t, f"{kind} {obj}", level="INFO")
             if self._waiting and k >= self._next_reach:
