@@ -6,16 +6,22 @@ returns are described in :mod:`rehabkit.core.plugins.hookspecs`; the run-lifecyc
 implements in :mod:`rehabkit.core.plugins.lifecycle`.
 """
 
-from rehabkit.core.kinds.backend import EStopLatchedError
+from rehabkit.core.io import load_yaml
+from rehabkit.core.kinds.backend import Drawing, EStopLatchedError
 from rehabkit.core.kinds.capabilities import (
-    ClusterPoints,
+    BaseState,
+    Cameras,
     Contacts,
     ExternalTorques,
     FloatingBase,
+    HeldObjects,
     HostsBodies,
-    LiftArmGripper,
+    Instruments,
+    NamedJoints,
     PassiveJoints,
     RandomReach,
+    SceneGeometry,
+    SceneObjects,
     WorkspaceTable,
 )
 from rehabkit.core.kinds.interfaces import (
@@ -45,10 +51,11 @@ from rehabkit.core.kinds.interfaces import (
 )
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, Section
+from rehabkit.core.plugins.names import suggest
 from rehabkit.core.results.metric import Metric
 from rehabkit.core.setup.errors import SetupError
 from rehabkit.core.setup.limits import LimitBreach, Narrowing
-from rehabkit.core.setup.targets import JointWaypoints, joint_waypoints
+from rehabkit.core.setup.targets import JointWaypoints, angle_axis, angular_distance, joint_waypoints, unreachable
 from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.models.strict import FilePath
 from rehabkit.models.wearable import Strap, Wearable
@@ -61,12 +68,17 @@ __all__ = [
     "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "InteractionForceSensor", "Backend",
     "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "FilePath",
     "Wearable", "Strap",
-    # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked)
-    "joint_waypoints", "JointWaypoints",
+    # what a plugin draws in the recording
+    "Drawing",
+    # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked), and their geometry
+    "joint_waypoints", "JointWaypoints", "angular_distance", "angle_axis", "unreachable",
     # what a robot declares it can do, and a plugin ``requires``
-    "WorkspaceTable", "RandomReach", "PassiveJoints", "ClusterPoints", "FloatingBase", "LiftArmGripper",
-    # what a backend declares it can do (the rest: rehabkit.core.kinds.capabilities)
-    "ExternalTorques", "Contacts", "HostsBodies",
+    "WorkspaceTable", "RandomReach", "PassiveJoints", "FloatingBase",
+    # what a backend declares it can do, and a plugin ``requires``
+    "ExternalTorques", "Contacts", "HostsBodies", "SceneGeometry", "SceneObjects", "HeldObjects", "Cameras",
+    "Instruments", "BaseState", "NamedJoints",
+    # a plugin's own data files and messages: YAML with located errors, "did you mean" for a misspelt name
+    "load_yaml", "suggest",
     # describing metrics; extensions' contributions and limits
     "Metric", "Contribution", "Section", "Narrowing", "LimitBreach",
     # errors

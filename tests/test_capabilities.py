@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rehabkit_plugins.robots.contracts import ClusterPoints
 
 from rehabkit.cli import main
 from rehabkit.core.kinds.capabilities import (
     Cameras,
-    ClusterPoints,
     Contacts,
     ExternalTorques,
     FloatingBase,

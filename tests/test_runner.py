@@ -177,3 +177,18 @@ def test_summary_lists_each_plans_via_points(hit_run, hit):
     assert plan["t"] == 0.0 and plan["duration_s"] == 8.0
     q_b = np.radians(plan["waypoints_deg"][1])
     np.testing.assert_allclose(hit.fk(q_b)[:3, 3], [-0.45, -0.1, -0.3], atol=1e-6)
+
+
+def test_a_plugin_builds_another_from_the_runs_own_plugins(bad_registry):
+    """Context.build (a policy's base controller, any wrapper): from the run's registry — here one only this test's
+    registry has — with the settings checked and what is wrong named by setting."""
+    from rehabkit.core.run.runner import Runner
+    from rehabkit.core.scenario.loader import load_scenario
+
+    a = Runner(load_scenario(HIT, registry=bad_registry), registry=bad_registry).build()
+    inner = a.context.build("controller", {"type": "bad", "fail_at": 0.25})
+    assert isinstance(inner, _BadController) and inner.config.fail_at == 0.25
+    with pytest.raises(ValueError, match=r"controller 'bad': fail_at: Input should be a valid number"):
+        a.context.build("controller", {"type": "bad", "fail_at": "soon"})
+    with pytest.raises(ValueError, match=r"unknown controller 'badd'.*'bad'"):
+        a.context.build("controller", {"type": "badd"})

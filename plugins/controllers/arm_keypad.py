@@ -16,9 +16,10 @@ from rehabkit_plugins.controllers.arm_keypad_jog import Jog, Jogger, Quintic
 from rehabkit_plugins.controllers.arm_keypad_menu import MENUS, STORE_HOLD_S
 from rehabkit_plugins.controllers.arm_keypad_patches import Auto, PatchBook
 from rehabkit_plugins.controllers.arm_keypad_settings import ArmKeypadConfig
+from rehabkit_plugins.robots.contracts import LiftArmGripper
 
 from rehabkit.models.time_laws import PEAK_VELOCITY
-from rehabkit.plugin import Context, Controller, LiftArmGripper, Metric, hookimpl
+from rehabkit.plugin import Context, Controller, Metric, hookimpl
 from rehabkit.store.patches import open_store
 
 

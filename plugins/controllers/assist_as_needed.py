@@ -24,8 +24,7 @@ import pinocchio as pin
 from pydantic import Field, model_validator
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Context, Controller, Metric, StrictModel
 
 SERIES_EVERY = 10
 

@@ -19,8 +19,8 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
 from rehabkit.numerics.spd3 import solve_spd3
+from rehabkit.plugin import Context, Controller, StrictModel
 
 
 class ClikPDConfig(StrictModel):

@@ -9,7 +9,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
+from rehabkit.plugin import Context, Controller, StrictModel
 
 
 class JointPDConfig(StrictModel):

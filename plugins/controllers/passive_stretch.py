@@ -19,8 +19,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Context, Controller, Metric, StrictModel
 
 MARGIN_DEG = 1.0  # the stretch stops this short of the robot's own limit
 EASE_S = 0.5  # the return reaches its speed over this long

@@ -17,9 +17,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
 from rehabkit.models.policy import Policy
 from rehabkit.models.strict import FilePath
+from rehabkit.plugin import Context, Controller, StrictModel
 
 CONTROLLER_TERMS = ("joint_state", "reference", "tracking_error", "phase")
 
@@ -112,19 +112,13 @@ class PolicyController(Controller):
 
 
 def _build(spec: dict[str, Any], context: Context) -> Controller:
-    """The base controller from its section (type and settings), through the installed plugins."""
-    from rehabkit.core.plugins.registry import default_registry
-
-    if "type" not in spec:
-        raise ValueError("base: give the controller's type")
-    if spec["type"] == "policy":
+    """The base controller from its section (type and settings), from the run's installed plugins."""
+    if spec.get("type") == "policy":
         raise ValueError("base: a policy cannot act on a policy")
-    info = default_registry().get("controller", spec["type"])
     try:
-        config = info.config.model_validate(spec)
-    except Exception as exc:  # a pydantic ValidationError: its settings, said under base
+        return context.build("controller", spec)
+    except ValueError as exc:  # its settings, said under base
         raise ValueError(f"base: {exc}") from None
-    return info.factory(config, context)
 
 
 @hookimpl

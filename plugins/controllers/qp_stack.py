@@ -21,9 +21,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import FloatingBase
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Context, Controller, FloatingBase, Metric, StrictModel
 from rehabkit.wholebody.stack import Level, compile_kernels, solve_cascade
 from rehabkit.wholebody.tasks import Constraints, ConstraintSpec, KinematicState, Task, TaskSpec
 

@@ -9,7 +9,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Controller, StrictModel
+from rehabkit.plugin import Context, Controller, StrictModel
 
 
 class TransparentConfig(StrictModel):

@@ -20,15 +20,13 @@ import numpy as np
 from rehabkit_plugins.patients.musculoskeletal_settings import MusculoskeletalConfig
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Drawing, EmbodiedPatient
-from rehabkit.core.plugins.names import suggest
-from rehabkit.core.results.metric import Metric
 from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
 from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
 from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
 from rehabkit.musculo.scaling import scale_arm
 from rehabkit.musculo.static_opt import StaticOptimisation
+from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, suggest
 from rehabkit.sim.mujoco import span
 
 SERIES_EVERY = 10  # control steps between logged samples

@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from rehabkit.core.kinds.interfaces import StrictModel
+from rehabkit.plugin import StrictModel
 
 Vec3 = tuple[float, float, float]
 

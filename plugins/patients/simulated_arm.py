@@ -32,8 +32,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Patient, StrictModel
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Context, Metric, Patient, StrictModel
 from rehabkit.rehab.profile import JointRom
 
 PerJoint = float | list[float]

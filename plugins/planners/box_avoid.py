@@ -22,14 +22,12 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.results.metric import Metric
-from rehabkit.core.setup.targets import angular_distance
 from rehabkit.geometry.box_avoid import NoPathError, plan_path
 from rehabkit.geometry.solids import Solid, make_solid
 from rehabkit.models.chain import rpy_to_matrix
 from rehabkit.models.time_laws import PEAK_VELOCITY as PEAK
 from rehabkit.models.time_laws import quintic
+from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, angular_distance
 
 
 class BoxAvoidConfig(StrictModel):

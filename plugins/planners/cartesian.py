@@ -18,9 +18,18 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel, Target
-from rehabkit.core.results.metric import Metric
-from rehabkit.core.setup.targets import angle_axis, unreachable
+from rehabkit.plugin import (
+    Context,
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    StrictModel,
+    Target,
+    angle_axis,
+    unreachable,
+)
 
 from .multi_cubic import MultiCubicTrajectory, solve_multi_cubic
 

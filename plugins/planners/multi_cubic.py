@@ -14,9 +14,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.results.metric import Metric
-from rehabkit.core.setup.targets import joint_waypoints
+from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, joint_waypoints
 
 
 def cubic_system(durations: np.ndarray) -> np.ndarray:

@@ -16,12 +16,10 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.results.metric import Metric
-from rehabkit.core.setup.targets import joint_waypoints
 from rehabkit.cspace.ompl_seed import seed_ompl
 from rehabkit.cspace.scene_check import SceneCollision
 from rehabkit.cspace.timing import RestToRestPath, rest_to_rest_durations
+from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, joint_waypoints
 
 ALGORITHMS = {"rrt-connect": "RRTConnect", "rrt-star": "RRTstar", "prm": "PRM"}
 

@@ -19,17 +19,15 @@ import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
 from pydantic import Field
+from rehabkit_plugins.robots.contracts import ClusterPoints
 from scipy import ndimage
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import ClusterPoints
-from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.results.metric import Metric
-from rehabkit.core.setup.targets import joint_waypoints
 from rehabkit.cspace.genetic import GAConfig, PathGA, resample
 from rehabkit.cspace.joint_matrix import JointMatrix, build_joint_matrix
 from rehabkit.cspace.occupancy import rasterise
 from rehabkit.cspace.ompl_seed import seed_ompl
+from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, joint_waypoints
 
 from .multi_cubic import MultiCubicTrajectory, solve_multi_cubic
 

@@ -23,10 +23,8 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import FloatingBase
-from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.results.metric import Metric
 from rehabkit.models.time_laws import quintic
+from rehabkit.plugin import Context, FloatingBase, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
 

@@ -23,14 +23,13 @@ import mujoco
 import numpy as np
 from pydantic import Field
 from rehabkit_plugins.robots.arm_kinematics import arm_ik, elbow_up
+from rehabkit_plugins.robots.contracts import LiftArmGripper
 
 from rehabkit import hookimpl
-from rehabkit.core.io import load_yaml
-from rehabkit.core.kinds.capabilities import LiftArmGripper
-from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
 from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
+from rehabkit.plugin import Context, Robot, StrictModel, load_yaml
 
 TABLE_MM = [(0, 0, 0), (-90, 0, 0), (0, 396.7, 99.2), (90, 0, 323.4), (-90, 0, 0), (90, 0, 0)]
 FINGER = (0.006, 0.012, 0.035)  # finger half sizes [m]: thickness, width, length

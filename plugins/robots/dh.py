@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Robot
 from rehabkit.models.dh import DHRobotSpec, build_dh_robot
+from rehabkit.plugin import Context, Robot
 
 
 class DHRobot(Robot):

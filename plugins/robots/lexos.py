@@ -26,14 +26,12 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.io import load_yaml
-from rehabkit.core.kinds.capabilities import RandomReach, WorkspaceTable
-from rehabkit.core.kinds.interfaces import Context, Robot, StrictModel
 from rehabkit.models.chain import KinematicChain, rot_x, trans
 from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
 from rehabkit.models.mjcf_builder import build_chain_mjcf
 from rehabkit.models.robot_model import RobotModel, SafeStop
 from rehabkit.models.wearable import Strap, Wearable
+from rehabkit.plugin import Context, RandomReach, Robot, StrictModel, WorkspaceTable, load_yaml
 from rehabkit.workspace.build import build_workspace
 from rehabkit.workspace.grid import VoxelWorkspace
 from rehabkit.workspace.sampling import random_inner, random_inner_not_straight

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Robot
 from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
+from rehabkit.plugin import Context, Robot
 
 
 class MjcfRobot(Robot):

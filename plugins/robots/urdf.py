@@ -5,8 +5,8 @@ from __future__ import annotations
 import pinocchio as pin
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Context, Robot
 from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
+from rehabkit.plugin import Context, Robot
 
 
 class UrdfRobot(Robot):

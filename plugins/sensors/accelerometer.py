@@ -16,11 +16,9 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import Instruments
-from rehabkit.core.kinds.interfaces import Backend, Context, Instrument, Sensor, SensorConfig
-from rehabkit.core.results.metric import Metric
 from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank, rts_smooth
 from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
+from rehabkit.plugin import Backend, Context, Instrument, Instruments, Metric, Sensor, SensorConfig
 
 Vec3 = tuple[float, float, float]
 MOVING_RAD_S = 0.02  # the plate counts as moving above this true angular speed

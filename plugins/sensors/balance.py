@@ -15,9 +15,7 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import BaseState, FloatingBase
-from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Backend, BaseState, Context, FloatingBase, Metric, Sensor, SensorConfig
 
 
 class BalanceConfig(SensorConfig):

@@ -14,9 +14,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import SceneGeometry, SceneObjects
-from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Backend, Context, Metric, SceneGeometry, SceneObjects, Sensor, SensorConfig
 from rehabkit.throwing.model import GRAVITY
 
 FIT_SAMPLES = 20  # samples after the release used to fit the flight's initial state

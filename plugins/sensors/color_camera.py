@@ -18,9 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import Cameras
-from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
-from rehabkit.core.results.metric import Metric
+from rehabkit.plugin import Backend, Cameras, Context, Metric, Sensor, SensorConfig
 
 HSV = tuple[int, int, int]
 

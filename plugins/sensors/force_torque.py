@@ -24,16 +24,16 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.capabilities import Instruments
-from rehabkit.core.kinds.interfaces import (
+from rehabkit.plugin import (
     Backend,
     Context,
     Instrument,
+    Instruments,
     InteractionForceSensor,
+    Metric,
     SensorConfig,
     StrictModel,
 )
-from rehabkit.core.results.metric import Metric
 
 Vec3 = tuple[float, float, float]
 

@@ -6,7 +6,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.core.kinds.interfaces import Backend, Context, Sensor, SensorConfig
+from rehabkit.plugin import Backend, Context, Sensor, SensorConfig
 
 
 class JointEncoderConfig(SensorConfig):

@@ -1,9 +1,9 @@
 """What a robot or a backend can do beyond the basics of its kind, declared, not guessed.
 
 A robot (or backend) plugin states a capability by deriving from its protocol
-(``class MyArm(Robot, LiftArmGripper)``, ``class MySim(Backend, Cameras)``) and
+(``class MyArm(Robot, WorkspaceTable)``, ``class MySim(Backend, Cameras)``) and
 implementing it. A planner, controller or sensor that needs one lists it in its
-class's ``requires`` attribute (``requires = (ClusterPoints,)``); the run's setup —
+class's ``requires`` attribute (``requires = (WorkspaceTable,)``); the run's setup —
 and ``rehabkit validate`` — refuse a scenario whose robot or backend lacks it, by
 name, before anything runs.
 """
@@ -47,11 +47,6 @@ class PassiveJoints(Protocol):
         ...
 
 
-@runtime_checkable
-class ClusterPoints(Protocol):
-    """Points on the moving body, for collision maps."""
-
-
     def cluster_points(self, qs: np.ndarray) -> np.ndarray:
         """World points (n, k, 3) of the moving body at configurations ``qs`` (n, dof)."""
         ...
@@ -67,15 +62,6 @@ class FloatingBase(Protocol):
     def floating_model(self) -> Any:
         """The Pinocchio model with the free root joint."""
         ...
-
-
-@runtime_checkable
-class LiftArmGripper(Protocol):
-    """A wheelchair-mounted arm: a lift joint, the arm's joints and a gripper joint (indices into ``q``)."""
-
-    lift_index: int
-    arm: Any
-    gripper_index: int
 
 
 # -- backends --------------------------------------------------------------------------------------------
@@ -208,9 +194,7 @@ ABILITY: dict[type, str] = {
     WorkspaceTable: "has a workspace look-up table (robot.workspace)",
     RandomReach: "draws random reachable targets (robot.random_reach)",
     PassiveJoints: "assembles its passive joints (robot.passive_state)",
-    ClusterPoints: "gives points on its moving body (robot.cluster_points)",
     FloatingBase: "has a floating base (robot.floating_model, robot.standing)",
-    LiftArmGripper: "has a lift, an arm and a gripper (robot.lift_index, robot.arm, robot.gripper_index)",
 }
 BACKEND_ABILITY: dict[type, str] = {
     Contacts: "reports contacts",
@@ -239,5 +223,12 @@ def missing_capabilities(requires: Iterable[type], robot: Any, backend: Any = No
             if not ok:
                 missing.append(f"a backend that {BACKEND_ABILITY[cap]}")
         elif not isinstance(robot, cap):
-            missing.append(f"a robot that {ABILITY.get(cap, cap.__name__)}")
+            missing.append(f"a robot that {ABILITY.get(cap) or _ability(cap)}")
     return missing
+
+
+def _ability(cap: type) -> str:
+    """A capability declared outside the core (beside the robots that have it), in its own words: its docstring's
+    first sentence, a verb phrase by convention ("Gives points on its moving body …")."""
+    first = (cap.__doc__ or cap.__name__).strip().split("\n")[0].rstrip(".")
+    return first[:1].lower() + first[1:]

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
+from pydantic import ValidationError
 
 from rehabkit.core.kinds.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
 from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
@@ -39,6 +40,7 @@ class Context:
         interaction_force: ``interaction_force()``: the force between person and robot the safety envelope checked
             at the last control step [N] (a force-torque sensor's, a strapped person's, or estimated from a simulated
             person's torques), or None where the run has no source of it.
+        plugins: The run's plugin registry, for :meth:`build`.
     """
 
     scenario_dir: Path
@@ -58,6 +60,24 @@ class Context:
     dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
     bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
     interaction_force: Callable[[], np.ndarray | None] | None = None
+    plugins: Any = None  # the run's plugin registry (``build`` makes others from it)
+
+    def build(self, kind: str, section: dict[str, Any]) -> Any:
+        """Another plugin of the run's from its section (``type`` and settings), built with this context: a
+        plugin that wraps another (``policy``'s ``base`` controller). Raises ``ValueError`` saying what in the
+        section is wrong (the caller names where the section is)."""
+        if "type" not in section:
+            raise ValueError(f"give the {kind}'s type")
+        try:
+            info = self.plugins.get(kind, section["type"])
+        except Exception as exc:  # noqa: BLE001 (the registry's UnknownPluginError: its words, with suggestions)
+            raise ValueError(str(exc)) from None
+        try:
+            config = info.config.model_validate(section)
+        except ValidationError as exc:
+            problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(section)'}: {e['msg']}" for e in exc.errors())
+            raise ValueError(f"{kind} '{section['type']}': {problems}") from None
+        return info.factory(config, self)
 
     def stream(self, name: str) -> np.random.Generator:
         """A random generator of its own for ``name``, from the scenario seed.
