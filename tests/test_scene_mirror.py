@@ -46,7 +46,6 @@ def test_the_mirror_renders_what_the_simulation_shows_at_the_same_pose(lexos):
 
 
 class _Slow(Sensor):
-    rate_hz = 10.0
     blocking = True
 
     def __init__(self):

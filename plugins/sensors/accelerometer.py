@@ -59,7 +59,7 @@ class AccelerometerArraySensor(Sensor):
     requires = (Instruments,)
 
     def __init__(self, config: AccelerometerArrayConfig, context: Context):
-        self.config, self.rate_hz = config, config.rate_hz
+        self.config = config
         self.array = AccelerometerArray(np.array(config.points))  # refuses layouts that can't give all of z
         self.raw_array = AccelerometerArray(np.array(config.points))
         self.rng = context.rng
@@ -175,7 +175,7 @@ class AccelerometerArraySensor(Sensor):
             p, R = self.robot.body_poses(self.config.body, trace.q_ref[k])
         except (NotImplementedError, IndexError):
             return None
-        dt = 1.0 / self.rate_hz
+        dt = 1.0 / self.config.rate_hz
         acc = np.gradient(np.gradient(p, dt, axis=0), dt, axis=0)
         gravity = self.robot.model.base_pose[:3, :3].T @ self.robot.model.gravity
         force = np.einsum("nji,nj->ni", R, acc - gravity)  # Rᵀ (a − g): what a still accelerometer reads
@@ -199,7 +199,7 @@ class AccelerometerArraySensor(Sensor):
         self.estimates["a_smoothed"], self.estimates["w_smoothed"] = list(a_s), list(w_s)
         self.errors["a_smoothed"] = list(a_s - np.array(self.estimates["a_true"]))
         self.errors["w_smoothed"] = list(w_s - np.array(self.estimates["w_true"]))
-        skip = min(len(self.errors["a_raw"]) // 10, int(self.rate_hz * 0.2))  # filters settling
+        skip = min(len(self.errors["a_raw"]) // 10, int(self.config.rate_hz * 0.2))  # filters settling
         out: dict[str, float] = {}
         moving = np.array(self.moving)
         moving[:skip] = False

@@ -40,7 +40,7 @@ class Balance(Sensor):
 
     def __init__(self, config: BalanceConfig, context: Context):
         robot = context.robot
-        self.robot, self.config, self.rate_hz = robot, config, config.rate_hz
+        self.robot, self.config = robot, config
         self.model = robot.floating_model
         self.data = self.model.createData()
         for f in config.support_frames + config.feet:

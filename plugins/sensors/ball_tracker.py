@@ -48,7 +48,7 @@ class BallTracker(Sensor):
     requires = (SceneGeometry, SceneObjects)
 
     def __init__(self, config: BallTrackerConfig, context: Context):
-        self.config, self.rate_hz, self.rng = config, config.rate_hz, context.rng
+        self.config, self.rng = config, context.rng
         base = context.robot.model.base_pose
         self._rot, self._origin = base[:3, :3], base[:3, 3]
         self.catch = np.asarray(config.catch_point, float)

@@ -57,7 +57,7 @@ class ColorCamera(Sensor):
     blocking = True  # a frame: ~70 ms of software rendering here, several ticks on any machine
 
     def __init__(self, config: ColorCameraConfig, context: Context):
-        self.config, self.rate_hz = config, config.rate_hz
+        self.config = config
         self.base = context.robot.model.base_pose
         names = [c.name for c in context.world.cameras]
         if config.camera not in names:

@@ -106,7 +106,7 @@ class ForceTorqueSensor(InteractionForceSensor):
     )
 
     def __init__(self, config: ForceTorqueConfig, context: Context):
-        self.config, self.rate_hz, self.interaction = config, config.rate_hz, config.interaction
+        self.config, self.interaction = config, config.interaction
         model = context.robot.model
         body, position = config.body, config.position
         self.name = config.name or (f"cuff_{config.strap}" if config.strap else "ft")

@@ -21,7 +21,6 @@ class JointEncoder(Sensor):
     """Joint angles as an encoder reads them: quantised to whole counts, optionally noisy."""
 
     def __init__(self, config: JointEncoderConfig, context: Context):
-        self.rate_hz = config.rate_hz
         self.step = 2 * np.pi / config.counts_per_rev
         self.per_rad = config.counts_per_rev / (2 * np.pi)
         self.noise = config.noise_counts

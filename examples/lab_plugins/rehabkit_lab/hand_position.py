@@ -20,7 +20,7 @@ class HandPosition(Sensor):
     metrics = (Metric("hand_marker_error_rms_mm", "mm", description="RMS distance of the readings from the hand"),)
 
     def __init__(self, config: HandPositionConfig, context: Context):
-        self.rate_hz, self.noise = config.rate_hz, config.noise_mm / 1000
+        self.noise = config.noise_mm / 1000
         self.robot, self.rng = context.robot, context.rng
         self.errors: list[float] = []
 

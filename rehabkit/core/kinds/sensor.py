@@ -47,15 +47,17 @@ INSTRUMENT_DIM = 3  # every instrument reads a 3-vector
 
 
 class SensorConfig(StrictModel):
-    """Base of every sensor plugin's config: each sensor runs at its own rate."""
+    """Base of every sensor plugin's config: each sensor runs at its own rate, set here and nowhere else (the run
+    reads it from the sensor's section; a sensor that needs it reads ``config.rate_hz``). A sensor's settings
+    model derives from this one, giving its own default where another suits it."""
 
     rate_hz: float = Field(100.0, gt=0, description="sampling rate [Hz]")
 
 
 class Sensor(ABC):
-    """Reads something at its own rate; readings go to the log and to ``Runner.observations``."""
+    """Reads something at its own rate (its config's ``rate_hz``, :class:`SensorConfig`); readings go to the log and
+    to the session's observations."""
 
-    rate_hz: float
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
     blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time

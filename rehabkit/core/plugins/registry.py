@@ -72,6 +72,9 @@ class Registrar:
             raise PluginError(f"{self.kind} '{name}': config must be a pydantic model class, got {config!r}")
         if "type" in config.model_fields:
             raise PluginError(f"{self.kind} '{name}': config must not declare 'type'; rehabkit adds it")
+        if self.kind == "sensor" and "rate_hz" not in config.model_fields:
+            raise PluginError(f"sensor '{name}': its config must derive from SensorConfig (rehabkit.plugin), which "
+                              "holds the sensor's rate_hz")
         if not callable(factory):
             raise PluginError(f"{self.kind} '{name}': factory {factory!r} is not callable")
         if description is None:

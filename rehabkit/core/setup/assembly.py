@@ -292,7 +292,7 @@ def _schedule(a: Assembly) -> Schedule:
         raise PluginSetupError(a.loaded.source, ("rates", "control_hz"), (),
                                f"rates.control_hz = {sc.rates.control_hz:g} gives a period of {control_dt:g} s, not "
                                f"a whole multiple of the backend timestep {dt:g} s")
-    every = tuple(max(1, round(sc.rates.control_hz / s.rate_hz)) for s in a.sensors.values())
+    every = tuple(max(1, round(sc.rates.control_hz / sc.sensors[name].rate_hz)) for name in a.sensors)
     return Schedule(control_dt, round(sub), int(round(sc.duration / control_dt)),
                     max(1, round(sc.rates.control_hz / sc.logging.rate_hz)),
                     max(1, round(sc.rates.control_hz / REACH_CHECK_HZ)), every)
