@@ -31,6 +31,7 @@ from rehabkit.core.kinds.interfaces import (
     Contact,
     Context,
     Controller,
+    ControllerReference,
     EmbodiedPatient,
     GeomVisual,
     IKUnavailableError,
@@ -65,9 +66,9 @@ __all__ = [
     "hookimpl",
     # the plugin kinds and what they exchange
     "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
-    "ReferenceSpace", "Controller", "Sensor", "SensorConfig", "Instrument", "InteractionForceSensor", "Backend",
-    "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient", "Context", "StrictModel", "FilePath",
-    "Wearable", "Strap",
+    "ReferenceSpace", "Controller", "ControllerReference", "Sensor", "SensorConfig", "Instrument",
+    "InteractionForceSensor", "Backend", "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient",
+    "Context", "StrictModel", "FilePath", "Wearable", "Strap",
     # what a plugin draws in the recording
     "Drawing",
     # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked), and their geometry

@@ -37,7 +37,7 @@ class ArmKeypad(Controller):
         Metric("sequence_replay_error_deg", "deg", description="largest joint error of a replayed sequence"),
     )
 
-    own_reference = True
+    reference = "own"
     requires = (LiftArmGripper,)
 
     def __init__(self, config: ArmKeypadConfig, context: Context):

@@ -46,7 +46,7 @@ class PassiveStretchConfig(StrictModel):
 class PassiveStretch(Controller):
     """Stretches each joint to its end-feel and back (see the module docstring); reports the angles reached."""
 
-    own_reference = True
+    reference = "own"
     metrics = (Metric("passive_rom_deg_*", "deg", outcome=True,
                       description="a joint's passive range end (lower_, upper_<joint>), where the stretch ended"),
                Metric("passive_stop_t_*", "s", description="when each stretch ended"),

@@ -275,6 +275,7 @@ class PlanningError(RuntimeError):
 
 
 ReferenceSpace = Literal["joint", "cartesian"]
+ControllerReference = Literal["joint", "cartesian", "own"]  # a controller's: the plan's space, or its own
 
 
 class Planner(ABC):
@@ -308,14 +309,15 @@ class Planner(ABC):
 class Controller(ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
 
-    ``reference`` is the space of the references it takes (see :class:`Planner`).
-    A controller that builds its own joint reference (e.g. by closed-loop IK, or from
-    a user's key presses) exposes it as ``joint_reference`` so runs can record and plot it.
+    ``reference`` is what it follows: the plan's references in ``"joint"`` or ``"cartesian"`` space (see
+    :class:`Planner`), or ``"own"``: a reference it makes itself, ignoring the plan's (an HMI driven by a person's
+    key presses, a passive stretch; such a controller asks for joint-space plans through ``Context.plan``).
+    A controller that turns the plan into a joint reference of its own (closed-loop IK) or makes one exposes its
+    current value as ``joint_reference``: the run records it as what was tracked, where the controller makes it.
     """
 
-    reference: ClassVar[ReferenceSpace] = "joint"
-    joint_reference: np.ndarray | None = None
-    own_reference: ClassVar[bool] = False  # it makes its own joint reference (e.g. an HMI), ignoring the runner's
+    reference: ClassVar[ControllerReference] = "joint"
+    joint_reference: np.ndarray | None = None  # the joint reference it tracks now, where it builds one
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
 
@@ -347,5 +349,5 @@ __all__ = [  # the backend, sensor and patient kinds live in modules of their ow
     "GeomVisual",
     "IKUnavailableError",
     "Instrument", "InteractionForceSensor", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest",
-    "ReferenceSpace", "Robot", "Sensor", "SensorConfig", "StrictModel", "Target", "Trajectory",
+    "ReferenceSpace", "ControllerReference", "Robot", "Sensor", "SensorConfig", "StrictModel", "Target", "Trajectory",
 ]

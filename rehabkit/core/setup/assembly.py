@@ -168,11 +168,11 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     a.context = replace(a.context, reference_space=a.planner.space, interaction_force=lambda: (
         a.force_source.last if a.force_source is not None else None))
     a.controller = a.make("controller", sc.controller, ("controller",))
-    if a.planner.space != a.controller.reference:
+    takes = "joint" if a.controller.reference == "own" else a.controller.reference  # (own: asks for joint plans)
+    if a.planner.space != takes:
         raise PluginSetupError(a.loaded.source, ("controller", "type"), (),
                                f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
-                               f"'{sc.controller.type}' takes {a.controller.reference} references; pick a "
-                               "matching pair")
+                               f"'{sc.controller.type}' takes {takes} references; pick a matching pair")
     a.space = reference_space(a)
     for t in sc.task.targets:
         if t.sensor and t.sensor not in a.sensors:

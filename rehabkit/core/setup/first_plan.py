@@ -36,7 +36,7 @@ def check_first_plan(a: Assembly) -> None:
     sc = a.sc
     names = sc.task.order()
     sensed = any(t.sensor for t in sc.task.targets if t.name in names)
-    if not names or sensed or a.controller.own_reference:
+    if not names or sensed or a.controller.reference == "own":
         return
     q0 = start_posture(a)
     try:

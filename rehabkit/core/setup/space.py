@@ -53,14 +53,14 @@ class JointSpace:
 
     def allocate(self, trace: Trace, ref_q: np.ndarray, ref_qd: np.ndarray) -> None:
         """The trace's reference columns: the planned reference, or the controller's own where it makes one."""
-        if self.controller.own_reference:  # what it tracked is its own reference; record that
+        if self.controller.reference == "own":  # what it tracked is its own reference; record that
             trace.q_ref, trace.qd_ref = np.zeros_like(ref_q), np.zeros_like(ref_qd)
         else:
             trace.q_ref, trace.qd_ref = ref_q, ref_qd
 
     def recorder(self, trace: Trace, backend) -> Callable[[int, np.ndarray], None] | None:
         """What the loop records each step beside the joints (None: nothing)."""
-        if not self.controller.own_reference:
+        if self.controller.reference != "own":
             return None
         q_ref, controller = trace.q_ref, self.controller
 
@@ -70,7 +70,7 @@ class JointSpace:
 
     def goal(self, goal: np.ndarray) -> np.ndarray | None:
         """The joint goal the final-error metrics measure (none where the controller went its own way)."""
-        return None if self.controller.own_reference else goal
+        return None if self.controller.reference == "own" else goal
 
     def metrics(self, trace: Trace) -> dict[str, float]:
         return {}
