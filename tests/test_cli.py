@@ -96,7 +96,7 @@ def test_plugins_and_schema_commands():
     assert "planner    multi-cubic      rehabkit 0.1.0" in r.stdout and "segment_durations: list[float]" in r.stdout
     assert "extension  rehab            sections outcomes:, patient:" in r.stdout  # the layers and their sections
     schema = json.loads(cli("schema").stdout)
-    assert schema["title"] == "rehabkit scenario" and "planner" in schema["properties"]
+    assert schema["title"] == "rehabkit scenario" and "planner" in schema["$defs"]["Scenario"]["properties"]
     listed = json.loads(cli("plugins", "--json").stdout)
     rows = listed if isinstance(listed, list) else listed.get("plugins", listed)
     assert "ompl-joint" in json.dumps(rows) and "cartesian" in json.dumps(rows)

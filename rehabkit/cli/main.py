@@ -174,20 +174,13 @@ def cmd_plugins(args: argparse.Namespace) -> int:
 
 def cmd_schema(args: argparse.Namespace) -> int:
     from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.scenario.json_schema import scenario_json_schema
     from rehabkit.core.scenario.models import scenario_model
 
     registry = default_registry()
     registry.load_all()
-    schema = scenario_model(registry).model_json_schema()
-    for name, (_, section) in default_extensions().sections(registry).items():
-        if section.file:  # the loader inlines such a section given as a file path before validation
-            prop = schema["properties"][name]
-            if "anyOf" not in prop:
-                prop["anyOf"] = [{k: prop.pop(k) for k in list(prop) if k not in ("default", "description")}]
-            prop["anyOf"].append({"type": "string", "description": f"a YAML file holding the {name} section"})
-    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema["title"] = "rehabkit scenario"
-    print(json.dumps(schema, indent=2))
+    files = [name for name, (_, section) in default_extensions().sections(registry).items() if section.file]
+    print(json.dumps(scenario_json_schema(scenario_model(registry), files), indent=2))
     return EXIT_OK
 
 

@@ -107,8 +107,8 @@ def deep_merge(base: Any, over: Any) -> Any:
         return copy.deepcopy(over)
     out = copy.deepcopy(base)
     for key, value in over.items():
-        if value is None and key in out:
-            del out[key]
+        if value is None:  # deletes an inherited key (and is no key at all where nothing was inherited)
+            out.pop(key, None)
         else:
             out[key] = deep_merge(out[key], value) if key in out else copy.deepcopy(value)
     return out
@@ -185,7 +185,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 
 def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -> None:
-    """Apply ``--set`` style overrides in place; list items are addressed by index."""
+    """Apply ``--set`` style overrides in place; list items are addressed by index; ``null`` deletes the key (its
+    default applies), as in a file that extends another."""
     items = overrides.items() if isinstance(overrides, Mapping) else (parse_override(o) for o in overrides)
     for key, value in items:
         parts = key.split(".") if isinstance(key, str) else list(key)
@@ -203,7 +204,9 @@ def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -
             elif not isinstance(node, dict):
                 raise ScenarioError([Diagnostic(mark, _dotted(parts), f"'{_dotted(path)}' is not a mapping")])
             path = (*path, part)
-            if last:
+            if last and value is None and isinstance(node, dict):  # null deletes, as in a file that extends
+                node.pop(part, None)
+            elif last:
                 node[part] = (
                     copy.deepcopy(value)
                     if not isinstance(node, dict) or not isinstance(node.get(part), dict)

@@ -1,0 +1,83 @@
+"""`rehabkit schema` read by an independent validator (check-jsonschema, as an editor's YAML language server reads
+it): every shipped scenario that `rehabkit validate` accepts is accepted, `extends:` files and `null` deletions
+included; of the corpus of wrong files (all refused by validate), those whose mistake a schema can tell are refused,
+a misspelt plugin named as such."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import pytest
+
+from rehabkit.cli import main
+from tests.conftest import SCENARIOS
+
+ROOT = SCENARIOS.parent
+SHIPPED = sorted(p for d in (SCENARIOS, ROOT / "examples") for p in d.rglob("*.yaml") if "patients" not in p.parts)
+CORPUS = sorted((ROOT / "tests" / "bad_scenarios").glob("*.yaml"))
+NEEDS_EXAMPLE_PACKAGES = {"planar_lab.yaml", "hit_minjerk.yaml"}  # their plugins come from examples/ packages
+# wrong files the schema refuses: unknown keys and plugins, wrong value types, values out of a declared range,
+# missing sections, unreadable YAML; the rest are mistakes only the run's setup can see (a joint's range, a body's
+# name, a NaN gain, list lengths that depend on the robot)
+SCHEMA_REFUSES = {
+    "cartesian_speed_zero", "control_rate_zero", "controller_needs_floating_base", "dh_convention",
+    "dh_mass_negative", "dh_row_unknown_key", "dh_velocity_zero", "duration_bool", "duration_negative",
+    "duration_text", "empty_file", "event_time_negative", "expect_text", "expect_unknown_operator",
+    "load_force_two_values", "log_rate_negative", "missing_robot", "not_utf8", "ompl_algorithm", "ompl_time_zero",
+    "safety_margin_negative", "seed_fraction", "segments_empty", "sensor_rate_text", "stop_category_rule_misspelt",
+    "stop_category_three", "target_free_axes_bad", "target_position_short", "top_level_list",
+    "unknown_controller_field", "unknown_planner", "unknown_robot_type", "unknown_sensor", "unknown_top_key",
+    "weakness_above_one", "world_negative_size", "world_shape", "yaml_syntax", "yaml_tab",
+}
+
+
+@pytest.fixture(scope="module")
+def schema(tmp_path_factory):
+    path = tmp_path_factory.mktemp("schema") / "rehabkit.schema.json"
+    out = subprocess.run([shutil.which("rehabkit"), "schema"], capture_output=True, text=True, check=True).stdout
+    path.write_text(out)
+    return path
+
+
+def _refused(schema, files) -> dict[str, list[dict]]:
+    """check-jsonschema's verdict: file name → its errors (a file that cannot be parsed: one error)."""
+    done = subprocess.run([shutil.which("check-jsonschema"), "--schemafile", str(schema), "--output-format", "json",
+                           *map(str, files)], capture_output=True, text=True, timeout=300)
+    report = json.loads(done.stdout)
+    out: dict[str, list[dict]] = {}
+    for e in report.get("errors", []) + report.get("parse_errors", []):  # (an empty list is left out)
+        out.setdefault(e["filename"].rsplit("/", 1)[-1], []).append(e)
+    return out
+
+
+def test_every_shipped_scenario_validate_accepts_the_schema_accepts(schema, capsys):
+    accepted = [p for p in SHIPPED if p.name not in NEEDS_EXAMPLE_PACKAGES and main(["validate", str(p)]) == 0]
+    capsys.readouterr()
+    assert len(accepted) >= 21 and any("extends:" in p.read_text() for p in accepted)
+    assert _refused(schema, accepted) == {}
+
+
+def test_the_schema_refuses_the_wrong_files_it_can_tell_and_names_the_plugin(schema):
+    refused = _refused(schema, CORPUS)
+    assert {name.removesuffix(".yaml") for name in refused} == SCHEMA_REFUSES
+    (planner,) = refused["unknown_planner.yaml"]  # `type: multicubic`: the choices, not another plugin's fields
+    assert planner["path"] == "$.planner.type" and "'multi-cubic'" in planner["message"]
+    assert "'feedfoward' was unexpected" in refused["unknown_controller_field.yaml"][0]["message"]
+
+
+def test_an_extending_file_is_partial_and_null_deletes(schema, tmp_path, capsys):
+    good = tmp_path / "longer.yaml"
+    good.write_text(f"extends: {SCENARIOS / 'lexos_patient.yaml'}\nduration: 30\ncontroller: {{kp: 200}}\n"
+                    "expect: {searched_legs: null}\n")
+    typo = tmp_path / "typo.yaml"
+    typo.write_text(f"extends: {SCENARIOS / 'lexos_patient.yaml'}\ncontroler: {{kp: 200}}\n")
+    wrong_type = tmp_path / "wrong_type.yaml"
+    wrong_type.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nduration: soon\n")
+    assert main(["validate", str(good)]) == 0 and main(["validate", str(typo)]) == 2
+    assert main(["validate", str(wrong_type)]) == 2
+    capsys.readouterr()
+    refused = _refused(schema, [good, typo, wrong_type])
+    assert set(refused) == {"typo.yaml", "wrong_type.yaml"}
+    assert "'controler' was unexpected" in json.dumps(refused["typo.yaml"])
