@@ -52,11 +52,23 @@ def shared_run(config: pytest.Config, path: str | Path):
 
 
 def _is_scenario(path: Path) -> bool:
+    """A whole scenario with expectations: ``robot:`` and ``expect:``, given in the file or by the files it
+    ``extends:`` (a scenario file that fails to read is collected: its test says why)."""
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.core.scenario.source import read_with_extends
+
     try:
         head = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError):
+    except (OSError, yaml.YAMLError, ValueError):
         return False
-    return isinstance(head, dict) and "robot" in head and "expect" in head
+    if not isinstance(head, dict) or not ({"robot", "extends"} & set(head)):
+        return False
+    if "extends" in head:
+        try:
+            head = read_with_extends(path).data
+        except ScenarioError:
+            return "expect" in head
+    return "robot" in head and "expect" in head
 
 
 def pytest_collect_file(parent: pytest.Collector, file_path: Path):
@@ -78,7 +90,7 @@ class ScenarioFile(pytest.File):
         item.add_marker(pytest.mark.xdist_group(group(self.path)))  # with the tests that read its run
         yield item
         with open(self.path) as f:
-            if isinstance(head := yaml.safe_load(f), dict) and head.get("sweep"):
+            if isinstance(head := yaml.safe_load(f), dict) and head.get("sweep"):  # (its own sweep: block)
                 yield SweepItem.from_parent(self, name=f"{self.path.stem}[sweep]")
 
 

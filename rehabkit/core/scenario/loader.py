@@ -26,10 +26,10 @@ from rehabkit.core.scenario.source import (  # noqa: F401 (deep_merge: part of t
     KeyPath,
     Source,
     _dotted,
-    _with_extends,
     apply_overrides,
     deep_merge,
     parse_override,
+    read_with_extends,
     with_file_sections,
 )
 from rehabkit.core.scenario.validation import validate_source
@@ -110,7 +110,7 @@ def load_scenario(
     extensions = extensions or default_extensions()
     sections = extensions.sections(registry)
     as_files = [name for name, (_, section) in sections.items() if section.file]
-    src = _with_extends(path)
+    src = read_with_extends(path)
     with_file_sections(src, path, as_files)
     try:
         apply_overrides(src, overrides)

@@ -114,7 +114,8 @@ def deep_merge(base: Any, over: Any) -> Any:
     return out
 
 
-def _with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
+def read_with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
+    """The file with the files it ``extends:`` merged under it (see :func:`deep_merge`), marks kept per key."""
     path = path.resolve()
     if path in chain:
         cycle = " -> ".join(str(p) for p in (*chain, path))
@@ -138,7 +139,7 @@ def _with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
         if not ppath.exists():
             mark = src.value_marks.get(("extends", i), src.value_marks[("extends",)])
             raise ScenarioError([Diagnostic(mark, "extends", f"file not found: {ppath}")])
-        base = _with_extends(ppath, (*chain, path))
+        base = read_with_extends(ppath, (*chain, path))
         merged_data = deep_merge(merged_data, base.data)
         keys.update(base.key_marks)
         values.update(base.value_marks)
