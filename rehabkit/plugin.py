@@ -46,6 +46,7 @@ from rehabkit.core.kinds.interfaces import (
     Robot,
     Sensor,
     SensorConfig,
+    SettingError,
     StrictModel,
     Target,
     Trajectory,
@@ -83,5 +84,5 @@ __all__ = [
     # describing metrics; extensions' contributions and limits
     "Metric", "Contribution", "Section", "Narrowing", "LimitBreach",
     # errors
-    "PlanningError", "IKUnavailableError", "BackendFaultError", "EStopLatchedError", "SetupError",
+    "PlanningError", "SettingError", "IKUnavailableError", "BackendFaultError", "EStopLatchedError", "SetupError",
 ]

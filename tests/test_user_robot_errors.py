@@ -28,11 +28,11 @@ def test_a_plugins_refusal_names_the_file_line_and_setting(tmp_path):
     assert isinstance(err.value, ScenarioError) and isinstance(err.value, SetupError)
     (d,) = err.value.diagnostics
     assert (d.mark.line, d.mark.col, d.path) == (18, 3, "controller.kp")
-    assert "kp has 2 values; the robot has 3 joints" in d.message
+    assert d.message == "controller 'joint-pd': has 2 values; the robot has 3 joints"
     for command in (("validate",), ("run", "--out", str(tmp_path / "out"))):  # validate finds what run refuses
         r = cli(command[0], str(path), *command[1:])
         assert r.returncode == 2 and "Traceback" not in r.stderr
-        assert f"{path}:18:3: controller.kp: controller 'joint-pd': kp has 2 values" in r.stderr
+        assert f"{path}:18:3: controller.kp: controller 'joint-pd': has 2 values; the robot has 3 joints" in r.stderr
     # a refusal that names none of the plugin's settings points at its section
     loaded = load_scenario(path)
     fields = type(loaded.model.controller).model_fields

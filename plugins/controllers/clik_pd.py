@@ -20,7 +20,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.numerics.spd3 import solve_spd3
-from rehabkit.plugin import Context, Controller, StrictModel
+from rehabkit.plugin import Context, Controller, SettingError, StrictModel
 
 
 class ClikPDConfig(StrictModel):
@@ -48,7 +48,7 @@ class ClikPD(Controller):
         self.frame = robot.ee_frame_id
         w = np.ones(n) if config.weights is None else np.asarray(config.weights, float)
         if w.shape != (n,) or np.any(w <= 0):
-            raise ValueError(f"clik-pd: weights must be {n} positive numbers")
+            raise SettingError("weights", f"must be {n} positive numbers")
         self.w_inv = 1.0 / w
         lim = robot.limits
         self.lower, self.upper, self.vmax = lim.lower, lim.upper, lim.velocity

@@ -9,7 +9,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, StrictModel
+from rehabkit.plugin import Context, Controller, SettingError, StrictModel
 
 
 class JointPDConfig(StrictModel):
@@ -37,12 +37,12 @@ class JointPD(Controller):
         if self.auto:
             given = [k for k in ("kp", "kd") if k in config.model_fields_set]
             if given:
-                raise ValueError(f"joint-pd: {' and '.join(given)} {'are' if len(given) > 1 else 'is'} computed "
+                raise SettingError(given[0], f"{' and '.join(given)} {'are' if len(given) > 1 else 'is'} computed "
                                  "from the model's inertia here (auto); leave it out, or ask for manual ones")
             w = 2 * np.pi * config.bandwidth_hz
             if w * context.control_dt > 0.3:  # a sampled PD this fast against its own period rings or diverges
                 most = 0.3 / context.control_dt / 2 / np.pi
-                raise ValueError(f"joint-pd: bandwidth_hz {config.bandwidth_hz:g} is too high for a control period "
+                raise SettingError("bandwidth_hz", f"{config.bandwidth_hz:g} is too high for a control period "
                                  f"of {context.control_dt * 1000:g} ms; at most {most:.0f}")
             self.kp, self.kd = np.full(n, w * w), np.full(n, 2 * config.damping_ratio * w)  # per unit inertia
         else:
@@ -59,9 +59,9 @@ class JointPD(Controller):
     def _gains(value: float | list[float], n: int, name: str) -> np.ndarray:
         g = np.full(n, float(value)) if isinstance(value, (int, float)) else np.asarray(value, dtype=float)
         if g.shape != (n,):
-            raise ValueError(f"joint-pd: {name} has {g.size} values; the robot has {n} joints")
+            raise SettingError(name, f"has {g.size} values; the robot has {n} joints")
         if np.any(g < 0):
-            raise ValueError(f"joint-pd: {name} must be >= 0")
+            raise SettingError(name, "must be >= 0")
         return g
 
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):

@@ -19,7 +19,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, Metric, StrictModel
+from rehabkit.plugin import Context, Controller, Metric, SettingError, StrictModel
 
 MARGIN_DEG = 1.0  # the stretch stops this short of the robot's own limit
 EASE_S = 0.5  # the return reaches its speed over this long
@@ -59,7 +59,7 @@ class PassiveStretch(Controller):
         model = context.robot.model
         names = config.joints or model.joint_names
         if unknown := [j for j in names if j not in model.joint_names]:
-            raise ValueError(f"passive-stretch: no joint(s) {unknown} on robot '{model.name}'")
+            raise SettingError("joints", f"no joint(s) {unknown} on robot '{model.name}'")
         self.c, self.dt, self.gravity = config, context.control_dt, context.robot.gravity_torque
         self._model = model.pin_model
         margin = np.radians(MARGIN_DEG)

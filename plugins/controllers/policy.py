@@ -19,7 +19,7 @@ from pydantic import Field
 from rehabkit import hookimpl
 from rehabkit.models.policy import Policy
 from rehabkit.models.strict import FilePath
-from rehabkit.plugin import Context, Controller, StrictModel
+from rehabkit.plugin import Context, Controller, SettingError, StrictModel
 
 CONTROLLER_TERMS = ("joint_state", "reference", "tracking_error", "phase")
 
@@ -38,19 +38,20 @@ class PolicyController(Controller):
     def __init__(self, config: PolicyConfig, context: Context):
         path = context.resolve(config.file)
         if not path.exists():
-            raise ValueError(f"file: no policy file {path}")
+            raise SettingError("file", f"no policy file {path}")
         self.policy = policy = Policy.load(path)
         meta, dof = policy.meta, context.robot.model.dof
         terms = meta.get("terms", [])
         if unseen := [t for t in terms if t not in CONTROLLER_TERMS]:
-            raise ValueError(f"file: the policy observes {', '.join(unseen)}, which a controller is not given; train "
-                             f"it on {', '.join(CONTROLLER_TERMS)}")
+            raise SettingError("file", f"the policy observes {', '.join(unseen)}, which a controller is not "
+                               f"given; train it on {', '.join(CONTROLLER_TERMS)}")
         action = meta.get("action", {})
         self.terms, self.kind = terms, action.get("kind", "residual")
         self.tuned = action.get("parameters", {}) if self.kind == "parameters" else {}
         outputs = len(self.tuned) if self.tuned else dof
         if policy.sizes[-1] != outputs or meta.get("dof", dof) != dof:
-            raise ValueError(f"file: the policy has {policy.sizes[-1]} outputs; this robot and action need {outputs}")
+            raise SettingError("file", f"the policy has {policy.sizes[-1]} outputs; this robot and action need "
+                                       f"{outputs}")
         scale = np.asarray(action.get("scale", 0.2), float)
         self.scale = context.robot.model.limits.effort * scale
         self.every = max(1, round(1.0 / (meta.get("policy_hz", 1.0 / context.control_dt) * context.control_dt)))
@@ -60,7 +61,7 @@ class PolicyController(Controller):
         if self.kind in ("residual", "parameters"):
             spec = config.base or meta.get("base")
             if not spec:
-                raise ValueError("base: a residual policy needs the controller it acts on (none in the file)")
+                raise SettingError("base", "a residual policy needs the controller it acts on (none in the file)")
             self.base = _build(spec, context)
             self.reference = self.base.reference
             self.metrics = self.base.metrics  # what it reports, it reports for the policy's run
@@ -114,11 +115,11 @@ class PolicyController(Controller):
 def _build(spec: dict[str, Any], context: Context) -> Controller:
     """The base controller from its section (type and settings), from the run's installed plugins."""
     if spec.get("type") == "policy":
-        raise ValueError("base: a policy cannot act on a policy")
+        raise SettingError("base", "a policy cannot act on a policy")
     try:
         return context.build("controller", spec)
     except ValueError as exc:  # its settings, said under base
-        raise ValueError(f"base: {exc}") from None
+        raise SettingError("base", str(exc)) from None
 
 
 @hookimpl

@@ -26,7 +26,7 @@ from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
 from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
 from rehabkit.musculo.scaling import scale_arm
 from rehabkit.musculo.static_opt import StaticOptimisation
-from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, suggest
+from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, SettingError, suggest
 from rehabkit.sim.mujoco import span
 
 SERIES_EVERY = 10  # control steps between logged samples
@@ -40,7 +40,8 @@ def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]],
     start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
     for group, value in values.items():
         if group not in names:
-            raise ValueError(f"{what}: no muscle group '{group}' in this arm{suggest(group, arm_groups)}")
+            raise SettingError((*what.split("."), group), f"no muscle group '{group}' in this arm"
+                               f"{suggest(group, arm_groups)}")
         out[start[names[group]] : start[names[group] + 1]] = value
     return out
 
@@ -66,30 +67,32 @@ class Musculoskeletal(EmbodiedPatient):
         self.cat = CATALOGUE[config.model]
         profile = context.patient
         if profile is not None and profile.side != self.cat.side:
-            raise ValueError(f"model: {config.model} is a {self.cat.side} arm; the profile treats the {profile.side} "
-                             "side (mirrored arms are not available)")
+            raise SettingError("model", f"{config.model} is a {self.cat.side} arm; the profile treats the "
+                               f"{profile.side} side (mirrored arms are not available)")
         fit = config.fit
         self.wearable = Wearable(fit.shoulder, fit.forward, fit.up, tuple(Strap(s.segment, s.body, s.position)
                                  for s in fit.straps)) if fit else self.robot.model.wearable
         if self.wearable is None:
-            raise ValueError(f"robot '{self.robot.model.name}' declares no fit for a person: give fit (shoulder and "
-                             "straps)")
+            raise SettingError("fit", f"robot '{self.robot.model.name}' declares no fit for a person: give fit "
+                               "(shoulder and straps)")
         self.wearable.person_axes()  # (a robot's own declaration checked as the scenario's is)
         bodies = {e.get("name") for e in ET.fromstring(self.robot.model.mjcf).iter("body")}
         for strap in self.wearable.straps:
             if strap.body not in bodies:
-                raise ValueError(f"{'fit: ' if fit else ''}strap on the {strap.segment}: robot "
-                                 f"'{self.robot.model.name}' has no body '{strap.body}'{suggest(strap.body, bodies)}; "
-                                 f"its bodies: {', '.join(sorted(b for b in bodies if b))}")
+                raise SettingError(("fit", "straps") if fit else "fit",
+                                   f"strap on the {strap.segment}: robot '{self.robot.model.name}' has no body "
+                                   f"'{strap.body}'{suggest(strap.body, bodies)}; "
+                                   f"its bodies: {', '.join(sorted(b for b in bodies if b))}")
         if config.model == "myoelbow" and any(s.segment == "upper_arm" for s in self.wearable.straps):
-            raise ValueError("model: MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
+            raise SettingError("model", "MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
         for field, names in (("tremor.amplitude_nm", config.tremor.amplitude_nm),
                              ("contracture_deg", config.contracture_deg)):
             for name in names:
                 if name not in self.cat.joints:
-                    raise ValueError(f"{field}: no joint '{name}' in {config.model}{suggest(name, self.cat.joints)}")
+                    raise SettingError((*field.split("."), name),
+                                       f"no joint '{name}' in {config.model}{suggest(name, self.cat.joints)}")
         if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in self.cat.joints:
-            raise ValueError(f"synergy: {config.model} has no shoulder")
+            raise SettingError("synergy", f"{config.model} has no shoulder")
         n = len(self.cat.muscles)
         self.strength = _per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
         self.reflex_gain = _per_group(config.spasticity.gain, self.cat.groups, n, "spasticity.gain", 0.0)
@@ -98,8 +101,8 @@ class Musculoskeletal(EmbodiedPatient):
             joint = self.spec.joint(self.cat.joints[name])
             full = np.degrees(joint.range)
             if not full[0] <= lo < hi <= full[1]:
-                raise ValueError(f"contracture_deg.{name}: [{lo:g}, {hi:g}] must be an interval inside the joint's "
-                                 f"range [{full[0]:.0f}, {full[1]:.0f}]")
+                raise SettingError(("contracture_deg", name), f"[{lo:g}, {hi:g}] must be an interval inside the "
+                                   f"joint's range [{full[0]:.0f}, {full[1]:.0f}]")
             joint.range = np.radians([lo, hi])
         self.scale: dict[str, float] = {}  # the segments' stretch
         segments = {k: v for k, v in (profile.segments if profile is not None else {}).items()

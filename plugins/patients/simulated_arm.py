@@ -32,7 +32,7 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Context, Metric, Patient, StrictModel
+from rehabkit.plugin import Context, Metric, Patient, SettingError, StrictModel
 from rehabkit.rehab.profile import JointRom
 
 PerJoint = float | list[float]
@@ -93,7 +93,7 @@ class SimulatedArmConfig(StrictModel):
 def _per_joint(value: PerJoint, n: int, name: str) -> np.ndarray:
     v = np.full(n, float(value)) if isinstance(value, (int, float)) else np.asarray(value, float)
     if v.shape != (n,) or np.any(v < 0):
-        raise ValueError(f"simulated-arm: {name} needs one value or {n} values, all >= 0")
+        raise SettingError(tuple(name.split(".")), f"needs one value or {n} values, all >= 0")
     return v
 
 
@@ -115,7 +115,7 @@ class SimulatedArm(Patient):
         self.v_th = np.radians(_per_joint(sp.threshold_deg_s, n, "spasticity.threshold_deg_s"))
         self.strength = _per_joint(vol.strength_nm, n, "voluntary.strength_nm")
         if not np.all(self.strength > 0):
-            raise ValueError("simulated-arm: voluntary.strength_nm must be > 0")
+            raise SettingError(("voluntary", "strength_nm"), "must be > 0")
         self.inv_strength = 1.0 / self.strength
         self.vol, self.fat = vol, fat
         self.own_speed = math.radians(vol.speed_deg_s)
@@ -126,7 +126,7 @@ class SimulatedArm(Patient):
         own = config.rom if config.rom is not None else (profile.joints if profile is not None else {})
         unknown = [name for name in own if name not in model.joint_names]
         if unknown:
-            raise ValueError(f"simulated-arm: rom: no joint(s) {unknown} on robot '{model.name}' "
+            raise SettingError("rom", f"no joint(s) {unknown} on robot '{model.name}' "
                              f"(its joints: {', '.join(model.joint_names)})")
         self.passive_lo, self.passive_hi = np.full(n, -np.inf), np.full(n, np.inf)
         for j, name in enumerate(model.joint_names):
@@ -140,7 +140,7 @@ class SimulatedArm(Patient):
         self.rest: np.ndarray | None = None  # None: the posture of the first step (the person sits relaxed)
         if config.rest_deg is not None:
             if len(config.rest_deg) != n:
-                raise ValueError(f"simulated-arm: rest_deg needs {n} values")
+                raise SettingError("rest_deg", f"needs {n} values")
             self.rest = np.radians(config.rest_deg)
         self.cartesian = context.reference_space == "cartesian"
         if self.cartesian:

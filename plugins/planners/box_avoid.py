@@ -27,7 +27,17 @@ from rehabkit.geometry.solids import Solid, make_solid
 from rehabkit.models.chain import rpy_to_matrix
 from rehabkit.models.time_laws import PEAK_VELOCITY as PEAK
 from rehabkit.models.time_laws import quintic
-from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, angular_distance
+from rehabkit.plugin import (
+    Context,
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    SettingError,
+    StrictModel,
+    angular_distance,
+)
 
 
 class BoxAvoidConfig(StrictModel):
@@ -101,7 +111,7 @@ class BoxAvoidPlanner(Planner):
             known = {o.name: o for o in objects}
             missing = [n for n in config.obstacles if n not in known]
             if missing:
-                raise ValueError(f"obstacles {missing} are not static objects of the world; "
+                raise SettingError("obstacles", f"{missing} are not static objects of the world; "
                                  f"known: {sorted(known) or 'none'}")
             objects = [known[n] for n in config.obstacles]
         rot_b, t_b = base[:3, :3], base[:3, 3]

@@ -25,6 +25,7 @@ from rehabkit.plugin import (
     Planner,
     PlanningError,
     PlanRequest,
+    SettingError,
     StrictModel,
     Target,
     angle_axis,
@@ -76,7 +77,7 @@ class CartesianPlanner(Planner):
 
     def __init__(self, config: CartesianConfig, context: Context):
         if config.segment_durations is not None and any(t <= 0 for t in config.segment_durations):
-            raise ValueError("segment_durations must all be > 0")
+            raise SettingError("segment_durations", "must all be > 0")
         self.config = config
         self.robot = context.robot
         self.checker = None

@@ -14,7 +14,17 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, joint_waypoints
+from rehabkit.plugin import (
+    Context,
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    SettingError,
+    StrictModel,
+    joint_waypoints,
+)
 
 
 def cubic_system(durations: np.ndarray) -> np.ndarray:
@@ -132,7 +142,7 @@ class MultiCubicPlanner(Planner):
 
     def __init__(self, config: MultiCubicConfig, context: Context | None = None):
         if any(t <= 0 for t in config.segment_durations):
-            raise ValueError("multi-cubic: every segment duration must be > 0")
+            raise SettingError("segment_durations", "every segment duration must be > 0")
         self.config = config
 
     def plan(self, request: PlanRequest) -> Plan:
@@ -145,8 +155,7 @@ class MultiCubicPlanner(Planner):
         if len(durations) != len(points) - 1:
             raise PlanningError(
                 f"multi-cubic: {len(points)} via points ({', '.join(names)}) need {len(points) - 1} segment "
-                f"durations; segment_durations has {len(durations)}"
-            )
+                f"durations; segment_durations has {len(durations)}", setting="segment_durations")
         v0 = np.asarray(request.qd, float) if self.config.start_from_current else None
         traj = MultiCubicTrajectory(solve_multi_cubic(points, durations, v0), durations)
         jumps = np.degrees(traj.continuity())

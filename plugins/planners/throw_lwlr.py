@@ -24,7 +24,17 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.models.time_laws import quintic
-from rehabkit.plugin import Context, FloatingBase, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel
+from rehabkit.plugin import (
+    Context,
+    FloatingBase,
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    SettingError,
+    StrictModel,
+)
 from rehabkit.throwing.lwlr import LWLR
 from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
 
@@ -103,7 +113,8 @@ class ThrowPlanner(Planner):
         q = np.zeros(model.nq)
         pin.framesForwardKinematics(model, pdata, q)
         if not model.existFrame(config.shoulder_frame):
-            raise ValueError(f"no frame '{config.shoulder_frame}' in robot '{self.robot.model.name}'")
+            raise SettingError("shoulder_frame",
+                               f"no frame '{config.shoulder_frame}' in robot '{self.robot.model.name}'")
         self.shoulder = pdata.oMf[model.getFrameId(config.shoulder_frame)].translation.copy()
         hand = pdata.oMf[model.getFrameId(self.robot.model.ee_site)].translation
         self.arm_length = float(np.linalg.norm(hand - self.shoulder))
@@ -111,7 +122,7 @@ class ThrowPlanner(Planner):
         names = self.robot.model.joint_names
         unknown = [j for j in config.arm_joints if j not in names]
         if unknown:
-            raise ValueError(f"arm joints {unknown} are not joints of the robot")
+            raise SettingError("arm_joints", f"{unknown} are not joints of the robot")
         self.arm_idx = np.array([names.index(j) for j in config.arm_joints])
         t0 = time.perf_counter()
         self.library = [th.scaled(self.scale) for th in self.human]

@@ -15,7 +15,7 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Backend, BaseState, Context, FloatingBase, Metric, Sensor, SensorConfig
+from rehabkit.plugin import Backend, BaseState, Context, FloatingBase, Metric, Sensor, SensorConfig, SettingError
 
 
 class BalanceConfig(SensorConfig):
@@ -45,7 +45,8 @@ class Balance(Sensor):
         self.data = self.model.createData()
         for f in config.support_frames + config.feet:
             if not self.model.existFrame(f):
-                raise ValueError(f"balance: no frame '{f}' in robot '{robot.model.name}'")
+                raise SettingError("support_frames" if f in config.support_frames else "feet",
+                                   f"no frame '{f}' in robot '{robot.model.name}'")
         self._corners = [self.model.getFrameId(f) for f in config.support_frames]
         self._feet = [self.model.getFrameId(f) for f in config.feet]
         self._polygon = None

@@ -18,7 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Backend, Cameras, Context, Metric, Sensor, SensorConfig
+from rehabkit.plugin import Backend, Cameras, Context, Metric, Sensor, SensorConfig, SettingError
 
 HSV = tuple[int, int, int]
 
@@ -61,7 +61,7 @@ class ColorCamera(Sensor):
         self.base = context.robot.model.base_pose
         names = [c.name for c in context.world.cameras]
         if config.camera not in names:
-            raise ValueError(f"color-camera: no camera '{config.camera}' in world.cameras "
+            raise SettingError("camera", f"no camera '{config.camera}' in world.cameras "
                              f"({', '.join(names) or 'none'})")
         self.kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
         self.errors: list[float] = []

@@ -32,6 +32,7 @@ from rehabkit.plugin import (
     InteractionForceSensor,
     Metric,
     SensorConfig,
+    SettingError,
     StrictModel,
 )
 
@@ -113,7 +114,7 @@ class ForceTorqueSensor(InteractionForceSensor):
         if config.strap is not None:
             straps = {s.segment: s for s in (model.wearable.straps if model.wearable else ())}
             if config.strap not in straps:
-                raise ValueError(f"force-torque: strap '{config.strap}': robot '{model.name}' has "
+                raise SettingError("strap", f"'{config.strap}': robot '{model.name}' has "
                                  f"{'straps ' + ', '.join(straps) if straps else 'no wearable straps'}")
             body, position = straps[config.strap].body, straps[config.strap].position
         if body is None or position is None:
@@ -124,7 +125,7 @@ class ForceTorqueSensor(InteractionForceSensor):
         # read every control step when the envelope uses it, else at the logging rate
         self.fs = 1.0 / context.control_dt if config.interaction else config.rate_hz
         if config.cutoff_hz >= self.fs / 2:
-            raise ValueError(f"force-torque: cutoff_hz ({config.cutoff_hz:g}) must be below half the rate it is "
+            raise SettingError("cutoff_hz", f"{config.cutoff_hz:g} must be below half the rate it is "
                              f"read at ({self.fs:g} Hz)")
         self._names = (f"{self.name}_force", f"{self.name}_torque")
         self._tare_n = round(config.tare_s * self.fs)

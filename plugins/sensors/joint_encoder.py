@@ -6,7 +6,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.plugin import Backend, Context, Sensor, SensorConfig
+from rehabkit.plugin import Backend, Context, Sensor, SensorConfig, SettingError
 
 
 class JointEncoderConfig(SensorConfig):
@@ -31,7 +31,7 @@ class JointEncoder(Sensor):
             known = model.joint_names + model.passive_joints
             unknown = [j for j in self.joints if j not in known]
             if unknown:
-                raise ValueError(f"joint-encoder: unknown joint(s) {unknown}; the robot has {known}")
+                raise SettingError("joints", f"unknown joint(s) {unknown}; the robot has {known}")
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
         if self.joints:

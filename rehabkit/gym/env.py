@@ -82,7 +82,7 @@ class ScenarioEnv(gym.Env):
                 controller.tune({})
                 controller.tune({n: action.parameters[n][0] for n in names})
             except ValueError as exc:
-                raise PluginSetupError(a.loaded.source, ("learning", "action", "parameters"), (),
+                raise PluginSetupError(a.loaded.source, ("learning", "action", "parameters"),
                                        f"learning.action.parameters: {exc}") from None
             lo, hi = (np.array([action.parameters[n][i] for n in names]) for i in (0, 1))
             self._tuned = (names, lo, hi)
@@ -171,7 +171,7 @@ class ScenarioEnv(gym.Env):
 
 def _learning(loaded: LoadedScenario):
     if loaded.model.learning is None:
-        raise PluginSetupError(loaded.source, (), (), f"{loaded.path.name} has no learning: section (the policy's "
+        raise PluginSetupError(loaded.source, (), f"{loaded.path.name} has no learning: section (the policy's "
                                "action, observation, reward and rate); add one to use it as an environment")
     return loaded.model.learning
 
@@ -181,7 +181,7 @@ def _policy_every(loaded: LoadedScenario) -> int:
     sc = loaded.model
     every = sc.rates.control_hz / sc.learning.policy_hz
     if abs(every - round(every)) > 1e-9 or round(every) < 1:
-        raise PluginSetupError(loaded.source, ("learning", "policy_hz"), (),
+        raise PluginSetupError(loaded.source, ("learning", "policy_hz"),
                                f"learning.policy_hz: {sc.learning.policy_hz:g} Hz does not divide the control rate "
                                f"{sc.rates.control_hz:g} Hz; take one that does (e.g. {sc.rates.control_hz / 20:g})")
     return round(every)

@@ -34,7 +34,7 @@ class Observer:
                       "interaction_force": 1, "person_torque": self.dof,
                       "person_state": len(a.patient.state()) if a.patient is not None else 0}
         if "person_state" in spec.terms and not self.sizes["person_state"]:
-            raise PluginSetupError(a.loaded.source, ("learning", "observation", "terms"), (),
+            raise PluginSetupError(a.loaded.source, ("learning", "observation", "terms"),
                                    "learning.observation.terms: person_state needs a simulated person with an inner "
                                    "state (patient.model)")
 

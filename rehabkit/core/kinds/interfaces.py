@@ -14,6 +14,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from rehabkit.core.kinds.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
+from rehabkit.core.kinds.errors import PlanningError, SettingError
 from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
 from rehabkit.core.kinds.sensor import Instrument, InteractionForceSensor, Sensor, SensorConfig
 from rehabkit.core.results.metric import Metric
@@ -265,15 +266,6 @@ class Plan:
     waypoint_times: np.ndarray | None = None  # when it passes each waypoint [s from its start]: the reaches counted
 
 
-class PlanningError(RuntimeError):
-    """A planner could not produce a plan; the message says why. ``target``: the target it could not plan for,
-    when it is one (the refusal of a run's first plan is then located where the scenario gives that target)."""
-
-    def __init__(self, message: str, target: str | None = None):
-        super().__init__(message)
-        self.target = target
-
-
 ReferenceSpace = Literal["joint", "cartesian"]
 ControllerReference = Literal["joint", "cartesian", "own"]  # a controller's: the plan's space, or its own
 
@@ -348,6 +340,7 @@ __all__ = [  # the backend, sensor and patient kinds live in modules of their ow
     "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "Drawing", "EmbodiedPatient",
     "GeomVisual",
     "IKUnavailableError",
-    "Instrument", "InteractionForceSensor", "Patient", "Plan", "Planner", "PlanningError", "PlanRequest",
+    "Instrument", "InteractionForceSensor", "Patient", "Plan", "Planner", "PlanningError", "SettingError",
+    "PlanRequest",
     "ReferenceSpace", "ControllerReference", "Robot", "Sensor", "SensorConfig", "StrictModel", "Target", "Trajectory",
 ]

@@ -170,7 +170,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     a.controller = a.make("controller", sc.controller, ("controller",))
     takes = "joint" if a.controller.reference == "own" else a.controller.reference  # (own: asks for joint plans)
     if a.planner.space != takes:
-        raise PluginSetupError(a.loaded.source, ("controller", "type"), (),
+        raise PluginSetupError(a.loaded.source, ("controller", "type"),
                                f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
                                f"'{sc.controller.type}' takes {takes} references; pick a matching pair")
     a.space = reference_space(a)
@@ -204,7 +204,7 @@ def _check_expectations(a: Assembly) -> None:
     catalogue = metric_catalogue(a)
     for name in a.sc.expect:
         if not catalogue.known(name):
-            raise PluginSetupError(a.loaded.source, ("expect", name), (),
+            raise PluginSetupError(a.loaded.source, ("expect", name),
                                    f"expect: no plugin of this run reports a metric '{name}'"
                                    f"{suggest(name, catalogue.names())} (see `rehabkit plugins` for each plugin's)")
 
@@ -265,7 +265,7 @@ def _patient_and_safety(a: Assembly) -> None:
             need, what = (HostsBodies, "simulates a person's body in its scene") if embodied else \
                 (ExternalTorques, "applies a simulated person's torques")
             if not has(backend, need):
-                raise PluginSetupError(a.loaded.source, (*slot.path, "type"), (),
+                raise PluginSetupError(a.loaded.source, (*slot.path, "type"),
                                        f"{where} '{model_cfg.type}' needs a backend that {what}; backend "
                                        f"'{sc.backend.type}' does not")
             a.patient = a.make("patient", model_cfg, slot.path)
@@ -289,7 +289,7 @@ def _schedule(a: Assembly) -> Schedule:
     control_dt = 1.0 / sc.rates.control_hz
     sub = control_dt / dt
     if abs(sub - round(sub)) > 1e-6 or round(sub) < 1:
-        raise PluginSetupError(a.loaded.source, ("rates", "control_hz"), (),
+        raise PluginSetupError(a.loaded.source, ("rates", "control_hz"),
                                f"rates.control_hz = {sc.rates.control_hz:g} gives a period of {control_dt:g} s, not "
                                f"a whole multiple of the backend timestep {dt:g} s")
     every = tuple(max(1, round(sc.rates.control_hz / sc.sensors[name].rate_hz)) for name in a.sensors)

@@ -36,7 +36,7 @@ def check_capabilities(a: Assembly) -> None:
         problems.append("task events that 'move' objects need a backend with scene objects")
         at = at or ("backend",)
     if problems:
-        raise PluginSetupError(a.loaded.source, at, (), f"{'; '.join(problems)} (robot '{sc.robot.type}', "
+        raise PluginSetupError(a.loaded.source, at, f"{'; '.join(problems)} (robot '{sc.robot.type}', "
                                f"backend '{sc.backend.type}')")
 
 
@@ -54,7 +54,7 @@ def check_scene_names(a: Assembly) -> None:
             owner = "rehabkit's scene" if item.name in SCENE_NAMES else (
                 f"the robot's {robot[item.name]}" if item.name in robot else None)
             if owner:
-                raise PluginSetupError(a.loaded.source, ("world", kind, i, "name"), (),
+                raise PluginSetupError(a.loaded.source, ("world", kind, i, "name"),
                                        f"world.{kind}: the name '{item.name}' is taken by {owner}; rename it")
 
 
@@ -76,11 +76,11 @@ def check_loads(a: Assembly) -> None:
             if ins.body not in bodies:
                 cfg = a.sc.sensors[name]
                 at = ("sensors", name, "body") if getattr(cfg, "body", None) == ins.body else ("sensors", name)
-                raise PluginSetupError(a.loaded.source, at, (), f"sensor '{name}': no body '{ins.body}' in the "
+                raise PluginSetupError(a.loaded.source, at, f"sensor '{name}': no body '{ins.body}' in the "
                                        f"scene{suggest(ins.body, bodies)}")
     for i, load in enumerate(a.sc.world.loads):
         if load.body not in bodies:
-            raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"), (),
+            raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"),
                                    f"world.loads '{load.name}': no body '{load.body}' in the scene"
                                    f"{suggest(load.body, bodies)} (a robot body, or a force-torque sensor's name)")
 
@@ -129,4 +129,4 @@ def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetup
     key = next(k for k in ("position", "joints_deg", "joints_rad", "same_as", "random", "sensor")
                if getattr(spec, k) is not None)
     prefix = f"planner '{a.sc.planner.type}': " if kind == "planner" else ""
-    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), (), f"{prefix}{exc}")
+    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), f"{prefix}{exc}")

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import re
 from typing import Any
 
+from rehabkit.core.kinds.errors import PlanningError, SettingError
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 
 
@@ -21,19 +21,29 @@ class SetupError(RuntimeError):
 
 
 class PluginSetupError(ScenarioError, SetupError):
-    """A plugin refused its settings when it was built: located at the setting its message names (the first
-    field of its config that the message mentions), else at its section. Both a :class:`ScenarioError` (the
-    CLI's exit 2 with ``file:line:col``) and a :class:`SetupError`."""
+    """A plugin refused its settings when it was built: located at the setting it names (a ``SettingError``'s
+    ``setting``), else at its section's ``type``. Both a :class:`ScenarioError` (the CLI's exit 2 with
+    ``file:line:col``) and a :class:`SetupError`."""
 
-    def __init__(self, source: Any, path: tuple[str, ...], fields: Any, message: str):
-        named = [f for f in fields if re.search(rf"(?<![\w.-]){re.escape(f)}(?![\w-])", message)]
-        at = next(((*path, f) for f in sorted(named, key=len, reverse=True) if (*path, f) in source.key_marks), path)
+    def __init__(self, source: Any, path: tuple[str, ...], message: str, setting: tuple = ()):
+        at = path
+        for n in range(len(setting), 0, -1):  # the deepest part of the setting the file writes
+            if (*path, *setting[:n]) in source.key_marks:
+                at = (*path, *setting[:n])
+                break
+        else:
+            at = (*path, "type") if setting == () and (*path, "type") in source.key_marks else path
         mark = source.key_marks.get(at) or source.value_marks.get(path) or source.value_marks[()]
         ScenarioError.__init__(self, [Diagnostic(mark, ".".join(map(str, at)), message)])
         self.breach = None
+        self.setting = setting
 
     @classmethod
     def refused(cls, source: Any, path: tuple[str, ...], kind: str, config: Any, exc: Exception) -> PluginSetupError:
-        """Plugin ``config.type`` of ``kind`` (its section at ``path``) refused with ``exc``: named once."""
+        """Plugin ``config.type`` of ``kind`` (its section at ``path``) refused with ``exc``: named once, located
+        at the setting a :class:`SettingError` names."""
+        setting = exc.setting if isinstance(exc, (SettingError, PlanningError)) else ()
         text = str(exc).removeprefix(f"{config.type}: ")  # plugins often name themselves
-        return cls(source, path, type(config).model_fields, f"{kind} '{config.type}': {text}")
+        if isinstance(exc, SettingError) and (*path, *setting) in source.key_marks:
+            text = exc.problem  # (located at the setting, which the diagnostic names)
+        return cls(source, path, f"{kind} '{config.type}': {text}", setting)

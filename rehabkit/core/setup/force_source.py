@@ -53,7 +53,7 @@ def force_source(a, limit: float | None) -> ForceSource | None:
     if limit is not None:
         at = ("safety", "interaction_force_n") if a.sc.safety.interaction_force_n is not None else \
             (a.patient_slot.path[:1] if a.patient_slot is not None else ())
-        raise PluginSetupError(a.loaded.source, at, (),
+        raise PluginSetupError(a.loaded.source, at,
                                f"an interaction-force limit ({limit:g} N, from safety.interaction_force_n or "
                                "patient.comfort) needs a source of the force: a force-torque sensor (sensors: {ft: "
                                "{type: force-torque}}) or a simulated patient (patient.model); backend "
