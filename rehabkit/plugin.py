@@ -42,6 +42,7 @@ from rehabkit.core.kinds.interfaces import (
     Planner,
     PlanningError,
     PlanRequest,
+    Reading,
     ReferenceSpace,
     Robot,
     Sensor,
@@ -59,7 +60,7 @@ from rehabkit.core.setup.errors import SetupError
 from rehabkit.core.setup.limits import LimitBreach, Narrowing
 from rehabkit.core.setup.targets import JointWaypoints, angle_axis, angular_distance, joint_waypoints, unreachable
 from rehabkit.models.robot_model import JointLimits, RobotModel
-from rehabkit.models.strict import FilePath
+from rehabkit.models.strict import FilePath, SensorName
 from rehabkit.models.wearable import Strap, Wearable
 
 __all__ = [
@@ -69,7 +70,7 @@ __all__ = [
     "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "ControllerReference", "Sensor", "SensorConfig", "Instrument",
     "InteractionForceSensor", "Backend", "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient",
-    "Context", "StrictModel", "FilePath", "Wearable", "Strap",
+    "Context", "StrictModel", "FilePath", "SensorName", "Reading", "Wearable", "Strap",
     # what a plugin draws in the recording
     "Drawing",
     # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked), and their geometry

@@ -12,6 +12,10 @@ from rehabkit import hookimpl
 from rehabkit.api import run_scenario
 from rehabkit.core.kinds.interfaces import Controller, StrictModel
 from rehabkit.core.plugins.registry import Provider, load_plugins
+from rehabkit.core.run.runner import Runner
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.plugin import SensorName
 from tests.conftest import SCENARIOS
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
@@ -192,3 +196,55 @@ def test_a_plugin_builds_another_from_the_runs_own_plugins(bad_registry):
         a.context.build("controller", {"type": "bad", "fail_at": "soon"})
     with pytest.raises(ValueError, match=r"unknown controller 'badd'.*'bad'"):
         a.context.build("controller", {"type": "badd"})
+
+
+class _SensedPDConfig(StrictModel):
+    sensor: SensorName = "encoders"
+    kp: float = 900.0
+    kd: float = 40.0
+
+
+class _SensedPD(Controller):
+    """A joint PD on a named sensor's angles (the encoders), not the simulator's: what a lab's controller does."""
+
+    def __init__(self, config, context):
+        self.config, self.context, self.seen = config, context, []
+
+    def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        r = self.context.reading(self.config.sensor)
+        self.seen.append((t, None if r is None else (r.t, r.frame, r.values["position_rad"].copy())))
+        angles = q if r is None else r.values["position_rad"]
+        return self.config.kp * (q_ref - angles) + self.config.kd * (qd_ref - qd)
+
+
+def test_a_controller_reads_a_sensor_by_the_name_in_its_settings(tmp_path):
+    """Context.reading: the named sensor's latest reading, with its time; a SensorName setting naming no sensor of
+    the scenario is refused at that setting, with the nearest name."""
+    plugin = types.SimpleNamespace()
+
+    @hookimpl
+    def rehabkit_register_controllers(registry):
+        registry.add("sensed-pd", config=_SensedPDConfig, factory=_SensedPD)
+
+    plugin.rehabkit_register_controllers = rehabkit_register_controllers
+    registry = load_plugins(extra=[(plugin, Provider("tests", "0", "sensed"))])
+    runner = Runner(load_scenario(HIT, {"duration": 0.5, "controller": {"type": "sensed-pd"},
+                                        "planner.segment_durations": [2.0] * 4}, registry=registry),
+                    registry=registry)
+    result = runner.run()
+    seen = runner.setup.controller.seen
+    assert seen[0][1] is not None  # the encoders read before the first control step (both at k = 0)
+    times = np.array([s[0] for s in seen])
+    read_at = np.array([s[1][0] for s in seen])
+    assert np.all(times - read_at >= -1e-12) and np.all(times - read_at < 2e-3 + 1e-9)  # 500 Hz: at most 2 ms old
+    assert seen[-1][1][1] is None  # joint angles: no frame
+    step = 2 * np.pi / 65536  # the reading is the encoders' (quantised), not the simulator's angles
+    assert np.allclose(np.round(seen[-1][1][2] / step) * step, seen[-1][1][2], atol=1e-12)
+    assert result.metrics["safety_events"] == 0
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"extends: {HIT}\ncontroller:\n  type: sensed-pd\n  sensor: encoder\n")
+    with pytest.raises(ScenarioError) as err:
+        Runner(load_scenario(bad, registry=registry), registry=registry).build()
+    (d,) = err.value.diagnostics
+    assert (d.path, d.mark.line, d.mark.col) == ("controller.sensor", 4, 3)
+    assert "no sensor 'encoder' in this scenario; did you mean 'encoders'?" in d.message

@@ -60,6 +60,7 @@ class AccelerometerArraySensor(Sensor):
 
     def __init__(self, config: AccelerometerArrayConfig, context: Context):
         self.config = config
+        self.frame = config.body  # the body the array is fixed to
         self.array = AccelerometerArray(np.array(config.points))  # refuses layouts that can't give all of z
         self.raw_array = AccelerometerArray(np.array(config.points))
         self.rng = context.rng

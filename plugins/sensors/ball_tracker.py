@@ -49,6 +49,7 @@ class BallTracker(Sensor):
 
     def __init__(self, config: BallTrackerConfig, context: Context):
         self.config, self.rng = config, context.rng
+        self.frame = "robot base"
         base = context.robot.model.base_pose
         self._rot, self._origin = base[:3, :3], base[:3, 3]
         self.catch = np.asarray(config.catch_point, float)

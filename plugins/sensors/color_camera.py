@@ -58,6 +58,7 @@ class ColorCamera(Sensor):
 
     def __init__(self, config: ColorCameraConfig, context: Context):
         self.config = config
+        self.frame = "robot base"  # (target_position)
         self.base = context.robot.model.base_pose
         names = [c.name for c in context.world.cameras]
         if config.camera not in names:

@@ -122,6 +122,7 @@ class ForceTorqueSensor(InteractionForceSensor):
             body = body or hand_body
             position = position if position is not None else (hand_at if body == hand_body else (0.0, 0.0, 0.0))
         self.body, self.position = body, position
+        self.frame = body  # the mount body's axes
         # read every control step when the envelope uses it, else at the logging rate
         self.fs = 1.0 / context.control_dt if config.interaction else config.rate_hz
         if config.cutoff_hz >= self.fs / 2:

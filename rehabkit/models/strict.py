@@ -20,6 +20,20 @@ FILE_SETTING = _FileSetting()
 # path is made absolute from that file's folder by the loader, so it means the same file wherever it is extended.
 FilePath = Annotated[str, FILE_SETTING]
 
+
+
+class _SensorSetting:
+    """Marks a setting that names one of the scenario's sensors (see :data:`SensorName`)."""
+
+    def __repr__(self) -> str:
+        return "SensorName"
+
+
+SENSOR_SETTING = _SensorSetting()
+# A setting naming one of the scenario's sensors (a controller reading a force-torque sensor by name): the run's
+# setup checks that the scenario has it, and says so at the setting, with the nearest name, before anything runs.
+SensorName = Annotated[str, SENSOR_SETTING]
+
 BOOLEAN = "a number is needed here, not a boolean (YAML reads yes/no/on/off/true/false as booleans)"
 
 

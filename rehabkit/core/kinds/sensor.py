@@ -54,12 +54,25 @@ class SensorConfig(StrictModel):
     rate_hz: float = Field(100.0, gt=0, description="sampling rate [Hz]")
 
 
+@dataclass(frozen=True)
+class Reading:
+    """A sensor's latest reading, as a plugin gets it by the sensor's name (``Context.reading``): ``values`` is what
+    its ``read`` returned, taken at ``t`` [s] on the run's clock; its vectors are in ``frame`` (the sensor's
+    declared :attr:`Sensor.frame`; ``None`` where its values are not spatial, e.g. joint angles)."""
+
+    sensor: str
+    t: float
+    values: dict[str, Any]
+    frame: str | None
+
+
 class Sensor(ABC):
     """Reads something at its own rate (its config's ``rate_hz``, :class:`SensorConfig`); readings go to the log and
     to the session's observations."""
 
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
+    frame: str | None = None  # the frame its vector readings are in (e.g. "robot base", a body's name); None: none
     blocking: bool = False  # a reading takes longer than a control tick (a camera frame): on a real-time
     #                         backend it is read in a thread of its own (``rehabkit.core.run.sensor_threads``)
 

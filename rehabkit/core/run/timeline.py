@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from rehabkit.core.kinds.capabilities import scene_actions
+from rehabkit.core.kinds.sensor import Reading
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.setup.assembly import Assembly
 
@@ -43,6 +44,8 @@ class Timeline:
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
         self.observations: dict[str, dict[str, Any]] = {}
+        self._readings = setup.context.readings  # what plugins read by a sensor's name (Context.reading)
+        self._frames = {name: sensor.frame for name, sensor in setup.sensors.items()}
         self.fired: list[dict] = []
         self._following: tuple[list[str], float, np.ndarray | None] = ([], 0.0, None)
         self.acted: list[dict] = []
@@ -165,6 +168,7 @@ class Timeline:
     def _take(self, name: str, t_read: float, reading: dict, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         """A sensor's reading (started at ``t_read``) into the observations and the log; 'moved' events."""
         self.observations[name] = reading
+        self._readings[name] = Reading(name, t_read, reading, self._frames[name])
         self.view.sensor(t_read, name, reading)
         if not self._watch:
             return

@@ -50,6 +50,7 @@ from rehabkit.core.setup.checks import (
     check_joint_targets,
     check_loads,
     check_scene_names,
+    check_sensor_settings,
     has,
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
@@ -138,7 +139,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     slot = patient_slot(sc, registry, extensions)
     ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
                   out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=slot.section if slot else None, plan=plan,
-                  note=note, dry_run=upto != "run", plugins=registry)
+                  note=note, dry_run=upto != "run", plugins=registry, readings={})
     a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx, patient_slot=slot)
     extensions.hook.rehabkit_configure_robot(setup=a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
@@ -160,6 +161,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
     a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
     check_loads(a)
+    check_sensor_settings(a)
     a.planner = a.make("planner", sc.planner, ("planner",))
     for i, ev in enumerate(sc.task.events):
         if ev.planner is not None:  # (the settings were validated with the scenario, each located)

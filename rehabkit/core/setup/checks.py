@@ -8,12 +8,14 @@ import os
 from typing import Any
 
 import numpy as np
+from pydantic import BaseModel
 
 from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
 from rehabkit.core.kinds.interfaces import PlanningError
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.models.strict import SENSOR_SETTING
 
 Assembly = Any  # a rehabkit.core.setup.assembly.Assembly (which imports this module: no import back)
 
@@ -130,3 +132,36 @@ def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetup
                if getattr(spec, k) is not None)
     prefix = f"planner '{a.sc.planner.type}': " if kind == "planner" else ""
     return PluginSetupError(a.loaded.source, ("task", "targets", index, key), f"{prefix}{exc}")
+
+
+def check_sensor_settings(a: Assembly) -> None:
+    """Settings naming a sensor (:data:`~rehabkit.models.strict.SensorName`) in the planner's, the controller's and
+    the patient model's sections name one of the scenario's sensors: another is refused at the setting."""
+    sections = [(("planner",), a.sc.planner), (("controller",), a.sc.controller)]
+    if a.patient_slot is not None and a.patient_slot.config is not None:
+        sections.append((a.patient_slot.path, a.patient_slot.config))
+    for path, config in sections:
+        for loc, name in _sensor_settings(config, path):
+            if name not in a.sc.sensors:
+                have = ", ".join(a.sc.sensors) or "none"
+                raise PluginSetupError(a.loaded.source, loc, f"no sensor '{name}' in this scenario"
+                                       f"{suggest(name, a.sc.sensors)} (its sensors: {have})")
+
+
+def _sensor_settings(node: Any, loc: tuple) -> list[tuple[tuple, str]]:
+    """(where, value) of every SensorName setting in a validated section."""
+    found: list[tuple[tuple, str]] = []
+    if isinstance(node, BaseModel):
+        for name, info in type(node).model_fields.items():
+            value = getattr(node, name)
+            if SENSOR_SETTING in info.metadata and isinstance(value, str):
+                found.append(((*loc, name), value))
+            else:
+                found += _sensor_settings(value, (*loc, name))
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            found += _sensor_settings(value, (*loc, i))
+    elif isinstance(node, dict):
+        for key, value in node.items():
+            found += _sensor_settings(value, (*loc, key))
+    return found

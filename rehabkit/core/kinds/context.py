@@ -1,0 +1,98 @@
+"""What every plugin factory receives besides its own settings: the run's :class:`Context`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from pydantic import ValidationError
+
+from rehabkit.core.kinds.sensor import Instrument, Reading
+
+if TYPE_CHECKING:
+    from rehabkit.core.kinds.interfaces import Plan, Robot
+
+ReferenceSpace = Literal["joint", "cartesian"]
+
+
+@dataclass(frozen=True)
+class Context:
+    """What every plugin factory receives besides its own config (read-only: the run's setup makes a new one
+    as it learns more — the robot, the sensors' instruments, the planner's space).
+
+    Attributes:
+        scenario_dir: Folder of the scenario file; relative paths resolve from here.
+        rng: The run's random generator (seeded from the scenario's ``seed``).
+        control_dt: Controller period [s].
+        robot: The robot plugin instance, once built (robots themselves get ``None``).
+        world: The scenario's world section.
+        out_dir: Where the run writes its files (``None`` when it writes none).
+        plan: For controllers that plan on their own (e.g. an HMI replaying a stored target):
+            ``plan(t, q, qd, targets)`` asks the scenario's planner, checks, logs and returns
+            the :class:`Plan`, or raises :class:`PlanningError`.
+        note: ``note(t, text)`` keeps a message for people (an HMI display line) in the summary and log.
+        interaction_force: ``interaction_force()``: the force between person and robot the safety envelope checked
+            at the last control step [N] (a force-torque sensor's, a strapped person's, or estimated from a simulated
+            person's torques), or None where the run has no source of it.
+        plugins: The run's plugin registry, for :meth:`build`.
+        readings: The sensors' latest readings by name, for :meth:`reading` (the run fills it as they read).
+    """
+
+    scenario_dir: Path
+    rng: np.random.Generator
+    control_dt: float
+    robot: Robot | None = None
+    world: Any = None  # the scenario's world section (``rehabkit.core.scenario.models.World``)
+    instruments: list[Instrument] = field(default_factory=list)
+    out_dir: Path | None = None
+    robot_spec: dict[str, Any] | None = None  # the scenario's robot section (type + settings), e.g. for a bridge
+    plan: Callable[..., Plan] | None = None
+    note: Callable[[float, str], None] | None = None
+    reference_space: ReferenceSpace = "joint"  # what the scenario's planner produces (controllers taking either)
+    seed: int = 0
+    safety: Any = None  # the scenario's safety envelope (``SafetyConfig``), e.g. for a link's heartbeat
+    patient: Any = None  # the section holding the simulated patient's settings: the rehab layer's profile, if any
+    dry_run: bool = False  # built to be checked, not run (``rehabkit validate``): open and write nothing
+    bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
+    interaction_force: Callable[[], np.ndarray | None] | None = None
+    plugins: Any = None  # the run's plugin registry (``build`` makes others from it)
+    readings: dict[str, Reading] = field(default_factory=dict)  # the sensors' latest, by name (see ``reading``)
+
+    def reading(self, sensor: str) -> Reading | None:
+        """The latest reading of the scenario's sensor named ``sensor`` (its values, time and frame), or None
+        before its first. Name the sensor in a :data:`~rehabkit.models.strict.SensorName` setting: the setup then
+        checks that the scenario has it, located at that setting."""
+        return self.readings.get(sensor)
+
+    def build(self, kind: str, section: dict[str, Any]) -> Any:
+        """Another plugin of the run's from its section (``type`` and settings), built with this context: a
+        plugin that wraps another (``policy``'s ``base`` controller). Raises ``ValueError`` saying what in the
+        section is wrong (the caller names where the section is)."""
+        if "type" not in section:
+            raise ValueError(f"give the {kind}'s type")
+        try:
+            info = self.plugins.get(kind, section["type"])
+        except Exception as exc:  # noqa: BLE001 (the registry's UnknownPluginError: its words, with suggestions)
+            raise ValueError(str(exc)) from None
+        try:
+            config = info.config.model_validate(section)
+        except ValidationError as exc:
+            problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(section)'}: {e['msg']}" for e in exc.errors())
+            raise ValueError(f"{kind} '{section['type']}': {problems}") from None
+        return info.factory(config, self)
+
+    def stream(self, name: str) -> np.random.Generator:
+        """A random generator of its own for ``name``, from the scenario seed.
+
+        Draws from it don't depend on what other plugins draw, so a counterfactual replay with another
+        controller sees the same patient noise and sensor noise.
+        """
+        return np.random.default_rng([self.seed, *name.encode()])
+
+    def resolve(self, path: str | Path) -> Path:
+        """A path from the scenario, made absolute relative to the scenario file."""
+        p = Path(path).expanduser()
+        return p if p.is_absolute() else (self.scenario_dir / p).resolve()
