@@ -248,3 +248,32 @@ def test_a_controller_reads_a_sensor_by_the_name_in_its_settings(tmp_path):
     (d,) = err.value.diagnostics
     assert (d.path, d.mark.line, d.mark.col) == ("controller.sensor", 4, 3)
     assert "no sensor 'encoder' in this scenario; did you mean 'encoders'?" in d.message
+
+
+class _BuggyController(Controller):
+    def __init__(self, config, context):
+        {}["oops"]  # a plugin's own bug
+
+    def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        return np.zeros_like(q)
+
+
+def test_a_plugin_that_fails_with_its_own_bug_is_named_at_its_type_exit_2(tmp_path, capsys):
+    """Not an internal error of rehabkit's: the plugin, its package and the section (exit 2 from validate)."""
+    plugin = types.SimpleNamespace()
+
+    @hookimpl
+    def rehabkit_register_controllers(registry):
+        registry.add("buggy", config=_BadConfig, factory=_BuggyController)
+
+    plugin.rehabkit_register_controllers = rehabkit_register_controllers
+    registry = load_plugins(extra=[(plugin, Provider("buggy-lab", "0.3", "buggy"))])
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"extends: {HIT}\ncontroller:\n  type: buggy\n")
+    with pytest.raises(ScenarioError) as err:
+        Runner(load_scenario(bad, registry=registry), registry=registry).build()
+    (d,) = err.value.diagnostics
+    assert (d.path, d.mark.line) == ("controller.type", 3)
+    assert d.message.startswith("controller 'buggy' failed while it was built: KeyError: 'oops' (a bug in the "
+                                "plugin, package buggy-lab 0.3")
+    assert isinstance(err.value.__cause__, KeyError)

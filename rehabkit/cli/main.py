@@ -253,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except ScenarioError as exc:
+        if os.environ.get("REHABKIT_DEBUG") and exc.__cause__ is not None:  # (a plugin's own exception: its trace)
+            traceback.print_exception(exc.__cause__)
         _err(str(exc))
         return EXIT_INVALID
     except PluginError as exc:

@@ -5,15 +5,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import ValidationError
 
 from rehabkit.core.kinds.sensor import Instrument, Reading
-
-if TYPE_CHECKING:
-    from rehabkit.core.kinds.interfaces import Plan, Robot
 
 ReferenceSpace = Literal["joint", "cartesian"]
 
@@ -44,12 +41,12 @@ class Context:
     scenario_dir: Path
     rng: np.random.Generator
     control_dt: float
-    robot: Robot | None = None
+    robot: Any = None  # the robot plugin (a Robot; this module is below the kinds it is handed to)
     world: Any = None  # the scenario's world section (``rehabkit.core.scenario.models.World``)
     instruments: list[Instrument] = field(default_factory=list)
     out_dir: Path | None = None
     robot_spec: dict[str, Any] | None = None  # the scenario's robot section (type + settings), e.g. for a bridge
-    plan: Callable[..., Plan] | None = None
+    plan: Callable[..., Any] | None = None  # returns a Plan
     note: Callable[[float, str], None] | None = None
     reference_space: ReferenceSpace = "joint"  # what the scenario's planner produces (controllers taking either)
     seed: int = 0

@@ -117,13 +117,20 @@ class Assembly:
         return self.loaded.model
 
     def make(self, kind: str, config, path: tuple[str, ...]) -> Any:
-        """Build plugin ``config.type`` of ``kind`` from the section at ``path``; its ``ValueError`` or
-        ``PlanningError`` becomes a :class:`PluginSetupError` located in the scenario file."""
+        """Build plugin ``config.type`` of ``kind`` from the section at ``path``; whatever it raises becomes a
+        :class:`PluginSetupError` located in the scenario file (a ``SettingError`` at its setting)."""
         info = self.registry.get(kind, config.type)
         try:
             return info.factory(config, self.context)
         except (ValueError, PlanningError) as exc:
             raise PluginSetupError.refused(self.loaded.source, path, kind, config, exc) from exc
+        except (ScenarioError, SetupError):
+            raise
+        except Exception as exc:  # a bug in the plugin: said at its type, naming the package to report it to
+            raise PluginSetupError(self.loaded.source, (*path, "type"), (
+                f"{kind} '{config.type}' failed while it was built: {type(exc).__name__}: {exc} (a bug in the "
+                f"plugin, package {info.provider.package} {info.provider.version}; REHABKIT_DEBUG=1 shows the "
+                "traceback)")) from exc
 
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
