@@ -77,11 +77,55 @@ class CapamanRobot(Robot, PassiveJoints, ClusterPoints):
         return p[0], R[0]
 
     def body_poses(self, body: str, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The movable plate's pose (its centre) for crank triples; other bodies are not predicted."""
-        if body != "plate":
-            return super().body_poses(body, qs)
+        """The movable plate's pose (its centre, ``plate``) or the tool tip's (``tool_tip``) for crank triples,
+        by the closed-loop kinematics (Pinocchio's tree cannot close the legs' loops)."""
+        if body not in ("plate", "tool_tip"):
+            raise ValueError(f"robot 'capaman' predicts the poses of 'plate' and 'tool_tip', not '{body}'")
         p, R, _ = forward(self.geo, np.atleast_2d(qs))
-        return p, R
+        return (p, R) if body == "plate" else (p + R @ self.tool, R)
+
+    def jacobian(self, q: np.ndarray, frame: str | None = None) -> np.ndarray:
+        """6×3: the tool tip's (default) or the plate's (``plate``) linear and angular velocity per crank rate,
+        base-frame axes, by implicit differentiation of the leg equations."""
+        if frame not in (None, "tool_tip", "plate"):
+            raise ValueError(f"robot 'capaman' gives the Jacobians of 'plate' and 'tool_tip', not '{frame}'")
+        q = np.asarray(q, float)
+        p, R = self.plate_pose(q)
+        d = forward_jacobian(self.geo, q, p, R)
+        if frame == "plate":
+            return d
+        return np.vstack([d[:3] - np.cross(R @ self.tool, d[3:].T).T, d[3:]])
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """The cranks' inertia matrix (3×3): the whole mechanism's (MuJoCo's tree, every leg and the plate)
+        seen through the closed loops, Gᵀ M G with G the tree's joint velocities per crank rate."""
+        import mujoco
+
+        if getattr(self, "_mj", None) is None:
+            self._mj = mujoco.MjModel.from_xml_string(self.model.mjcf)
+        mj = self._mj
+        data = mujoco.MjData(mj)
+
+        def qpos(cranks: np.ndarray) -> np.ndarray:
+            out = mj.qpos0.copy()
+            for name, value in {**{f"alpha_{k + 1}": [cranks[k]] for k in range(3)},
+                                **self.passive_state(cranks)}.items():
+                adr = mj.jnt_qposadr[mj.joint(name).id]
+                out[adr:adr + len(value)] = value
+            return out
+
+        q = np.asarray(q, float)
+        eps, G, column = 1e-6, np.empty((mj.nv, 3)), np.empty(mj.nv)
+        for k in range(3):
+            step = np.zeros(3)
+            step[k] = eps
+            mujoco.mj_differentiatePos(mj, column, 2 * eps, qpos(q - step), qpos(q + step))
+            G[:, k] = column
+        data.qpos[:] = qpos(q)
+        mujoco.mj_forward(mj, data)
+        M = np.zeros((mj.nv, mj.nv))
+        mujoco.mj_fullM(mj, data, M)
+        return G.T @ M @ G
 
     def fk_batch(self, qs: np.ndarray) -> np.ndarray:
         p, R, _ = forward(self.geo, np.atleast_2d(qs))

@@ -53,12 +53,45 @@ class Robot(ABC):
         return self.fk_batch(qs)[:, :3, 3] @ base[:3, :3].T + base[:3, 3]
 
     def body_poses(self, body: str, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Positions (N, 3) and rotations (N, 3, 3) of a body in the base frame for configurations ``qs``.
+        """Positions (N, 3) and rotations (N, 3, 3) of a body (or site) of the robot's model in the base frame for
+        configurations ``qs``. Default: Pinocchio's frames (every serial robot's bodies); a robot whose model
+        cannot say (a parallel mechanism's closed loops) overrides it."""
+        import pinocchio as pin
 
-        Robots that can predict where a body is (e.g. for comparing sensors with the
-        planned motion) implement this; the default cannot.
-        """
-        raise NotImplementedError(f"robot '{self.model.name}' does not predict the pose of '{body}'")
+        m, data = self.model.pin_model, self._data()
+        fid = self._frame_id(body)
+        qs = np.atleast_2d(np.asarray(qs, float))
+        pos, rot = np.empty((len(qs), 3)), np.empty((len(qs), 3, 3))
+        for i, q in enumerate(qs):
+            pin.framesForwardKinematics(m, data, q)
+            pos[i], rot[i] = data.oMf[fid].translation, data.oMf[fid].rotation
+        return pos, rot
+
+    def jacobian(self, q: np.ndarray, frame: str | None = None) -> np.ndarray:
+        """The 6×dof Jacobian of a body or site (default: the end effector) at ``q``: its linear velocity (rows
+        0–2, of the frame's origin) and angular velocity (rows 3–5), both in the base frame's axes. Default:
+        Pinocchio (``LOCAL_WORLD_ALIGNED``)."""
+        import pinocchio as pin
+
+        fid = self.model.ee_frame_id if frame is None else self._frame_id(frame)
+        return pin.computeFrameJacobian(self.model.pin_model, self._data(), np.asarray(q, float), fid,
+                                        pin.LOCAL_WORLD_ALIGNED).copy()
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """The joint-space inertia matrix M(q) (dof×dof, symmetric). Default: Pinocchio's CRBA."""
+        import pinocchio as pin
+
+        M = pin.crba(self.model.pin_model, self._data(), np.asarray(q, float))
+        return np.triu(M) + np.triu(M, 1).T  # (CRBA fills the upper triangle)
+
+    def _frame_id(self, name: str) -> int:
+        m = self.model.pin_model
+        if not m.existFrame(name):
+            from rehabkit.core.plugins.names import suggest
+
+            frames = sorted({f.name for f in m.frames if f.name != "universe"})
+            raise ValueError(f"robot '{self.model.name}' has no body or site '{name}'{suggest(name, frames)}")
+        return m.getFrameId(name)
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio RNEA."""
