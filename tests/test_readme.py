@@ -8,9 +8,11 @@ import shlex
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
-from tests.conftest import ROOT
+from rehabkit.core.scenario.errors import ScenarioError
+from tests.conftest import ROOT, SCENARIOS
 from tests.test_cli import cli
 
 README = (ROOT / "README.md").read_text()
@@ -25,6 +27,9 @@ EXECUTED_ELSEWHERE = {
     "rehabkit run scenarios/lexos_reaching.yaml --set backend.type=hardware":
         "tests/test_hardware_link.py::test_lexos_reaching_over_the_link_reaches_the_proxy_points_of_the_simulation",
     "rehabkit plugins": "tests/test_cli.py::test_plugins_and_schema_commands",
+    # the plugin guide's, for its own package: run in-process with its registry (it is not installed here)
+    "rehabkit plugins --fields sensed-pd": "tests/test_readme.py::test_the_plugin_guide_runs_as_written",
+    "rehabkit validate sensed_roundtrip.yaml": "tests/test_readme.py::test_the_plugin_guide_runs_as_written",
     "rehabkit plugins --json": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema > rehabkit.schema.json": "tests/test_cli.py::test_plugins_and_schema_commands",
@@ -200,3 +205,54 @@ def test_the_force_sensing_block_is_the_force_skills():
     sensor = scenario["sensors"]["ft"]
     assert block["sensors"]["ft"]["type"] == sensor["type"]
     assert block["sensors"]["ft"]["simulated"].items() <= sensor["simulated"].items()
+
+
+def test_the_plugin_guide_runs_as_written(tmp_path, capsys):
+    """The guide's package (a sensor and a controller reading it by name), its entry points, its scenario and its
+    test, as a third party writes them: registered as the entry points name them, run, refused where it says."""
+    import tomllib
+    import types
+
+    from rehabkit.api import run_scenario
+    from rehabkit.cli.plugin_reference import plugin_reference
+    from rehabkit.core.plugins.registry import Provider, load_plugins
+    from rehabkit.core.run.runner import Runner
+    from rehabkit.core.scenario.loader import load_scenario
+
+    guide = README[README.index("### Writing a plugin"):]
+    code = re.search(r"```python\n(# mylab/plugins.py\n.*?)```", guide, re.S).group(1)
+    module = types.ModuleType("mylab.plugins")
+    exec(compile(code, "README.md (mylab/plugins.py)", "exec"), module.__dict__)
+    points = tomllib.loads(re.search(r"```toml\n(.*?)```", guide, re.S).group(1))["project"]["entry-points"]
+    assert points == {"rehabkit.sensors": {"noisy-angles": "mylab.plugins"},
+                      "rehabkit.controllers": {"sensed-pd": "mylab.plugins"}}
+    registry = load_plugins(extra=[(module, Provider("mylab", "0.1", "mylab.plugins"))])
+    assert {"noisy-angles", "sensed-pd"} <= set(registry.names("sensor")) | set(registry.names("controller"))
+    fields = plugin_reference(registry.get("controller", "sensed-pd"))  # `rehabkit plugins --fields sensed-pd`
+    assert "controller 'sensed-pd' (mylab 0.1)" in fields and "sensor: SensorName = required" in fields
+    scenario = tmp_path / "sensed_roundtrip.yaml"
+    text = re.search(r"```yaml\n(# sensed_roundtrip.yaml.*?)```", guide, re.S).group(1)
+    scenario.write_text(text.replace("extends: hit_roundtrip.yaml", f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}"))
+    result = run_scenario(scenario, registry=registry)
+    assert result.passed and result.metrics["safety_events"] == 0
+    assert 0.04 < result.metrics["angle_noise_rms_deg"] < 0.06 and result.metrics["tracking_rms_deg"] < 0.6
+    for wrong, where, said in (("sensor: angles", "controller.sensor", "no sensor 'angle' in this scenario; did you "
+                                "mean 'angles'?"), ("kp: [900, 900, 150, 180, 16, 18]", "controller.kp",
+                                                    "give one gain or 6, one per joint")):
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(scenario.read_text().replace(wrong, "sensor: angle" if "sensor" in wrong else "kp: [900, 900]"))
+        with pytest.raises(ScenarioError) as err:
+            Runner(load_scenario(bad, registry=registry), registry=registry).build()
+        (d,) = err.value.diagnostics
+        assert d.path == where and said in d.message, d
+    test = re.search(r"```python\n(import pytest\n\n@pytest.mark.parametrize\(\"noise_deg\".*?)```", guide,
+                     re.S).group(1)
+    scope: dict = {}
+    exec(compile(test, "README.md (the guide's test)", "exec"), scope)
+
+    def fixture(path, **kw):  # the run_scenario fixture, with this registry in place of the installed plugins
+        return run_scenario(scenario if path == "sensed_roundtrip.yaml" else path,
+                            {k.replace("__", "."): v for k, v in kw.items()}, registry=registry)
+
+    for noise in (0.0, 0.2):
+        scope["test_the_pd_tracks_through_the_noise"](fixture, noise)

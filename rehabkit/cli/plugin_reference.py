@@ -11,6 +11,8 @@ from typing import Any
 from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
+from rehabkit.models.strict import FILE_SETTING, SENSOR_SETTING
+
 
 def _models_in(annotation: Any) -> list[type[BaseModel]]:
     """Pydantic models an annotation holds (``list[JointSpec]``, ``Pose | None``, …)."""
@@ -33,7 +35,8 @@ def field_lines(model: type[BaseModel], indent: str = "  ", seen: tuple[type, ..
         default = "required" if f.is_required() else (
             f"{f.default_factory()!r}" if f.default_factory is not None else
             "none" if f.default is None else repr(f.default) if f.default is not PydanticUndefined else "required")
-        text = f"{indent}{name}: {_type_name(f.annotation)} = {default}"
+        marked = [repr(m) for m in f.metadata if m in (FILE_SETTING, SENSOR_SETTING)]  # FilePath, SensorName
+        text = f"{indent}{name}: {marked[0] if marked else _type_name(f.annotation)} = {default}"
         if f.description:
             text += f" — {f.description}"
         lines.append(text)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from rehabkit.plugin import Context, Metric, Patient, StrictModel, hookimpl
+from rehabkit.plugin import Context, Metric, Patient, SettingError, StrictModel, hookimpl
 
 
 class RelaxedArmConfig(StrictModel):
@@ -26,8 +26,8 @@ class RelaxedArm(Patient):
         if config.rest_deg is not None:
             self.rest = np.radians(config.rest_deg)
             if len(self.rest) != context.robot.model.dof:
-                raise ValueError(f"rest_deg has {len(self.rest)} values; the robot has {context.robot.model.dof} "
-                                 "joints")
+                raise SettingError("rest_deg", f"has {len(self.rest)} values; the robot has "
+                                               f"{context.robot.model.dof} joints")
 
     def torque(self, t, q, qd, goal):
         if self.rest is None:

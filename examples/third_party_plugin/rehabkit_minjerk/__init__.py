@@ -16,6 +16,7 @@ from rehabkit.plugin import (
     Planner,
     PlanningError,
     PlanRequest,
+    SettingError,
     StrictModel,
     hookimpl,
     joint_waypoints,
@@ -60,13 +61,13 @@ class MinJerkPlanner(Planner):
     def __init__(self, config: MinJerkConfig, context=None):
         self.durations = np.asarray(config.segment_durations, dtype=float)
         if np.any(self.durations <= 0):
-            raise ValueError("min-jerk: every segment duration must be > 0")
+            raise SettingError("segment_durations", "every segment duration must be > 0")
 
     def plan(self, request: PlanRequest) -> Plan:
         wp = joint_waypoints(request.targets, request.robot, request.q)
         if len(self.durations) != len(wp.q) - 1:
             raise PlanningError(f"min-jerk: {len(wp.q)} via points need {len(wp.q) - 1} segment durations, "
-                                f"got {len(self.durations)}")
+                                f"got {len(self.durations)}", setting="segment_durations")
         peak = np.max(np.abs(np.diff(wp.q, axis=0)) * 1.875 / self.durations[:, None])  # 15/8 Δ/T
         return Plan(MinJerkTrajectory(wp.q, self.durations),
                     {"ik_roundtrip_position_error_m": wp.ik_position_error_m, "min_jerk_peak_speed_rad_s": peak},
