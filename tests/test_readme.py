@@ -30,6 +30,7 @@ EXECUTED_ELSEWHERE = {
     # the plugin guide's, for its own package: run in-process with its registry (it is not installed here)
     "rehabkit plugins --fields sensed-pd": "tests/test_readme.py::test_the_plugin_guide_runs_as_written",
     "rehabkit validate sensed_roundtrip.yaml": "tests/test_readme.py::test_the_plugin_guide_runs_as_written",
+    "rehabkit bridge --help": "tests/test_readme.py::test_every_option_of_every_command_is_in_the_readme",
     "rehabkit plugins --json": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema": "tests/test_cli.py::test_plugins_and_schema_commands",
     "rehabkit schema > rehabkit.schema.json": "tests/test_cli.py::test_plugins_and_schema_commands",
@@ -256,3 +257,29 @@ def test_the_plugin_guide_runs_as_written(tmp_path, capsys):
 
     for noise in (0.0, 0.2):
         scope["test_the_pd_tracks_through_the_noise"](fixture, noise)
+
+
+def test_the_plugin_table_lists_every_built_in_plugin():
+    """The README's table of plugins against the registry: every plugin rehabkit installs, and none it doesn't."""
+    from rehabkit.core.plugins.registry import default_registry
+
+    registry = default_registry()
+    registry.load_all()
+    table = README[README.index("| kind | name | |"):README.index("Two installable packages")]
+    listed = {(cells[0], name) for row in table.splitlines()[2:]
+              if len(cells := [c.strip() for c in row.strip("|").split("|")]) >= 2
+              for name in re.findall(r"`([^`]+)`", cells[1])}
+    installed = {(kind, name) for kind in ("robot", "planner", "controller", "sensor", "backend", "patient")
+                 for name in registry.names(kind) if registry.get(kind, name).provider.package == "rehabkit"}
+    assert listed == installed
+
+
+def test_every_option_of_every_command_is_in_the_readme():
+    from rehabkit.cli.main import parser
+
+    commands = next(a for a in parser()._actions if a.choices and "run" in a.choices).choices
+    missing = {name: [o for a in sub._actions for o in a.option_strings if o.startswith("--") and o != "--help"
+                      and o not in README] for name, sub in commands.items()}
+    assert {k: v for k, v in missing.items() if v} == {}
+    shown = cli("bridge", "--help")  # where the README sends a reader for the options a host passes
+    assert shown.returncode == 0 and "--watchdog-ms" in shown.stdout and "--instruments JSON" in shown.stdout
