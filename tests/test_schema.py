@@ -1,7 +1,7 @@
 """`rehabkit schema` read by an independent validator (check-jsonschema, as an editor's YAML language server reads
 it): every shipped scenario that `rehabkit validate` accepts is accepted, `extends:` files and `null` deletions
 included; of the corpus of wrong files (all refused by validate), those whose mistake a schema can tell are refused,
-a misspelt plugin named as such."""
+a misspelt plugin named as such; a number in quotes is refused by both."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ NEEDS_EXAMPLE_PACKAGES = {"planar_lab.yaml", "hit_minjerk.yaml"}  # their plugin
 SCHEMA_REFUSES = {
     "cartesian_speed_zero", "control_rate_zero", "controller_needs_floating_base", "dh_convention",
     "dh_mass_negative", "dh_row_unknown_key", "dh_velocity_zero", "duration_bool", "duration_negative",
+    "duration_quoted",
     "duration_text", "empty_file", "event_time_negative", "expect_text", "expect_unknown_operator",
     "load_force_two_values", "log_rate_negative", "missing_robot", "not_utf8", "ompl_algorithm", "ompl_time_zero",
     "safety_margin_negative", "seed_fraction", "segments_empty", "sensor_rate_text", "stop_category_rule_misspelt",

@@ -4,13 +4,28 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where installed: ~10x the pure-Python parser
+_BASE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where installed: ~10x the pure-Python parser
+
+
+class YAML_LOADER(_BASE_LOADER):  # noqa: N801 (a loader class, named as the constant it replaced)
+    """PyYAML's safe loader reading numbers as YAML 1.2 does (and editors' YAML, e.g. check-jsonschema's): ``1e-6``
+    is a number, not the text PyYAML's YAML 1.1 makes of an exponent without a decimal point."""
+
+
+YAML_LOADER.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
+
+
+def load_scalar(text: str) -> Any:
+    """One YAML value as a scenario file would read it (a ``--set`` or ``--grid`` value)."""
+    return yaml.load(text, Loader=YAML_LOADER)
 
 
 def load_yaml(text: str) -> Any:

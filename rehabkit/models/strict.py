@@ -45,13 +45,30 @@ def _numbers_only(annotation: Any) -> bool:
     return bool(kinds) and all(_numbers_only(a) for a in kinds)
 
 
+QUOTED = "a number is needed here, not the text '{text}': write it without quotes"
+
+
+def _quoted_number(value: Any) -> str | None:
+    """A number written in quotes (``"8.5"``), which pydantic would quietly read as one; a JSON Schema validator
+    (an editor) refuses it, and so does the loader."""
+    for v in value if isinstance(value, (list, tuple)) else (value,):
+        if isinstance(v, str):
+            try:
+                float(v)
+            except ValueError:
+                continue
+            return v
+    return None
+
+
 def _has_bool(value: Any) -> bool:
     return isinstance(value, bool) or (isinstance(value, (list, tuple)) and any(isinstance(v, bool) for v in value))
 
 
 class StrictModel(BaseModel):
-    """Base of every DSL model: unknown keys are errors, not silently ignored; numbers are finite and never
-    booleans (YAML reads ``yes``, ``no``, ``on``, ``off`` as booleans, and pydantic would take them as 1 and 0)."""
+    """Base of every DSL model: unknown keys are errors, not silently ignored; numbers are finite, never booleans
+    (YAML reads ``yes``, ``no``, ``on``, ``off`` as booleans, and pydantic would take them as 1 and 0) and never
+    text in quotes (``"8.5"``: pydantic would read it, a JSON Schema validator would not)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
@@ -59,9 +76,12 @@ class StrictModel(BaseModel):
     @classmethod
     def _no_booleans_for_numbers(cls, data: Any) -> Any:
         if isinstance(data, dict):
-            bad = [k for k, v in data.items() if _has_bool(v) and (f := cls.model_fields.get(k)) is not None
-                   and _numbers_only(f.annotation)]
-            if bad:  # located at each such setting (a model validator: a field one would meet the union tags too)
-                raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
-                    type=PydanticCustomError("boolean_number", BOOLEAN), loc=(k,), input=data[k]) for k in bad])
+            numbers = {k: v for k, v in data.items()
+                       if (f := cls.model_fields.get(k)) is not None and _numbers_only(f.annotation)}
+            errors = [InitErrorDetails(type=PydanticCustomError("boolean_number", BOOLEAN), loc=(k,), input=v)
+                      for k, v in numbers.items() if _has_bool(v)]
+            errors += [InitErrorDetails(type=PydanticCustomError("quoted_number", QUOTED, {"text": text}), loc=(k,),
+                                        input=v) for k, v in numbers.items() if (text := _quoted_number(v)) is not None]
+            if errors:  # located at each such setting (a model validator: a field one would meet the union tags too)
+                raise ValidationError.from_exception_data(cls.__name__, errors)
         return data

@@ -26,6 +26,7 @@ CASES: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
     "unknown_sensor": ("a sensor type that does not exist", ARM3,
                        [("duration: 4.5", "sensors:\n  enc: {type: joint-encoders}\nduration: 4.5")]),
     "duration_text": ("a word for a number", ARM3, [("duration: 4.5", "duration: five")]),
+    "duration_quoted": ("a number in quotes", ARM3, [("duration: 4.5", 'duration: "4.5"')]),
     "duration_bool": ("a YAML boolean for a number", ARM3, [("duration: 4.5", "duration: yes")]),
     "duration_inf": ("an infinite duration", ARM3, [("duration: 4.5", "duration: .inf")]),
     "duration_negative": ("a negative duration", ARM3, [("duration: 4.5", "duration: -4.5")]),
