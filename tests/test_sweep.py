@@ -1,6 +1,7 @@
 """Sweeps: the grid, serial against Ray row for row, resuming a killed sweep, failing and hanging runs."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -122,8 +123,24 @@ def test_a_crashing_run_is_recorded_with_its_error_and_the_others_complete(tmp_p
     result = run_sweep(TRIAL, {"planner.type": ["voxel-astar"], **grid}, 2, tmp_path, serial=mode == "serial",
                        workers=2)  # (the scenario's own grid has four planners; one is enough here)
     assert len(result.records) == 4
+    labels = [r["controller"] for r in result.records]  # whole sections: by type and settings, short
+    assert labels[:2] == ["clik-pd"] * 2 and labels[2] == labels[3] and labels[2].startswith("qp-stack #")
     ok, crashed = result.records[:2], result.records[2:]
     assert all(r["error"] is None and r["passed"] for r in ok)
     assert all("controller 'qp-stack' needs a robot that has a floating base" in r["error"] and not r["passed"]
                for r in crashed)
     assert [a["errors"] for a in result.aggregate] == [0, 2] and len(result.failed) == 2
+
+
+def test_a_grid_over_whole_plugin_sections_as_the_readme_writes_it(tmp_path):
+    """`--grid 'controller={type: joint-pd, kp: 300},{type: assist-as-needed}'` on HIT: each value a whole
+    section (the second plugin takes none of the first's settings, nor the scenario's), labelled short."""
+    from rehabkit.sweep.grid import parse_grid
+
+    readme = (SCENARIOS.parent / "README.md").read_text()
+    (raw,) = re.findall(r"--grid '(controller=\{type: joint-pd[^']*)'", readme)
+    grid = parse_grid([raw])
+    assert grid == {"controller": [{"type": "joint-pd", "kp": 300}, {"type": "assist-as-needed"}]}
+    result = run_sweep(HIT, {"duration": [1.0], **grid}, 1, tmp_path, serial=True)
+    assert [r["controller"] for r in result.records] == ["joint-pd kp=300", "assist-as-needed"]
+    assert [r["error"] for r in result.records] == [None, None]

@@ -66,5 +66,22 @@ def expand(path: Path, grid: Mapping[str, list[Any]], seeds: int) -> list[RunSpe
 
 
 def point_label(point: tuple[tuple[str, Any], ...]) -> dict[str, str]:
-    """Grid values as text, one column per key (strings as they are, anything else as JSON)."""
-    return {k: v if isinstance(v, str) else json.dumps(v) for k, v in point}
+    """Grid values as text, one column per key: strings as they are; a whole plugin section by its type and its
+    scalar settings (``joint-pd kp=300``), with a short digest of the rest where anything was left out or the
+    text grew long (so distinct values keep distinct labels); anything else as JSON."""
+    return {k: _label(v) for k, v in point}
+
+
+def _label(value: Any) -> str:
+    if isinstance(value, str):
+        return value
+    if not isinstance(value, dict):
+        return json.dumps(value)
+    parts = [str(value["type"])] if "type" in value else []
+    scalar = {k: v for k, v in value.items() if k != "type" and not isinstance(v, (dict, list))}
+    parts += [f"{k}={v}" for k, v in scalar.items()]
+    text = " ".join(parts)
+    if len(scalar) + ("type" in value) < len(value) or len(text) > 48 or not text:
+        digest = hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest()[:6]
+        text = f"{text[:40]} #{digest}".strip()
+    return text
