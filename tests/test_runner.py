@@ -277,3 +277,32 @@ def test_a_plugin_that_fails_with_its_own_bug_is_named_at_its_type_exit_2(tmp_pa
     assert d.message.startswith("controller 'buggy' failed while it was built: KeyError: 'oops' (a bug in the "
                                 "plugin, package buggy-lab 0.3")
     assert isinstance(err.value.__cause__, KeyError)
+
+
+class _YieldingPD(Controller):
+    """A PD that deliberately lags its plan by 2° on every joint (as a compliant controller yields), exposing the
+    reference it tracks: that one is its own."""
+
+    def __init__(self, config, context):
+        self.gravity, self.joint_reference = context.robot.gravity_torque, None
+
+    def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
+        self.joint_reference = q_ref - np.radians(2.0)
+        return 900 * (self.joint_reference - q) + 45 * (qd_ref - qd) + self.gravity(q)
+
+
+def test_tracking_is_measured_against_the_plan_and_against_the_controllers_own_reference():
+    plugin = types.SimpleNamespace()
+
+    @hookimpl
+    def rehabkit_register_controllers(registry):
+        registry.add("yielding-pd", config=_BadConfig, factory=_YieldingPD)
+
+    plugin.rehabkit_register_controllers = rehabkit_register_controllers
+    registry = load_plugins(extra=[(plugin, Provider("tests", "0", "yielding"))])
+    r = run_scenario(HIT, {"duration": 3.0, "controller": {"type": "yielding-pd"}}, registry=registry)
+    m = r.metrics
+    assert m["tracking_rms_deg"] > 1.8  # the plan's: the 2° it yields counts as error
+    assert m["controller_tracking_rms_deg"] < 0.5 < 1.8 < m["tracking_rms_deg"]  # its own: tracked
+    assert r.summary["metric_info"]["controller_tracking_rms_deg"]["unit"] == "deg"
+    assert "controller_tracking_rms_deg" not in run_scenario(HIT, {"duration": 0.5}).metrics  # joint-pd has none

@@ -107,7 +107,11 @@ CORE_METRICS: tuple[Metric, ...] = (
     Metric("final_position_error_m", "m", description="hand at the end against the goal"),
     Metric("cartesian_tracking_rms_mm", "mm", outcome=True, description="RMS of the hand's Cartesian error"),
     Metric("cartesian_tracking_max_mm", "mm", description="largest Cartesian error"),
-    Metric("tracking_rms_deg", "deg", outcome=True, description="RMS of joint reference minus measured"),
+    Metric("tracking_rms_deg", "deg", outcome=True, description="RMS of the plan's joint reference minus measured "
+           "(where the controller makes the joint reference — Cartesian references, an HMI — its own)"),
+    Metric("controller_tracking_rms_deg", "deg", description="RMS of the controller's own joint reference minus "
+           "measured, where a joint-space controller exposes one (a compliant controller's yielded reference)"),
+    Metric("controller_tracking_max_deg", "deg", description="largest of the same"),
     Metric("sim_time_s", "s", description="simulated time run"),
     Metric("wall_time_s", "s", "wall", description="wall time of the loop"),
     Metric("setup_time_s", "s", "wall", description="wall time from loading to the first step"),

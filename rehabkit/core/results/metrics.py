@@ -25,10 +25,11 @@ class Trace:
     x_ref: np.ndarray | None = None
     tau_h: np.ndarray | None = None  # torques a (simulated) person applied at the joints
     f_h: np.ndarray | None = None  # interaction force measured [N] (a force-torque sensor, an embodied person's cuffs)
+    q_ctrl: np.ndarray | None = None  # the controller's own joint reference where it exposes one (NaN elsewhere)
 
     def trimmed(self, n: int) -> Trace:
         return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]
-                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h", "f_h")))
+                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h", "f_h", "q_ctrl")))
 
 
 def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:
@@ -49,6 +50,10 @@ def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> t
         }
         for j, name in enumerate(robot.joint_names)
     } if err.size else {}
+    if trace.q_ctrl is not None and (rows := np.isfinite(trace.q_ctrl).all(axis=1)).any():
+        own = np.degrees(trace.q_ctrl[rows] - trace.q[rows])  # what the controller meant, e.g. a compliant yield
+        metrics["controller_tracking_rms_deg"] = float(np.sqrt(np.mean(own**2)))
+        metrics["controller_tracking_max_deg"] = float(np.abs(own).max())
     metrics["joint_limit_excess_deg"] = joint_limit_excess(trace, robot)
     if goal_q is not None and err.size:
         q_end = trace.q[-1]

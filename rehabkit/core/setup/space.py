@@ -52,21 +52,29 @@ class JointSpace:
         return plan_breach(plan, self.robot.model)
 
     def allocate(self, trace: Trace, ref_q: np.ndarray, ref_qd: np.ndarray) -> None:
-        """The trace's reference columns: the planned reference, or the controller's own where it makes one."""
+        """The trace's reference columns: the planned reference, or the controller's own where it makes one; and,
+        beside the plan's, the controller's own joint reference where it exposes one (``q_ctrl``)."""
         if self.controller.reference == "own":  # what it tracked is its own reference; record that
             trace.q_ref, trace.qd_ref = np.zeros_like(ref_q), np.zeros_like(ref_qd)
         else:
             trace.q_ref, trace.qd_ref = ref_q, ref_qd
+            trace.q_ctrl = np.full_like(ref_q, np.nan)
 
     def recorder(self, trace: Trace, backend) -> Callable[[int, np.ndarray], None] | None:
-        """What the loop records each step beside the joints (None: nothing)."""
-        if self.controller.reference != "own":
-            return None
-        q_ref, controller = trace.q_ref, self.controller
+        """What the loop records each step beside the joints: the controller's own joint reference."""
+        controller = self.controller
+        if controller.reference == "own":
+            q_ref = trace.q_ref
 
-        def record(k: int, q: np.ndarray) -> None:
-            q_ref[k] = controller.joint_reference
-        return record
+            def record(k: int, q: np.ndarray) -> None:
+                q_ref[k] = controller.joint_reference
+            return record
+        q_ctrl = trace.q_ctrl
+
+        def record_own(k: int, q: np.ndarray) -> None:  # (a compliant controller's yield: reported beside the plan's)
+            if controller.joint_reference is not None:
+                q_ctrl[k] = controller.joint_reference
+        return record_own
 
     def goal(self, goal: np.ndarray) -> np.ndarray | None:
         """The joint goal the final-error metrics measure (none where the controller went its own way)."""
