@@ -9,7 +9,7 @@ from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
-from tests.conftest import DATA
+from tests.conftest import DATA, SCENARIOS
 from tests.test_cli import cli
 
 ARM3 = (DATA / "arm3_dh.yaml").read_text()  # a user's own 3-joint arm, written as a DH table
@@ -119,3 +119,16 @@ def test_gains_auto_refuses_hand_gains_and_a_bandwidth_the_control_rate_cannot_g
     done = cli("validate", str(_write(tmp_path, fast)))
     assert done.returncode == 2 and "arm3.yaml:19:3: controller.bandwidth_hz" in done.stderr, done.stderr
     assert "at most 48" in done.stderr
+
+
+def test_every_plugins_refusal_is_said_at_once(tmp_path):
+    """A sensor's, the planner's and the controller's refusals together, each at its setting (not the first only)."""
+    bad = tmp_path / "three.yaml"
+    bad.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\n"
+                   "sensors:\n  encoders: {type: joint-encoder, joints: [elbow_9]}\n"
+                   "planner: {segment_durations: [2, 0, 2, 2]}\n"
+                   "controller: {kp: [900, 900]}\n")
+    with pytest.raises(ScenarioError) as err:
+        Runner(load_scenario(bad)).build()
+    found = {(d.path, d.mark.line) for d in err.value.diagnostics}
+    assert found == {("sensors.encoders.joints", 3), ("planner.segment_durations", 4), ("controller.kp", 5)}

@@ -25,7 +25,8 @@ from rehabkit.core.run.reference import ReferenceBuffer
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.run.timeline import Replan, Timeline
 from rehabkit.core.scenario.errors import ScenarioError
-from rehabkit.core.setup.assembly import Assembly, SetupError, metric_catalogue
+from rehabkit.core.setup.assembly import Assembly, SetupError
+from rehabkit.core.setup.checks import metric_catalogue
 from rehabkit.core.setup.first_plan import first_plan_refusal, start_posture
 from rehabkit.core.setup.limits import LimitBreach
 

@@ -39,7 +39,6 @@ from rehabkit.core.kinds.interfaces import (
 from rehabkit.core.plugins.lifecycle import Extensions
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.registry import PluginRegistry
-from rehabkit.core.results.metric import CORE_METRICS, MetricCatalogue
 from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.loader import LoadedScenario
@@ -47,8 +46,10 @@ from rehabkit.core.setup.checks import (
     at_target,
     check_capabilities,
     check_duration,
+    check_expectations,
     check_joint_targets,
     check_loads,
+    check_robot_model,
     check_scene_names,
     check_sensor_settings,
     has,
@@ -151,6 +152,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     extensions.hook.rehabkit_configure_robot(setup=a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
     a.robot = a.make("robot", a.robot_config, ("robot",))
+    check_robot_model(a)
     a.context = replace(a.context, robot=a.robot)
     _narrow_limits(a)
     check_capabilities(a)
@@ -164,19 +166,34 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     check_duration(a)
     if upto == "targets":
         return a
-    # sensors before the backend: their instruments go into the scene it builds
-    a.sensors = {name: a.make("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
+    # sensors before the backend: their instruments go into the scene it builds; the sensors, the planner and the
+    # controller are each built even when another refused, so that every refusal is said at once
+    refused: list[PluginSetupError] = []
+
+    def attempt(kind: str, config, path: tuple) -> Any:
+        try:
+            return a.make(kind, config, path)
+        except PluginSetupError as exc:
+            refused.append(exc)
+            return None
+
+    built = {name: attempt("sensor", cfg, ("sensors", name)) for name, cfg in sc.sensors.items()}
+    a.sensors = {name: s for name, s in built.items() if s is not None}
     a.context = replace(a.context, instruments=[i for s in a.sensors.values() for i in s.instruments()])
-    check_loads(a)
+    if not refused:
+        check_loads(a)
     check_sensor_settings(a)
-    a.planner = a.make("planner", sc.planner, ("planner",))
+    a.planner = attempt("planner", sc.planner, ("planner",))
     for i, ev in enumerate(sc.task.events):
-        if ev.planner is not None:  # (the settings were validated with the scenario, each located)
+        if ev.planner is not None and a.planner is not None:  # (validated with the scenario, each located)
             config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
             a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
-    a.context = replace(a.context, reference_space=a.planner.space, interaction_force=lambda: (
+    space = a.planner.space if a.planner is not None else a.context.reference_space
+    a.context = replace(a.context, reference_space=space, interaction_force=lambda: (
         a.force_source.last if a.force_source is not None else None))
-    a.controller = a.make("controller", sc.controller, ("controller",))
+    a.controller = attempt("controller", sc.controller, ("controller",))
+    if refused:
+        raise PluginSetupError.together(refused)
     takes = "joint" if a.controller.reference == "own" else a.controller.reference  # (own: asks for joint plans)
     if a.planner.space != takes:
         raise PluginSetupError(a.loaded.source, ("controller", "type"),
@@ -193,29 +210,9 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()
         a.context = replace(a.context, bodies=bodies)
         a.backend = a.make("backend", sc.backend, ("backend",))
-    _check_expectations(a)
+    check_expectations(a)
     a.schedule = _schedule(a)
     return a
-
-
-def metric_catalogue(a: Assembly) -> MetricCatalogue:
-    """Every metric the run can report, described: the core's, the extensions', each plugin's."""
-    catalogue = MetricCatalogue(CORE_METRICS)
-    catalogue.add(a.extensions.metrics())
-    for plugin in (a.planner, a.controller, a.patient, *a.sensors.values()):
-        catalogue.add(plugin.metrics if plugin is not None else ())
-    catalogue.add(a.registry.get("backend", a.sc.backend.type).declared.metrics)  # (validate builds no backend)
-    return catalogue
-
-
-def _check_expectations(a: Assembly) -> None:
-    """An ``expect:`` on a metric nothing in this run reports could never be met: refused, with the nearest."""
-    catalogue = metric_catalogue(a)
-    for name in a.sc.expect:
-        if not catalogue.known(name):
-            raise PluginSetupError(a.loaded.source, ("expect", name),
-                                   f"expect: no plugin of this run reports a metric '{name}'"
-                                   f"{suggest(name, catalogue.names())} (see `rehabkit plugins` for each plugin's)")
 
 
 def _narrow_limits(a: Assembly) -> None:

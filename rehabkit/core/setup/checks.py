@@ -13,8 +13,10 @@ from pydantic import BaseModel
 from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
 from rehabkit.core.kinds.interfaces import PlanningError
 from rehabkit.core.plugins.names import suggest
+from rehabkit.core.results.metric import CORE_METRICS, MetricCatalogue
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.models.robot_model import RobotModel
 from rehabkit.models.strict import SENSOR_SETTING
 
 Assembly = Any  # a rehabkit.core.setup.assembly.Assembly (which imports this module: no import back)
@@ -165,3 +167,35 @@ def _sensor_settings(node: Any, loc: tuple) -> list[tuple[tuple, str]]:
         for key, value in node.items():
             found += _sensor_settings(value, (*loc, key))
     return found
+
+
+def metric_catalogue(a: Assembly) -> MetricCatalogue:
+    """Every metric the run can report, described: the core's, the extensions', each plugin's."""
+    catalogue = MetricCatalogue(CORE_METRICS)
+    catalogue.add(a.extensions.metrics())
+    for plugin in (a.planner, a.controller, a.patient, *a.sensors.values()):
+        catalogue.add(plugin.metrics if plugin is not None else ())
+    catalogue.add(a.registry.get("backend", a.sc.backend.type).declared.metrics)  # (validate builds no backend)
+    return catalogue
+
+
+def check_expectations(a: Assembly) -> None:
+    """An ``expect:`` on a metric nothing in this run reports could never be met: refused, with the nearest."""
+    catalogue = metric_catalogue(a)
+    for name in a.sc.expect:
+        if not catalogue.known(name):
+            raise PluginSetupError(a.loaded.source, ("expect", name),
+                                   f"expect: no plugin of this run reports a metric '{name}'"
+                                   f"{suggest(name, catalogue.names())} (see `rehabkit plugins` for each plugin's)")
+
+
+def check_robot_model(a: Assembly) -> None:
+    """A robot plugin's constructor sets ``self.model`` to its :class:`RobotModel`: said at its type if it did not."""
+    try:
+        model = a.robot.model
+    except AttributeError:
+        model = None
+    if not isinstance(model, RobotModel):
+        raise PluginSetupError(a.loaded.source, ("robot", "type"),
+                               f"robot '{a.sc.robot.type}' set no self.model in its constructor (a RobotModel: its "
+                               "name, MJCF, joint names, limits and end-effector site)")

@@ -47,3 +47,13 @@ class PluginSetupError(ScenarioError, SetupError):
         if isinstance(exc, SettingError) and (*path, *setting) in source.key_marks:
             text = exc.problem  # (located at the setting, which the diagnostic names)
         return cls(source, path, f"{kind} '{config.type}': {text}", setting)
+
+    @classmethod
+    def together(cls, errors: list[PluginSetupError]) -> PluginSetupError:
+        """Several plugins' refusals as one error, each located (a user fixes them all at once)."""
+        if len(errors) == 1:
+            return errors[0]
+        combined = cls.__new__(cls)
+        ScenarioError.__init__(combined, [d for e in errors for d in e.diagnostics])
+        combined.breach, combined.setting = None, ()
+        return combined
