@@ -59,6 +59,7 @@ from rehabkit.core.results.metric import Metric
 from rehabkit.core.setup.errors import SetupError
 from rehabkit.core.setup.limits import LimitBreach, Narrowing
 from rehabkit.core.setup.targets import JointWaypoints, angle_axis, angular_distance, joint_waypoints, unreachable
+from rehabkit.models.dh import PoseSpec
 from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.models.strict import FilePath, SensorName
 from rehabkit.models.wearable import Strap, Wearable
@@ -67,7 +68,7 @@ __all__ = [
     # registering
     "hookimpl",
     # the plugin kinds and what they exchange
-    "Robot", "RobotModel", "JointLimits", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
+    "Robot", "RobotModel", "JointLimits", "PoseSpec", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "ControllerReference", "Sensor", "SensorConfig", "Instrument",
     "InteractionForceSensor", "Backend", "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient",
     "Context", "StrictModel", "FilePath", "SensorName", "Reading", "Wearable", "Strap",

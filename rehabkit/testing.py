@@ -172,13 +172,18 @@ def scenario_run(pytestconfig: pytest.Config) -> Callable[[str | Path], Any]:
 
 
 @pytest.fixture
-def run_scenario(tmp_path: Path) -> Callable[..., Any]:
-    """Run a scenario file with overrides; returns a :class:`rehabkit.core.run.runner.RunResult`."""
+def run_scenario(tmp_path: Path, request: pytest.FixtureRequest) -> Callable[..., Any]:
+    """Run a scenario file with overrides; returns a :class:`rehabkit.core.run.runner.RunResult`. A relative path is
+    from the current directory, or else from the test file's folder (``run_scenario("planar_reach.yaml")`` beside
+    the test runs wherever pytest starts)."""
     from rehabkit.api import run_scenario as _run
 
     counter = iter(range(1_000_000))
 
     def run(path: str | Path, overrides: dict[str, Any] | None = None, write: bool = True, **kw: Any):
+        path = Path(path)
+        if not path.is_absolute() and not path.exists() and (request.path.parent / path).exists():
+            path = request.path.parent / path
         merged = dict(overrides or {})
         merged.update({k.replace("__", "."): v for k, v in kw.items()})
         out = tmp_path / f"run{next(counter)}" if write else None

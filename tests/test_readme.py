@@ -283,3 +283,16 @@ def test_every_option_of_every_command_is_in_the_readme():
     assert {k: v for k, v in missing.items() if v} == {}
     shown = cli("bridge", "--help")  # where the README sends a reader for the options a host passes
     assert shown.returncode == 0 and "--watchdog-ms" in shown.stdout and "--instruments JSON" in shown.stdout
+
+
+def test_the_guides_robot_is_a_robot():
+    """The guide's whole robot, as written: its model loads in MuJoCo and Pinocchio, its hand where its links say."""
+    code = re.search(r"```python\n(import numpy as np\n\nfrom rehabkit.plugin import Context, JointLimits.*?)```",
+                     README, re.S).group(1)
+    scope: dict = {}
+    exec(compile(code, "README.md (the guide's robot)", "exec"), scope)
+    robot = scope["TwoLink"](scope["TwoLinkConfig"](), None)
+    np.testing.assert_allclose(robot.fk(np.zeros(2))[:3, 3], [0.55, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(robot.ee_world(np.zeros((1, 2)))[0], [0.55, 0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(robot.fk(np.array([np.pi / 2, 0]))[:3, 3], [0, 0, 0.55], atol=1e-12)  # up: y axis −1
+    assert robot.jacobian(np.zeros(2)).shape == (6, 2) and robot.mass_matrix(np.zeros(2))[0, 0] > 0

@@ -102,6 +102,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
             loaded = load_scenario(path, args.set)
             print(f"{path}: ok{_admission(loaded)}")
         except ScenarioError as exc:
+            _debug_cause(exc)
             _err(str(exc))
             status = EXIT_INVALID
         except (ValueError, SetupError) as exc:
@@ -253,8 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except ScenarioError as exc:
-        if os.environ.get("REHABKIT_DEBUG") and exc.__cause__ is not None:  # (a plugin's own exception: its trace)
-            traceback.print_exception(exc.__cause__)
+        _debug_cause(exc)
         _err(str(exc))
         return EXIT_INVALID
     except PluginError as exc:
@@ -274,6 +274,12 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         _err(f"internal error: {type(exc).__name__}: {exc} (set REHABKIT_DEBUG=1 for the traceback)")
         return EXIT_FAILED
+
+
+def _debug_cause(exc: BaseException) -> None:
+    """With ``REHABKIT_DEBUG=1``: the traceback of what a plugin raised behind a located error (its own code)."""
+    if os.environ.get("REHABKIT_DEBUG") and exc.__cause__ is not None:
+        traceback.print_exception(exc.__cause__)
 
 
 def entry() -> None:
