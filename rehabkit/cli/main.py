@@ -190,6 +190,8 @@ def parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="rehabkit", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"rehabkit {__version__}")
+    p.add_argument("--debug", action="store_true",
+                   help="print the traceback behind an error, a plugin's own code included (as REHABKIT_DEBUG=1)")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a scenario; writes DIR/run.rrd and DIR/summary.json")
     r.add_argument("scenario")
@@ -251,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
 
     warnings.formatwarning = lambda msg, category, *a, **k: f"warning: {msg}\n"
     args = parser().parse_args(argv)
+    if args.debug:
+        os.environ["REHABKIT_DEBUG"] = "1"
     try:
         return args.func(args)
     except ScenarioError as exc:
@@ -272,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_INVALID
         if os.environ.get("REHABKIT_DEBUG"):
             traceback.print_exc()
-        _err(f"internal error: {type(exc).__name__}: {exc} (set REHABKIT_DEBUG=1 for the traceback)")
+        _err(f"internal error: {type(exc).__name__}: {exc} (--debug for the traceback)")
         return EXIT_FAILED
 
 

@@ -130,8 +130,8 @@ class Assembly:
         except Exception as exc:  # a bug in the plugin: said at its type, naming the package to report it to
             raise PluginSetupError(self.loaded.source, (*path, "type"), (
                 f"{kind} '{config.type}' failed while it was built: {type(exc).__name__}: {exc} (a bug in the "
-                f"plugin, package {info.provider.package} {info.provider.version}; REHABKIT_DEBUG=1 shows the "
-                "traceback)")) from exc
+                f"plugin, package {info.provider.package} {info.provider.version}; `rehabkit --debug …` shows "
+                "its traceback)")) from exc
 
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
