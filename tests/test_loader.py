@@ -125,6 +125,8 @@ def test_set_overrides_parse_yaml_values_and_index_lists():
                              "task.targets.1.position=[-0.4, -0.1, -0.3]", "controller.feedforward=gravity"]).model
     assert sc.planner.segment_durations == [1, 1.5, 1, 1.5] and sc.seed == 7
     assert sc.task.targets[1].position == (-0.4, -0.1, -0.3) and sc.controller.feedforward == "gravity"
+    bracketed = load_scenario(HIT, ["task.targets[1].position=[-0.4, -0.1, -0.25]", "duration=1e1"]).model
+    assert bracketed.task.targets[1].position == (-0.4, -0.1, -0.25) and bracketed.duration == 10.0  # (YAML 1.2)
 
 
 def test_bad_set_override_is_reported_as_such():

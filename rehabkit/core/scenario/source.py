@@ -4,6 +4,7 @@ a patient profile given as a file, ``--set`` overrides. Validation is :mod:`reha
 from __future__ import annotations
 
 import copy
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -171,11 +172,12 @@ def with_file_sections(src: Source, path: Path, names: Iterable[str]) -> None:
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
-    """``"a.b.c=value"`` → (["a", "b", "c"], value parsed as YAML)."""
+    """``"a.b.c=value"`` → (["a", "b", "c"], value parsed as YAML); a list item by its index, ``targets.1`` or
+    ``targets[1]``."""
     if "=" not in text:
         raise ValueError(f"--set '{text}': expected key.path=value")
     key, _, raw = text.partition("=")
-    parts = [p for p in key.strip().split(".") if p]
+    parts = [p for p in re.sub(r"\[(\d+)\]", r".\1", key.strip()).split(".") if p]
     if not parts:
         raise ValueError(f"--set '{text}': empty key")
     try:
