@@ -55,6 +55,7 @@ from rehabkit.core.kinds.interfaces import (
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, Section
 from rehabkit.core.plugins.names import suggest
+from rehabkit.core.plugins.types import Declared
 from rehabkit.core.results.metric import Metric
 from rehabkit.core.setup.errors import SetupError
 from rehabkit.core.setup.limits import LimitBreach, Narrowing
@@ -66,7 +67,7 @@ from rehabkit.models.wearable import Strap, Wearable
 
 __all__ = [
     # registering
-    "hookimpl",
+    "hookimpl", "Declared",
     # the plugin kinds and what they exchange
     "Robot", "RobotModel", "JointLimits", "PoseSpec", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "ControllerReference", "Sensor", "SensorConfig", "Instrument",

@@ -57,6 +57,7 @@ class Registrar:
         config: type[BaseModel],
         factory: Callable[..., Any],
         description: str | None = None,
+        declared: Declared | None = None,
     ) -> None:
         """Register plugin ``name`` of this registrar's kind.
 
@@ -65,6 +66,8 @@ class Registrar:
             config: Pydantic model of the plugin's settings (without a ``type`` field).
             factory: Callable ``(config, context) -> instance``; usually the class.
             description: One line; defaults to the factory docstring's first line.
+            declared: What the plugin declares (``requires``, ``metrics``, a backend's ``real_person``) where the
+                factory is a function; a class's own class attributes are read otherwise.
         """
         if not _NAME_RE.match(name):
             raise PluginError(f"{self.kind} name '{name}' must be lower-case words joined by '-'")
@@ -90,7 +93,7 @@ class Registrar:
         typed.model_config = ConfigDict(**{**config.model_config, "extra": "forbid"})
         typed.model_rebuild(force=True)
         self._registry._staged.append(PluginInfo(self.kind, name, typed, factory, description.strip(),
-                                                 self._registry._current, Declared.of(factory)))
+                                                 self._registry._current, declared or Declared.of(factory)))
 
 
 @dataclass(frozen=True)
