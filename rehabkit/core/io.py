@@ -23,13 +23,9 @@ YAML_LOADER.add_implicit_resolver(
     "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"), list("-+0123456789"))
 
 
-def load_scalar(text: str) -> Any:
-    """One YAML value as a scenario file would read it (a ``--set`` or ``--grid`` value)."""
-    return yaml.load(text, Loader=YAML_LOADER)
-
-
 def load_yaml(text: str) -> Any:
-    """``yaml.safe_load`` by libyaml (a robot's joint table: ~1 ms instead of ~10)."""
+    """``yaml.safe_load`` by libyaml (a robot's joint table: ~1 ms instead of ~10), numbers as YAML 1.2 reads them:
+    a data file, or one value as a scenario file would read it (a ``--set`` or ``--grid`` value)."""
     return yaml.load(text, Loader=YAML_LOADER)
 
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import yaml
 
-from rehabkit.core.io import load_scalar
+from rehabkit.core.io import load_yaml
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
         if not sep or not key.strip() or not raw.strip():
             raise ValueError(f"--grid '{text}': expected key.path=value1,value2,...")
         try:
-            values = load_scalar(f"[{raw}]")
+            values = load_yaml(f"[{raw}]")
         except yaml.YAMLError as exc:
             raise ValueError(f"--grid '{text}': the values are not valid YAML ({exc})") from None
         grid[key.strip()] = values

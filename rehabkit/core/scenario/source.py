@@ -12,7 +12,7 @@ from typing import Any
 
 import yaml
 
-from rehabkit.core.io import YAML_LOADER, load_scalar
+from rehabkit.core.io import YAML_LOADER, load_yaml
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 
 KeyPath = tuple[Any, ...]
@@ -181,7 +181,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     if not parts:
         raise ValueError(f"--set '{text}': empty key")
     try:
-        value = load_scalar(raw) if raw.strip() else ""
+        value = load_yaml(raw) if raw.strip() else ""
     except yaml.YAMLError as exc:
         raise ValueError(f"--set '{text}': value is not valid YAML ({exc})") from None
     return parts, value
