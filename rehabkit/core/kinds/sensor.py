@@ -68,7 +68,7 @@ class Reading:
 
 class Sensor(ABC):
     """Reads something at its own rate (its config's ``rate_hz``, :class:`SensorConfig`); readings go to the log and
-    to the session's observations."""
+    to the run's readings (``Context.reading``)."""
 
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)

@@ -53,7 +53,7 @@ class Runner:
     robot = property(lambda self: self.setup.robot)
     backend = property(lambda self: self.setup.backend)
     sensors = property(lambda self: self.setup.sensors)
-    observations = property(lambda self: self.session.timeline.observations)
+    observations = property(lambda self: {name: r.values for name, r in self.session.timeline.readings.items()})
 
     def build(self) -> Assembly:
         """Assemble the run (see :mod:`rehabkit.core.setup.assembly`)."""

@@ -11,7 +11,6 @@ sensed target having moved and settled; they plan again, move an object, or stop
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -43,8 +42,7 @@ class Timeline:
         self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
-        self.observations: dict[str, dict[str, Any]] = {}
-        self._readings = setup.context.readings  # what plugins read by a sensor's name (Context.reading)
+        self.readings = setup.context.readings  # the sensors' latest, by name: what plugins read (Context.reading)
         self._frames = {name: sensor.frame for name, sensor in setup.sensors.items()}
         self.fired: list[dict] = []
         self._following: tuple[list[str], float, np.ndarray | None] = ([], 0.0, None)
@@ -86,7 +84,8 @@ class Timeline:
 
     def sensed(self, name: str) -> np.ndarray | None:
         """Where the sensor of a sensor-driven target last saw it (base frame), if it did."""
-        pos = self.observations.get(self.specs[name].sensor, {}).get("target_position")
+        reading = self.readings.get(self.specs[name].sensor)
+        pos = None if reading is None else reading.values.get("target_position")
         return None if pos is None else np.asarray(pos, float)
 
     def request(self, names: list[str], event: int | None = None) -> Replan:
@@ -166,9 +165,8 @@ class Timeline:
                 self._take(name, t_read, reading, k, t, q, qd)
 
     def _take(self, name: str, t_read: float, reading: dict, k: int, t: float, q: np.ndarray, qd: np.ndarray) -> None:
-        """A sensor's reading (started at ``t_read``) into the observations and the log; 'moved' events."""
-        self.observations[name] = reading
-        self._readings[name] = Reading(name, t_read, reading, self._frames[name])
+        """A sensor's reading (started at ``t_read``) into the readings and the log; 'moved' events."""
+        self.readings[name] = Reading(name, t_read, reading, self._frames[name])
         self.view.sensor(t_read, name, reading)
         if not self._watch:
             return
