@@ -34,6 +34,28 @@ SENSOR_SETTING = _SensorSetting()
 # setup checks that the scenario has it, and says so at the setting, with the nearest name, before anything runs.
 SensorName = Annotated[str, SENSOR_SETTING]
 
+
+
+def marked_settings(node: Any, marker: Any, loc: tuple = ()) -> list[tuple[tuple, str]]:
+    """(key path, value) of every setting marked ``marker`` (:data:`FILE_SETTING`, :data:`SENSOR_SETTING`) in a
+    validated model, through nested models, lists and mappings."""
+    found: list[tuple[tuple, str]] = []
+    if isinstance(node, BaseModel):
+        for name, info in type(node).model_fields.items():
+            value = getattr(node, name)
+            if marker in info.metadata and isinstance(value, str):
+                found.append(((*loc, name), value))
+            else:
+                found += marked_settings(value, marker, (*loc, name))
+    elif isinstance(node, (list, tuple)):
+        for i, value in enumerate(node):
+            found += marked_settings(value, marker, (*loc, i))
+    elif isinstance(node, dict):
+        for key, value in node.items():
+            found += marked_settings(value, marker, (*loc, key))
+    return found
+
+
 BOOLEAN = "a number is needed here, not a boolean (YAML reads yes/no/on/off/true/false as booleans)"
 
 

@@ -13,7 +13,7 @@ from typing import Any
 from pydantic import BaseModel
 
 from rehabkit.core.scenario.source import Source
-from rehabkit.models.strict import FILE_SETTING
+from rehabkit.models.strict import FILE_SETTING, marked_settings
 
 
 def _set_at(data: Any, loc: tuple, value: Any) -> None:
@@ -26,26 +26,10 @@ def anchor_file_settings(src: Source, scenario: BaseModel, path: Path) -> bool:
     """File settings (:data:`~rehabkit.models.strict.FilePath`) written relative in another file than the scenario
     (an ``extends:`` base, a profile) made absolute from that file's folder; whether any was."""
     here, changed = path.resolve(), False
-
-    def walk(node: Any, loc: tuple) -> None:
-        nonlocal changed
-        if isinstance(node, BaseModel):
-            for name, info in type(node).model_fields.items():
-                value = getattr(node, name)
-                if FILE_SETTING in info.metadata and isinstance(value, str):
-                    mark = src.value_marks.get((*loc, name))
-                    written = Path(mark.file).resolve() if mark is not None and not mark.file.startswith("<") else here
-                    if written != here and not Path(value).expanduser().is_absolute():
-                        _set_at(src.data, (*loc, name), str((written.parent / value).resolve()))
-                        changed = True
-                else:
-                    walk(value, (*loc, name))
-        elif isinstance(node, dict):
-            for key, value in node.items():
-                walk(value, (*loc, key))
-        elif isinstance(node, (list, tuple)):
-            for i, value in enumerate(node):
-                walk(value, (*loc, i))
-
-    walk(scenario, ())
+    for loc, value in marked_settings(scenario, FILE_SETTING):
+        mark = src.value_marks.get(loc)
+        written = Path(mark.file).resolve() if mark is not None and not mark.file.startswith("<") else here
+        if written != here and not Path(value).expanduser().is_absolute():
+            _set_at(src.data, loc, str((written.parent / value).resolve()))
+            changed = True
     return changed

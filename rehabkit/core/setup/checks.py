@@ -8,7 +8,6 @@ import os
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel
 
 from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
 from rehabkit.core.kinds.interfaces import PlanningError
@@ -17,7 +16,7 @@ from rehabkit.core.results.metric import CORE_METRICS, MetricCatalogue
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from rehabkit.models.robot_model import RobotModel
-from rehabkit.models.strict import SENSOR_SETTING
+from rehabkit.models.strict import SENSOR_SETTING, marked_settings
 
 Assembly = Any  # a rehabkit.core.setup.assembly.Assembly (which imports this module: no import back)
 
@@ -143,30 +142,11 @@ def check_sensor_settings(a: Assembly) -> None:
     if a.patient_slot is not None and a.patient_slot.config is not None:
         sections.append((a.patient_slot.path, a.patient_slot.config))
     for path, config in sections:
-        for loc, name in _sensor_settings(config, path):
+        for loc, name in marked_settings(config, SENSOR_SETTING, path):
             if name not in a.sc.sensors:
                 have = ", ".join(a.sc.sensors) or "none"
                 raise PluginSetupError(a.loaded.source, loc, f"no sensor '{name}' in this scenario"
                                        f"{suggest(name, a.sc.sensors)} (its sensors: {have})")
-
-
-def _sensor_settings(node: Any, loc: tuple) -> list[tuple[tuple, str]]:
-    """(where, value) of every SensorName setting in a validated section."""
-    found: list[tuple[tuple, str]] = []
-    if isinstance(node, BaseModel):
-        for name, info in type(node).model_fields.items():
-            value = getattr(node, name)
-            if SENSOR_SETTING in info.metadata and isinstance(value, str):
-                found.append(((*loc, name), value))
-            else:
-                found += _sensor_settings(value, (*loc, name))
-    elif isinstance(node, (list, tuple)):
-        for i, value in enumerate(node):
-            found += _sensor_settings(value, (*loc, i))
-    elif isinstance(node, dict):
-        for key, value in node.items():
-            found += _sensor_settings(value, (*loc, key))
-    return found
 
 
 def metric_catalogue(a: Assembly) -> MetricCatalogue:
