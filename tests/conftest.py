@@ -19,6 +19,23 @@ pytest_plugins = ["pytester"]  # (the README's scenario-test example runs in a p
 collect_ignore = ["bad_scenarios"]  # refused on purpose (tests/test_bad_corpus.py), not scenario tests
 
 
+def registry_with(kind: str, name: str, config, factory, package: str = "tests", version: str = "0", **add):
+    """The installed plugins and one more of ``kind``, registered in-process through its hook as an installed
+    package's would be (``registry.add(name, config=, factory=, **add)``), provided by ``package`` ``version``."""
+    import types
+
+    from rehabkit import hookimpl
+    from rehabkit.core.plugins.registry import Provider, load_plugins
+
+    def register(registry):
+        registry.add(name, config=config, factory=factory, **add)
+
+    hook = f"rehabkit_register_{kind}s"
+    register.__name__ = hook
+    plugin = types.SimpleNamespace(**{hook: hookimpl(register)})
+    return load_plugins(extra=[(plugin, Provider(package, version, name))])
+
+
 @pytest.fixture(scope="session")
 def hit():
     from rehabkit_plugins.robots.hit import HitConfig, HitRobot

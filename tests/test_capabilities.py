@@ -21,7 +21,7 @@ from rehabkit.core.plugins.types import Declared
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.setup.errors import SetupError
-from tests.conftest import SCENARIOS
+from tests.conftest import SCENARIOS, registry_with
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 
@@ -81,10 +81,6 @@ def test_a_third_party_robot_states_a_capability_by_deriving_from_it(hit):
 
 def test_a_factory_function_declares_what_its_plugin_needs_when_it_registers(hit):
     """A plugin built by a function (no class attributes to read) gives its declarations to registry.add."""
-    import types
-
-    from rehabkit import hookimpl
-    from rehabkit.core.plugins.registry import Provider, load_plugins
     from rehabkit.plugin import Declared, Metric, StrictModel
 
     class Settings(StrictModel):
@@ -93,15 +89,9 @@ def test_a_factory_function_declares_what_its_plugin_needs_when_it_registers(hit
     def make_planner(config, context):  # a factory function
         raise AssertionError("not built in this test")
 
-    plugin = types.SimpleNamespace()
-
-    @hookimpl
-    def rehabkit_register_planners(registry):
-        registry.add("table-walk", config=Settings, factory=make_planner,
-                     declared=Declared(requires=(WorkspaceTable,), metrics=(Metric("walked_m", "m"),)))
-
-    plugin.rehabkit_register_planners = rehabkit_register_planners
-    info = load_plugins(extra=[(plugin, Provider("tests", "0", "walk"))]).get("planner", "table-walk")
+    registry = registry_with("planner", "table-walk", Settings, make_planner,
+                             declared=Declared(requires=(WorkspaceTable,), metrics=(Metric("walked_m", "m"),)))
+    info = registry.get("planner", "table-walk")
     assert [m.name for m in info.declared.metrics] == ["walked_m"]
     assert missing_capabilities(info.declared.requires, hit) == [
         "a robot that has a workspace look-up table (robot.workspace)"]

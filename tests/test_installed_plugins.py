@@ -78,14 +78,11 @@ def rehabkit_register_planners(registry):
 def test_a_sensor_whose_settings_do_not_hold_its_rate_is_refused_when_it_registers():
     """A sensor's rate is its config's ``rate_hz`` (SensorConfig), read by the run: a settings model without one
     is refused at registration, with the fix."""
-    import types
-
     import pytest
 
-    from rehabkit import hookimpl
-    from rehabkit.core.plugins.registry import Provider, load_plugins
     from rehabkit.core.plugins.types import UnknownPluginError
     from rehabkit.plugin import Sensor, StrictModel
+    from tests.conftest import registry_with
 
     class NoRate(StrictModel):
         gain: float = 1.0
@@ -97,14 +94,7 @@ def test_a_sensor_whose_settings_do_not_hold_its_rate_is_refused_when_it_registe
         def read(self, t, q, qd, backend):
             return {}
 
-    plugin = types.SimpleNamespace()
-
-    @hookimpl
-    def rehabkit_register_sensors(registry):
-        registry.add("probe", config=NoRate, factory=Probe)
-
-    plugin.rehabkit_register_sensors = rehabkit_register_sensors
-    registry = load_plugins(extra=[(plugin, Provider("tests", "0", "probe"))])
+    registry = registry_with("sensor", "probe", NoRate, Probe)
     (broken,) = registry.broken
     assert broken.provider.entry_point == "probe" and "sensor 'probe': its config must derive from SensorConfig" in \
         broken.error

@@ -3,20 +3,17 @@
 import json
 import shutil
 import subprocess
-import types
 
 import numpy as np
 import pytest
 
-from rehabkit import hookimpl
 from rehabkit.api import run_scenario
 from rehabkit.core.kinds.interfaces import Controller, StrictModel
-from rehabkit.core.plugins.registry import Provider, load_plugins
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.plugin import SensorName
-from tests.conftest import SCENARIOS
+from tests.conftest import SCENARIOS, registry_with
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 
@@ -127,14 +124,7 @@ class _BadController(Controller):
 
 @pytest.fixture(scope="module")
 def bad_registry():
-    plugin = types.SimpleNamespace()
-
-    @hookimpl
-    def rehabkit_register_controllers(registry):
-        registry.add("bad", config=_BadConfig, factory=_BadController)
-
-    plugin.rehabkit_register_controllers = rehabkit_register_controllers
-    return load_plugins(extra=[(plugin, Provider("tests", "0", "bad"))])
+    return registry_with("controller", "bad", _BadConfig, _BadController)
 
 
 @pytest.mark.parametrize("mode, rule", [("nan", "non-finite"), ("raise", "plugin-error")])
@@ -220,14 +210,7 @@ class _SensedPD(Controller):
 def test_a_controller_reads_a_sensor_by_the_name_in_its_settings(tmp_path):
     """Context.reading: the named sensor's latest reading, with its time; a SensorName setting naming no sensor of
     the scenario is refused at that setting, with the nearest name."""
-    plugin = types.SimpleNamespace()
-
-    @hookimpl
-    def rehabkit_register_controllers(registry):
-        registry.add("sensed-pd", config=_SensedPDConfig, factory=_SensedPD)
-
-    plugin.rehabkit_register_controllers = rehabkit_register_controllers
-    registry = load_plugins(extra=[(plugin, Provider("tests", "0", "sensed"))])
+    registry = registry_with("controller", "sensed-pd", _SensedPDConfig, _SensedPD)
     runner = Runner(load_scenario(HIT, {"duration": 0.5, "controller": {"type": "sensed-pd"},
                                         "planner.segment_durations": [2.0] * 4}, registry=registry),
                     registry=registry)
@@ -260,14 +243,8 @@ class _BuggyController(Controller):
 
 def test_a_plugin_that_fails_with_its_own_bug_is_named_at_its_type_exit_2(tmp_path, capsys):
     """Not an internal error of rehabkit's: the plugin, its package and the section (exit 2 from validate)."""
-    plugin = types.SimpleNamespace()
-
-    @hookimpl
-    def rehabkit_register_controllers(registry):
-        registry.add("buggy", config=_BadConfig, factory=_BuggyController)
-
-    plugin.rehabkit_register_controllers = rehabkit_register_controllers
-    registry = load_plugins(extra=[(plugin, Provider("buggy-lab", "0.3", "buggy"))])
+    registry = registry_with("controller", "buggy", _BadConfig, _BuggyController, package="buggy-lab",
+                             version="0.3")
     bad = tmp_path / "bad.yaml"
     bad.write_text(f"extends: {HIT}\ncontroller:\n  type: buggy\n")
     with pytest.raises(ScenarioError) as err:
@@ -292,14 +269,7 @@ class _YieldingPD(Controller):
 
 
 def test_tracking_is_measured_against_the_plan_and_against_the_controllers_own_reference():
-    plugin = types.SimpleNamespace()
-
-    @hookimpl
-    def rehabkit_register_controllers(registry):
-        registry.add("yielding-pd", config=_BadConfig, factory=_YieldingPD)
-
-    plugin.rehabkit_register_controllers = rehabkit_register_controllers
-    registry = load_plugins(extra=[(plugin, Provider("tests", "0", "yielding"))])
+    registry = registry_with("controller", "yielding-pd", _BadConfig, _YieldingPD)
     r = run_scenario(HIT, {"duration": 3.0, "controller": {"type": "yielding-pd"}}, registry=registry)
     m = r.metrics
     assert m["tracking_rms_deg"] > 1.8  # the plan's: the 2° it yields counts as error
