@@ -55,10 +55,11 @@ from rehabkit.hardware.protocol import (
     LIMIT,
     RAMP_IN,
     STATE,
+    TICK,
     WATCHDOG,
     Receiver,
-    clock_time,
     encode,
+    link_tick,
 )
 
 LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
@@ -127,21 +128,27 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
     def _now(self) -> float:
         return time.monotonic() if self.realtime else self.clock * self.timestep
 
-    def _send(self, values: np.ndarray, flags: int = 0) -> float:
+    def _send(self, values: np.ndarray, flags: int = 0, tick: bool = False) -> float:
+        """A command; with ``tick`` (lock-step) it also tells the bridge to tick at the link's time (the clock
+        rides on it: see :mod:`rehabkit.hardware.protocol`)."""
         self.seq += 1
         sent = self._now()
-        self.sock.sendto(encode(COMMAND, self.config.robot_id, self.seq, values, sent_at=sent, status=flags), self.addr)
+        self.sock.sendto(encode(COMMAND, self.config.robot_id, self.seq, values, sent_at=sent,
+                                status=flags | (TICK if tick else 0)), self.addr)
         return sent
 
-    def _tick_lockstep(self, timeout: float = LOCKSTEP_REPLY_S) -> bool:
-        """Lock-step: tell the bridge to tick at the link's time, wait (in wall time) until it says it has, taking
-        the states that came meanwhile; the clock advances one tick. False if it did not answer in ``timeout``."""
+    def _tick_lockstep(self, timeout: float = LOCKSTEP_REPLY_S, sent: bool = False) -> bool:
+        """Lock-step: tell the bridge to tick at the link's time (``sent``: a command carrying the tick has gone),
+        wait (in wall time) until it says it has, taking the states that came meanwhile; the clock advances one
+        tick. False if it did not answer in ``timeout``."""
         t = self.clock * self.timestep
-        self._clock_seq += 1
-        self.sock.sendto(encode(CLOCK, self.config.robot_id, self._clock_seq, np.zeros(0), t), self.addr)
+        if not sent:
+            self._clock_seq += 1
+            self.sock.sendto(encode(CLOCK, self.config.robot_id, self._clock_seq, np.zeros(0), t), self.addr)
         self.clock += 1
+        done = t + 0.5 * self.timestep  # the bridge answers with the time its tick ends, t + its timestep
         until = time.monotonic() + timeout
-        while self._answered != t:
+        while self._answered < done:
             if not wait_readable(self.sock, until - time.monotonic()):
                 return False
             self._receive()
@@ -154,9 +161,10 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
             except (BlockingIOError, ConnectionRefusedError):
                 return
             now = self._now()
-            if not self.realtime and (t := clock_time(data, self.config.robot_id)) is not None:
-                self._answered = t
-                continue
+            if not self.realtime and (tick := link_tick(data, self.config.robot_id)) is not None:
+                self._answered = max(self._answered, tick[0])
+                if tick[1]:  # a bare clock: no state in it
+                    continue
             msg = self.rx.accept(data, now)
             if msg is None:
                 continue
@@ -199,13 +207,13 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
             self.frames.wait_ready()  # started with the backend; up before the loop
         limit = time.monotonic() + 5.0
         while time.monotonic() < limit:  # the bridge may still be starting: ask until it answers from q0
-            self._send(np.asarray(q0, float), CMD_RESET)
+            self._send(np.asarray(q0, float), CMD_RESET, tick=not self.realtime)
             self._got = False
             if self.realtime:
                 time.sleep(0.005)
                 self._receive()
             else:
-                self._tick_lockstep(0.2)
+                self._tick_lockstep(0.2, sent=True)
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
                 raise EStopLatchedError(self._latched_message(), f"{self.robot_name}-{self.config.robot_id}",
                                         f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
@@ -239,11 +247,12 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
             self.deadline = self.last_state = self.t0 = self._now()
         cut = self.config.cut_commands_at_s
         for _ in range(n):
-            if cut is None or self._now() - self.t0 < cut:  # (a fault a safety-skill test injects: a cut link)
-                self._send(self.tau, self._flags)
+            sent = cut is None or self._now() - self.t0 < cut  # (a fault a safety-skill test injects: a cut link)
+            if sent:
+                self._send(self.tau, self._flags, tick=not self.realtime)
             self.deadline += self.timestep
             self._got = False
-            late = self._pace()
+            late = self._pace(sent)
             self.ticks += 1
             self.lateness.append(late)
             if late > self.resync_s:
@@ -268,12 +277,13 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
                 raise LinkLostError(f"no valid state from the bridge for {1e3 * silent:.0f} ms "
                                     f"(dropped: {dict(self.rx.dropped) or 'none'})")
 
-    def _pace(self) -> float:
-        """Wait for this tick's deadline; how late it came [s]. Lock-step: until the bridge has ticked (never late)."""
+    def _pace(self, sent: bool) -> float:
+        """Wait for this tick's deadline; how late it came [s]. Lock-step: until the bridge has ticked (never late;
+        ``sent``: the tick went with this tick's command)."""
         if self.realtime:
             wait_until(self.deadline)
             return time.monotonic() - self.deadline
-        if not self._tick_lockstep():
+        if not self._tick_lockstep(sent=sent):
             raise LinkLostError(f"no valid state from the bridge: it did not answer tick {self.clock - 1} of the "
                                 f"lock-step clock within {LOCKSTEP_REPLY_S:g} s of wall time")
         return 0.0

@@ -52,10 +52,11 @@ from rehabkit.hardware.protocol import (
     RAMP_IN,
     STALE,
     STATE,
+    TICK,
     WATCHDOG,
     Receiver,
-    clock_time,
     encode,
+    link_tick,
 )
 
 HOLD_KP, HOLD_KD = 60.0, 6.0
@@ -196,9 +197,9 @@ class Bridge:
                 self.since_command = 0
                 self.tau = np.clip(msg.values, -self.plant.effort, self.plant.effort)
 
-    def tick(self, now: float, inbox: list[tuple[bytes, tuple]] | None = None) -> None:
+    def tick(self, now: float, inbox: list[tuple[bytes, tuple]] | None = None) -> bool:
         """One cycle: commands in (what arrived, or ``inbox``: those a lock-step clock gathered), watchdog, torques,
-        plant step, state out."""
+        plant step, state out (in lock-step carrying the clock's answer); False if there was no peer to send it."""
         self._receive(now, self._arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
@@ -221,16 +222,18 @@ class Bridge:
                           -self.plant.effort, self.plant.effort)
         self.plant.apply(tau)
         self.plant.advance()
-        if self.peer is not None:
-            q, qd = self.plant.read()
-            self.seq += 1
-            sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
-            state = self._state
-            state[0], state[1], state[2] = q, qd, tau
-            self.sock.sendto(encode(STATE, self.robot_id, self.seq, state, sent, echo=self.echo,
-                                    status=self.status, held=self.held_ticks,
-                                    measured=self.plant.read_measured(),
-                                    instruments=self.plant.read_instruments()), self.peer)
+        if self.peer is None:
+            return False
+        q, qd = self.plant.read()
+        self.seq += 1
+        sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
+        state = self._state
+        state[0], state[1], state[2] = q, qd, tau
+        self.sock.sendto(encode(STATE, self.robot_id, self.seq, state, sent, echo=self.echo,
+                                status=self.status | (TICK if self.lockstep else 0), held=self.held_ticks,
+                                measured=self.plant.read_measured(),
+                                instruments=self.plant.read_instruments()), self.peer)
+        return True
 
     def serve(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given
@@ -253,10 +256,11 @@ class Bridge:
             self.sock.close()
 
     def serve_lockstep(self, duration: float | None = None, parent: int | None = None) -> None:
-        """Tick when the host's clock says so, not the wall's: each CLOCK datagram from the host is one tick at the
-        time it carries (with the commands that arrived before it), answered by the state and a CLOCK back. A
-        simulation's clock, for tests and rehearsals: deterministic, as fast as both ends compute. ``duration`` is
-        link time; with ``parent`` the bridge stops once that process is gone."""
+        """Tick when the host's clock says so, not the wall's: each tick from the host (a command carrying it, or a
+        bare CLOCK) is one tick at the time it carries (with the commands that arrived before it), answered by the
+        state carrying the clock back (a bare CLOCK if the state goes elsewhere or nowhere). A simulation's clock,
+        for tests and rehearsals: deterministic, as fast as both ends compute. ``duration`` is link time; with
+        ``parent`` the bridge stops once that process is gone."""
         self.lockstep = True
         inbox: list[tuple[bytes, tuple]] = []
         try:
@@ -266,17 +270,21 @@ class Bridge:
                         return
                     continue
                 data, addr = self.sock.recvfrom(65536)
-                now = clock_time(data, self.robot_id)
-                if now is None:
+                tick = link_tick(data, self.robot_id)
+                if tick is None or not tick[1]:
                     inbox.append((data, addr))
+                if tick is None:
                     continue
+                now = tick[0]
                 if duration is not None and now >= duration:
                     return
                 if self.keypad is not None:
                     handle(self, self.keypad.poll(), now)
-                self.tick(now, inbox)
+                answered = self.tick(now, inbox) and self.peer == addr
                 inbox = []
-                self.seq += 1
-                self.sock.sendto(encode(CLOCK, self.robot_id, self.seq, np.zeros(0), now), addr)
+                if not answered:
+                    self.seq += 1
+                    self.sock.sendto(encode(CLOCK, self.robot_id, self.seq, np.zeros(0), now + self.plant.timestep),
+                                     addr)
         finally:
             self.sock.close()

@@ -11,8 +11,14 @@ One datagram is one message, little-endian::
                      run's sensors declare them, read by the plant at the tick that state closes)
             COMMAND: τ (n doubles; m = 0)
             CLOCK:   nothing (n = m = 0): in lock-step, the host's "advance to 'sent at'" and the bridge's
-                     "done"; never applied, never dropped by a link impairment relay (it is the clock, not data)
+                     "done, the link's time is now 'sent at'"; never applied, never dropped by a link impairment
+                     relay (it is the clock, not data)
     trailer CRC-32 of everything before it (I)
+
+In lock-step the clock usually rides on the data: a COMMAND with the ``TICK`` status bit is the command and
+then the host's CLOCK at its 'sent at'; a STATE with ``TICK`` is the state and then the bridge's CLOCK at its
+'sent at' (the end of the tick). One datagram each way per tick instead of two: each costs a process wake-up
+on both ends. A bare CLOCK goes when there is no data to carry it (or a relay drops the data).
 
 ``held ticks`` (STATE only): the bridge's ticks spent holding the posture for want of a newer
 command since the last reset, modulo 2¹⁶ — so the host knows how long each such hold lasted
@@ -38,8 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 5  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
-# 5: instrument values in STATE
+VERSION = 6  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
+# 5: instrument values in STATE; 6: the lock-step clock rides on COMMAND and STATE (TICK)
 STATE, COMMAND, CLOCK = 1, 2, 3
 HEADER = struct.Struct("<2sBBIIddHHHHH")
 CRC = struct.Struct("<I")
@@ -57,6 +63,8 @@ CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint position
 CMD_CLEAR = 8  # clear a latched e-stop (a person's deliberate act at the host: `rehabkit estop clear --bridge`)
 CMD_BRAKE = 32  # apply the holding brakes (the host's safety stop has turned the torque off)
 CMD_LATCH = 16  # latch the e-stop for the sessions to come; this session's stop is the host's (its stop category)
+# either way, lock-step only: this datagram also carries the link's clock at its 'sent at' (see the module's doc)
+TICK = 0x8000
 
 
 @dataclass
@@ -100,13 +108,18 @@ def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float |
     return body + CRC.pack(zlib.crc32(body))
 
 
-def clock_time(data: bytes, robot: int) -> float | None:
-    """The time a well-formed CLOCK datagram of ``robot`` carries, else None (any other datagram)."""
-    if len(data) != HEADER.size + CRC.size or CRC.unpack_from(data, HEADER.size)[0] != zlib.crc32(data[: HEADER.size]):
+def link_tick(data: bytes, robot: int) -> tuple[float, bool] | None:
+    """The lock-step clock time an intact datagram of ``robot`` carries and whether it is a bare CLOCK (else the
+    time rides on a COMMAND or STATE with ``TICK``), or None: no clock in it (or not intact)."""
+    size = len(data) - CRC.size
+    if size < HEADER.size or CRC.unpack_from(data, size)[0] != zlib.crc32(data[:size]):
         return None
-    magic, version, kind, rid, _seq, sent_at, *_ = HEADER.unpack_from(data)
-    ok = magic == MAGIC and version == VERSION and kind == CLOCK and rid == robot and math.isfinite(sent_at)
-    return sent_at if ok else None
+    magic, version, kind, rid, _seq, sent_at, _echo, _n, _m, status, *_ = HEADER.unpack_from(data)
+    if magic != MAGIC or version != VERSION or rid != robot or not math.isfinite(sent_at):
+        return None
+    if kind == CLOCK:
+        return (sent_at, True) if size == HEADER.size else None
+    return (sent_at, False) if status & TICK else None
 
 
 def newer(seq: int, last: int) -> bool:
