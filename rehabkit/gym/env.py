@@ -13,6 +13,7 @@ and passes the safety layer like any command: a safety stop ends the episode (``
 from __future__ import annotations
 
 import gc
+import weakref
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,7 @@ class ScenarioEnv(gym.Env):
         self.render_mode, self.render_size = render_mode, render_size
         self._renderer = None
         self._session: RunSession | None = None
+        self._acting = None
         self._blas = ThreadpoolController()  # found once: looking for the libraries costs ~1.4 ms a policy step
         self._open(sc.seed)
         n = len(self._tuned[0]) if self._tuned else self._dof
@@ -57,25 +59,22 @@ class ScenarioEnv(gym.Env):
     def _open(self, seed: int) -> None:
         """Build the scenario afresh with this seed and stand at its start."""
         self.close_run()
-        # the last episode's scene (a MuJoCo model of ~100 MB with a musculoskeletal arm) is held by reference cycles
-        # whose Python side is small: the collector would not run for it, and a learner's worker grew to 10 GB
-        gc.collect()
         # the validated scenario with the episode's seed (a deep copy: a run's setup may adapt its sections)
         loaded = self._loaded
         session = Runner(replace(loaded, model=loaded.model.model_copy(update={"seed": seed}, deep=True))).start()
         a = session.setup
-        self._session, self._a, self._dof = session, a, a.robot.model.dof
+        self._session, self._a, self._sc, self._dof = session, a, a.sc, a.robot.model.dof
         self._ended = False
         limit = a.robot.model.limits.effort
         scale = self.spec_learning.action.scale
         self._scale = limit * (np.asarray(scale, float) if isinstance(scale, list) else scale)
         if len(np.atleast_1d(self._scale)) not in (1, self._dof):
             raise ValueError(f"learning.action.scale: {len(scale)} values for a robot of {self._dof} joints")
-        self._u = np.zeros(self._dof)
+        self._u = u = np.zeros(self._dof)
         controller = a.controller
         inner = controller.compute
         action = self.spec_learning.action
-        self._tuned = None
+        self._tuned = self._acting = None
         if action.kind == "parameters":  # the controller's own settings, each from its range
             names = list(action.parameters)
             try:
@@ -87,10 +86,10 @@ class ScenarioEnv(gym.Env):
             lo, hi = (np.array([action.parameters[n][i] for n in names]) for i in (0, 1))
             self._tuned = (names, lo, hi)
         elif action.kind == "residual":
-            controller.compute = lambda *args: inner(*args) + self._u  # noqa: E731 (the loop reads .compute)
+            self._acting = lambda *args: inner(*args) + u  # noqa: E731
         else:
             gravity = a.robot.gravity_torque
-            controller.compute = lambda t, q, *rest: gravity(q) + self._u  # noqa: E731
+            self._acting = lambda t, q, *rest: gravity(q) + u  # noqa: E731
         self.observer = Observer(self.spec_learning.observation, session)
         self.rewards = RewardTerms(self.spec_learning.reward, session, self.every)
 
@@ -111,8 +110,19 @@ class ScenarioEnv(gym.Env):
         else:
             self._u[:] = self._scale * action
         k0 = st.k
-        with self._blas.limit(limits=1, user_api="blas"):  # (as in a run: BLAS threads only spin here)
-            run_loop(self._session, k_to=k0 + self.every)
+        controller, acting = a.controller, self._acting
+        if acting is not None:  # on the controller for the period alone (the loop reads .compute as it starts):
+            own = vars(controller).get("compute")  # kept there, it would hold the controller (`inner`) in a cycle
+            controller.compute = acting
+        try:
+            with self._blas.limit(limits=1, user_api="blas"):  # (as in a run: BLAS threads only spin here)
+                run_loop(self._session, k_to=k0 + self.every)
+        finally:
+            if acting is not None:
+                if own is None:
+                    del controller.compute
+                else:
+                    controller.compute = own
         terms = self.rewards.terms(k0, st.k)
         reward = float(sum(terms.values()))
         terminated = a.safety.tripped_at is not None
@@ -128,7 +138,7 @@ class ScenarioEnv(gym.Env):
 
     def policy_meta(self) -> dict:
         """What a policy trained here must carry for the ``policy`` controller to run it (rehabkit.models.policy)."""
-        sc, spec = self._a.sc, self.spec_learning
+        sc, spec = self._sc, self.spec_learning
         return {"terms": list(spec.observation.terms), "dof": self._dof, "policy_hz": spec.policy_hz,
                 "duration_s": sc.duration, "scenario": self.path.name,
                 "action": {"kind": spec.action.kind, "scale": spec.action.scale,
@@ -158,15 +168,24 @@ class ScenarioEnv(gym.Env):
         return self._renderer.render()
 
     def close_run(self) -> None:
-        if self._session is not None:
-            self._session.setup.backend.close()
-        self._session = None
+        """End the episode's run: its backend closed, and every reference to it dropped so that it — its MuJoCo
+        scene, ~100 MB with a musculoskeletal arm — is freed here, by reference counting."""
+        if self._renderer is not None:  # (it holds the episode's model; the next episode's needs its own)
+            self._renderer.close()
+            self._renderer = self._renderer_model = None
+        if self._session is None:
+            return
+        a = self._a
+        a.backend.close()
+        held = [weakref.ref(x) for x in (self._session, a, a.backend)]
+        self._session = self._a = self.observer = self.rewards = self._acting = a = None
+        if any(ref() is not None for ref in held):
+            # a plugin's reference cycle holds it: the collector, seeing only its small Python side, would not run
+            # for it (a learner's worker grew to 10 GB), so a full collection frees it now
+            gc.collect()
 
     def close(self) -> None:
         self.close_run()
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
 
 def _learning(loaded: LoadedScenario):

@@ -12,6 +12,7 @@ them, and calls the extensions at setup and at the end.
 from __future__ import annotations
 
 import time
+import weakref
 from pathlib import Path
 
 import yaml
@@ -47,7 +48,7 @@ class Runner:
         self.out_dir, self.spawn, self.progress = out_dir, spawn, progress
         self.setup: Assembly | None = None
         self.session: RunSession | None = None
-        self._notes: list[dict] = []  # said while assembling, before there is a session
+        self._calls = _Calls()
 
     # the assembled plugins and the last readings, for callers that inspect a run
     robot = property(lambda self: self.setup.robot)
@@ -61,7 +62,7 @@ class Runner:
             raise SetupError("; ".join(f"extension '{b.name}' failed to load: {b.error}" for b in broken)
                              + " (fix or uninstall it)")
         self.setup = assemble(self.loaded, self.registry, self.extensions, self.out_dir,
-                              plan=self._plan_for_controller, note=self._note)
+                              plan=self._calls.plan, note=self._calls.note)
         return self.setup
 
     def start(self) -> RunSession:
@@ -69,7 +70,8 @@ class Runner:
         :meth:`run` does first, and what a learning environment does at each reset (it then runs the loop a
         policy period at a time with :func:`~rehabkit.core.run.loop.run_loop`'s ``k_to``)."""
         a = self.build()
-        self.session = open_session(a, self.spawn, self._notes)
+        self.session = open_session(a, self.spawn, self._calls.notes)
+        self._calls.session = weakref.ref(self.session)
         return self.session
 
     def run(self) -> RunResult:
@@ -91,16 +93,27 @@ class Runner:
             if session is not None and session.threads is not None:
                 session.threads.close()
 
-    def _note(self, t: float, text: str) -> None:
-        # a plugin's message for people (Context.note): the session's once there is one
-        if self.session is not None:
-            self.session.note(t, text)
-        else:
-            self._notes.append({"t": round(t, 6), "text": text})
 
-    def _plan_for_controller(self, t, q, qd, targets):
+class _Calls:
+    """What the plugins' context calls back into (``Context.plan``, ``Context.note``). It reaches the session weakly:
+    the session holds the context, and a strong way back would be a reference cycle keeping the run — its MuJoCo
+    scene among it — alive after its last user dropped it, until a full collection."""
+
+    def __init__(self):
+        self.session: weakref.ref[RunSession] | None = None
+        self.notes: list[dict] = []  # said while assembling, before there is a session
+
+    def note(self, t: float, text: str) -> None:
+        # a plugin's message for people (Context.note): the session's once there is one
+        session = self.session() if self.session is not None else None
+        if session is not None:
+            session.note(t, text)
+        else:
+            self.notes.append({"t": round(t, 6), "text": text})
+
+    def plan(self, t, q, qd, targets):
         # Context.plan: a controller's own plan, made by the session (controllers ask only while it runs)
-        return self.session.plan_for_controller(t, q, qd, targets)
+        return self.session().plan_for_controller(t, q, qd, targets)
 
 
 def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path | None) -> RunResult:

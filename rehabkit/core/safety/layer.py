@@ -55,10 +55,11 @@ class SafetyLayer:
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
         self.config = config
-        self.stopping = Stopping(robot, config, self.lo, self.hi, gravity, dt, self._note)
-        self.ramps = Ramps(config, self.stopping.hold_torque, self._note)
         self.events: list[SafetyEvent] = []  # trips
         self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
+        # (the list's own append, not self._note: a bound method of the layer's would be a reference cycle)
+        self.stopping = Stopping(robot, config, self.lo, self.hi, gravity, dt, self.interventions.append)
+        self.ramps = Ramps(config, self.stopping.hold_torque, self.interventions.append)
         self.tripped_at: float | None = None
         self.saturated_steps = 0
         self._dt = dt

@@ -55,7 +55,7 @@ from rehabkit.core.setup.checks import (
     has,
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
-from rehabkit.core.setup.force_source import ForceSource, force_source
+from rehabkit.core.setup.force_source import ForceSource, LastForce, force_source
 from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
 from rehabkit.core.setup.space import JointSpace, reference_space
 from rehabkit.core.setup.targets import resolve_targets
@@ -189,8 +189,8 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
             config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
             a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
     space = a.planner.space if a.planner is not None else a.context.reference_space
-    a.context = replace(a.context, reference_space=space, interaction_force=lambda: (
-        a.force_source.last if a.force_source is not None else None))
+    last_force = LastForce()
+    a.context = replace(a.context, reference_space=space, interaction_force=last_force)
     a.controller = attempt("controller", sc.controller, ("controller",))
     if refused:
         raise PluginSetupError.together(refused)
@@ -205,6 +205,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
             raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
                              f"{suggest(t.sensor, a.sensors)}")
     _patient_and_safety(a)
+    last_force.source = a.force_source
     if upto == "run":  # last: a backend may start processes (a hardware link's bridge); its scene holds the
         # sensors' instruments and an embodied patient's body
         bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()

@@ -8,6 +8,7 @@ a simulated person's joint torques. An interaction-force limit with no source is
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -32,21 +33,38 @@ class ForceSource:
         return force
 
 
+class LastForce:
+    """``Context.interaction_force()``: the last value of ``source`` (None while there is none). The source is chosen
+    after the controllers that read this are built: it is handed over, not reached through the assembly, which holds
+    the context — a reference cycle that would keep the run alive until a full collection."""
+
+    def __init__(self):
+        self.source: ForceSource | None = None
+
+    def __call__(self) -> np.ndarray | None:
+        return self.source.last if self.source is not None else None
+
+
 def force_source(a, limit: float | None) -> ForceSource | None:
     """The source of the run's interaction force (``a``: the run's :class:`~rehabkit.core.setup.assembly.Assembly`,
     its sensors, patient and backend built or about to be): force-torque sensors (the largest of several: a cuff per
     segment), else an embodied person's straps, else a simulated person's torques where a limit needs them."""
     sensing = [s for s in a.sensors.values() if isinstance(s, InteractionForceSensor) and s.interaction]
+    # the backend is built after the source, and the assembly holds the source: reached weakly, as a strong
+    # reference would be a cycle keeping the run (its MuJoCo scene) alive until a full collection
+    setup = weakref.ref(a)
     if len(sensing) == 1:  # (the common case: no list and max each control step)
         sensor = sensing[0]
-        return ForceSource(lambda t, q, tau_h: sensor.interaction_force(t, a.backend), True)
+        return ForceSource(lambda t, q, tau_h: sensor.interaction_force(t, setup().backend), True)
     if sensing:
         def largest(t, q, tau_h):
-            forces = [s.interaction_force(t, a.backend) for s in sensing]
+            backend = setup().backend
+            forces = [s.interaction_force(t, backend) for s in sensing]
             return max(forces, key=lambda f: f @ f)
         return ForceSource(largest, True)
     if isinstance(a.patient, EmbodiedPatient):
-        return ForceSource(lambda t, q, tau_h: a.patient.interaction_force(), True)
+        strapped = a.patient.interaction_force
+        return ForceSource(lambda t, q, tau_h: strapped(), True)
     if a.patient is not None and limit is not None:
         estimate = HandForce(a.robot.model)
         return ForceSource(lambda t, q, tau_h: estimate(q, tau_h), False)
