@@ -144,3 +144,25 @@ def test_a_grid_over_whole_plugin_sections_as_the_readme_writes_it(tmp_path):
     result = run_sweep(HIT, {"duration": [1.0], **grid}, 1, tmp_path, serial=True)
     assert [r["controller"] for r in result.records] == ["joint-pd kp=300", "assist-as-needed"]
     assert [r["error"] for r in result.records] == [None, None]
+
+
+def test_a_finished_run_is_freed_without_a_full_collection_and_a_failed_one_is_collected(monkeypatch):
+    """A sweep's worker runs one scenario after another: each run's scene must go with it. A run that finishes is
+    freed by reference counting (a full collection costs ~50 ms a run); one that raised is collected (its
+    traceback holds it)."""
+    import gc
+
+    from rehabkit.sweep.execute import execute
+
+    full, collect = [], gc.collect
+
+    def counting(*generation):
+        if not generation:
+            full.append(generation)
+        return collect(*generation)
+
+    monkeypatch.setattr(gc, "collect", counting)
+    ok = execute(str(HIT), {"duration": 0.05, "logging.rrd": False})
+    assert ok["error"] is None and [g for g in full if not g] == []
+    failed = execute(str(TRIAL), {"controller": {"type": "qp-stack", "levels": [{"tasks": [{"type": "com"}]}]}})
+    assert "floating base" in failed["error"] and [g for g in full if not g] == [()]

@@ -10,6 +10,7 @@ import gc
 import signal
 import threading
 import time
+import weakref
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +35,12 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
             raise RunTimeoutError(f"timeout: still running after {timeout_s:g} s")
         previous = signal.signal(signal.SIGALRM, expire)
         signal.setitimer(signal.ITIMER_REAL, timeout_s)
+    setup = None  # the run's plugins, watched: freed with the run, or collected
     try:
-        result = Runner(load_scenario(Path(path), overrides)).run()
+        runner = Runner(load_scenario(Path(path), overrides))
+        result = runner.run()
+        setup = weakref.ref(runner.setup)
+        del runner
         row["passed"] = result.passed
         # NaN (a measure with nothing to measure) as None, as the stored rows have it
         row["metrics"] = {k: None if v != v else float(v) for k, v in result.metrics.items()
@@ -49,8 +54,10 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
         if alarm:
             signal.setitimer(signal.ITIMER_REAL, 0)
             signal.signal(signal.SIGALRM, previous)
-    # the run's scene (a MuJoCo model of ~100 MB with a musculoskeletal arm) hangs on reference cycles too small for
-    # the collector to notice: a worker running one scenario after another grew ~140 MB a run
-    gc.collect()
+    # a run is freed by reference counting; where a plugin's reference cycle (or a failure's traceback) holds it,
+    # its scene (a MuJoCo model of ~100 MB with a musculoskeletal arm) would wait for a full collection the small
+    # Python side never triggers: a worker running one scenario after another grew ~140 MB a run
+    if setup is None or setup() is not None:
+        gc.collect()
     row["wall_time_s"] = time.perf_counter() - t0
     return row
