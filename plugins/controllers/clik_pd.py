@@ -16,11 +16,14 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.numerics.spd3 import solve_spd3
+from rehabkit.numerics.spd3 import adjugate_solve3
 from rehabkit.plugin import Context, Controller, SettingError, StrictModel
+
+_solve3 = njit(cache=True, nogil=True)(adjugate_solve3)
 
 
 class ClikPDConfig(StrictModel):
@@ -57,7 +60,6 @@ class ClikPD(Controller):
         self.kp = np.broadcast_to(np.asarray(config.kp, float), (n,)).copy()
         self.kv = np.broadcast_to(np.asarray(config.kv, float), (n,)).copy()
         self.gravity = config.gravity_compensation
-        self.zero = np.zeros(n)
         self.joint_reference: np.ndarray | None = None
         self.qd_r = np.zeros(n)
 
@@ -65,20 +67,44 @@ class ClikPD(Controller):
         if self.joint_reference is None:
             self.joint_reference = q.copy()  # start the integration where the arm is
         q_r = self.joint_reference
-        J = pin.computeFrameJacobian(self.model, self.data, q_r, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-        e = x_r - self.data.oMf[self.frame].translation
-        JW = J * self.w_inv  # J W⁻¹
-        qd0 = -self.k0 * 2.0 * (q_r - self.centre) / self.span2
-        # J⁺ v + (I − J⁺J) qd0 = qd0 + J⁺ (v − J qd0), with J⁺ = W⁻¹Jᵀ (J W⁻¹ Jᵀ + λ²I)⁻¹: one 3×3 solve
-        qd_r = qd0 + JW.T @ solve_spd3(JW @ J.T, xd_r + self.k * e - J @ qd0, self.lam2)
-        np.clip(qd_r, -self.vmax, self.vmax, out=qd_r)
-        q_r += qd_r * self.dt
-        np.clip(q_r, self.lower, self.upper, out=q_r)
-        self.qd_r = qd_r
-        tau = self.kp * (q_r - q) + self.kv * (qd_r - qd)
+        J = pin.computeFrameJacobian(self.model, self.data, q_r, self.frame, pin.LOCAL_WORLD_ALIGNED)
+        self.qd_r, tau = _clik_step(J, self.data.oMf[self.frame].translation, x_r, xd_r, q_r, q, qd, self.w_inv,
+                                    self.centre, self.span2, self.vmax, self.lower, self.upper, self.kp, self.kv,
+                                    self.k, self.k0, self.lam2, self.dt)
         if self.gravity:
-            tau += pin.rnea(self.model, self.data, q, self.zero, self.zero)
+            tau += pin.computeGeneralizedGravity(self.model, self.data, q)  # (RNEA at rest)
         return tau
+
+
+@njit(cache=True, nogil=True)
+def _clik_step(J, x, x_r, xd_r, q_r, q, qd, w_inv, centre, span2, vmax, lower, upper, kp, kv, k, k0, lam2,
+               dt):  # pragma: no cover - compiled
+    """One cycle of the module docstring's law, compiled (numpy's per-call dispatch on 3×n matrices costs more than
+    the arithmetic): q̇_r and the PD torque; q_r advanced in place. ``J``: the frame Jacobian (rows 0–2 used),
+    ``x``: the hand position at q_r."""
+    n = len(q_r)
+    qd0, JW, v = np.empty(n), np.empty((3, n)), np.empty(3)
+    for j in range(n):
+        qd0[j] = -k0 * 2.0 * (q_r[j] - centre[j]) / span2[j]
+    for i in range(3):
+        Jqd0 = 0.0
+        for j in range(n):
+            JW[i, j] = J[i, j] * w_inv[j]  # J W⁻¹
+            Jqd0 += J[i, j] * qd0[j]
+        v[i] = xd_r[i] + k * (x_r[i] - x[i]) - Jqd0
+    A = np.zeros((3, 3))  # J W⁻¹ Jᵀ, its upper triangle
+    for i in range(3):
+        for m in range(i, 3):
+            for j in range(n):
+                A[i, m] += JW[i, j] * J[m, j]
+    # J⁺ v + (I − J⁺J) qd0 = qd0 + J⁺ (v − J qd0), with J⁺ = W⁻¹Jᵀ (J W⁻¹ Jᵀ + λ²I)⁻¹: one 3×3 solve
+    s0, s1, s2 = _solve3(A[0, 0] + lam2, A[0, 1], A[0, 2], A[1, 1] + lam2, A[1, 2], A[2, 2] + lam2, v[0], v[1], v[2])
+    qd_r, tau = np.empty(n), np.empty(n)
+    for j in range(n):
+        qd_r[j] = min(max(qd0[j] + (JW[0, j] * s0 + JW[1, j] * s1 + JW[2, j] * s2), -vmax[j]), vmax[j])
+        q_r[j] = min(max(q_r[j] + qd_r[j] * dt, lower[j]), upper[j])
+        tau[j] = kp[j] * (q_r[j] - q[j]) + kv[j] * (qd_r[j] - qd[j])
+    return qd_r, tau
 
 
 @hookimpl

@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 from pydantic import Field
 
 from rehabkit import hookimpl
@@ -37,6 +38,9 @@ from rehabkit.rehab.profile import JointRom
 
 PerJoint = float | list[float]
 SERIES_EVERY = 10  # control steps between logged samples of the person's state
+# rows of SimulatedArm.joint (per-joint parameters) and entries of SimulatedArm.const, as the compiled step reads them
+K, B, REST, PASSIVE_LO, PASSIVE_HI, GAIN_S, V_TH, STRENGTH, ACTIVE_LO, ACTIVE_HI, INV_STRENGTH = range(11)
+END_T, END_W, STIFF, DAMP, HAND_F, SPEED, NOISE_A, NOISE_B, NOISE = range(9)
 
 
 class Spasticity(StrictModel):
@@ -108,17 +112,15 @@ class SimulatedArm(Patient):
         model = context.robot.model
         n, dt = model.dof, context.control_dt
         self.n, self.dt = n, dt
-        self.k = _per_joint(config.stiffness_nm_rad, n, "stiffness_nm_rad")
-        self.b = _per_joint(config.damping_nms_rad, n, "damping_nms_rad")
+        k = _per_joint(config.stiffness_nm_rad, n, "stiffness_nm_rad")
+        b = _per_joint(config.damping_nms_rad, n, "damping_nms_rad")
         sp, vol, fat = config.spasticity, config.voluntary, config.fatigue
-        self.g_s = _per_joint(sp.gain_nms_rad, n, "spasticity.gain_nms_rad")
-        self.v_th = np.radians(_per_joint(sp.threshold_deg_s, n, "spasticity.threshold_deg_s"))
-        self.strength = _per_joint(vol.strength_nm, n, "voluntary.strength_nm")
-        if not np.all(self.strength > 0):
+        g_s = _per_joint(sp.gain_nms_rad, n, "spasticity.gain_nms_rad")
+        v_th = np.radians(_per_joint(sp.threshold_deg_s, n, "spasticity.threshold_deg_s"))
+        strength = _per_joint(vol.strength_nm, n, "voluntary.strength_nm")
+        if not np.all(strength > 0):
             raise SettingError(("voluntary", "strength_nm"), "must be > 0")
-        self.inv_strength = 1.0 / self.strength
         self.vol, self.fat = vol, fat
-        self.own_speed = math.radians(vol.speed_deg_s)
         self.delay_s = vol.delay_s
         lim = model.limits  # the effective limits: the profile's passive range is in them
         lo, hi = lim.lower.copy(), lim.upper.copy()
@@ -128,15 +130,13 @@ class SimulatedArm(Patient):
         if unknown:
             raise SettingError("rom", f"no joint(s) {unknown} on robot '{model.name}' "
                              f"(its joints: {', '.join(model.joint_names)})")
-        self.passive_lo, self.passive_hi = np.full(n, -np.inf), np.full(n, np.inf)
+        passive_lo, passive_hi = np.full(n, -np.inf), np.full(n, np.inf)
         for j, name in enumerate(model.joint_names):
             rom = own.get(name)
             if rom is not None:
-                self.passive_lo[j], self.passive_hi[j] = np.radians(rom.passive_deg)
+                passive_lo[j], passive_hi[j] = np.radians(rom.passive_deg)
                 if rom.active_deg is not None:
                     lo[j], hi[j] = np.radians(rom.active_deg)
-        self.end_torque, self.end_width = config.end_range.torque_nm, np.radians(config.end_range.width_deg)
-        self.active_lo, self.active_hi = lo, hi
         self.rest: np.ndarray | None = None  # None: the posture of the first step (the person sits relaxed)
         if config.rest_deg is not None:
             if len(config.rest_deg) != n:
@@ -147,9 +147,14 @@ class SimulatedArm(Patient):
             self.pin_model = model.pin_model
             self.data = self.pin_model.createData()
             self.frame = model.ee_frame_id
+        self._no_hand = np.zeros((6, n)), np.zeros(3)  # (joint-space cues: the compiled step's unused arguments)
         self.rng = context.stream("patient")
-        self.noise_a = math.exp(-2 * math.pi * vol.noise_hz * dt)
-        self.noise_b = math.sqrt(1 - self.noise_a**2)
+        noise_a = math.exp(-2 * math.pi * vol.noise_hz * dt)
+        self.joint = np.array([k, b, np.zeros(n) if self.rest is None else self.rest, passive_lo, passive_hi, g_s,
+                               v_th, strength, lo, hi, 1.0 / strength])
+        self.const = np.array([config.end_range.torque_nm, np.radians(config.end_range.width_deg), vol.stiffness,
+                               vol.damping, vol.hand_force_n, math.radians(vol.speed_deg_s), noise_a,
+                               math.sqrt(1 - noise_a**2), vol.noise])
         self.noise_state = self.rng.standard_normal(n)
         self._draws = np.empty((0, n))
         self._digest = hashlib.sha256(self.noise_state.tobytes())
@@ -170,49 +175,25 @@ class SimulatedArm(Patient):
         return w
 
     def torque(self, t, q, qd, goal):
-        # (each control step: in-place ufuncs and scalar math, numpy's dispatch would cost more than the model)
         if self.rest is None:
             self.rest = q.copy()
-        tau = -self.k * (q - self.rest) - self.b * qd
-        if self.end_torque:  # (bounded exponents: a joint driven far past its end must not overflow)
-            w = self.end_width
-            tau -= self.end_torque * np.exp(np.minimum((q - self.passive_hi) / w, 30.0))
-            tau += self.end_torque * np.exp(np.minimum((self.passive_lo - q) / w, 30.0))
-        slot = self.step % len(self.reflex)
-        qd_late = self.reflex[slot].copy()  # the velocity one reflex delay ago
-        self.reflex[slot] = qd
-        tau -= self.g_s * np.sign(qd_late) * np.maximum(0.0, np.abs(qd_late) - self.v_th)
-
-        vol = self.vol
+            self.joint[REST] = q
         if self.cartesian:
-            J = pin.computeFrameJacobian(self.pin_model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+            J = pin.computeFrameJacobian(self.pin_model, self.data, q, self.frame, pin.LOCAL_WORLD_ALIGNED)
             x = self.data.oMf[self.frame].translation
-            force = vol.stiffness * (goal - x) - vol.damping * (J @ qd)
-            size = math.sqrt(force @ force)
-            if size > vol.hand_force_n:
-                force *= vol.hand_force_n / size
-            effort = J.T @ force
         else:
-            target = np.minimum(np.maximum(goal, self.active_lo), self.active_hi)
-            effort = vol.stiffness * (target - q) - vol.damping * qd
-        np.minimum(np.maximum(effort, -self.strength, out=effort), self.strength, out=effort)
-        # no voluntary push further out of the active range, nor faster than the person moves
-        effort[((q >= self.active_hi) & (effort > 0)) | ((q <= self.active_lo) & (effort < 0))] = 0.0
-        along = effort * qd > 0  # force-velocity: pushing along the motion, less the faster it goes (none at v_max)
-        if along.any():
-            effort[along] *= np.maximum(0.0, 1.0 - np.abs(qd[along]) / self.own_speed)
-        self.noise_state = self.noise_a * self.noise_state + self.noise_b * self._white()
-        effort *= self.capacity * vol.participation * (1.0 + vol.noise * self.noise_state)
-        tau += effort
-
-        load = float(np.abs(effort) @ self.inv_strength) / self.n
+            J, x = self._no_hand
+        drive = self.capacity * self.vol.participation
+        tau, load, work, size2 = _person_torque(q, qd, goal, J, x, self.cartesian, self.joint, self.const,
+                                                self.reflex, self.step % len(self.reflex), self.noise_state,
+                                                self._white(), drive)
         fat = self.fat
         self.capacity += self.dt * (-fat.rate_per_s * load + fat.recovery_per_s * (1.0 - self.capacity))
         self.capacity = min(1.0, max(0.0, self.capacity))
-        self.voluntary_work += max(0.0, float(effort @ qd)) * self.dt
+        self.voluntary_work += max(0.0, work) * self.dt
         if self.step % SERIES_EVERY == 0:
             self._log_t.append(t)
-            self._log.append((self.capacity, math.sqrt(effort @ effort), load))
+            self._log.append((self.capacity, math.sqrt(size2), load))
         self.step += 1
         return tau
 
@@ -230,6 +211,56 @@ class SimulatedArm(Patient):
         t, v = np.asarray(self._log_t), np.asarray(self._log).reshape(-1, 3)
         return {"patient/capacity": (t, v[:, 0]), "patient/voluntary_torque_nm": (t, v[:, 1]),
                 "patient/effort_fraction": (t, v[:, 2])}
+
+
+@njit(cache=True, nogil=True)
+def _person_torque(q, qd, goal, J, x, cartesian, p, c, reflex, slot, noise_state, white, drive):  # pragma: no cover
+    """One control step of the module docstring's model, compiled (numpy's per-call dispatch on a handful of joints
+    costs more than the model): the torques, and the effort's load (its mean share of strength), power (effort · q̇)
+    and squared size. ``p``, ``c``: the per-joint and scalar parameters (rows and entries named above); the velocity
+    ring ``reflex`` (its row ``slot``) and the noise process are advanced in place."""
+    n = len(q)
+    tau, effort = np.empty(n), np.empty(n)
+    end_t, w = c[END_T], c[END_W]
+    for j in range(n):
+        t = -p[K, j] * (q[j] - p[REST, j]) - p[B, j] * qd[j]
+        if end_t:  # (bounded exponents: a joint driven far past its end must not overflow)
+            t -= end_t * math.exp(min((q[j] - p[PASSIVE_HI, j]) / w, 30.0))
+            t += end_t * math.exp(min((p[PASSIVE_LO, j] - q[j]) / w, 30.0))
+        late = reflex[slot, j]  # the velocity one reflex delay ago
+        reflex[slot, j] = qd[j]
+        tau[j] = t - p[GAIN_S, j] * np.sign(late) * max(0.0, abs(late) - p[V_TH, j])
+    if cartesian:  # a hand force toward the goal, capped at the person's, through Jᵀ
+        force = np.empty(3)
+        for i in range(3):
+            v = 0.0
+            for j in range(n):
+                v += J[i, j] * qd[j]
+            force[i] = c[STIFF] * (goal[i] - x[i]) - c[DAMP] * v
+        size = math.sqrt(force[0] * force[0] + force[1] * force[1] + force[2] * force[2])
+        if size > c[HAND_F]:
+            force *= c[HAND_F] / size
+        for j in range(n):
+            effort[j] = J[0, j] * force[0] + J[1, j] * force[1] + J[2, j] * force[2]
+    else:
+        for j in range(n):
+            target = min(max(goal[j], p[ACTIVE_LO, j]), p[ACTIVE_HI, j])
+            effort[j] = c[STIFF] * (target - q[j]) - c[DAMP] * qd[j]
+    load = work = size2 = 0.0
+    for j in range(n):
+        e = min(max(effort[j], -p[STRENGTH, j]), p[STRENGTH, j])
+        # no voluntary push further out of the active range, nor faster than the person moves
+        if (q[j] >= p[ACTIVE_HI, j] and e > 0) or (q[j] <= p[ACTIVE_LO, j] and e < 0):
+            e = 0.0
+        if e * qd[j] > 0:  # force-velocity: pushing along the motion, less the faster it goes (none at v_max)
+            e *= max(0.0, 1.0 - abs(qd[j]) / c[SPEED])
+        noise_state[j] = c[NOISE_A] * noise_state[j] + c[NOISE_B] * white[j]
+        e *= drive * (1.0 + c[NOISE] * noise_state[j])
+        tau[j] += e
+        load += abs(e) * p[INV_STRENGTH, j]
+        work += e * qd[j]
+        size2 += e * e
+    return tau, load / n, work, size2
 
 
 @hookimpl

@@ -22,7 +22,7 @@ from importlib import resources
 import mujoco
 import numpy as np
 from pydantic import Field
-from rehabkit_plugins.robots.arm_kinematics import arm_ik, elbow_up
+from rehabkit_plugins.robots.arm_kinematics import elbow_up, nearest_elbow_up
 from rehabkit_plugins.robots.contracts import LiftArmGripper
 
 from rehabkit import hookimpl
@@ -116,20 +116,8 @@ class ArmRobot(Robot, LiftArmGripper):
         ref = np.zeros(self.model.dof) if reference is None else np.asarray(reference, float)
         lim = self.model.limits
         lift = ref[self.lift_index] if self.lift_index is not None else 0.0
-        wrist = np.asarray(pose, float).copy()
-        wrist[:3, 3] -= wrist[:3, 2] * self.config.gripper + np.array([0.0, 0.0, lift])
-        arms = arm_ik(wrist, elbow_up_only=True)
-        if not arms:
-            return []
-        arm = np.array(arms)  # (branches, 6), all at once
-        lo, hi, r = lim.lower[self.arm], lim.upper[self.arm], ref[self.arm]
-        arm = arm + 2 * np.pi * np.round((r - arm) / (2 * np.pi))  # the turn nearest the reference
-        arm = np.where(arm > hi, arm - 2 * np.pi, np.where(arm < lo, arm + 2 * np.pi, arm))
-        ok = np.all((arm >= lo - 1e-12) & (arm <= hi + 1e-12), axis=1)
-        q = np.tile(ref, (int(ok.sum()), 1))
-        q[:, self.arm] = np.clip(arm[ok], lo, hi)
-        order = np.argsort(np.abs(q - ref).max(axis=1), kind="stable")  # nearest first, ties as the branches came
-        return list(q[order])
+        return list(nearest_elbow_up(np.asarray(pose, float), self.config.gripper, lift, ref, self.arm.start,
+                                     lim.lower, lim.upper))
 
 
 @hookimpl

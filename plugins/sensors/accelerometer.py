@@ -62,7 +62,6 @@ class AccelerometerArraySensor(Sensor):
         self.config = config
         self.frame = config.body  # the body the array is fixed to
         self.array = AccelerometerArray(np.array(config.points))  # refuses layouts that can't give all of z
-        self.raw_array = AccelerometerArray(np.array(config.points))
         self.rng = context.rng
         self.offsets = self.rng.normal(0.0, config.offset_std, (len(config.points), 3))
         dt = 1.0 / config.rate_hz
@@ -78,9 +77,9 @@ class AccelerometerArraySensor(Sensor):
         self.ekf = AngularVelocityEKF()
         self.prefix = f"acc_{config.body}"
         self._names = [f"{self.prefix}_{i}" for i in range(len(config.points))]
+        self._truth = f"{self.prefix}_true_acc", f"{self.prefix}_true_gyro"
         self._noise_std = np.asarray(config.noise_std, float)
-        self.errors: dict[str, list[np.ndarray]] = {k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered")}
-        self.moving: list[bool] = []
+        self._true = np.empty((len(config.points), 3))
         self.times: list[float] = []
         self.estimates: dict[str, list[np.ndarray]] = {
             k: [] for k in ("a_raw", "a_filtered", "w_raw", "w_filtered", "a_true", "w_true")
@@ -99,48 +98,26 @@ class AccelerometerArraySensor(Sensor):
         ]
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
-        n = len(self.config.points)
-        true = np.array([backend.read_instrument(name) for name in self._names])
-        raw = true + self.offsets + self.rng.normal(0.0, 1.0, true.shape) * self._noise_std
+        true = self._true
+        for i, name in enumerate(self._names):
+            true[i] = backend.read_instrument(name)
+        raw = true + self.offsets
+        raw += self.rng.standard_normal(true.shape) * self._noise_std  # (the draws of normal(0, 1), cheaper)
         filtered = self.bank.step(raw)
-        var = self.bank.value_variance if self.bank.started else np.tile(np.square(self.config.noise_std), (n, 1))
-        z_raw = self.raw_array.solve(raw, self.offsets)
-        z_f = self.array.solve(filtered, self.offsets)
-        cov_f = (self.array.M_pinv * var.ravel()) @ self.array.M_pinv.T  # M⁺ diag(var) M⁺ᵀ
+        var = self.bank.value_variance
+        z_raw, z_f, w_raw, w_f = self.array.sample(raw, filtered, var, self.offsets, self.ekf, self.dt)
         self.recording.append(raw)
-        self.variances.append(var.ravel())
-        w_raw = self.raw_array.omega(z_raw, self.dt)
-        w_f = self.ekf.step(z_f, cov_f, self.dt)
-        a_true = backend.read_instrument(f"{self.prefix}_true_acc")
-        w_true = backend.read_instrument(f"{self.prefix}_true_gyro")
-        for key, est, truth in (
-            ("a_raw", z_raw[:3], a_true),
-            ("a_filtered", z_f[:3], a_true),
-            ("w_raw", w_raw, w_true),
-            ("w_filtered", w_f, w_true),
-        ):
-            self.errors[key].append(est - truth)
-        self.moving.append(bool(np.linalg.norm(w_true) > MOVING_RAD_S))
+        self.variances.append(var.ravel().copy())  # (the filter updates its variances in place)
+        a_true, w_true = backend.read_instrument(self._truth[0]), backend.read_instrument(self._truth[1])
+        a_raw, a_f = z_raw[:3], z_f[:3]
         self.times.append(t)
-        for key, est in (
-            ("a_raw", z_raw[:3]),
-            ("a_filtered", z_f[:3]),
-            ("w_raw", w_raw),
-            ("w_filtered", w_f),
-            ("a_true", a_true),
-            ("w_true", w_true),
-        ):
-            self.estimates[key].append(est)
-        return {
-            "raw_readings": raw.ravel(),
-            "filtered_readings": filtered.ravel(),
-            "acc_raw": z_raw[:3],
-            "acc_filtered": z_f[:3],
-            "acc_true": a_true,
-            "omega_raw": w_raw,
-            "omega_filtered": w_f,
-            "omega_true": w_true,
-        }
+        est = self.estimates
+        for key, value in (("a_raw", a_raw), ("a_filtered", a_f), ("w_raw", w_raw), ("w_filtered", w_f),
+                           ("a_true", a_true), ("w_true", w_true)):
+            est[key].append(value)
+        return {"raw_readings": raw.ravel(), "filtered_readings": filtered.ravel(), "acc_raw": a_raw,
+                "acc_filtered": a_f, "acc_true": a_true, "omega_raw": w_raw, "omega_filtered": w_f,
+                "omega_true": w_true}
 
     def report(self, metrics: dict[str, float]) -> str | None:
         """The validation table: RMS errors of raw and filtered estimates against truth and the plan."""
@@ -194,20 +171,19 @@ class AccelerometerArraySensor(Sensor):
         return z[:, :3], AngularVelocityEKF().run(z, covs, self.dt)
 
     def run_metrics(self, trace=None) -> dict[str, float]:
-        if not self.errors["a_raw"]:
+        if not self.times:
             return {}
         a_s, w_s = self.smoothed()
-        self.estimates["a_smoothed"], self.estimates["w_smoothed"] = list(a_s), list(w_s)
-        self.errors["a_smoothed"] = list(a_s - np.array(self.estimates["a_true"]))
-        self.errors["w_smoothed"] = list(w_s - np.array(self.estimates["w_true"]))
-        skip = min(len(self.errors["a_raw"]) // 10, int(self.config.rate_hz * 0.2))  # filters settling
+        est = {k: np.array(v) for k, v in self.estimates.items()} | {"a_smoothed": a_s, "w_smoothed": w_s}
+        errors = {k: est[k] - est[f"{k[0]}_true"] for k in est if not k.endswith("_true")}
+        skip = min(len(self.times) // 10, int(self.config.rate_hz * 0.2))  # filters settling
         out: dict[str, float] = {}
-        moving = np.array(self.moving)
+        moving = np.linalg.norm(est["w_true"], axis=1) > MOVING_RAD_S  # the plate moving (its true rotation)
         moving[:skip] = False
         for suffix, keep in (("", slice(skip, None)), ("_moving", moving)):
             if not np.any(np.ones(len(moving), bool)[keep]):
                 continue
-            rms = {k: float(np.sqrt(np.mean(np.square(np.array(v)[keep])))) for k, v in self.errors.items()}
+            rms = {k: float(np.sqrt(np.mean(np.square(v[keep])))) for k, v in errors.items()}
             out |= {
                 f"accel_rms_raw{suffix}_m_s2": rms["a_raw"],
                 f"accel_rms_filtered{suffix}_m_s2": rms["a_filtered"],
@@ -226,7 +202,7 @@ class AccelerometerArraySensor(Sensor):
             for name, key, ref in (("accel", "a", planned[0]), ("omega", "w", planned[1])):
                 unit = "m_s2" if name == "accel" else "rad_s"
                 for kind in ("raw", "filtered", "smoothed", "true"):  # 'true': how far the run was from the plan
-                    err = np.array(self.estimates[f"{key}_{kind}"])[keep] - ref[keep]
+                    err = est[f"{key}_{kind}"][keep] - ref[keep]
                     out[f"{name}_rms_{kind}_vs_planned_{unit}"] = float(np.sqrt(np.mean(np.square(err))))
                 raw = out[f"{name}_rms_raw_vs_planned_{unit}"]
                 out[f"{name}_filter_gain_vs_planned"] = raw / max(out[f"{name}_rms_filtered_vs_planned_{unit}"], 1e-12)

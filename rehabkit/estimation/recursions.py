@@ -1,9 +1,13 @@
-"""The Kalman bank's recursions compiled: one implementation, stepped one sample at a time online and run over a
+"""The estimators' recursions compiled: one implementation, stepped one sample at a time online and run over a
 whole recording offline (the RTS smoother's passes, the angular-velocity EKF over smoothed readings), where a
-Python loop per sample cost ~2 s of a CaPaMan run's finishing (19,000 samples). Scalar loops only: they compile
-in about a second on first use, where numba's array operations and LAPACK bindings took ~10 s for the EKF."""
+Python loop per sample cost ~2 s of a CaPaMan run's finishing (19,000 samples); and an accelerometer array's
+whole online sample in one call, where numpy's per-call dispatch on 12-vectors cost more than the arithmetic.
+Scalar loops only: they compile in about a second on first use, where numba's array operations and LAPACK
+bindings took ~10 s for the EKF."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -116,3 +120,39 @@ def ekf_omega(zs, covs, dt, w, P):  # pragma: no cover - compiled
                 P[i, j] -= acc
         out[t] = w
     return out
+
+
+@njit(cache=True, nogil=True)
+def omega_from_products(z, dt, prev, known):  # pragma: no cover - compiled
+    """ω from the quadratic terms of ``z`` (12,) (see :mod:`~rehabkit.estimation.rigid_body`), its overall sign
+    continuous with the previous estimate ``prev`` advanced by α dt when ``known``; ``prev`` takes the new one."""
+    sx, sy, sz = math.sqrt(max(z[6], 0.0)), math.sqrt(max(z[7], 0.0)), math.sqrt(max(z[8], 0.0))
+    # signs of (ω_y, ω_z) relative to ω_x from the products (of ω_z to ω_y when ω_x is zero); a zero product fits +1
+    if sx < 1e-9:
+        sz = -sz if z[10] < 0 else sz
+    else:
+        sy, sz = -sy if z[9] < 0 else sy, -sz if z[11] < 0 else sz
+    if known and sx * (prev[0] + z[3] * dt) + sy * (prev[1] + z[4] * dt) + sz * (prev[2] + z[5] * dt) < 0:
+        sx, sy, sz = -sx, -sy, -sz
+    prev[0], prev[1], prev[2] = sx, sy, sz
+    return prev.copy()
+
+
+@njit(cache=True, nogil=True)
+def array_sample(raw, filtered, variances, offsets, M_pinv, dt, prev, known, w, P):  # pragma: no cover - compiled
+    """One sample of an accelerometer array online: z from the raw and from the filtered readings (n, 3) less the
+    offsets, ω from the raw z's products (:func:`omega_from_products`) and by the EKF (:func:`ekf_omega`, state
+    ``w``, ``P``) from the filtered z, of covariance M⁺ diag(variances) M⁺ᵀ. Returns z_raw, z_f, ω_raw, ω_f."""
+    m, n = M_pinv.shape[0], raw.shape[0]
+    z_raw, z_f, cov = np.zeros(m), np.zeros((1, m)), np.zeros((1, m, m))  # (z_f, cov: a one-sample recording)
+    for i in range(m):
+        for s in range(n):
+            for a in range(3):
+                k = 3 * s + a
+                z_raw[i] += M_pinv[i, k] * (raw[s, a] - offsets[s, a])
+                z_f[0, i] += M_pinv[i, k] * (filtered[s, a] - offsets[s, a])
+                mv = M_pinv[i, k] * variances[s, a]
+                for j in range(m):
+                    cov[0, i, j] += mv * M_pinv[j, k]
+    w_raw = omega_from_products(z_raw, dt, prev, known)
+    return z_raw, z_f[0], w_raw, ekf_omega(z_f, cov, dt, w, P)[0]

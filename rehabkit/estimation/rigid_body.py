@@ -12,11 +12,9 @@ estimate advanced by α dt.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from rehabkit.estimation.recursions import ekf_omega
+from rehabkit.estimation.recursions import array_sample, ekf_omega, omega_from_products
 
 
 def design_row(axis: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -42,7 +40,7 @@ class AccelerometerArray:
             raise ValueError(f"these {n} accelerometers determine only {rank} of the 12 motion terms; "
                              "mount at least four, not all in one plane")
         self.M_pinv = np.linalg.pinv(self.M)
-        self._omega: np.ndarray | None = None
+        self._omega, self._omega_known = np.zeros(3), False  # the last ω from the products: their sign's reference
 
     def solve(self, readings: np.ndarray, offsets: np.ndarray | float = 0.0) -> np.ndarray:
         """z (12,) from the stacked readings (n*3,) minus the calibrated offsets."""
@@ -50,21 +48,20 @@ class AccelerometerArray:
 
     def omega(self, z: np.ndarray, dt: float) -> np.ndarray:
         """Angular velocity from z's quadratic terms, its sign kept continuous over calls."""
-        # (scalar math: called every control step with twelve numbers, numpy's per-call cost would dominate)
-        xx, yy, zz, xy, yz, xz = z[6:12].tolist()
-        sq = (math.sqrt(max(xx, 0.0)), math.sqrt(max(yy, 0.0)), math.sqrt(max(zz, 0.0)))
-        # choose signs of (ω_y, ω_z) relative to ω_x to match the products, using the largest component
-        signs = (1.0, 1.0, _sign(yz)) if sq[0] < 1e-9 else (1.0, _sign(xy), _sign(xz))
-        w = np.array([sq[0] * signs[0], sq[1] * signs[1], sq[2] * signs[2]])
-        if self._omega is not None and w @ (self._omega + z[3:6] * dt) < 0:
-            w = -w
-        self._omega = w
+        w = omega_from_products(np.ascontiguousarray(z, dtype=float), dt, self._omega, self._omega_known)
+        self._omega_known = True
         return w
 
-
-def _sign(x: float) -> float:
-    """The sign of a product, +1 for zero (either sign fits it)."""
-    return -1.0 if x < 0 else 1.0
+    def sample(self, raw: np.ndarray, filtered: np.ndarray, variances: np.ndarray, offsets: np.ndarray,
+               ekf: AngularVelocityEKF, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One online sample in one compiled call, for a sensor read at the control rate: z from the raw and from
+        the filtered readings (n, 3) — :meth:`solve` — and ω from the raw z — :meth:`omega` — and by ``ekf``
+        from the filtered z, whose covariance is M⁺ diag(variances) M⁺ᵀ (``variances`` (n, 3): the filter's).
+        Returns z_raw, z_filtered, ω_raw, ω_filtered."""
+        out = array_sample(raw, filtered, variances, offsets, self.M_pinv, dt, self._omega, self._omega_known,
+                           ekf.w, ekf.P)
+        self._omega_known = True
+        return out
 
 
 class AngularVelocityEKF:

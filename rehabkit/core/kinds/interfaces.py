@@ -94,11 +94,11 @@ class Robot(ABC):
         return m.getFrameId(name)
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
-        """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio RNEA."""
+        """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio's RNEA at rest
+        (``computeGeneralizedGravity``: its velocity and acceleration terms left out, not added as zeros)."""
         import pinocchio as pin
 
-        zero = np.zeros(self.model.dof)
-        return pin.rnea(self.model.pin_model, self._data(), np.asarray(q, float), zero, zero)
+        return pin.computeGeneralizedGravity(self.model.pin_model, self._data(), np.asarray(q, float))
 
     def gravity_torques(self, qs: np.ndarray) -> np.ndarray:
         """:meth:`gravity_torque` for the rows of ``qs`` (N, dof). Default: Pinocchio's RNEA over the batch (in
