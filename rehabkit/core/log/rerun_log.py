@@ -20,91 +20,21 @@ import numpy as np
 import rerun as rr
 
 from rehabkit.core.kinds.interfaces import BodyPoses, Drawing, GeomVisual
+from rehabkit.core.log.archetypes import (
+    LIMIT_RGB,
+    PALETTE,
+    Column,
+    encode_image,
+    entity_part,
+    is_image,
+    paler,
+    rgba_rows,
+    shape,
+    xyzw,
+)
+from rehabkit.core.log.blueprint import Contents, blueprint, labelled
 
 TIMELINE = "sim_time"
-
-
-def _rgba(c) -> list[int]:
-    return [int(round(255 * v)) for v in c]
-
-
-def _rgba_rows(rgba) -> np.ndarray | None:
-    return None if rgba is None else np.round(255 * np.clip(np.asarray(rgba, float), 0, 1)).astype(np.uint8)
-
-
-def _xyzw(wxyz: np.ndarray) -> np.ndarray:
-    return np.asarray(wxyz)[..., [1, 2, 3, 0]]
-
-
-def _shape(g: GeomVisual):
-    """A Rerun archetype for a primitive, in the geom's own frame."""
-    color = [_rgba(g.rgba)]
-    if g.shape == "sphere":
-        return rr.Ellipsoids3D(half_sizes=[[g.size[0]] * 3], colors=color, fill_mode="solid")
-    if g.shape == "ellipsoid":
-        return rr.Ellipsoids3D(half_sizes=[g.size], colors=color, fill_mode="solid")
-    if g.shape == "box":
-        return rr.Boxes3D(half_sizes=[g.size], colors=color, fill_mode="solid")
-    if g.shape == "plane":
-        return rr.Boxes3D(half_sizes=[[g.size[0], g.size[1], 0.001]], colors=color, fill_mode="solid")
-    if g.shape == "cylinder":
-        return rr.Cylinders3D(lengths=[2 * g.size[1]], radii=[g.size[0]], colors=color, fill_mode="solid")
-    if g.shape == "mesh" and g.mesh is not None:
-        return rr.Mesh3D(vertex_positions=g.mesh[0], triangle_indices=g.mesh[1], albedo_factor=color[0])
-    if g.shape == "capsule":  # Rerun's capsule starts at the origin; MuJoCo's is centred
-        return rr.Capsules3D(lengths=[2 * g.size[1]], radii=[g.size[0]], translations=[[0, 0, -g.size[1]]],
-                             colors=color, fill_mode="solid")
-    return None
-
-
-def is_image(value: Any) -> bool:
-    """An RGB image as sensors give them: ``HxWx3`` uint8."""
-    return isinstance(value, np.ndarray) and value.ndim == 3 and value.shape[2] == 3 and value.dtype == np.uint8
-
-
-def encode_image(rgb: np.ndarray) -> rr.EncodedImage:
-    """JPEG for the log (OpenCV's encoder: ~4x faster than Rerun's own here, and it lets other threads run)."""
-    import cv2  # only runs with cameras pay for importing OpenCV
-
-    ok, data = cv2.imencode(".jpg", np.ascontiguousarray(rgb[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, 85])
-    if not ok:
-        raise ValueError("could not encode an image for the log")
-    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg")
-
-
-def encode_images(reading: dict[str, Any]) -> dict[str, Any]:
-    """The reading with its images encoded for the log (done where the reading is made, off the loop)."""
-    return {k: encode_image(v) if is_image(v) else v for k, v in reading.items()}
-
-
-
-def _part(name: str) -> str:
-    """A model's name as one entity-path part (MyoSuite names hold spaces, which Rerun warns about)."""
-    return name.replace(" ", "_")
-
-class _Column:
-    """One sensor value's readings, appended in place (no per-sample list to convert at the flush)."""
-
-    def __init__(self, width: int, what: str):
-        self.t, self.values, self.n, self.what = np.empty(256), np.empty((256, width)), 0, what
-
-    def append(self, t: float, value) -> None:
-        n = self.n
-        if n == len(self.t):
-            self.t = np.resize(self.t, 2 * n)
-            self.values = np.resize(self.values, (2 * n, self.values.shape[1]))
-        try:
-            self.values[n] = value
-        except ValueError:
-            raise ValueError(f"{self.what}: {np.size(value)} values, {self.values.shape[1]} in its earlier "
-                             "readings (a reading's arrays keep their size; log a changing set as points)") from None
-        self.t[n] = t
-        self.n = n + 1
-
-    def take(self) -> tuple[np.ndarray, np.ndarray]:
-        """The buffered (times, values), copied; the buffer starts over."""
-        n, self.n = self.n, 0
-        return self.t[:n].copy(), self.values[:n].copy()
 
 
 class RerunLog:
@@ -126,29 +56,42 @@ class RerunLog:
                 warnings.warn(f"--spawn: could not start the Rerun viewer ({exc}); writing {self.path} only",
                               stacklevel=2)
         self.joint_names = joint_names
+        self.joint_parts = [entity_part(j) for j in joint_names]
+        self.contents = Contents(self.joint_parts)
         # in wall-clock runs the column sends are queued and sent one per tick (:meth:`send_one`): a whole
         # flush (~6-8 ms here) in one tick would outlast a robot link's command watchdog
         self.deferred = False
         self._queue: deque[Callable[[], None]] = deque()
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
-        self._sensor_columns: dict[str, dict[str, _Column]] = {}  # sensor -> reading key -> its column
+        self._sensor_columns: dict[str, dict[str, Column]] = {}  # sensor -> reading key -> its column
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        for series in ("position_deg", "reference_deg", "velocity_deg_s", "torque_nm", "tracking_error_deg"):
-            rec.log(f"joints/{series}", rr.SeriesLines(names=joint_names), static=True)
+        for i, (name, part) in enumerate(zip(joint_names, self.joint_parts)):
+            rgb = PALETTE[i % len(PALETTE)]
+            rec.log(f"joints/{part}/measured_deg", rr.SeriesLines(names=[f"{name} measured [deg]"], colors=[rgb],
+                                                                  widths=[2.0]), static=True)
+            rec.log(f"joints/{part}/reference_deg", rr.SeriesLines(names=[f"{name} reference [deg]"],
+                                                                   colors=[paler(rgb)], widths=[1.25]), static=True)
+            rec.log(f"joints/{part}/limits_deg", rr.SeriesLines(
+                names=[f"{name} lower limit [deg]", f"{name} upper limit [deg]"], colors=[LIMIT_RGB] * 2,
+                widths=[1.0, 1.0]), static=True)
+        colors = [PALETTE[i % len(PALETTE)] for i in range(len(joint_names))]
+        for series, unit in (("joint_velocity_deg_s", "deg/s"), ("joint_torque_nm", "N·m"),
+                             ("tracking_error_deg", "deg")):
+            rec.log(series, rr.SeriesLines(names=[f"{j} [{unit}]" for j in joint_names], colors=colors), static=True)
 
     # -- static content -----------------------------------------------------
 
     def scene(self, geoms: list[GeomVisual]) -> None:
         """Geometry of every body, each geom at its fixed offset in its body."""
         for g in geoms:
-            parent = "world/scene" if g.body == "world" else f"world/bodies/{_part(g.body)}"
-            archetype = _shape(g)
+            parent = "world/scene" if g.body == "world" else f"world/bodies/{entity_part(g.body)}"
+            archetype = shape(g)
             if archetype is None:
                 continue
-            path = f"{parent}/{_part(g.name)}"
-            self.rec.log(path, rr.Transform3D(translation=g.position, quaternion=_xyzw(g.quat_wxyz)), static=True)
+            path = f"{parent}/{entity_part(g.name)}"
+            self.rec.log(path, rr.Transform3D(translation=g.position, quaternion=xyzw(g.quat_wxyz)), static=True)
             self.rec.log(path, archetype, static=True)
 
     def targets(self, t: float, names: list[str], positions_world: np.ndarray) -> None:
@@ -169,6 +112,11 @@ class RerunLog:
             self.rec.set_time(TIMELINE, duration=t)
         self.rec.log(path, rr.Points3D(positions_world, colors=[color], radii=radius), static=t is None)
 
+    def box(self, path: str, lo: np.ndarray, hi: np.ndarray, color: tuple[int, int, int], label: str) -> None:
+        """An axis-aligned box drawn as its edges (static), e.g. the safety envelope's keep-in box."""
+        self.rec.log(path, rr.Boxes3D(mins=[lo], sizes=[np.asarray(hi) - np.asarray(lo)], colors=[color],
+                                      labels=[label], fill_mode="majorwireframe", radii=0.004), static=True)
+
     def line(self, path: str, points: np.ndarray, color: tuple[int, int, int], radius: float,
              t: float | None = None) -> None:
         """A polyline: static when ``t`` is None, else at time ``t``."""
@@ -181,11 +129,11 @@ class RerunLog:
         def send() -> None:
             self.rec.set_time(TIMELINE, duration=t)
             if shapes.lines is not None:
-                self.rec.log(f"{path}/lines", rr.LineStrips3D(shapes.lines, colors=_rgba_rows(shapes.line_rgba),
+                self.rec.log(f"{path}/lines", rr.LineStrips3D(shapes.lines, colors=rgba_rows(shapes.line_rgba),
                                                               radii=0.003))
             if shapes.origins is not None:
                 self.rec.log(f"{path}/arrows", rr.Arrows3D(origins=shapes.origins, vectors=shapes.vectors,
-                                                           colors=_rgba_rows(shapes.arrow_rgba), radii=0.006))
+                                                           colors=rgba_rows(shapes.arrow_rgba), radii=0.006))
         if self.deferred:
             self._queue.append(send)
         else:
@@ -194,6 +142,16 @@ class RerunLog:
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)
         self.rec.log("events", rr.TextLog(text, level=level))
+
+    def safety_event(self, ev) -> None:
+        """A safety layer's event: its line in the text log, its fields beside it (shown when it is selected)."""
+        where = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in
+                          (("joint", ev.joint), ("value", ev.value), ("limit", ev.limit)) if v is not None)
+        self.rec.set_time(TIMELINE, duration=ev.t)
+        self.rec.log("events", rr.TextLog(f"SAFETY {ev.rule}" + (f" ({where})" if where else "") + f": {ev.message}",
+                                          level=ev.level),
+                     rr.AnyValues(rule=ev.rule, joint=ev.joint or "", value=np.nan if ev.value is None else ev.value,
+                                  limit=np.nan if ev.limit is None else ev.limit))
 
     # -- time series --------------------------------------------------------
 
@@ -212,14 +170,32 @@ class RerunLog:
         if not len(t):
             return
         t, deg = np.array(t), np.degrees
-        for series, values in (("position_deg", deg(q)), ("reference_deg", deg(q_ref)), ("velocity_deg_s", deg(qd)),
-                               ("torque_nm", np.array(tau)), ("tracking_error_deg", deg(q_ref - q))):
-            self._send(f"joints/{series}", t, lambda v=values: rr.Scalars.columns(scalars=v))
+        q_deg, ref_deg = deg(q), deg(q_ref)
+        for i, part in enumerate(self.joint_parts):
+            self._send(f"joints/{part}/measured_deg", t, lambda v=q_deg[:, i]: rr.Scalars.columns(scalars=v))
+            self._send(f"joints/{part}/reference_deg", t, lambda v=ref_deg[:, i]: rr.Scalars.columns(scalars=v))
+        for series, values in (("joint_velocity_deg_s", deg(qd)), ("joint_torque_nm", np.array(tau)),
+                               ("tracking_error_deg", ref_deg - q_deg)):
+            self._send(series, t, lambda v=values: rr.Scalars.columns(scalars=v))
+
+    def joint_limits(self, t_end: float, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Each joint's range as two flat lines over the run, in its angle panel."""
+        t = np.array([0.0, max(t_end, 1e-3)])
+        for i, part in enumerate(self.joint_parts):
+            both = np.degrees([[lower[i], upper[i]]] * 2)
+            if np.all(np.isfinite(both)):
+                self._send(f"joints/{part}/limits_deg", t, lambda v=both: rr.Scalars.columns(scalars=v))
+
+    def frame_on(self, points_world: np.ndarray) -> None:
+        """Points the 3-D view must hold (the robot's bodies, the person, the targets)."""
+        self.contents.scene_points.append(np.asarray(points_world, float).reshape(-1, 3))
 
     def series(self, path: str, t: np.ndarray, values: np.ndarray) -> None:
         """A scalar time series sent as one column (e.g. a link's latency per tick)."""
         if len(t):
             values = np.array(values, float)
+            self.rec.log(path, rr.SeriesLines(names=[labelled(path.split("/")[-1])]), static=True)
+            self.contents.add_series(path)
             self._send(path, np.array(t, float), lambda: rr.Scalars.columns(scalars=values))
 
     def sensor(self, t: float, sensor: str, reading: dict) -> None:
@@ -232,6 +208,7 @@ class RerunLog:
                 continue
             if type(value) is not float and not (type(value) is np.ndarray and value.ndim == 1):
                 if isinstance(value, rr.EncodedImage) or is_image(value):
+                    self.contents.add_sensor(sensor, key, True)
                     self.rec.set_time(TIMELINE, duration=t)
                     self.rec.log(f"sensors/{sensor}/{key}", value if isinstance(value, rr.EncodedImage) else
                                  encode_image(value))
@@ -239,8 +216,15 @@ class RerunLog:
                 value = np.ravel(np.asarray(value, float))
             column = columns.get(key)
             if column is None:
-                column = columns[key] = _Column(np.size(value), f"sensor '{sensor}' {key}")
+                column = columns[key] = Column(np.size(value), f"sensor '{sensor}' {key}")
+                self._name_sensor_series(sensor, key, np.size(value))
             column.append(t, value)
+
+    def _name_sensor_series(self, sensor: str, key: str, width: int) -> None:
+        label = labelled(key)
+        names = [label] if width == 1 else [f"{label} {i}" for i in range(width)]
+        self.rec.log(f"sensors/{sensor}/{key}", rr.SeriesLines(names=names), static=True)
+        self.contents.add_sensor(sensor, key, False)
 
     def flush(self) -> None:
         """Send buffered poses and sensor readings as columns."""
@@ -249,9 +233,9 @@ class RerunLog:
             times = np.array([r[0] for r in rows])
             names = rows[0][1].names
             pos = np.array([r[1].positions for r in rows])
-            quat = _xyzw(np.array([r[1].quats_wxyz for r in rows]))
+            quat = xyzw(np.array([r[1].quats_wxyz for r in rows]))
             for i, name in enumerate(names):
-                self._send(f"world/bodies/{_part(name)}", times,
+                self._send(f"world/bodies/{entity_part(name)}", times,
                            lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
             ee = np.array(self._ee_path[-len(rows):])
             self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))
@@ -269,6 +253,10 @@ class RerunLog:
             self._queue.append(send)
         else:
             send()
+
+    def send_layout(self) -> None:
+        """The recording's blueprint, for what it holds now (sent at the start of a live run, and at the end)."""
+        self.rec.send_blueprint(blueprint(self.contents), make_active=True, make_default=True)
 
     @property
     def queued(self) -> int:
@@ -292,6 +280,8 @@ class RerunLog:
         if self._ee_path:
             self.rec.log("world/end_effector_path", rr.LineStrips3D([np.array(self._ee_path)],
                                                                      colors=[[250, 180, 40]], radii=0.004), static=True)
+            self.frame_on(np.array(self._ee_path))
+        self.send_layout()
         self.rec.flush()
         self.rec.disconnect()
         os.replace(self.tmp, self.path)

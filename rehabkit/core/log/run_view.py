@@ -55,20 +55,31 @@ class RunView:
         if self._drawn:
             log.scene(setup.backend.visual_geoms())
         named = [(n, t) for n, t in setup.targets.items() if t.pose is not None]
-        log.targets(0.0, [n for n, _ in named], model.to_world([t.pose[:3, 3] for _, t in named]))
+        targets = model.to_world([t.pose[:3, 3] for _, t in named]) if named else np.zeros((0, 3))
+        log.targets(0.0, [n for n, _ in named], targets)
+        log.frame_on(targets)
+        if (box := setup.safety.keep_in) is not None:
+            log.box("world/safety/keep_in", *box, (230, 150, 30), "keep-in box (the hand stays inside)")
         for name, points in setup.planner.joint_space_visuals().items():
-            self._joint_space = True
+            self._joint_space = log.contents.joint_space = True
             log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
         self.log = log
+        self._framed = False
+        if spawn:  # a live viewer lays the run out as it comes (the file gets the final layout at the end)
+            log.send_layout()
 
     def record_step(self, t: float, k: int, q: np.ndarray, trace: Trace) -> None:
         """A logged step: the bodies' poses and the hand (the backend's, where it tracks them; else the robot's
         kinematics), a simulated person's drawings, and the joint series when enough are buffered."""
         a, log = self.setup, self.log
         if self._drawn:
-            log.record(t, a.backend.body_poses(), a.backend.ee_position())
+            bodies, hand = a.backend.body_poses(), a.backend.ee_position()
         else:
-            log.record(t, NO_BODIES, a.robot.ee_world(q[None])[0])
+            bodies, hand = NO_BODIES, a.robot.ee_world(q[None])[0]
+        log.record(t, bodies, hand)
+        if not self._framed:  # the 3-D view holds the bodies where they start, the targets and the hand's path
+            self._framed = True
+            log.frame_on(bodies.positions)
         if self._draws is not None:
             for name, shapes in self._draws().items():
                 log.drawing(t, f"world/patient/{name}", shapes)
@@ -78,6 +89,16 @@ class RunView:
     def event(self, t: float, text: str, level: str = "INFO") -> None:
         """A line in the recording's text log (an event, a note, a warning)."""
         self.log.event(t, text, level=level)
+
+    def verdicts(self, t: float, summary: dict) -> None:
+        """The summary's verdicts at the end of the text log, as the terminal says them."""
+        for e in summary["expectations"]:
+            value = "missing" if e["value"] is None else f"{e['value']:.6g}"
+            why = f"  — {e['reason']}" if e.get("reason") else ""
+            self.log.event(t, f"{'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
+                           + why, level="INFO" if e["passed"] else "ERROR")
+        self.log.event(t, f"run {'PASSED' if summary['passed'] else 'FAILED'}",
+                       level="INFO" if summary["passed"] else "ERROR")
 
     def sensor(self, t: float, name: str, reading: dict) -> None:
         """A sensor's reading, and where it saw a target."""
@@ -113,13 +134,15 @@ class RunView:
     def executed(self, trace: Trace, k: int) -> None:
         """The rest of the joint series, and the executed path in the joint space where it is drawn."""
         self.flush(trace, k)
+        limits = self.setup.safety.limits  # the ranges the run kept to (the envelope's, where narrower)
+        self.log.joint_limits(float(trace.t[k - 1]) if k else 0.0, limits.lower, limits.upper)
         if self._joint_space and k:
             self.log.line("joint_space/executed", np.degrees(trace.q[:k:10]), (250, 180, 40), 0.3)
 
     def finish(self, interventions: list, series: Callable[[], dict[str, tuple[np.ndarray, np.ndarray]]]) -> None:
         """The safety layer's interventions as events, and the run's series (backend, plugins, extensions)."""
         for ev in interventions:
-            self.log.event(ev.t, f"SAFETY {ev.rule}: {ev.message}", level=ev.level)
+            self.log.safety_event(ev)
         for path, (t, values) in series().items():
             self.log.series(path, np.asarray(t, float), np.asarray(values, float))
 
@@ -143,7 +166,7 @@ class NullView:
     def _nothing(self, *args, **kwargs) -> None:
         return None
 
-    record_step = event = sensor = planner_drawings = plan = flush = executed = finish = discard = _nothing
+    record_step = event = verdicts = sensor = planner_drawings = plan = flush = executed = finish = discard = _nothing
 
     def close(self) -> dict[str, str]:
         return {}

@@ -134,6 +134,7 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                        # the host's interventions and the robot side's (a bridge's held commands), in time order
                        interventions=sorted(a.safety.interventions + a.backend.interventions(), key=lambda e: e.t))
     summary = summarize(a, record, session.catalogue, session.view)
+    session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:
         summary["outputs"] = {**session.view.close(), "scenario": SNAPSHOT}
         snapshot = (f"# {a.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "

@@ -16,7 +16,7 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import NamedJoints, PassiveJoints
 from rehabkit.core.kinds.interfaces import BackendFaultError, Plan, PlanningError, Target
-from rehabkit.core.log.rerun_log import encode_images
+from rehabkit.core.log.archetypes import encode_images
 from rehabkit.core.log.run_view import NullView, RunView, open_view
 from rehabkit.core.results.metric import MetricCatalogue
 from rehabkit.core.results.metrics import Trace
@@ -119,7 +119,10 @@ class RunSession:
         if problem:
             self._refuse(PlanRefusal(t, problem, breach=breach, actions=actions, first=first), q, "; not executed")
             return
+        said = len(self.gate.warnings)
         self.gate.warn_box(t, plan)
+        for w in self.gate.warnings[said:]:  # (the terminal's PLAN line, in the recording when it is said)
+            self.view.event(t, f"PLAN {w['message']}", level="WARN")
         self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
         self.timeline.following(request.names, t, plan.waypoint_times)
 

@@ -51,6 +51,7 @@ class SafetyLayer:
         margin = math.radians(config.position_margin_deg)
         self.names = robot.joint_names
         self._revolute = robot.revolute
+        self.limits = lim  # the ranges, speeds and torques the run keeps to (the envelope's where narrower)
         self.lo, self.hi = lim.lower - margin, lim.upper + margin
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
@@ -122,6 +123,11 @@ class SafetyLayer:
     @property
     def watches_box(self) -> bool:
         return self._box is not None
+
+    @property
+    def keep_in(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The keep-in box's world corners (min, max) the hand is watched against, if there is one."""
+        return self._box
 
     def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""

@@ -1,0 +1,102 @@
+"""Rerun's pieces for a run's recording: colours, a model's shapes as archetypes, images, buffered columns."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from rehabkit.core.kinds.interfaces import GeomVisual
+
+# a joint's colour (measured: full, reference: paler and thinner), the same in every panel; Rerun's own palette order
+PALETTE = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+           (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207))
+LIMIT_RGB = (110, 110, 110)
+
+
+def rgba(c) -> list[int]:
+    return [int(round(255 * v)) for v in c]
+
+
+def rgba_rows(values) -> np.ndarray | None:
+    return None if values is None else np.round(255 * np.clip(np.asarray(values, float), 0, 1)).astype(np.uint8)
+
+
+def xyzw(wxyz: np.ndarray) -> np.ndarray:
+    return np.asarray(wxyz)[..., [1, 2, 3, 0]]
+
+
+def shape(g: GeomVisual):
+    """A Rerun archetype for a primitive, in the geom's own frame."""
+    color = [rgba(g.rgba)]
+    if g.shape == "sphere":
+        return rr.Ellipsoids3D(half_sizes=[[g.size[0]] * 3], colors=color, fill_mode="solid")
+    if g.shape == "ellipsoid":
+        return rr.Ellipsoids3D(half_sizes=[g.size], colors=color, fill_mode="solid")
+    if g.shape == "box":
+        return rr.Boxes3D(half_sizes=[g.size], colors=color, fill_mode="solid")
+    if g.shape == "plane":
+        return rr.Boxes3D(half_sizes=[[g.size[0], g.size[1], 0.001]], colors=color, fill_mode="solid")
+    if g.shape == "cylinder":
+        return rr.Cylinders3D(lengths=[2 * g.size[1]], radii=[g.size[0]], colors=color, fill_mode="solid")
+    if g.shape == "mesh" and g.mesh is not None:
+        return rr.Mesh3D(vertex_positions=g.mesh[0], triangle_indices=g.mesh[1], albedo_factor=color[0])
+    if g.shape == "capsule":  # Rerun's capsule starts at the origin; MuJoCo's is centred
+        return rr.Capsules3D(lengths=[2 * g.size[1]], radii=[g.size[0]], translations=[[0, 0, -g.size[1]]],
+                             colors=color, fill_mode="solid")
+    return None
+
+
+def is_image(value: Any) -> bool:
+    """An RGB image as sensors give them: ``HxWx3`` uint8."""
+    return isinstance(value, np.ndarray) and value.ndim == 3 and value.shape[2] == 3 and value.dtype == np.uint8
+
+
+def encode_image(rgb: np.ndarray) -> rr.EncodedImage:
+    """JPEG for the log (OpenCV's encoder: ~4x faster than Rerun's own here, and it lets other threads run)."""
+    import cv2  # only runs with cameras pay for importing OpenCV
+
+    ok, data = cv2.imencode(".jpg", np.ascontiguousarray(rgb[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, 85])
+    if not ok:
+        raise ValueError("could not encode an image for the log")
+    return rr.EncodedImage(contents=data.tobytes(), media_type="image/jpeg")
+
+
+def encode_images(reading: dict[str, Any]) -> dict[str, Any]:
+    """The reading with its images encoded for the log (done where the reading is made, off the loop)."""
+    return {k: encode_image(v) if is_image(v) else v for k, v in reading.items()}
+
+
+
+def paler(rgb: tuple[int, int, int]) -> list[int]:
+    return [int(v + 0.55 * (255 - v)) for v in rgb]
+
+
+def entity_part(name: str) -> str:
+    """A model's name as one entity-path part (MyoSuite names hold spaces, which Rerun warns about)."""
+    return name.replace(" ", "_")
+
+class Column:
+    """One sensor value's readings, appended in place (no per-sample list to convert at the flush)."""
+
+    def __init__(self, width: int, what: str):
+        self.t, self.values, self.n, self.what = np.empty(256), np.empty((256, width)), 0, what
+
+    def append(self, t: float, value) -> None:
+        n = self.n
+        if n == len(self.t):
+            self.t = np.resize(self.t, 2 * n)
+            self.values = np.resize(self.values, (2 * n, self.values.shape[1]))
+        try:
+            self.values[n] = value
+        except ValueError:
+            raise ValueError(f"{self.what}: {np.size(value)} values, {self.values.shape[1]} in its earlier "
+                             "readings (a reading's arrays keep their size; log a changing set as points)") from None
+        self.t[n] = t
+        self.n = n + 1
+
+    def take(self) -> tuple[np.ndarray, np.ndarray]:
+        """The buffered (times, values), copied; the buffer starts over."""
+        n, self.n = self.n, 0
+        return self.t[:n].copy(), self.values[:n].copy()

@@ -1,0 +1,166 @@
+"""What a person sees when a run's recording opens in Rerun's viewer: the layout sent with it (a blueprint) and the
+entities it shows, read back from the ``.rrd`` with Rerun's own reader."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rerun.chunk as rc
+
+from rehabkit.testing import group
+from tests.conftest import SCENARIOS
+
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+LEXOS_MYOARM = SCENARIOS / "lexos_myoarm.yaml"
+
+
+def _columns(chunk) -> dict[str, list]:
+    """A chunk's component columns (not its row ids and timelines), each a list of rows."""
+    batch, skip = chunk.to_record_batch(), set(chunk.timeline_names)
+    return {name: batch.column(name).to_pylist() for name in batch.schema.names
+            if name not in skip and not name.startswith("rerun.")}
+
+
+def read_layout(rrd) -> tuple[list, dict[str, dict]]:
+    """The blueprint's tree from its root (containers as ``(kind, name, [children])``, views as ``(class, name,
+    origin, contents)``) and the views by id, as the viewer reads them from the file."""
+    reader = rc.RrdReader(rrd)
+    (store,) = reader.blueprints()
+    parts: dict[str, dict[str, list]] = {}
+    for chunk in reader.stream(store=store).to_chunks():
+        for name, values in _columns(chunk).items():
+            parts.setdefault(chunk.entity_path.strip("/"), {})[name] = values[-1]
+    views = {}
+
+    def node(path: str):
+        p = parts[path]
+        if path.startswith("container/"):
+            kind = p["ContainerBlueprint:container_kind"][0]
+            name = (p.get("ContainerBlueprint:display_name") or [None])[0]
+            return ("container", kind, name, [node(c) for c in p["ContainerBlueprint:contents"]])
+        contents = parts.get(f"{path}/ViewContents", {}).get("ViewContents:query", [])
+        view = (p["ViewBlueprint:class_identifier"][0], p["ViewBlueprint:display_name"][0],
+                p["ViewBlueprint:space_origin"][0], tuple(contents))
+        views[path] = {"view": view, **parts.get(f"{path}/EyeControls3D", {})}
+        return view
+
+    (root,) = parts["viewport"]["ViewportBlueprint:root_container"]
+    root_path = "container/" + "".join(f"{b:02x}" for b in root)
+    root_path = next(p for p in parts if p.replace("-", "") == root_path)
+    return node(root_path), views
+
+
+def recording(rrd) -> dict[str, dict[str, list]]:
+    """Each entity's static components and, for the rest, every logged value in order (path -> component -> list)."""
+    reader = rc.RrdReader(rrd)
+    (store,) = reader.recordings()
+    out: dict[str, dict[str, list]] = {}
+    for chunk in reader.stream(store=store).to_chunks():
+        for name, values in _columns(chunk).items():
+            out.setdefault(chunk.entity_path.strip("/"), {}).setdefault(name, []).extend(values)
+    return out
+
+
+def _flat(tree) -> list[tuple]:
+    if tree[0] == "container":
+        return [v for child in tree[3] for v in _flat(child)]
+    return [tree]
+
+
+def _run(path, overrides, out):
+    """The run, and its plugins as they were built (to check the recording against)."""
+    from rehabkit.core.run.runner import Runner
+    from rehabkit.core.scenario.loader import load_scenario
+
+    runner = Runner(load_scenario(path, overrides), out_dir=out)
+    result = runner.run()
+    result.setup = runner.setup
+    return result
+
+
+@pytest.fixture(scope="module")
+def hit_rrd(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hit")
+    return out / "run.rrd", _run(HIT, {"duration": 2.0}, out)
+
+
+def test_the_recording_opens_with_a_scene_framed_on_the_robot_and_a_panel_per_joint(hit_rrd):
+    rrd, result = hit_rrd
+    tree, views = read_layout(rrd)
+    flat = _flat(tree)
+    joints = result.setup.robot.model.joint_names
+    for j in joints:  # measured, reference and limits of the same joint, in one panel
+        assert ("TimeSeries", f"{j} [deg]: measured, reference, limits", f"joints/{j}", ("$origin/**",)) in flat
+    assert any(v[0] == "TextLog" and v[2] == "events" for v in flat)
+    (scene,) = [v for v in views.values() if v["view"][0] == "3D" and v["view"][2] == "world"]
+    eye, target = np.array(scene["EyeControls3D:position"][0]), np.array(scene["EyeControls3D:look_target"][0])
+    # framed on the robot (HIT spans ~0.8 m), not on the 6 x 6 m floor: the target among its bodies, the eye near
+    bodies = np.array([result.setup.backend.body_poses().positions]).reshape(-1, 3)
+    assert np.all(target >= bodies.min(axis=0) - 0.2) and np.all(target <= bodies.max(axis=0) + 0.2)
+    assert 0.8 < np.linalg.norm(eye - target) < 3.0
+
+
+def test_measured_and_reference_are_told_apart_by_name_colour_and_width_and_limits_are_drawn(hit_rrd):
+    rrd, result = hit_rrd
+    data = recording(rrd)
+    model = result.setup.robot.model
+    for i, j in enumerate(model.joint_names):
+        measured, reference = data[f"joints/{j}/measured_deg"], data[f"joints/{j}/reference_deg"]
+        assert measured["SeriesLines:names"] == [[f"{j} measured [deg]"]]
+        assert reference["SeriesLines:names"] == [[f"{j} reference [deg]"]]
+        assert measured["SeriesLines:colors"] != reference["SeriesLines:colors"]
+        assert measured["SeriesLines:widths"][0][0] > reference["SeriesLines:widths"][0][0]
+        q = np.array(measured["Scalars:scalars"]).ravel()
+        assert np.allclose(q, np.degrees(result.trace.q[::10, i])[: len(q)], atol=1e-9)  # degrees, at the log rate
+        limits = np.array(data[f"joints/{j}/limits_deg"]["Scalars:scalars"])
+        assert np.allclose(limits[0], np.degrees([model.limits.lower[i], model.limits.upper[i]]))
+    for series, unit in (("joint_velocity_deg_s", "deg/s"), ("joint_torque_nm", "N·m")):
+        assert data[series]["SeriesLines:names"][0] == [f"{j} [{unit}]" for j in model.joint_names]
+
+
+def test_the_text_log_ends_with_the_verdicts_the_terminal_prints(hit_rrd):
+    rrd, result = hit_rrd
+    lines = [text for batch in recording(rrd)["events"]["TextLog:text"] for text in batch]
+    verdicts = [f"{'PASS' if e['passed'] else 'FAIL'}  {e['metric']}" for e in result.summary["expectations"]]
+    assert verdicts and all(any(line.startswith(v) for line in lines) for v in verdicts)
+    assert lines[-1] == ("run PASSED" if result.passed else "run FAILED")
+
+
+def test_the_same_run_opens_with_the_same_layout(hit_rrd, tmp_path):
+    from rehabkit.api import run_scenario
+
+    rrd, _ = hit_rrd
+    run_scenario(HIT, {"duration": 2.0}, out_dir=tmp_path)
+    assert read_layout(tmp_path / "run.rrd")[0] == read_layout(rrd)[0]
+
+
+def test_a_keep_in_breach_says_the_plan_warning_and_the_stop_with_its_fields_and_draws_the_box(tmp_path):
+    breach = SCENARIOS.parent / "examples" / "hit_keep_in_breach.yaml"
+    result = _run(breach, {}, tmp_path)
+    data = recording(tmp_path / "run.rrd")
+    events = data["events"]
+    lines = [text for batch in events["TextLog:text"] for text in batch]
+    levels = [level for batch in events["TextLog:level"] for level in batch]
+    warning = result.summary["safety"]["plan_warnings"][0]["message"]
+    assert levels[lines.index(f"PLAN {warning}")] == "WARN"
+    trip = result.summary["safety"]["events"][0]
+    (said,) = [line for line in lines if line.startswith(f"SAFETY {trip['rule']}") and trip["message"] in line]
+    assert trip["joint"] is None or f"joint {trip['joint']}" in said
+    assert trip["rule"] in [r for batch in events["rule"] for r in batch]  # the event's fields, beside its line
+    lo, hi = result.setup.safety.keep_in
+    box = data["world/safety/keep_in"]
+    assert np.allclose(box["Boxes3D:centers"][0][0], (lo + hi) / 2)
+    assert np.allclose(box["Boxes3D:half_sizes"][0][0], (hi - lo) / 2)
+
+
+@pytest.mark.xdist_group(group(LEXOS_MYOARM))
+def test_a_musculoskeletal_person_gets_panels_for_every_strap_and_muscle_group(scenario_run):
+    r = scenario_run(LEXOS_MYOARM)  # (its scenario test's run)
+    tree, _ = read_layout(r.out_dir / "run.rrd")
+    flat = _flat(tree)
+    logged = sorted(recording(r.out_dir / "run.rrd"))
+    cuffs = tuple(p for p in logged if p.startswith("patient/cuff_force_n/"))
+    muscles = tuple(p for p in logged if p.startswith("patient/activation/"))
+    assert len(cuffs) == 2 and len(muscles) == 5  # (the upper arm's and the forearm's straps; the MyoArm's groups)
+    assert ("TimeSeries", "cuff force [N]", "patient/cuff_force_n", cuffs) in flat
+    assert ("TimeSeries", "activation", "patient/activation", muscles) in flat
