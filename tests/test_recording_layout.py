@@ -90,7 +90,7 @@ def test_the_recording_opens_with_a_scene_framed_on_the_robot_and_a_panel_per_jo
     flat = _flat(tree)
     joints = result.setup.robot.model.joint_names
     for j in joints:  # measured, reference and limits of the same joint, in one panel
-        assert ("TimeSeries", f"{j} [deg]: measured, reference, limits", f"joints/{j}", ("$origin/**",)) in flat
+        assert ("TimeSeries", f"{j} [deg]", f"joints/{j}", ("$origin/**",)) in flat
     assert any(v[0] == "TextLog" and v[2] == "events" for v in flat)
     (scene,) = [v for v in views.values() if v["view"][0] == "3D" and v["view"][2] == "world"]
     eye, target = np.array(scene["EyeControls3D:position"][0]), np.array(scene["EyeControls3D:look_target"][0])

@@ -87,7 +87,8 @@ def blueprint(contents: Contents) -> rrb.Blueprint:
     scene = rrb.Spatial3DView(name="scene", origin="world", eye_controls=rrb.EyeControls3D(
         kind=rrb.Eye3DKind.Orbital, position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0]))
     left = [scene, rrb.TextLogView(name="events, notes and verdicts", origin="events")]
-    tabs = [rrb.Grid(*[rrb.TimeSeriesView(name=f"{j} [deg]: measured, reference, limits", origin=f"joints/{j}")
+    tabs = [rrb.Grid(*[rrb.TimeSeriesView(name=f"{j} [deg]", origin=f"joints/{j}",
+                                          plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.LeftTop))
                        for j in contents.joints], name="joint angles")]
     tabs.append(rrb.Grid(rrb.TimeSeriesView(name="joint speeds [deg/s]", origin="joint_velocity_deg_s"),
                          rrb.TimeSeriesView(name="joint torques [N·m]", origin="joint_torque_nm"),
@@ -110,7 +111,7 @@ def blueprint(contents: Contents) -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*left, row_shares=[3, 1]), rrb.Tabs(*tabs), column_shares=[1, 1]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="expanded"), auto_layout=False, auto_views=False)
+        rrb.TimePanel(state="collapsed"), auto_layout=False, auto_views=False)
 
 
 def _by_top(groups: dict[str, list[str]]) -> dict[str, dict[str, list[str]]]:

@@ -60,6 +60,7 @@ class RunView:
         log.frame_on(targets)
         if (box := setup.safety.keep_in) is not None:
             log.box("world/safety/keep_in", *box, (230, 150, 30), "keep-in box (the hand stays inside)")
+            log.frame_on(np.array(box))
         for name, points in setup.planner.joint_space_visuals().items():
             self._joint_space = log.contents.joint_space = True
             log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
