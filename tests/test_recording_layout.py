@@ -164,3 +164,32 @@ def test_a_musculoskeletal_person_gets_panels_for_every_strap_and_muscle_group(s
     assert len(cuffs) == 2 and len(muscles) == 5  # (the upper arm's and the forearm's straps; the MyoArm's groups)
     assert ("TimeSeries", "cuff force [N]", "patient/cuff_force_n", cuffs) in flat
     assert ("TimeSeries", "activation", "patient/activation", muscles) in flat
+
+
+def test_a_robot_whose_model_has_meshes_is_drawn_with_them(tmp_path):
+    """An MJCF robot whose tool is a mesh (a tetrahedron, inline): its recording holds that mesh, vertex for
+    vertex, on the tool's body — not a primitive standing in for it."""
+    robots = SCENARIOS.parent / "examples" / "robots"
+    xml = (robots / "arm5.xml").read_text()
+    box = '<geom type="box" size="0.04 0.03 0.01" pos="0.04 0 0" mass="0.2"/>'
+    assert box in xml
+    vertices = [[0, 0, 0], [0.08, 0, 0], [0, 0.05, 0], [0, 0, 0.03]]
+    mesh = " ".join(str(v) for p in vertices for v in p)
+    xml = xml.replace(box, '<geom type="mesh" mesh="tool_tip" mass="0.2" rgba="0.9 0.6 0.1 1"/>')
+    xml = xml.replace("<worldbody>", f'<asset><mesh name="tool_tip" vertex="{mesh}"/></asset>\n  <worldbody>', 1)
+    (tmp_path / "arm5_mesh.xml").write_text(xml)
+    scenario = (robots / "mjcf_arm5.yaml").read_text().replace("file: arm5.xml", "file: arm5_mesh.xml")
+    (tmp_path / "arm.yaml").write_text(scenario)
+    _run(tmp_path / "arm.yaml", {"duration": 0.2, "expect": {}}, tmp_path / "out")
+    data = recording(tmp_path / "out" / "run.rrd")
+    (path,) = [p for p, c in data.items() if "Mesh3D:vertex_positions" in c]
+    from scipy.spatial.transform import Rotation
+
+    drawn = np.array(data[path]["Mesh3D:vertex_positions"][0])
+    assert path.startswith("world/bodies/") and len(drawn) == 4
+    # MuJoCo keeps a mesh in its principal frame, the geom's pose placing it: drawn so, in the body it is where
+    # the file put it
+    pose = data[path]
+    rot = Rotation.from_quat(pose["Transform3D:quaternion"][0][0])  # (x, y, z, w)
+    in_body = rot.apply(drawn) + pose["Transform3D:translation"][0][0]
+    assert np.allclose(in_body, vertices, atol=1e-6)
