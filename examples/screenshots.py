@@ -12,7 +12,9 @@ the same, after the data has loaded. Run it again whenever what a recording hold
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -58,7 +60,7 @@ def photograph(rrd: Path, png: Path, chromium: str, settle_s: float = 8.0, timeo
     web, grpc = free_port(), free_port()
     viewer = subprocess.Popen([shutil.which("rerun"), "--web-viewer", "--bind", "127.0.0.1", "--web-viewer-port",
                                str(web), "--port", str(grpc), "--renderer", "webgl", str(rrd)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         url = f"http://127.0.0.1:{web}/?url={quote(f'rerun+http://127.0.0.1:{grpc}/proxy', safe='')}&renderer=webgl"
         with sync_playwright() as p:
@@ -83,8 +85,8 @@ def photograph(rrd: Path, png: Path, chromium: str, settle_s: float = 8.0, timeo
                 last = shot
             png.write_bytes(last)
             browser.close()
-    finally:
-        viewer.terminate()
+    finally:  # the whole group: `rerun` is a launcher whose viewer is a process of its own
+        os.killpg(viewer.pid, signal.SIGTERM)
         viewer.wait(timeout=10)
 
 

@@ -193,3 +193,28 @@ def test_a_robot_whose_model_has_meshes_is_drawn_with_them(tmp_path):
     rot = Rotation.from_quat(pose["Transform3D:quaternion"][0][0])  # (x, y, z, w)
     in_body = rot.apply(drawn) + pose["Transform3D:translation"][0][0]
     assert np.allclose(in_body, vertices, atol=1e-6)
+
+
+@pytest.mark.xdist_group(group(LEXOS_MYOARM))
+def test_muscles_move_with_the_bones_and_cuff_forces_are_arrows_to_scale(scenario_run):
+    r = scenario_run(LEXOS_MYOARM)
+    data = recording(r.out_dir / "run.rrd")
+    bones = len(data["world/end_effector"]["Points3D:positions"])  # a row per logged sample
+    assert len(data["world/patient/muscles/lines"]["LineStrips3D:strips"]) == bones
+    arrows = data["world/patient/cuffs/arrows"]
+    vectors = np.array([v for row in arrows["Arrows3D:vectors"] for v in row])
+    labels = [label for row in arrows["Arrows3D:labels"] for label in row]
+    sizes = np.array([float(label.split()[-6]) for label in labels])  # "<segment> 12.3 N (1 cm per N)"
+    assert all(label.endswith("N (1 cm per N)") for label in labels)
+    assert np.allclose(np.linalg.norm(vectors, axis=1), sizes / 100, atol=0.0006)  # 1 cm per N, to the label's 0.1 N
+    assert sizes.max() == pytest.approx(r.metrics["peak_cuff_force_n"], rel=0.05) and sizes.max() > 10
+
+
+def test_angles_a_sensor_reads_in_radians_are_logged_in_degrees(hit_rrd):
+    rrd, result = hit_rrd
+    data = recording(rrd)
+    assert "sensors/encoders/position_rad" not in data
+    logged = np.array(data["sensors/encoders/position_deg"]["Scalars:scalars"])
+    assert data["sensors/encoders/position_deg"]["SeriesLines:names"][0][0].startswith("position [deg]")
+    every = round(len(result.trace.q) / len(logged))  # (the encoder's rate)
+    assert np.abs(logged - np.degrees(result.trace.q[::every][: len(logged)])).max() < 0.5

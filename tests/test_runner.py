@@ -57,7 +57,7 @@ def test_rrd_holds_geometry_poses_paths_and_series(hit_run):
                           text=True, timeout=120).stdout
     for entity in ("/world/bodies/elbow_2_link/elbow_2_g0", "/world/bodies/wrist_2_link - data columns: [Transform3D",
                    "/world/plan/path", "/world/targets", "/world/end_effector_path", "/tracking_error_deg",
-                   "/sensors/encoders/position_rad", "/world/scene/floor"):
+                   "/sensors/encoders/position_deg", "/world/scene/floor"):
         assert entity in text, entity
 
 

@@ -56,6 +56,7 @@ class Drawing:
         origins: Arrow tails (m, 3) [m].
         vectors: Arrows (m, 3) [m].
         arrow_rgba: One colour per arrow (m, 4), 0..1.
+        arrow_labels: A label per arrow, shown beside it (say the scale: "12.3 N (1 cm per N)").
     """
 
     lines: list[np.ndarray] | None = None
@@ -63,6 +64,7 @@ class Drawing:
     origins: np.ndarray | None = None
     vectors: np.ndarray | None = None
     arrow_rgba: np.ndarray | None = None
+    arrow_labels: list[str] | None = None
 
 
 @dataclass

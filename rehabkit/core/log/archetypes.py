@@ -100,3 +100,12 @@ class Column:
         """The buffered (times, values), copied; the buffer starts over."""
         n, self.n = self.n, 0
         return self.t[:n].copy(), self.values[:n].copy()
+
+
+def in_degrees(key: str) -> tuple[str, float]:
+    """A reading's key as the log shows it, and the factor to its values: angles in degrees throughout
+    (``position_rad`` → ``position_deg``, × 180/π)."""
+    for rad, deg in (("_rad_s", "_deg_s"), ("_rad", "_deg")):
+        if key.endswith(rad):
+            return key[: -len(rad)] + deg, 180.0 / np.pi
+    return key, 1.0

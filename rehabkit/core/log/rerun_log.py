@@ -26,6 +26,7 @@ from rehabkit.core.log.archetypes import (
     Column,
     encode_image,
     entity_part,
+    in_degrees,
     is_image,
     paler,
     rgba_rows,
@@ -65,6 +66,7 @@ class RerunLog:
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
         self._sensor_columns: dict[str, dict[str, Column]] = {}  # sensor -> reading key -> its column
+        self._drawings: dict[str, list[tuple[float, Drawing]]] = {}
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for i, (name, part) in enumerate(zip(joint_names, self.joint_parts)):
@@ -125,19 +127,35 @@ class RerunLog:
         self.rec.log(path, rr.LineStrips3D([points], colors=[color], radii=radius), static=t is None)
 
     def drawing(self, t: float, path: str, shapes: Drawing) -> None:
-        """Shapes that change during the run, at time ``t`` (logged as they come: a few per log sample)."""
-        def send() -> None:
-            self.rec.set_time(TIMELINE, duration=t)
-            if shapes.lines is not None:
-                self.rec.log(f"{path}/lines", rr.LineStrips3D(shapes.lines, colors=rgba_rows(shapes.line_rgba),
-                                                              radii=0.003))
-            if shapes.origins is not None:
-                self.rec.log(f"{path}/arrows", rr.Arrows3D(origins=shapes.origins, vectors=shapes.vectors,
-                                                           colors=rgba_rows(shapes.arrow_rgba), radii=0.006))
-        if self.deferred:
-            self._queue.append(send)
-        else:
-            send()
+        """Shapes that change during the run, at time ``t`` (buffered, and sent as columns with the poses: a row
+        each, as a person's 60-odd muscle paths at the log rate, would cost ~1 ms a sample)."""
+        self._drawings.setdefault(path, []).append((t, shapes))
+
+    def _flush_drawings(self) -> None:
+        drawings, self._drawings = self._drawings, {}
+        for path, rows in drawings.items():
+            lines = [(t, s) for t, s in rows if s.lines is not None]
+            if lines:
+                strips = [np.asarray(line, float) for _, s in lines for line in s.lines]
+                colors = [rgba_rows(s.line_rgba) for _, s in lines if s.line_rgba is not None]
+                fields = {"strips": strips, "radii": np.full(len(strips), 0.003)}
+                if len(colors) == len(lines):
+                    fields["colors"] = np.concatenate(colors)
+                counts = [len(s.lines) for _, s in lines]
+                self._send(f"{path}/lines", np.array([t for t, _ in lines]),
+                           lambda f=fields, n=counts: rr.LineStrips3D.columns(**f).partition(n))
+            arrows = [(t, s) for t, s in rows if s.origins is not None]
+            if arrows:
+                fields = {"origins": np.concatenate([s.origins for _, s in arrows]),
+                          "vectors": np.concatenate([s.vectors for _, s in arrows])}
+                fields["radii"] = np.full(len(fields["origins"]), 0.006)
+                if all(s.arrow_rgba is not None for _, s in arrows):
+                    fields["colors"] = np.concatenate([rgba_rows(s.arrow_rgba) for _, s in arrows])
+                if all(s.arrow_labels is not None for _, s in arrows):
+                    fields["labels"] = [label for _, s in arrows for label in s.arrow_labels]
+                counts = [len(s.origins) for _, s in arrows]
+                self._send(f"{path}/arrows", np.array([t for t, _ in arrows]),
+                           lambda f=fields, n=counts: rr.Arrows3D.columns(**f).partition(n))
 
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)
@@ -221,6 +239,7 @@ class RerunLog:
             column.append(t, value)
 
     def _name_sensor_series(self, sensor: str, key: str, width: int) -> None:
+        key = in_degrees(key)[0]
         label = labelled(key)
         names = [label] if width == 1 else [f"{label} {i}" for i in range(width)]
         self.rec.log(f"sensors/{sensor}/{key}", rr.SeriesLines(names=names), static=True)
@@ -239,11 +258,13 @@ class RerunLog:
                            lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
             ee = np.array(self._ee_path[-len(rows):])
             self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))
+        self._flush_drawings()
         for sensor, columns in self._sensor_columns.items():
             for key, column in columns.items():
                 if column.n:
                     t, values = column.take()
-                    self._send(f"sensors/{sensor}/{key}", t, lambda v=values: rr.Scalars.columns(scalars=v))
+                    logged, scale = in_degrees(key)
+                    self._send(f"sensors/{sensor}/{logged}", t, lambda v=values * scale: rr.Scalars.columns(scalars=v))
 
     def _send(self, path: str, t: np.ndarray, columns: Callable[[], Any]) -> None:
         """Send one entity's columns now, or queue it in deferred mode (``columns`` builds them then)."""
