@@ -97,6 +97,7 @@ class QpStack(Controller):
         lim = self.robot.model.limits
         self.constraints = Constraints(self.config.constraints, self.state, lim.lower, lim.upper, lim.velocity)
         self.base_pose = pin.SE3(self.robot.model.base_pose[:3, :3], self.robot.model.base_pose[:3, 3])
+        self._base_rotation = self.base_pose.rotation  # kept: Pinocchio's accessor wraps a new view on every call
 
     def solve(self, x_ref: np.ndarray | None, xd_ref: np.ndarray | None) -> np.ndarray:
         """One cycle of the stack at the current reference configuration: the generalised velocity."""
@@ -104,7 +105,7 @@ class QpStack(Controller):
         st.update(self.q_des)
         ref = None
         if x_ref is not None:  # runner references are in the base frame; tasks work in the world
-            ref = (self.base_pose.act(np.asarray(x_ref, float)), self.base_pose.rotation @ np.asarray(xd_ref, float))
+            ref = (self.base_pose.act(np.asarray(x_ref, float)), self._base_rotation @ np.asarray(xd_ref, float))
         for task, A, b in self._task_rows:
             task.fill(st, ref if task.follows_runner else None, A, b)
         metric = None

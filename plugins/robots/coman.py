@@ -102,23 +102,22 @@ class ComanRobot(Robot, FloatingBase):
         model = self.floating_model
         data = self._support_data()
         tau = pin.computeGeneralizedGravity(model, data, q_full)  # RNEA(q, 0, 0)
-        pin.computeJointJacobians(model, data, q_full)
-        pin.updateFramePlacements(model, data)
-        jc = self._jc
-        for k, i in enumerate(self._feet_ids):
-            jc[6 * k : 6 * k + 6] = pin.getFrameJacobian(model, data, i, pin.LOCAL_WORLD_ALIGNED)
+        pin.computeJointJacobians(model, data, q_full)  # (a frame's Jacobian needs no frame placements)
+        for i, rows in self._feet_rows:
+            rows[:] = pin.getFrameJacobian(model, data, i, pin.LOCAL_WORLD_ALIGNED)
         # the unactuated pelvis rows must balance: J_c,baseᵀ f = τ_base; the minimum-norm wrenches by the normal
         # equations (two flat feet give a well-conditioned 6×6 system; lstsq's SVD cost 3x as much every cycle)
-        a = jc[:, :6].T
+        a = self._jc_base_t
         _, _, x, info = dgesv(a @ a.T, tau[:6])  # LAPACK directly: numpy's solve costs 3x as much at 6x6
         f = a.T @ x if info == 0 else np.linalg.lstsq(a, tau[:6], rcond=None)[0]
-        return tau[6:] - jc[:, 6:].T @ f
+        return tau[6:] - self._jc_joints_t @ f
 
     def _support_data(self):
         if getattr(self, "_sdata", None) is None:
             self._sdata = self.floating_model.createData()
-            self._feet_ids = [self.floating_model.getFrameId(f) for f in FEET]
-            self._jc = np.zeros((6 * len(FEET), self.floating_model.nv))
+            jc = np.zeros((6 * len(FEET), self.floating_model.nv))  # the feet's Jacobians, stacked
+            self._feet_rows = [(self.floating_model.getFrameId(f), jc[6 * k : 6 * k + 6]) for k, f in enumerate(FEET)]
+            self._jc_base_t, self._jc_joints_t = jc[:, :6].T, jc[:, 6:].T  # views, made once
         return self._sdata
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:

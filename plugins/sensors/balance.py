@@ -51,17 +51,22 @@ class Balance(Sensor):
         self._feet = [self.model.getFrameId(f) for f in config.feet]
         self._polygon = None
         self._feet_xyz = np.zeros((len(self._feet), 3))
+        # views into the data, rewritten in place by each reading's kinematics (Pinocchio's accessors wrap new ones
+        # on every call)
+        self._feet_rows = [(f, self.data.oMf[f].translation, self._feet_xyz[k]) for k, f in enumerate(self._feet)]
+        self._pelvis_rot = self.data.oMi[1].rotation
         self.margin_min, self.slip_max, self.tilt_max = np.inf, 0.0, 0.0
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, float]:
         pos, quat, _, _ = backend.base_state()
         qf = self.robot.pin_configuration(np.asarray(q, float), pos, quat)
         com = pin.centerOfMass(self.model, self.data, qf)
-        pin.updateFramePlacements(self.model, self.data)
+        for f, now, row in self._feet_rows:  # only the frames read: every frame's placement costs more
+            pin.updateFramePlacement(self.model, self.data, f)
+            row[:] = now
         feet = self._feet_xyz
-        for k, f in enumerate(self._feet):
-            feet[k] = self.data.oMf[f].translation
         if self._polygon is None:
+            pin.updateFramePlacements(self.model, self.data)
             pts = np.array([self.data.oMf[f].translation[:2] for f in self._corners])
             hull = ConvexHull(pts)
             self._polygon = (hull.equations[:, :2], -hull.equations[:, 2])
@@ -69,7 +74,7 @@ class Balance(Sensor):
         normals, offsets = self._polygon
         margin = min((offsets - normals @ com[:2]).tolist())  # Python's min/max: ndarray.min costs ~2 us at this size
         slip = max(map(abs, (feet - self._feet0).ravel().tolist()))
-        up_z = self.data.oMi[1].rotation[2, 2]  # the pelvis' z axis, its world z component
+        up_z = self._pelvis_rot[2, 2]  # the pelvis' z axis, its world z component
         tilt = math.degrees(math.acos(min(1.0, max(-1.0, up_z))))
         self.margin_min = min(self.margin_min, margin)
         self.slip_max, self.tilt_max = max(self.slip_max, slip), max(self.tilt_max, tilt)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from rehabkit.numerics.triangular import backward_solve, cholesky, forward_solve
+from rehabkit.numerics import triangular as tri
 
 FEASIBLE_TOL = 1e-9
 CONSISTENT_TOL = 1e-7
@@ -52,29 +52,38 @@ def equality_cascade(A, b, ends, reg, metric, use_metric, lb, ub, G, h):  # prag
             stop = start
             P = metric.copy()
             q = np.zeros(n)
-        L = cholesky(P)
+        L = tri.cholesky_sparse(P)  # P is mostly zero (each task moves few joints): so are L and its solves
         if L.shape[0] == 0:  # not positive definite: the QP solver handles it
             return V, k
         rhs = np.empty((n, m + 1))
         rhs[:, :m] = A[:m].T
         rhs[:, m] = q
-        Z = forward_solve(L, rhs)  # [Y | y]
-        y = np.ascontiguousarray(Z[:, m])
+        Z = tri.forward_solve_sparse(L, rhs)  # [Y | y]
+        y = Z[:, m].copy()
         if m:
             Y = np.ascontiguousarray(Z[:, :m])
-            Ls = cholesky(Y.T @ Y)
+            Ls = tri.cholesky(Y.T @ Y)
             if Ls.shape[0] == 0:  # the rows above are (numerically) dependent: the QP solver
                 return V, k
-            lam = backward_solve(Ls, forward_solve(Ls, (Y.T @ y - e[:m]).reshape(m, 1))[:, 0])
+            lam = tri.backward_solve(Ls, tri.forward_solve(Ls, (Y.T @ y - e[:m]).reshape(m, 1))[:, 0])
             y -= Y @ lam
-        v = backward_solve(L, y)
-        if m and np.max(np.abs(A[:m] @ v - e[:m])) > CONSISTENT_TOL:
-            return V, k
+        v = tri.backward_solve_sparse(L, y)
+        # the tests below only decide (against tolerances far above rounding): loops, not a BLAS call each
+        for i in range(m):
+            r = -e[i]
+            for j in range(n):
+                r += A[i, j] * v[j]
+            if abs(r) > CONSISTENT_TOL:
+                return V, k
         for i in range(n):
             if v[i] < lb[i] - FEASIBLE_TOL or v[i] > ub[i] + FEASIBLE_TOL:
                 return V, k
-        if G.shape[0] and np.max(G @ v - h) > FEASIBLE_TOL:
-            return V, k
+        for i in range(G.shape[0]):
+            r = -h[i]
+            for j in range(n):
+                r += G[i, j] * v[j]
+            if r > FEASIBLE_TOL:
+                return V, k
         V[k] = v
         if k < len(ends):
             e[start:stop] = Ak @ v

@@ -116,7 +116,6 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
         ends = np.cumsum([len(lv.b) for lv in levels])
     else:
         A, b, ends = stacked
-    starts = np.concatenate([[0], ends[:-1]])
     freedom_left = bool(ends[-1] < n)  # else the levels leave nothing to choose (generically)
     # the common case first: every step's equality-constrained optimum, in one compiled call
     V, done = equality_cascade(A, b, ends, reg, H, freedom_left, ineq.lb, ineq.ub, ineq.G, ineq.h)
@@ -126,7 +125,9 @@ def solve_cascade(levels: list[Level], ineq: Inequalities, reg: float = 1e-6, so
         if warm is not None:
             warm[:] = list(V)
         r = A @ V[-1] - b
-        return StackResult(V[-1], np.sqrt(np.add.reduceat(r * r, starts)).tolist())  # ‖A_k v − b_k‖
+        r *= r
+        starts = np.concatenate(([0], ends[:-1]))
+        return StackResult(V[-1], np.sqrt(np.add.reduceat(r, starts)).tolist())  # ‖A_k v − b_k‖
     steps: list[Level | None] = [*levels, *([None] if freedom_left else [])]  # None: the least kinetic energy
     v = np.zeros(n)
     rows: list[np.ndarray] = []

@@ -88,13 +88,15 @@ class KinematicState:
     def __init__(self, model: pin.Model):
         self.model, self.data = model, model.createData()
         self.q = pin.neutral(model)
+        # views into ``data``, which every update rewrites in place: Pinocchio's accessors wrap new ones on every call
+        self.com, self.com_jacobian = self.data.com[0], self.data.Jcom
+        self._poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def update(self, q: np.ndarray) -> None:
         self.q = q
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
-        self.com_jacobian = pin.jacobianCenterOfMass(self.model, self.data, True)  # from the kinematics just done
-        self.com = self.data.com[0]
+        pin.jacobianCenterOfMass(self.model, self.data, True)  # into com, com_jacobian: from the kinematics just done
 
     def frame_id(self, name: str) -> int:
         if not self.model.existFrame(name):
@@ -103,6 +105,14 @@ class KinematicState:
 
     def placement(self, fid: int) -> pin.SE3:
         return self.data.oMf[fid]
+
+    def pose(self, fid: int) -> tuple[np.ndarray, np.ndarray]:
+        """A frame's rotation and position, as views that every update rewrites."""
+        views = self._poses.get(fid)
+        if views is None:
+            oMf = self.data.oMf[fid]
+            views = self._poses[fid] = (oMf.rotation, oMf.translation)
+        return views
 
     def jacobian(self, fid: int) -> np.ndarray:
         return pin.getFrameJacobian(self.model, self.data, fid, pin.LOCAL_WORLD_ALIGNED)
@@ -115,9 +125,13 @@ def orientation_error(current: np.ndarray, desired: np.ndarray) -> np.ndarray:
     with its scalar part positive (the shorter way round, so ω = λ·e converges) straight from that matrix:
     building two quaternions through Pinocchio cost ~10 us a call.
     """
+    return np.array(_orientation_error(current, desired))
+
+
+def _orientation_error(current: np.ndarray, desired: np.ndarray) -> tuple[float, float, float]:
     (a, b, c), (d, e, f), (g, h, i) = (desired @ current.T).tolist()  # floats: 9 indexings cost more
     w2 = 2.0 * math.sqrt(max(1.0 + a + e + i, 1e-12))  # 4η
-    return np.array([(h - f) / w2, (c - g) / w2, (d - b) / w2])
+    return (h - f) / w2, (c - g) / w2, (d - b) / w2
 
 
 class Task:
@@ -134,7 +148,8 @@ class Task:
             self.start_p = self.start.translation.copy()
         if spec.type == "orientation":
             self.axes = [AXIS[a] for a in spec.axes]
-            self._axes = np.array(self.axes)
+            self._rows = 3 + np.array(self.axes)  # of the frame's Jacobian
+            self._wg = spec.weight * spec.gain
         if spec.type == "posture":
             unknown = [n for n in (spec.joints or []) + spec.exclude if n not in joint_names]
             names = [n for n in (spec.joints or joint_names) if n not in spec.exclude]
@@ -147,6 +162,7 @@ class Task:
             self.target = np.radians(spec.target_deg) if spec.target_deg is not None else state.q[self.qidx].copy()
             self.A = np.zeros((len(names), nv))
             self.A[np.arange(len(names)), self.idx] = spec.weight  # constant: weighted once
+            self._wg = spec.weight * spec.gain
         if spec.type == "com":
             self.axes = [AXIS[a] for a in spec.axes]
             self.start_com = state.com.copy()
@@ -179,26 +195,34 @@ class Task:
         s = self.spec
         if s.type == "posture":
             np.subtract(self.target, st.q[self.qidx], out=b)
-            b *= s.weight * s.gain
+            b *= self._wg
             return
         if s.type == "frame":
-            now = st.placement(self.fid)
-            goal_p, ff = (self.start_p, 0.0) if ref is None else ref
-            b[:3] = ff + s.gain * (goal_p - now.translation)
+            rot, pos = st.pose(self.fid)
+            J = pin.getFrameJacobian(st.model, st.data, self.fid, pin.LOCAL_WORLD_ALIGNED)
+            linear = b[:3]
+            np.subtract(self.start_p if ref is None else ref[0], pos, out=linear)
+            linear *= s.gain
+            if ref is not None:
+                linear += ref[1]
             if s.position_only:
-                A[:] = st.jacobian(self.fid)[:3]
+                A[:] = J[:3]
             else:
-                A[:] = st.jacobian(self.fid)
-                b[3:] = s.rotation_gain * orientation_error(now.rotation, self.start_rot)
+                A[:] = J
+                x, y, z = _orientation_error(rot, self.start_rot)
+                g = s.rotation_gain
+                b[3], b[4], b[5] = g * x, g * y, g * z
             if s.weight != 1.0:
                 A *= s.weight
                 b *= s.weight
             return
         if s.type == "orientation":
-            A[:] = st.jacobian(self.fid)[3 + self._axes]
-            b[:] = orientation_error(st.placement(self.fid).rotation, self.start_rot)[self._axes]
-            A *= s.weight
-            b *= s.weight * s.gain
+            rot, _ = st.pose(self.fid)
+            J = pin.getFrameJacobian(st.model, st.data, self.fid, pin.LOCAL_WORLD_ALIGNED)
+            np.multiply(J[self._rows], s.weight, out=A)
+            err = _orientation_error(rot, self.start_rot)
+            for k, axis in enumerate(self.axes):
+                b[k] = err[axis] * self._wg
             return
         A[:], b[:] = self.rows(st, ref)
 
@@ -218,26 +242,38 @@ class Constraints:
             self.polygon = (hull.equations[:, :2], -hull.equations[:, 2] - spec.support_margin_m)
             self.hull_points = pts[hull.vertices]
         self.rows = (2 if spec.com_height_m is not None else 0) + (0 if self.polygon is None else len(self.polygon[1]))
+        nv = state.model.nv
+        self._ineq = Inequalities(np.empty((self.rows, nv)), np.empty(self.rows), np.full(nv, -FREE), np.full(nv, FREE))
+        self._joint_lb, self._joint_ub, self._neg_vmax = self._ineq.lb[6:], self._ineq.ub[6:], -self.vmax
 
     def build(self, st: KinematicState) -> Inequalities:
-        """This cycle's inequalities (new arrays: a caller may keep them)."""
-        s, nv = self.spec, st.model.nv
+        """This cycle's inequalities, in arrays that the next call rewrites (a cycle's allocations cost more than
+        its arithmetic)."""
+        s = self.spec
         qj = st.q[7:]
-        lb = np.full(nv, -FREE)
-        ub = np.full(nv, FREE)
-        lb[6:] = np.maximum(-self.vmax, s.joint_damper_mu * (self.lower - qj))
-        ub[6:] = np.maximum(np.minimum(self.vmax, s.joint_damper_mu * (self.upper - qj)), lb[6:])  # never empty
-        G, h = np.empty((self.rows, nv)), np.empty(self.rows)
+        lb, ub = self._joint_lb, self._joint_ub
+        np.subtract(self.lower, qj, out=lb)
+        lb *= s.joint_damper_mu
+        np.maximum(self._neg_vmax, lb, out=lb)
+        np.subtract(self.upper, qj, out=ub)
+        ub *= s.joint_damper_mu
+        np.minimum(self.vmax, ub, out=ub)
+        np.maximum(ub, lb, out=ub)  # never empty
+        G, h = self._ineq.G, self._ineq.h
         k = 0
         if s.com_height_m is not None:
-            G[0], G[1] = st.com_jacobian[2], -st.com_jacobian[2]
-            h[0], h[1] = s.com_gain * (s.com_height_m[1] - st.com[2]), -s.com_gain * (s.com_height_m[0] - st.com[2])
+            G[0] = st.com_jacobian[2]
+            np.negative(st.com_jacobian[2], out=G[1])
+            z = st.com[2]
+            h[0], h[1] = s.com_gain * (s.com_height_m[1] - z), -s.com_gain * (s.com_height_m[0] - z)
             k = 2
         if self.polygon is not None:
             normals, offsets = self.polygon
-            G[k:] = normals @ st.com_jacobian[:2]
-            h[k:] = s.com_gain * (offsets - normals @ st.com[:2])
-        return Inequalities(G, h, lb, ub)
+            np.matmul(normals, st.com_jacobian[:2], out=G[k:])
+            hk = h[k:]
+            np.subtract(offsets, normals @ st.com[:2], out=hk)
+            hk *= s.com_gain
+        return self._ineq
 
     def com_margin(self, com_xy: np.ndarray) -> float:
         """Distance of a point inside the (unshrunk) support polygon to its nearest edge (negative outside)."""
