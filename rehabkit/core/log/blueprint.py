@@ -19,6 +19,7 @@ import rerun.blueprint as rrb
 # the eye looks at the scene's centre from the front left, above: the view a clinician standing there has
 EYE_DIRECTION = np.array([1.0, -1.3, 0.75]) / np.linalg.norm([1.0, -1.3, 0.75])
 MIN_RADIUS_M = 0.35  # (a small robot still shows its surroundings)
+LEGENDS_UP_TO = 8  # joints whose angle panels still have room for a legend
 
 # units named by a series' last name part, as rehabkit's own names end (metric names follow the same rule)
 UNITS = (("_deg_s", "deg/s"), ("_deg", "deg"), ("_nm", "N·m"), ("_n", "N"), ("_mm", "mm"), ("_ms", "ms"),
@@ -87,8 +88,9 @@ def blueprint(contents: Contents) -> rrb.Blueprint:
     scene = rrb.Spatial3DView(name="scene", origin="world", eye_controls=rrb.EyeControls3D(
         kind=rrb.Eye3DKind.Orbital, position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0]))
     left = [scene, rrb.TextLogView(name="events, notes and verdicts", origin="events")]
-    tabs = [rrb.Grid(*[rrb.TimeSeriesView(name=f"{j} [deg]", origin=f"joints/{j}",
-                                          plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.LeftTop))
+    # (a humanoid's 29 panels leave no room for legends: the title names the joint, the colours say the rest)
+    legend = rrb.PlotLegend(corner=rrb.Corner2D.LeftTop, visible=len(contents.joints) <= LEGENDS_UP_TO)
+    tabs = [rrb.Grid(*[rrb.TimeSeriesView(name=f"{j} [deg]", origin=f"joints/{j}", plot_legend=legend)
                        for j in contents.joints], name="joint angles")]
     tabs.append(rrb.Grid(rrb.TimeSeriesView(name="joint speeds [deg/s]", origin="joint_velocity_deg_s"),
                          rrb.TimeSeriesView(name="joint torques [N·m]", origin="joint_torque_nm"),
