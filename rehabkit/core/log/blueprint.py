@@ -26,17 +26,17 @@ UNITS = (("_deg_s", "deg/s"), ("_deg", "deg"), ("_nm", "N·m"), ("_n", "N"), ("_
          ("_m_s2", "m/s²"), ("_m", "m"), ("_s", "s"), ("_rad_s", "rad/s"), ("_rad", "rad"))
 
 
-def unit_of(name: str) -> str | None:
-    """The unit a name's suffix says (``cuff_force_n`` → N), or None."""
-    return next((unit for suffix, unit in UNITS if name.endswith(suffix)), None)
+def _split_unit(name: str) -> tuple[str, str | None]:
+    """A name without its unit suffix, and the unit (``cuff_force_n`` → ``cuff_force``, ``N``)."""
+    for suffix, unit in UNITS:
+        if name.endswith(suffix):
+            return name[: -len(suffix)], unit
+    return name, None
 
 
 def labelled(name: str) -> str:
     """A series' label with its unit: ``cuff_force_n`` → ``cuff force [N]``."""
-    unit = unit_of(name)
-    base = name
-    if unit is not None:
-        base = name[: -len(next(s for s, u in UNITS if u == unit and name.endswith(s)))]
+    base, unit = _split_unit(name)
     text = re.sub(r"_+", " ", base).strip() or name
     return f"{text} [{unit}]" if unit else text
 

@@ -45,18 +45,21 @@ class PlanGate:
             return f"plan action(s) {list(bad)} unknown; the backend can do: {can}", None, bad
         return None, None, ()
 
-    def warn_box(self, t: float, plan: Plan) -> None:
-        """The keep-in box is watched, not planned around: say before moving where a plan will leave it."""
+    def warn_box(self, t: float, plan: Plan) -> str | None:
+        """The keep-in box is watched, not planned around: say before moving where a plan will leave it (the
+        warning, kept; None if it stays inside)."""
         if not self.safety.watches_box:
-            return
+            return None
         ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
         found = self.safety.box_exit(self.space.hand_world(plan.trajectory.sample(ts)[0]))
-        if found is not None:
-            k, a, side, bound = found
-            self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "axis": AXES[a], "side": side,
-                                  "bound": bound, "message": (
-                f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) "
-                f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")})
+        if found is None:
+            return None
+        k, a, side, bound = found
+        message = (f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) "
+                   f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")
+        self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "axis": AXES[a], "side": side,
+                              "bound": bound, "message": message})
+        return message
 
     def account(self, plan: Plan) -> Plan:
         """Merge the plan's diagnostics into the run's, each by its metric's rule (default: the worst)."""

@@ -119,10 +119,8 @@ class RunSession:
         if problem:
             self._refuse(PlanRefusal(t, problem, breach=breach, actions=actions, first=first), q, "; not executed")
             return
-        said = len(self.gate.warnings)
-        self.gate.warn_box(t, plan)
-        for w in self.gate.warnings[said:]:  # (the terminal's PLAN line, in the recording when it is said)
-            self.view.event(t, f"PLAN {w['message']}", level="WARN")
+        if (warning := self.gate.warn_box(t, plan)) is not None:  # (the terminal's PLAN line, said in the recording)
+            self.view.event(t, f"PLAN {warning}", level="WARN")
         self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
         self.timeline.following(request.names, t, plan.waypoint_times)
 
