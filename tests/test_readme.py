@@ -234,8 +234,12 @@ def test_the_plugin_guide_runs_as_written(tmp_path, capsys):
     scenario = tmp_path / "sensed_roundtrip.yaml"
     text = re.search(r"```yaml\n(# sensed_roundtrip.yaml.*?)```", guide, re.S).group(1)
     scenario.write_text(text.replace("extends: hit_roundtrip.yaml", f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}"))
-    result = run_scenario(scenario, registry=registry)
+    result = run_scenario(scenario, registry=registry, out_dir=tmp_path / "out")
     assert result.passed and result.metrics["safety_events"] == 0
+    from tests.test_recording_layout import recording
+
+    names = recording(tmp_path / "out" / "run.rrd")["sensors/angles/angles"]["SeriesLines:names"][0]
+    assert names == [f"{j} angles" for j in result.summary["per_joint"]]
     assert 0.04 < result.metrics["angle_noise_rms_deg"] < 0.06 and result.metrics["tracking_rms_deg"] < 0.6
     for wrong, where, said in (("sensor: angles", "controller.sensor", "no sensor 'angle' in this scenario; did you "
                                 "mean 'angles'?"), ("kp: [900, 900, 150, 180, 16, 18]", "controller.kp",

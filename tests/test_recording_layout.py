@@ -215,6 +215,38 @@ def test_angles_a_sensor_reads_in_radians_are_logged_in_degrees(hit_rrd):
     data = recording(rrd)
     assert "sensors/encoders/position_rad" not in data
     logged = np.array(data["sensors/encoders/position_deg"]["Scalars:scalars"])
-    assert data["sensors/encoders/position_deg"]["SeriesLines:names"][0][0].startswith("position [deg]")
     every = round(len(result.trace.q) / len(logged))  # (the encoder's rate)
     assert np.abs(logged - np.degrees(result.trace.q[::every][: len(logged)])).max() < 0.5
+
+
+@pytest.mark.xdist_group(group(LEXOS_MYOARM))
+def test_muscle_paths_move_with_the_bones_at_their_rate(scenario_run):
+    """Every muscle path at every logged sample, each as it was then: a muscle's origin is a site on a bone, so in
+    the frame of one of the logged bodies (their poses logged at the same instants) it stays put, to float32."""
+    from scipy.spatial.transform import Rotation
+
+    r = scenario_run(LEXOS_MYOARM)
+    data = recording(r.out_dir / "run.rrd")
+    samples = len(data["world/end_effector"]["Points3D:positions"])
+    paths = data["world/patient/muscles/lines"]["LineStrips3D:strips"]
+    assert len(paths) == samples and {len(row) for row in paths} == {63}  # (the MyoArm's muscles)
+    origins = np.array([[strip[0] for strip in row] for row in paths])  # sample, muscle, xyz (world)
+    bodies = {p: c for p, c in data.items() if p.startswith("world/bodies/") and "Transform3D:translation" in c
+              and len(c["Transform3D:translation"]) == samples}
+    moved = 0
+    for k in range(origins.shape[1]):
+        spread = []
+        for pose in bodies.values():
+            where = np.array([p[0] for p in pose["Transform3D:translation"]])
+            turn = Rotation.from_quat([q[0] for q in pose["Transform3D:quaternion"]])
+            spread.append(np.ptp(turn.inv().apply(origins[:, k] - where), axis=0).max())
+        assert min(spread) < 2e-5, k  # fixed on a body
+        moved += np.ptp(origins[:, k], axis=0).max() > 0.02
+    assert moved > 30  # (most of them on bones that move centimetres)
+
+
+def test_a_sensor_names_each_value_it_reads(hit_rrd):
+    """The encoders' series are the joints' names with the unit, not numbers."""
+    rrd, result = hit_rrd
+    names = recording(rrd)["sensors/encoders/position_deg"]["SeriesLines:names"][0]
+    assert names == [f"{j} position [deg]" for j in result.setup.robot.model.joint_names]

@@ -31,8 +31,6 @@ from rehabkit.sim.mujoco import span
 
 SERIES_EVERY = 10  # control steps between logged samples
 CUFF_ARROW_M_PER_N = 0.01  # the cuff forces drawn 1 cm per N: a 25 N push is a 25 cm arrow
-# [s] between drawings of the muscle paths: Rerun's conversion of 60-odd strips a sample costs ~15 % of a run
-MUSCLES_EVERY_S = 0.1
 
 
 def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], n: int, what: str,
@@ -116,7 +114,6 @@ class Musculoskeletal(EmbodiedPatient):
         self.noise_stream = NoiseStream(context.stream("patient"))
         self.arm: HumanArm | None = None
         self._goal_key, self._goal_world_at = b"", np.zeros(3)
-        self._muscles_at = -np.inf
 
     # -- the scene ------------------------------------------------------------------------------------
 
@@ -154,7 +151,6 @@ class Musculoskeletal(EmbodiedPatient):
         self.peak = self.force_sum = self.effort_sum = 0.0
         self.steps = self.saturated = 0
         self.force = np.zeros(3)
-        self._muscles_at = -np.inf
         self._t: list[float] = []
         self._rows: list[np.ndarray] = []
 
@@ -280,8 +276,7 @@ class Musculoskeletal(EmbodiedPatient):
 
     def drawing(self) -> dict[str, Drawing]:
         """Each muscle's path coloured by its activation (blue at rest, red at full), each strap's force as an
-        arrow from the strap, 1 cm per N, labelled with its size: the straps at the log rate, as the bones, the
-        muscles every :data:`MUSCLES_EVERY_S`."""
+        arrow from the strap, 1 cm per N, labelled with its size; both at the log rate, as the bones."""
         m, d = self.m, self.d
         origins = np.array([d.xpos[m.eq_obj1id[eq]] + d.xmat[m.eq_obj1id[eq]].reshape(3, 3) @ m.eq_data[eq, :3]
                             for eq in self.eqs])
@@ -289,12 +284,9 @@ class Musculoskeletal(EmbodiedPatient):
         labels = [f"{s.segment} {np.linalg.norm(f):.1f} N (1 cm per N)" for s, f in zip(self.wearable.straps, forces)]
         drawn = {"cuffs": Drawing(origins=origins, vectors=forces * CUFF_ARROW_M_PER_N,
                                   arrow_rgba=np.tile([1.0, 0.8, 0.1, 1.0], (len(self.eqs), 1)), arrow_labels=labels)}
-        if d.time - self._muscles_at < MUSCLES_EVERY_S - 1e-9:
-            return drawn
-        self._muscles_at = d.time
         tendons = m.actuator_trnid[self.arm.all_muscles, 0]  # (MuJoCo keeps the paths in tendon order)
         start, count = d.ten_wrapadr[tendons], d.ten_wrapnum[tendons]
-        points = d.wrap_xpos.reshape(-1, 3)[start[0] : start[-1] + count[-1]]
+        points = d.wrap_xpos.reshape(-1, 3)[start[0] : start[-1] + count[-1]].copy()  # (kept until sent)
         lines = np.split(points, start[1:] - start[0])
         act = d.act[m.actuator_actadr[self.arm.all_muscles]]
         rgba = np.column_stack([0.2 + 0.8 * act, 0.3 * (1 - act), 1.0 - act, np.ones_like(act)])

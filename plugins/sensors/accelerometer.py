@@ -119,6 +119,12 @@ class AccelerometerArraySensor(Sensor):
                 "acc_filtered": a_f, "acc_true": a_true, "omega_raw": w_raw, "omega_filtered": w_f,
                 "omega_true": w_true}
 
+    def channels(self, key: str, width: int) -> list[str] | None:
+        """Each accelerometer's axes for the per-point readings, the body's axes for the estimates."""
+        if key in ("raw_readings", "filtered_readings"):
+            return [f"#{i} {axis}" for i in range(width // 3) for axis in "xyz"]
+        return super().channels(key, width)
+
     def report(self, metrics: dict[str, float]) -> str | None:
         """The validation table: RMS errors of raw and filtered estimates against truth and the plan."""
         if "accel_rms_raw_m_s2" not in metrics:

@@ -129,6 +129,9 @@ class ColorCamera(Sensor):
         spread = float(angles.std() / angles.mean())
         return cam_pos + cam_rot @ (distance * d), 2.0 * f * tan_alpha, pixel[:2] / pixel[2], spread
 
+    def channels(self, key: str, width: int) -> list[str] | None:
+        return ["u", "v"] if key == "pixel" else super().channels(key, width)
+
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict:
         cfg = self.config
         rgb = backend.render(cfg.camera, cfg.width, cfg.height)

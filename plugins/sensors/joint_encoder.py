@@ -26,6 +26,7 @@ class JointEncoder(Sensor):
         self.noise = config.noise_counts
         self.rng = context.rng
         self.joints = config.joints
+        self.names = config.joints or context.robot.model.joint_names
         if self.joints:
             model = context.robot.model
             known = model.joint_names + model.passive_joints
@@ -41,6 +42,10 @@ class JointEncoder(Sensor):
             counts += np.rint(self.rng.normal(0.0, self.noise, size=q.shape))
         counts *= self.step
         return {"position_rad": counts}
+
+    def channels(self, key: str, width: int) -> list[str] | None:
+        """A joint's name per angle."""
+        return list(self.names) if width == len(self.names) else None
 
 
 @hookimpl

@@ -88,6 +88,12 @@ class Sensor(ABC):
         """Figures about the whole run (e.g. estimation error), given the run's trace; default none."""
         return {}
 
+    def channels(self, key: str, width: int) -> list[str] | None:
+        """What each of the ``width`` values of the vector reading ``key`` is (a joint's name, an axis), for the
+        log's series names; default: ``x y z`` for a 3-vector of a spatial sensor (:attr:`frame` set), else none
+        (numbered)."""
+        return ["x", "y", "z"] if width == 3 and self.frame is not None else None
+
     def report(self, metrics: dict[str, float]) -> str | None:
         """A short text report for people (printed by ``rehabkit run``, kept in summary.json); default none."""
         return None

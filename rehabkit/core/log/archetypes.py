@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 import rerun as rr
 
 from rehabkit.core.kinds.interfaces import GeomVisual
@@ -21,6 +22,17 @@ def rgba(c) -> list[int]:
 
 def rgba_rows(values) -> np.ndarray | None:
     return None if values is None else np.round(255 * np.clip(np.asarray(values, float), 0, 1)).astype(np.uint8)
+
+
+def strips(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
+    """Polylines as the Arrow array of Rerun's ``LineStrip3D`` component: ``points`` (n, 3) one after another,
+    ``lengths`` the points in each. Rerun's own conversion of a list of arrays costs ~15 µs a line (a person's 63
+    muscle paths at the log rate would add ~15 % to a recorded run); this is one copy."""
+    offsets = np.zeros(len(lengths) + 1, np.int32)
+    np.cumsum(lengths, out=offsets[1:])
+    kind = rr.components.LineStrip3DBatch._ARROW_DATATYPE
+    xyz = pa.FixedSizeListArray.from_arrays(pa.array(np.asarray(points, np.float32).ravel()), type=kind.value_type)
+    return pa.ListArray.from_arrays(pa.array(offsets), xyz, type=kind)
 
 
 def xyzw(wxyz: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ from rehabkit.core.log.archetypes import (
     paler,
     rgba_rows,
     shape,
+    strips,
     xyzw,
 )
 from rehabkit.core.log.blueprint import Contents, blueprint, labelled
@@ -66,7 +67,8 @@ class RerunLog:
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
         self._sensor_columns: dict[str, dict[str, Column]] = {}  # sensor -> reading key -> its column
-        self._drawings: dict[str, list[tuple[float, Drawing]]] = {}
+        self._lines: dict[str, list[tuple]] = {}  # path -> (t, points, points per line, colours) a drawing
+        self._arrows: dict[str, list[tuple]] = {}  # path -> (t, origins, vectors, colours, labels) a drawing
         rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for i, (name, part) in enumerate(zip(joint_names, self.joint_parts)):
@@ -127,35 +129,37 @@ class RerunLog:
         self.rec.log(path, rr.LineStrips3D([points], colors=[color], radii=radius), static=t is None)
 
     def drawing(self, t: float, path: str, shapes: Drawing) -> None:
-        """Shapes that change during the run, at time ``t`` (buffered, and sent as columns with the poses: a row
-        each, as a person's 60-odd muscle paths at the log rate, would cost ~1 ms a sample)."""
-        self._drawings.setdefault(path, []).append((t, shapes))
+        """Shapes that change during the run, at time ``t`` (copied and buffered, and sent as columns with the
+        poses: a row each, as a person's 60-odd muscle paths at the log rate, would cost ~1 ms a sample)."""
+        if shapes.lines is not None:
+            lengths = np.fromiter((len(line) for line in shapes.lines), np.int32, len(shapes.lines))
+            points = np.concatenate(shapes.lines) if len(lengths) else np.zeros((0, 3))
+            self._lines.setdefault(path, []).append((t, points, lengths, rgba_rows(shapes.line_rgba)))
+        if shapes.origins is not None:
+            self._arrows.setdefault(path, []).append(
+                (t, np.array(shapes.origins, float), np.array(shapes.vectors, float), rgba_rows(shapes.arrow_rgba),
+                 None if shapes.arrow_labels is None else list(shapes.arrow_labels)))
 
     def _flush_drawings(self) -> None:
-        drawings, self._drawings = self._drawings, {}
-        for path, rows in drawings.items():
-            lines = [(t, s) for t, s in rows if s.lines is not None]
-            if lines:
-                strips = [np.asarray(line, float) for _, s in lines for line in s.lines]
-                colors = [rgba_rows(s.line_rgba) for _, s in lines if s.line_rgba is not None]
-                fields = {"strips": strips, "radii": np.full(len(strips), 0.003)}
-                if len(colors) == len(lines):
-                    fields["colors"] = np.concatenate(colors)
-                counts = [len(s.lines) for _, s in lines]
-                self._send(f"{path}/lines", np.array([t for t, _ in lines]),
-                           lambda f=fields, n=counts: rr.LineStrips3D.columns(**f).partition(n))
-            arrows = [(t, s) for t, s in rows if s.origins is not None]
-            if arrows:
-                fields = {"origins": np.concatenate([s.origins for _, s in arrows]),
-                          "vectors": np.concatenate([s.vectors for _, s in arrows])}
-                fields["radii"] = np.full(len(fields["origins"]), 0.006)
-                if all(s.arrow_rgba is not None for _, s in arrows):
-                    fields["colors"] = np.concatenate([rgba_rows(s.arrow_rgba) for _, s in arrows])
-                if all(s.arrow_labels is not None for _, s in arrows):
-                    fields["labels"] = [label for _, s in arrows for label in s.arrow_labels]
-                counts = [len(s.origins) for _, s in arrows]
-                self._send(f"{path}/arrows", np.array([t for t, _ in arrows]),
-                           lambda f=fields, n=counts: rr.Arrows3D.columns(**f).partition(n))
+        for path, rows in self._lines.items():
+            fields = {"strips": strips(np.concatenate([r[1] for r in rows]), np.concatenate([r[2] for r in rows]))}
+            fields["radii"] = np.full(sum(len(r[2]) for r in rows), 0.003)
+            if all(r[3] is not None for r in rows):
+                fields["colors"] = np.concatenate([r[3] for r in rows])
+            counts = [len(r[2]) for r in rows]
+            self._send(f"{path}/lines", np.array([r[0] for r in rows]),
+                       lambda f=fields, n=counts: rr.LineStrips3D.columns(**f).partition(n))
+        for path, rows in self._arrows.items():
+            fields = {"origins": np.concatenate([r[1] for r in rows]), "vectors": np.concatenate([r[2] for r in rows])}
+            fields["radii"] = np.full(len(fields["origins"]), 0.006)
+            if all(r[3] is not None for r in rows):
+                fields["colors"] = np.concatenate([r[3] for r in rows])
+            if all(r[4] is not None for r in rows):
+                fields["labels"] = [label for r in rows for label in r[4]]
+            counts = [len(r[1]) for r in rows]
+            self._send(f"{path}/arrows", np.array([r[0] for r in rows]),
+                       lambda f=fields, n=counts: rr.Arrows3D.columns(**f).partition(n))
+        self._lines, self._arrows = {}, {}
 
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)
@@ -216,8 +220,10 @@ class RerunLog:
             self.contents.add_series(path)
             self._send(path, np.array(t, float), lambda: rr.Scalars.columns(scalars=values))
 
-    def sensor(self, t: float, sensor: str, reading: dict) -> None:
-        """A sensor reading: images are logged at once, numbers buffered in columns."""
+    def sensor(self, t: float, sensor: str, reading: dict,
+               channels: Callable[[str, int], list[str] | None] | None = None) -> None:
+        """A sensor reading: images are logged at once, numbers buffered in columns; ``channels(key, width)`` names
+        a vector's values (:meth:`Sensor.channels`)."""
         columns = self._sensor_columns.get(sensor)
         if columns is None:
             columns = self._sensor_columns[sensor] = {}
@@ -235,13 +241,18 @@ class RerunLog:
             column = columns.get(key)
             if column is None:
                 column = columns[key] = Column(np.size(value), f"sensor '{sensor}' {key}")
-                self._name_sensor_series(sensor, key, np.size(value))
+                self._name_sensor_series(sensor, key, np.size(value), channels)
             column.append(t, value)
 
-    def _name_sensor_series(self, sensor: str, key: str, width: int) -> None:
+    def _name_sensor_series(self, sensor: str, key: str, width: int, channels) -> None:
+        parts = channels(key, width) if channels is not None and width > 1 else None
+        if parts is not None and len(parts) != width:  # a plugin's slip: the series still logged, numbered
+            warnings.warn(f"sensor '{sensor}': channels('{key}', {width}) named {len(parts)} values; numbered instead",
+                          stacklevel=2)
+            parts = None
         key = in_degrees(key)[0]
         label = labelled(key)
-        names = [label] if width == 1 else [f"{label} {i}" for i in range(width)]
+        names = [label] if width == 1 else [f"{part} {label}" for part in (parts or range(width))]
         self.rec.log(f"sensors/{sensor}/{key}", rr.SeriesLines(names=names), static=True)
         self.contents.add_sensor(sensor, key, False)
 

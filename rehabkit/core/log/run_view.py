@@ -103,7 +103,7 @@ class RunView:
 
     def sensor(self, t: float, name: str, reading: dict) -> None:
         """A sensor's reading, and where it saw a target."""
-        self.log.sensor(t, name, reading)
+        self.log.sensor(t, name, reading, self.setup.sensors[name].channels)
         if reading.get("target_position") is not None:
             self.log.points(f"world/sensed/{name}", self.setup.robot.model.to_world(reading["target_position"]),
                             (40, 220, 40), 0.02, t)
