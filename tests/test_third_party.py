@@ -11,6 +11,9 @@ import pytest
 
 from tests.conftest import ROOT
 
+# one worker installs both packages once for the module's tests (~7 s a pip install)
+pytestmark = pytest.mark.xdist_group("third-party")
+
 EXAMPLE = ROOT / "examples" / "third_party_plugin"
 LAB = ROOT / "examples" / "lab_plugins"
 

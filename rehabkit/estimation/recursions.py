@@ -105,8 +105,10 @@ def ekf_omega(zs, covs, dt, w, P):  # pragma: no cover - compiled
                 S[i, i] += ridge
             L = cholesky(S)
         X = forward_solve(L, HP)  # S⁻¹ H P column by column; K = (S⁻¹ H P)ᵀ, S and P symmetric
-        for j in range(3):
-            X[:, j] = backward_solve(L, X[:, j].copy())
+        for j in range(3):  # (element by element: numba's slice assignment takes seconds to compile)
+            col = backward_solve(L, X[:, j].copy())
+            for i in range(6):
+                X[i, j] = col[i]
         for j in range(3):  # w += K (z − h)
             acc = 0.0
             for i in range(6):
@@ -118,7 +120,7 @@ def ekf_omega(zs, covs, dt, w, P):  # pragma: no cover - compiled
                 for k in range(6):
                     acc += X[k, i] * HP[k, j]
                 P[i, j] -= acc
-        out[t] = w
+        out[t, 0], out[t, 1], out[t, 2] = w[0], w[1], w[2]
     return out
 
 

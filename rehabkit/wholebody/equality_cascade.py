@@ -4,7 +4,8 @@ At a standstill or in smooth motion no inequality is active, and each level's QP
 solved by one KKT system (its damped task, the higher levels' achieved task velocities as
 equalities). Done level by level from Python, the numpy calls around the four LAPACK
 solves cost more than the solves (~130 of ~185 us a cycle for COMAN); compiled with numba,
-the whole sequence is one call. It stops at the first level whose optimum breaks an
+the whole sequence is one call, written in loops (numba compiles matrix products and slice assignments in
+seconds each: ~10 s on first use, ~3 s without them). It stops at the first level whose optimum breaks an
 inequality (or whose system is singular) and says so: the caller finishes that level and
 the ones below with the QP solver.
 """
@@ -43,11 +44,17 @@ def equality_cascade(A, b, ends, reg, metric, use_metric, lb, ub, G, h):  # prag
         m = start  # equality rows: every level above
         if k < len(ends):
             stop = ends[k]
-            Ak, bk = A[start:stop], b[start:stop]
-            P = Ak.T @ Ak
+            P = np.zeros((n, n))
+            q = np.zeros(n)
+            for r in range(start, stop):
+                for i in range(n):
+                    ari = A[r, i]
+                    if ari != 0.0:
+                        q[i] += ari * b[r]
+                        for j in range(n):
+                            P[i, j] += ari * A[r, j]
             for i in range(n):
                 P[i, i] += reg
-            q = Ak.T @ bk
         else:
             stop = start
             P = metric.copy()
@@ -56,17 +63,35 @@ def equality_cascade(A, b, ends, reg, metric, use_metric, lb, ub, G, h):  # prag
         if L.shape[0] == 0:  # not positive definite: the QP solver handles it
             return V, k
         rhs = np.empty((n, m + 1))
-        rhs[:, :m] = A[:m].T
-        rhs[:, m] = q
+        for i in range(n):
+            for j in range(m):
+                rhs[i, j] = A[j, i]
+            rhs[i, m] = q[i]
         Z = tri.forward_solve_sparse(L, rhs)  # [Y | y]
         y = Z[:, m].copy()
         if m:
-            Y = np.ascontiguousarray(Z[:, :m])
-            Ls = tri.cholesky(Y.T @ Y)
+            S = np.zeros((m, m))
+            g = np.empty((m, 1))
+            for i in range(m):
+                gi = -e[i]
+                for r in range(n):
+                    gi += Z[r, i] * y[r]
+                g[i, 0] = gi
+                for j in range(i + 1):
+                    s = 0.0
+                    for r in range(n):
+                        s += Z[r, i] * Z[r, j]
+                    S[i, j] = s
+                    S[j, i] = s
+            Ls = tri.cholesky(S)
             if Ls.shape[0] == 0:  # the rows above are (numerically) dependent: the QP solver
                 return V, k
-            lam = tri.backward_solve(Ls, tri.forward_solve(Ls, (Y.T @ y - e[:m]).reshape(m, 1))[:, 0])
-            y -= Y @ lam
+            lam = tri.backward_solve(Ls, tri.forward_solve(Ls, g)[:, 0])
+            for r in range(n):
+                s = 0.0
+                for i in range(m):
+                    s += Z[r, i] * lam[i]
+                y[r] -= s
         v = tri.backward_solve_sparse(L, y)
         # the tests below only decide (against tolerances far above rounding): loops, not a BLAS call each
         for i in range(m):
@@ -84,8 +109,13 @@ def equality_cascade(A, b, ends, reg, metric, use_metric, lb, ub, G, h):  # prag
                 r += G[i, j] * v[j]
             if r > FEASIBLE_TOL:
                 return V, k
-        V[k] = v
+        for i in range(n):
+            V[k, i] = v[i]
         if k < len(ends):
-            e[start:stop] = Ak @ v
+            for r in range(start, stop):
+                s = 0.0
+                for j in range(n):
+                    s += A[r, j] * v[j]
+                e[r] = s
         start = stop
     return V, steps
