@@ -5,6 +5,7 @@ tests/test_safety_report.py)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
@@ -53,3 +54,20 @@ def test_a_sensor_at_a_cuff_reads_the_strapped_persons_cuff_force():
     measured = np.interp(times, r.trace.t, r.trace.f_h)
     assert cuffs.max() > 5.0  # the arm's weight and its effort
     assert np.abs(measured - cuffs).max() < 0.05 * cuffs.max()
+
+
+@pytest.mark.parametrize(("cutoff_hz", "fs"), [(30.0, 1000.0), (5.0, 100.0), (240.0, 500.0)])
+def test_the_sensors_low_pass_is_scipys_butterworth(cutoff_hz, fs):
+    """The filter's closed-form design, its start at rest and its run over a recording, against scipy.signal."""
+    from rehabkit_plugins.sensors.force_torque import Biquads, butterworth2
+    from scipy.signal import butter, sosfilt, sosfilt_zi
+
+    sos = butterworth2(cutoff_hz, fs)
+    assert np.allclose(sos, butter(2, cutoff_hz, fs=fs, output="sos"), rtol=1e-12, atol=1e-14)
+    at = np.array([1.5, -2.0, 0.25])
+    settled = Biquads(sos, 3)
+    settled.settle(at)
+    assert np.allclose(settled.z, sosfilt_zi(sos)[:, :, None] * at, atol=1e-12)
+    assert np.allclose(settled(at), at)  # at rest: the output stays where it started
+    xs = np.random.default_rng(3).normal(0.0, 1.0, (400, 3))
+    assert np.allclose(Biquads(sos, 3).run(xs), sosfilt(sos, xs, axis=0), atol=1e-12)

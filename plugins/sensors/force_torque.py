@@ -7,8 +7,9 @@ or the MuJoCo plant's). Either way the host then
 
 - removes the bias (tare): the mean of the first ``tare_s`` of readings, taken while the ramp-in holds the
   robot at its start with nothing pushing — a real sensor's offset drifts between sessions;
-- filters the readings: a second-order Butterworth low-pass at ``cutoff_hz`` (scipy's design), run sample by
-  sample at the rate it is read;
+- filters the readings: a second-order Butterworth low-pass at ``cutoff_hz`` (the bilinear transform's closed
+  form, as ``scipy.signal.butter(2, cutoff_hz, fs=rate, output="sos")`` designs it — checked against it in the
+  tests; importing ``scipy.signal`` costs ~1 s, a third of a short run), run sample by sample at the rate it is read;
 - gives the safety envelope its interaction force every control step (``interaction: true``), and the log
   its readings at ``rate_hz``.
 
@@ -65,6 +66,15 @@ class ForceTorqueConfig(SensorConfig):
     simulated: SimulatedError = SimulatedError()
 
 
+def butterworth2(cutoff_hz: float, fs: float) -> np.ndarray:
+    """A second-order Butterworth low-pass as one second-order section ``[[b0, b1, b2, 1, a1, a2]]``: the analogue
+    prototype at the prewarped cut-off, bilinear-transformed."""
+    k = np.tan(np.pi * cutoff_hz / fs)
+    norm = 1.0 / (1.0 + np.sqrt(2.0) * k + k * k)
+    b0 = k * k * norm
+    return np.array([[b0, 2.0 * b0, b0, 1.0, 2.0 * (k * k - 1.0) * norm, (1.0 - np.sqrt(2.0) * k + k * k) * norm]])
+
+
 class Biquads:
     """A second-order-sections filter run one sample (a vector of channels) at a time (transposed direct form II)."""
 
@@ -82,10 +92,17 @@ class Biquads:
         return x
 
     def settle(self, x: np.ndarray) -> None:
-        """Start at rest at ``x`` (no step response from zero)."""
-        from scipy.signal import sosfilt_zi
+        """Start at rest at ``x`` (no step response from zero): each section's state in its steady state for a
+        constant input, the input of the next its output (``scipy.signal.sosfilt_zi`` times ``x``)."""
+        for i, (b0, b1, b2, _, a1, a2) in enumerate(self.sos):
+            y = (b0 + b1 + b2) / (1.0 + a1 + a2) * x
+            self.z[i, 1] = b2 * x - a2 * y
+            self.z[i, 0] = b1 * x - a1 * y + self.z[i, 1]
+            x = y
 
-        self.z[:] = sosfilt_zi(self.sos)[:, :, None] * x
+    def run(self, xs: np.ndarray) -> np.ndarray:
+        """Each of ``xs`` (samples × channels) filtered in turn."""
+        return np.array([self(x) for x in xs])
 
 
 def hand_mount(mjcf: str, site: str) -> tuple[str, Vec3]:
@@ -134,9 +151,7 @@ class ForceTorqueSensor(InteractionForceSensor):
         self.bias = np.zeros(6)
         self.filter = None
         if config.cutoff_hz > 0:
-            from scipy.signal import butter
-
-            self.filter = Biquads(butter(2, config.cutoff_hz, fs=self.fs, output="sos"), 6)
+            self.filter = Biquads(butterworth2(config.cutoff_hz, self.fs), 6)
             if not self._tare_n:
                 self.filter.settle(np.zeros(6))
         self.raw = self.value = np.zeros(6)
@@ -184,9 +199,7 @@ class ForceTorqueSensor(InteractionForceSensor):
         out = {"ft_bias_n": float(np.linalg.norm(self.bias[:3])),
                "ft_noise_n": float(np.mean(np.std(tare[:, :3], axis=0))), "ft_peak_force_n": self.peak}
         if self.filter is not None:
-            from scipy.signal import sosfilt
-
-            filtered = sosfilt(self.filter.sos, tare[:, :3] - self.bias[:3], axis=0)
+            filtered = Biquads(self.filter.sos, 3).run(tare[:, :3] - self.bias[:3])  # (from rest at zero)
             settled = filtered[len(filtered) // 3:]  # past the filter's start-up
             out["ft_noise_filtered_n"] = float(np.mean(np.std(settled, axis=0)))
         return out
