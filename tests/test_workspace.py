@@ -16,7 +16,7 @@ def lexos():
 
 @pytest.fixture(scope="module")
 def ws(lexos):
-    return lexos.workspace(progress=False)  # the table shipped beside the plugin (built here: ~30 s on 2 cores)
+    return lexos.workspace(progress=False)  # the table shipped beside the plugin (built here: ~5 s)
 
 
 def test_swivel_ik_reproduces_the_hand_position(lexos, rng):
@@ -27,6 +27,22 @@ def test_swivel_ik_reproduces_the_hand_position(lexos, rng):
     hands = lexos.chain.fk_batch(sols.reshape(-1, 4))[:, :3, 3].reshape(300, -1, 3)
     np.testing.assert_allclose(hands, np.broadcast_to(p[:, None, :], hands.shape), atol=1e-12)
     assert lexos.reachable(p).mean() > 0.99  # the rest: swivel windows narrower than the 3° sampling
+
+
+def test_the_compiled_reachability_test_is_the_swivel_iks(lexos, rng):
+    """The table's point test (compiled, stopping at the first swivel sample in range) says what the vectorised IK
+    says, point for point, with the arm's ranges and with a patient's narrower ones."""
+    from rehabkit_plugins.robots.lexos import SwivelReachability
+
+    lim = lexos.model.limits
+    p = rng.uniform(-0.7, 0.7, (20_000, 3))
+    for lower, upper in ((lim.lower, lim.upper), (lim.lower + 0.3 * (lim.upper - lim.lower),
+                                                  lim.upper - 0.2 * (lim.upper - lim.lower))):
+        q = lexos.position_ik(p)
+        with np.errstate(invalid="ignore"):
+            expected = np.all((q >= lower) & (q <= upper), axis=-1).any(axis=1)
+        assert 0.005 < expected.mean() < 0.5
+        np.testing.assert_array_equal(SwivelReachability(*lexos.lengths, lower, upper, lexos.swivel)(p), expected)
 
 
 def test_fk_batch_matches_pinocchio(lexos, rng):

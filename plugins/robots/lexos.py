@@ -18,11 +18,13 @@ is what makes the workspace look-up table cheap to build.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from pydantic import Field
 
 from rehabkit import hookimpl
@@ -98,6 +100,49 @@ def position_ik(p: np.ndarray, swivel: np.ndarray, l1: float = UPPER_ARM, l2: fl
     return np.stack([q1, q2, q3, np.broadcast_to(q4[:, None], q1.shape)], axis=-1)
 
 
+@njit(cache=True, nogil=True)
+def _any_swivel_in_range(p, swivel, l1, l2, lower, upper):  # pragma: no cover - compiled
+    """:func:`position_ik`'s arithmetic point by point, each point's swivel samples in turn until one puts every
+    joint in its range: a workspace table tests ~10⁵-10⁶ points, most of them reachable at an early sample, where
+    the (N, M, 4) arrays of the vectorised form cost ~57 µs a point."""
+    out = np.zeros(len(p), np.bool_)
+    for k in range(len(p)):
+        x, y, z = p[k, 0], p[k, 1], p[k, 2]
+        r = math.sqrt(x * x + y * y + z * z)
+        c4 = (r * r - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+        if not abs(c4) <= 1.0:
+            continue
+        q4 = -math.acos(c4)
+        if not (lower[3] <= q4 <= upper[3]):
+            continue
+        hx, hy, hz = x / r, y / r, z / r
+        cos_a = min(max((l1 * l1 + r * r - l2 * l2) / (2 * l1 * r), -1.0), 1.0)
+        sin_a = math.sqrt(1.0 - cos_a * cos_a)
+        ax, ay, az = (0.0, 0.0, 1.0) if abs(hz) < 0.9 else (1.0, 0.0, 0.0)
+        n1x, n1y, n1z = hy * az - hz * ay, hz * ax - hx * az, hx * ay - hy * ax
+        norm = math.sqrt(n1x * n1x + n1y * n1y + n1z * n1z)
+        n1x, n1y, n1z = n1x / norm, n1y / norm, n1z / norm
+        n2x, n2y, n2z = hy * n1z - hz * n1y, hz * n1x - hx * n1z, hx * n1y - hy * n1x
+        for phi in swivel:
+            cphi, sphi = math.cos(phi), math.sin(phi)
+            ex = l1 * (cos_a * hx + sin_a * (cphi * n1x + sphi * n2x))
+            ey = l1 * (cos_a * hy + sin_a * (cphi * n1y + sphi * n2y))
+            ez = l1 * (cos_a * hz + sin_a * (cphi * n1z + sphi * n2z))
+            q2 = -math.asin(min(max(ex / l1, -1.0), 1.0))
+            if not (lower[1] <= q2 <= upper[1]):
+                continue
+            q1 = math.atan2(-ey / l1, -ez / l1)
+            if not (lower[0] <= q1 <= upper[0]):
+                continue
+            fx, fy, fz = (x - ex) / l2, (y - ey) / l2, (z - ez) / l2
+            c1, s1, c2, s2 = math.cos(q1), math.sin(q1), math.cos(q2), math.sin(q2)
+            q3 = math.atan2(-(c1 * fy - s1 * fz), c2 * fx - s2 * s1 * fy - s2 * c1 * fz)
+            if lower[2] <= q3 <= upper[2]:
+                out[k] = True
+                break
+    return out
+
+
 @dataclass(frozen=True)
 class SwivelReachability:
     """Picklable reachability test: some swivel sample satisfies every joint range."""
@@ -109,10 +154,9 @@ class SwivelReachability:
     swivel: np.ndarray
 
     def __call__(self, p: np.ndarray) -> np.ndarray:
-        q = position_ik(p, self.swivel, self.l1, self.l2)
-        with np.errstate(invalid="ignore"):
-            ok = np.all((q >= self.lower) & (q <= self.upper), axis=-1)
-        return ok.any(axis=1)
+        return _any_swivel_in_range(np.ascontiguousarray(p, dtype=float), np.asarray(self.swivel, float),
+                                    float(self.l1), float(self.l2), np.asarray(self.lower, float),
+                                    np.asarray(self.upper, float))
 
 
 def lexos_wearable(l1: float, l2: float) -> Wearable:
