@@ -157,6 +157,8 @@ class ForceTorqueSensor(InteractionForceSensor):
         self.raw = self.value = np.zeros(6)
         self.peak = 0.0
         self._last_t = -1.0
+        self._model = model
+        self._pin = None  # (model, data, frame id), made when first asked where the force acts
 
     def instruments(self) -> list[Instrument]:
         sim, name = self.config.simulated, self.name
@@ -187,6 +189,26 @@ class ForceTorqueSensor(InteractionForceSensor):
 
     def interaction_force(self, t: float, backend: Backend) -> np.ndarray:
         return self.sample(t, backend)[:3]
+
+    def joint_torque(self, q: np.ndarray, force: np.ndarray) -> np.ndarray | None:
+        """Jᵀ F at the sensor: the reading turned from the mount's axes into the base frame's by the body's
+        rotation, the Jacobian of the point it acts at (Pinocchio); None for a robot Pinocchio cannot load."""
+        if self._pin is None:
+            import pinocchio as pin
+
+            try:
+                model = self._model.pin_model
+            except Exception:  # noqa: BLE001 (a closed chain: no Pinocchio model, no direction)
+                return None
+            if not model.existFrame(self.body):
+                return None
+            self._pin = (pin, model, model.createData(), model.getFrameId(self.body))
+        pin, model, data, frame = self._pin
+        J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)  # (updates the placements)
+        rot = data.oMf[frame].rotation
+        r = rot @ np.asarray(self.position, float)  # the point, from the body's origin, base axes
+        linear = J[:3] - np.cross(r, J[3:].T).T  # v_point = v_origin + ω × r
+        return linear.T @ (rot @ np.asarray(force, float))
 
     def read(self, t: float, q: np.ndarray, qd: np.ndarray, backend: Backend) -> dict[str, np.ndarray]:
         value = self.sample(t, backend) if not self.interaction else self.value  # (sampled by the loop already)

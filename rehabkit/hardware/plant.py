@@ -90,6 +90,7 @@ class MujocoPlant(Plant):
 
     def reset(self, q0):
         mujoco.mj_resetData(self.model, self.data)
+        self.loads.reset()
         self.model.dof_frictionloss[self._v] = self._friction
         self.data.qpos[self._q] = q0
         if isinstance(self.robot, PassiveJoints):  # a parallel mechanism: its passive joints close the loops

@@ -113,6 +113,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
             raise EStopLatchedError(self._latch.refusal(where), self._latch.name, where)
         self.ramp_in_after_clear = RAMP_IN_AFTER_CLEAR_S if self._latch.take_ramp_in() else 0.0
         mujoco.mj_resetData(self.model, self.data)
+        self.loads.reset()
         self.model.dof_frictionloss[self._v] = self._friction
         self.data.qpos[self._q] = q0
         mujoco.mj_forward(self.model, self.data)

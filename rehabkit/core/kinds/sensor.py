@@ -113,3 +113,8 @@ class InteractionForceSensor(Sensor):
     @abstractmethod
     def interaction_force(self, t: float, backend: Any) -> np.ndarray:
         """The force the person (or a rig) puts on the robot now [N], 3 values; called every control step."""
+
+    def joint_torque(self, q: np.ndarray, force: np.ndarray) -> np.ndarray | None:
+        """The joint torques [N·m] that ``force`` (as :meth:`interaction_force` gave it) exerts on the robot at
+        posture ``q``: where it acts and in which axes (a retreat moves away along it); default None (unknown)."""
+        return None

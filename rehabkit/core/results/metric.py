@@ -119,7 +119,13 @@ CORE_METRICS: tuple[Metric, ...] = (
     Metric("contact_steps", "count", description="control steps with a robot collision"),
     Metric("safety_events", "count", description="safety trips"),
     Metric("torque_saturation_steps", "count", description="control steps with a torque clipped"),
-    Metric("stop_category", "count", description="the safety stop's category (IEC 60204-1: 0, 1, 2)"),
+    Metric("stop_category", "count", description="the safety stop's category (IEC 60204-1: 0, 1, 2; NaN: a "
+           "force-limiting reaction that did not end in a stop)"),
+    Metric("force_after_trip_peak_n", "N", description="the largest interaction force from the first trip on"),
+    Metric("force_above_limit_s", "s", description="time the interaction force spent above its limit after the "
+           "first trip"),
+    Metric("joints_in_range", "1", description="1 when every joint stayed in its range (the run's, without the "
+           "trip margin) after the first trip, else 0"),
     Metric("stop_time_s", "s", description="from the trip to standstill (every joint < 1°/s for 50 ms; NaN: not "
            "at rest by the run's end)"),
     Metric("stop_distance_deg", "deg", description="the largest joint travel from the trip to standstill"),

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -87,7 +88,17 @@ def stop_metrics(a: Assembly, trace) -> dict[str, float]:
     hand = np.full((len(trace.t), 3), np.nan)
     hand[k0:] = a.robot.fk_batch(trace.q[k0:])[:, :3, 3]  # (the stop's steps only)
     figures = stop_figures(trace.t, trace.q, trace.qd, hand, a.safety.tripped_at, a.robot.model.revolute)
-    return {"stop_category": float(a.safety.category), **figures}
+    category = a.safety.category
+    out = {"stop_category": float(category) if category is not None else math.nan, **figures}
+    lim = a.safety.limits
+    out["joints_in_range"] = float(np.all((trace.q[k0:] >= lim.lower) & (trace.q[k0:] <= lim.upper)))
+    limit = a.safety.config.interaction_force_n
+    if trace.f_h is not None and limit is not None:
+        after = trace.f_h[k0:]
+        dt = float(trace.t[1] - trace.t[0]) if len(trace.t) > 1 else 0.0
+        out["force_after_trip_peak_n"] = float(after.max()) if len(after) else 0.0
+        out["force_above_limit_s"] = float(np.count_nonzero(after > limit) * dt)
+    return out
 
 
 def plugin_versions(a: Assembly) -> dict[str, Any]:

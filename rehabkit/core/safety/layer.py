@@ -9,7 +9,9 @@ ignored and the robot stopped in the category the envelope sets for the rule
 (:mod:`rehabkit.core.safety.stopping`: 0 torque off; 1 and 2 a controlled stop with
 bounded deceleration, then torque off or the posture held, PD with gravity
 compensation within effort limits); by default 2, or 0 for a robot whose
-``safe_stop`` is ``zero-torque``. Torques beyond the effort limit
+``safe_stop`` is ``zero-torque``. The interaction force may instead get a force-limiting
+reaction (``safety.reactions``: yield or retreat, :mod:`rehabkit.core.safety.compliance`),
+under which the other rules still hold and stop the robot. Torques beyond the effort limit
 are clipped (each episode an intervention) or trip the stop if the scenario asks.
 A ramp-in blends from holding the start posture to the controller's torque, a
 ramp-out back to holding the posture where it began.
@@ -25,6 +27,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from rehabkit.core.safety.compliance import Compliance
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.ramps import Ramps
 from rehabkit.core.safety.stopping import WORDS, Stopping
@@ -62,6 +65,11 @@ class SafetyLayer:
         self.stopping = Stopping(robot, config, self.lo, self.hi, gravity, dt, self.interventions.append)
         self.ramps = Ramps(config, self.stopping.hold_torque, self.interventions.append)
         self.tripped_at: float | None = None
+        self.compliance: Compliance | None = None  # a force-limiting reaction under way (instead of a stop)
+        # the joint torques the interaction force exerts, (q, force) -> tau: a retreat's direction (the runner
+        # sets it from the force's source)
+        self.joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None
+        self._robot = robot
         self.saturated_steps = 0
         self._dt = dt
         self._clip: SafetyEvent | None = None  # the clipping episode under way
@@ -93,8 +101,13 @@ class SafetyLayer:
 
     @property
     def category(self) -> int | None:
-        """The category of the stop under way (None before a trip)."""
+        """The category of the stop under way (None before a trip, or while a force-limiting reaction lasts)."""
         return self.stopping.category
+
+    @property
+    def reaction(self) -> str | None:
+        """The force-limiting reaction under way (``yield``/``retreat``), if any."""
+        return self.compliance.kind if self.compliance is not None else None
 
     @property
     def categories(self) -> dict[str, int]:
@@ -157,6 +170,9 @@ class SafetyLayer:
                 return tau
         n = self._n
         q, qd, tau = row[:n], row[n : 2 * n], row[2 * n :]
+        if self.compliance is not None:
+            tau[:] = self._comply(t, q, qd)
+            return tau
         if self.tripped_at is None:
             # slow path: find out what went wrong
             if (
@@ -186,12 +202,36 @@ class SafetyLayer:
     def check_force(self, t: float, q: np.ndarray, force: np.ndarray, qd: np.ndarray | None = None) -> None:
         """Trip if the interaction force at the hand (world frame [N]) is above the envelope's limit."""
         limit = self.config.interaction_force_n
+        if self.compliance is not None:
+            self.compliance.observe(t, q, force)
+            return
         if limit is None or self.tripped_at is not None:
             return
         magnitude = float(np.linalg.norm(force))
         if not magnitude <= limit:  # NaN trips too
             self._trip(t, q, "interaction-force", None, magnitude, limit, "interaction force above its limit",
                        {"force_n": np.round(force, 3).tolist()}, qd=qd)
+
+    def _comply(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """The reaction's torque, unless a rule it keeps is broken: then the robot stops in that rule's category."""
+        broken = self.compliance.broken(q, qd, self.lo, self.hi)
+        if broken is not None:
+            return self._escalate(t, q, qd, *broken)
+        return self.compliance.torque(t, q, qd)
+
+    def _escalate(self, t, q, qd, rule, joint, value, limit, why) -> np.ndarray:
+        """A force-limiting reaction ends in a stop (its rule's category): a trip of its own."""
+        kind, self.compliance = self.compliance.kind, None
+        name = self.names[joint] if isinstance(joint, int) else joint
+        category = self.stopping.category_of(rule)
+        figure = f": {name + ' = ' if name else ''}{value:.4g} (limit {limit:.4g})" if value is not None else ""
+        cause = f"while the robot {'yielded' if kind == 'yield' else 'retreated'}, {why}{figure}"
+        event = SafetyEvent(t, rule, name, value, limit, f"t={t:.3f}s: {cause}; {WORDS[category]}",
+                            {"category": category, "during": kind}, cause=cause)
+        self.events.append(event)
+        self._note(event)
+        self.stopping.begin(t, category, q, qd)
+        return self.stopping.torque(t, q, qd)
 
     def trip(self, t: float, q: np.ndarray, rule: str, message: str, qd: np.ndarray | None = None,
              breach: LimitBreach | None = None, data: dict | None = None) -> None:
@@ -278,6 +318,18 @@ class SafetyLayer:
         if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
             self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}, cause=cause))
             return
+        reaction = self.config.reactions.get(rule)
+        if reaction is not None and reaction.type != "stop":
+            words = {"yield": "yield: compliant, gravity compensated, no stop",
+                     "retreat": "retreat: away along the force, then hold"}[reaction.type]
+            event = SafetyEvent(t, rule, name, value, limit, f"{text}; {words}",
+                                {**(data or {}), "reaction": reaction.type}, cause=cause)
+            self.events.append(event)
+            self._note(event)
+            self.tripped_at = t
+            self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
+                                               self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque)
+            return
         category = self.stopping.category_of(rule)
         text += f"; {WORDS[category]}"
         event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category}, cause=cause)
@@ -285,3 +337,4 @@ class SafetyLayer:
         self._note(event)
         self.tripped_at = t
         self.stopping.begin(t, category, q, qd)
+

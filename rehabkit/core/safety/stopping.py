@@ -46,7 +46,7 @@ class ControlledStop:
         """The ramp from the state at the trip; ``decel`` [rad/s²] per joint, or None: half what each drive can give
         its joint at this posture (effort / inertia), the quickest stop that keeps a margin for gravity."""
         v0 = np.zeros_like(q) if qd is None else np.where(np.isfinite(qd), qd, 0.0)
-        inertia = _mass_matrix(robot, q)
+        inertia = mass_matrix(robot, q)
         if decel is None:
             decel = 0.5 * effort / np.diag(inertia) if inertia is not None else np.full(len(q), np.radians(360.0))
         duration = max(float(np.max(np.abs(v0) / decel)) if len(v0) else 0.0, dt)
@@ -68,7 +68,7 @@ class ControlledStop:
         return self.q0 + self.v0 * self.duration / 2
 
 
-def _mass_matrix(robot, q: np.ndarray) -> np.ndarray | None:
+def mass_matrix(robot, q: np.ndarray) -> np.ndarray | None:
     """The joint-space inertia at ``q`` (Pinocchio), or None for a robot without a dynamic model."""
     try:
         import pinocchio as pin

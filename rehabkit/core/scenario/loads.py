@@ -13,7 +13,12 @@ Vec3 = tuple[float, float, float]
 class Load(StrictModel):
     """A force on a body of the scene, world frame: zero until ``start_s``, rising linearly over ``ramp_s`` to
     ``force_n``, held until ``release_s``. Simulated wherever the robot is (the MuJoCo scene, or the MuJoCo plant
-    behind a hardware link's bridge); on a real robot the rig itself pushes."""
+    behind a hardware link's bridge); on a real robot the rig itself pushes.
+
+    With ``stiffness_n_m`` the rig pushes through a spring, as a person's arm or a pusher with a load cell does: its
+    far end advances along the force so that on a body held still the force is the profile above, and a body that
+    gives way along it by d is pushed k·d less (never pulled). Without it the force is applied whatever the body
+    does (a hanging weight)."""
 
     name: str
     body: str = Field(description="the body pushed: a robot body, or a force-torque sensor's mount (its name)")
@@ -21,6 +26,8 @@ class Load(StrictModel):
     start_s: float = Field(0.0, ge=0, description="when the push begins")
     ramp_s: float = Field(0.0, ge=0, description="how long it takes to reach the full force (0: at once)")
     release_s: float | None = Field(None, gt=0, description="when it stops (default: never)")
+    stiffness_n_m: float | None = Field(None, gt=0, description="push through a spring of this stiffness [N/m]: "
+                                        "the force falls as the body gives way (default: a set force)")
 
     @model_validator(mode="after")
     def _ordered(self) -> Load:

@@ -64,6 +64,32 @@ class Heartbeat(StrictModel):
         return self
 
 
+class ForceReaction(StrictModel):
+    """What the robot does when the interaction force passes its limit (:mod:`rehabkit.core.safety.compliance`):
+    ``stop`` in the rule's stop category (as every other rule), ``yield`` (compliant: gravity and friction
+    compensated, damped, soft walls inside the joint ranges) or ``retreat`` (away along the force until it falls
+    below ``release_n``, then hold)."""
+
+    type: Literal["stop", "yield", "retreat"] = Field(description="stop (its category), yield or retreat")
+    yield_speed_deg_s: float = Field(30.0, gt=0, description="yield: the speed the force at its limit moves a "
+                                     "joint at, at most (sets each joint's damping) [deg/s; mm/s]")
+    max_speed_deg_s: float = Field(60.0, gt=0, description="speed bound while yielding or retreating; faster is a "
+                                   "velocity stop [deg/s; mm/s for a sliding joint]")
+    wall_deg: float = Field(10.0, gt=0, description="soft walls this far inside each joint's range: a joint at the "
+                            "speed bound stops within it [deg; mm]")
+    release_n: float | None = Field(None, gt=0, description="retreat: hold once the force is below this (default: "
+                                    "60 % of the limit)")
+    retreat_speed_deg_s: float = Field(20.0, gt=0, description="retreat: the fastest joint's speed [deg/s; mm/s]")
+
+    @model_validator(mode="after")
+    def _within(self) -> ForceReaction:
+        for name in ("retreat_speed_deg_s", "yield_speed_deg_s"):
+            if getattr(self, name) >= self.max_speed_deg_s:
+                raise ValueError(f"{name} ({getattr(self, name):g}) must be below max_speed_deg_s "
+                                 f"({self.max_speed_deg_s:g}): moving at the speed bound would stop the robot")
+        return self
+
+
 class SafetyConfig(StrictModel):
     """Safety-layer settings of a scenario: the envelope every command passes."""
 
@@ -84,6 +110,18 @@ class SafetyConfig(StrictModel):
     keep_in: KeepInBox | None = Field(None, description="box the hand must stay in")
     interaction_force_n: float | None = Field(None, gt=0, description="largest force between person and robot "
                                                                        "at the hand")
+    reactions: dict[Literal["interaction-force"], ForceReaction] = Field(
+        {}, description="a force limit's reaction instead of a stop: yield (compliant) or retreat (away along the "
+        "force); only the interaction-force rule limits a force, the other rules stop (stop_category)")
     ramp_in_s: float = Field(0.0, ge=0, description="soft start: blend from holding the start posture")
     ramp_out_s: float = Field(0.0, ge=0, description="soft stop: blend to holding the posture, before the end")
     heartbeat: Heartbeat | None = Field(None, description="link timing (hardware backends)")
+
+    @model_validator(mode="after")
+    def _release_below_limit(self) -> SafetyConfig:
+        reaction = self.reactions.get("interaction-force")
+        if reaction is not None and reaction.release_n is not None and self.interaction_force_n is not None \
+                and reaction.release_n >= self.interaction_force_n:
+            raise ValueError(f"reactions.interaction-force.release_n ({reaction.release_n:g} N) must be below "
+                             f"interaction_force_n ({self.interaction_force_n:g} N): the retreat ends below the limit")
+        return self

@@ -24,8 +24,10 @@ class ForceSource:
     """``source(t, q, tau_person)`` → the interaction force [N] (3 values, world frame); ``last`` is the value it
     gave last (None before the first step), ``measured`` whether it is measured or estimated."""
 
-    def __init__(self, read: Read, measured: bool):
+    def __init__(self, read: Read, measured: bool,
+                 joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
         self._read, self.measured = read, measured
+        self.joint_torque = joint_torque  # (q, force) -> the joint torques it exerts, where known
         self.last: np.ndarray | None = None
 
     def __call__(self, t: float, q: np.ndarray, tau_h: np.ndarray | None) -> np.ndarray:
@@ -55,19 +57,25 @@ def force_source(a, limit: float | None) -> ForceSource | None:
     setup = weakref.ref(a)
     if len(sensing) == 1:  # (the common case: no list and max each control step)
         sensor = sensing[0]
-        return ForceSource(lambda t, q, tau_h: sensor.interaction_force(t, setup().backend), True)
+        return ForceSource(lambda t, q, tau_h: sensor.interaction_force(t, setup().backend), True, sensor.joint_torque)
     if sensing:
+        seen: list[np.ndarray] = []
+
         def largest(t, q, tau_h):
             backend = setup().backend
-            forces = [s.interaction_force(t, backend) for s in sensing]
-            return max(forces, key=lambda f: f @ f)
-        return ForceSource(largest, True)
+            seen[:] = [s.interaction_force(t, backend) for s in sensing]
+            return max(seen, key=lambda f: f @ f)
+
+        def all_torques(q, force):  # every sensor's force, each where it acts
+            torques = [s.joint_torque(q, f) for s, f in zip(sensing, seen)]
+            return None if not seen or any(x is None for x in torques) else np.sum(torques, axis=0)
+        return ForceSource(largest, True, all_torques)
     if isinstance(a.patient, EmbodiedPatient):
         strapped = a.patient.interaction_force
         return ForceSource(lambda t, q, tau_h: strapped(), True)
     if a.patient is not None and limit is not None:
         estimate = HandForce(a.robot.model)
-        return ForceSource(lambda t, q, tau_h: estimate(q, tau_h), False)
+        return ForceSource(lambda t, q, tau_h: estimate(q, tau_h), False, lambda q, f: estimate.jacobian(q).T @ f)
     if limit is not None:
         at = ("safety", "interaction_force_n") if a.sc.safety.interaction_force_n is not None else \
             (a.patient_slot.path[:1] if a.patient_slot is not None else ())

@@ -1,0 +1,150 @@
+"""Force-limiting reactions: what the robot does when the interaction force passes its limit, when the scenario asks
+for more than a stop (``safety.reactions``).
+
+A stop and a stiff hold is the reaction that hurts when the force comes from the person (a spasm, a push against
+the exoskeleton): the robot holds its posture and the force keeps rising. Rehabilitation robots limit such a force
+by giving way (Bessler et al. 2021 frame the skill as limiting the force; admittance and impedance control do it):
+
+- **yield**: the robot becomes compliant — gravity and the joints' friction compensated, damped, no stiffness
+  toward the old posture — so the person's force moves it; each joint's damping is what holds it to
+  ``yield_speed_deg_s`` under the force at its limit, pushing where it acts in the worst direction (Jᵀ at the
+  trip). A soft wall ``wall_deg`` inside each joint's range stops a joint arriving at the speed bound within the wall's
+  width; beyond the range (and its margin) the position rule stops the robot, and faster than ``max_speed_deg_s``
+  the velocity rule does, each in its own stop category. Suits a person who must not be resisted (spasticity, a
+  patient pushing out of a posture): the force stays at what moving the damped arm takes.
+- **retreat**: the robot moves away along the force — its reference runs in the direction the force would move the
+  joints (M⁻¹ Jᵀ F), the fastest joint at ``retreat_speed_deg_s`` — until the force is below ``release_n``, then
+  holds there (the hold gains), and retreats again if the force passes its limit again; at a soft wall it cannot go
+  further and stops. Suits a pinch or a squeeze the robot itself caused (moving into the person or an obstacle):
+  it gives back the space it took.
+
+Both keep every other rule of the envelope: the layer still checks the state each control step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from rehabkit.core.safety.stopping import mass_matrix
+from rehabkit.core.scenario.safety import ForceReaction
+
+
+class Compliance:
+    """A force-limiting reaction under way (``yield`` or ``retreat``), from the trip at ``t0`` in state ``q0``.
+
+    ``lo``, ``hi``: the joint ranges the layer keeps to [rad]; ``inertia``: the joint-space inertia at the trip
+    (None: no dynamic model, the hold gains stand in); ``gravity(q)``, ``friction``: what is compensated;
+    ``joint_torque(q, force)``: the torques the interaction force exerts on the joints (retreat only)."""
+
+    def __init__(self, reaction: ForceReaction, limit_n: float, t0: float, q0: np.ndarray, lo: np.ndarray,
+                 hi: np.ndarray, revolute: np.ndarray, effort: np.ndarray, inertia: np.ndarray | None,
+                 gravity: Callable[[np.ndarray], np.ndarray] | None, friction: np.ndarray | None,
+                 hold_kp: float, hold_kd: float,
+                 joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
+        self.reaction, self.kind, self.limit = reaction, reaction.type, limit_n
+        self.release = reaction.release_n if reaction.release_n is not None else 0.6 * limit_n
+        unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
+        self.vmax = reaction.max_speed_deg_s * unit
+        self.vretreat = reaction.retreat_speed_deg_s * unit
+        wall = np.minimum(reaction.wall_deg * unit, (hi - lo) / 4)
+        self.wall_lo, self.wall_hi = lo + wall, hi - wall
+        mass = np.diag(inertia) if inertia is not None else np.full(len(q0), hold_kd * 0.1)
+        self.inertia = inertia
+        # the torque per newton each joint can get from the force (the norm of its row of Jᵀ), at the trip
+        reach = None
+        if joint_torque is not None:
+            rows = [joint_torque(q0, axis) for axis in np.eye(3)]
+            if all(r is not None for r in rows):
+                reach = np.linalg.norm(np.array(rows), axis=0)
+        if reach is not None:
+            self.damping = np.maximum(reach * limit_n / (reaction.yield_speed_deg_s * unit), mass / 0.1)
+        else:  # where the force acts is unknown: a tenth of a second to damp a joint's own motion
+            self.damping = mass / 0.1
+        # a joint arriving at the speed bound stops within the wall's width: ½ m v² = ½ k w²
+        self.wall_k = mass * (self.vmax / wall) ** 2
+        self.wall_d = 2.0 * np.sqrt(self.wall_k * mass)
+        self.gravity, self.friction, self.effort = gravity, friction, effort
+        self.hold_kp, self.hold_kd = hold_kp, hold_kd
+        self.joint_torque = joint_torque
+        self.q_ref = np.clip(q0, self.wall_lo, self.wall_hi)
+        self.moving = self.kind == "retreat"  # retreating (else holding where it went)
+        self.blocked_at: float | None = None  # a retreat that reached a soft wall with the force still high
+        self._last_t = t0
+        self.force = 0.0
+
+    @classmethod
+    def start(cls, reaction: ForceReaction, limit_n: float, t: float, q: np.ndarray, robot, lo: np.ndarray,
+              hi: np.ndarray, gravity, config, joint_torque=None) -> Compliance:
+        """The reaction from the trip at ``t`` in posture ``q`` of ``robot`` (its model: inertia, friction, effort
+        limits, joint kinds), with the layer's ranges, gravity and hold gains (``config``: the envelope)."""
+        friction = None
+        try:
+            f = np.asarray(robot.pin_model.friction, float)[: robot.dof]
+            friction = f if np.any(f) else None
+        except Exception:  # noqa: BLE001 (no dynamic model: nothing known to compensate)
+            pass
+        return cls(reaction, limit_n, t, np.asarray(q, float), lo, hi, robot.revolute, robot.limits.effort,
+                   mass_matrix(robot, q), gravity, friction, config.hold_kp, config.hold_kd, joint_torque)
+
+    def broken(self, q: np.ndarray, qd: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple | None:
+        """A rule the reaction keeps, broken now: ``(rule, joint index, value, limit, why)``; None while all hold."""
+        bad = ~(np.isfinite(q) & np.isfinite(qd))
+        if bad.any():
+            return "non-finite", int(np.argmax(bad)), None, None, "a non-finite state"
+        outside = (q < lo) | (q > hi)
+        if outside.any():
+            j = int(np.argmax(outside))
+            return "position", j, float(q[j]), float(lo[j] if q[j] < lo[j] else hi[j]), "a joint beyond its range"
+        over = np.abs(qd) > self.vmax
+        if over.any():
+            j = int(np.argmax(over))
+            return "velocity", j, float(qd[j]), float(self.vmax[j]), f"a joint faster than the {self.kind}'s bound"
+        if self.blocked_at is not None:
+            return "interaction-force", None, self.force, self.limit, "the force above its limit at a soft wall"
+        return None
+
+    def observe(self, t: float, q: np.ndarray, force: np.ndarray) -> None:
+        """The interaction force now (what the retreat follows and releases on)."""
+        self.force = float(np.linalg.norm(force))
+        if self.kind != "retreat":
+            return
+        if self.moving and self.force <= self.release:
+            self.moving = False
+        elif not self.moving and self.force > self.limit:
+            self.moving = True
+        if self.moving:
+            self._advance(t, q, force)
+        self._last_t = t
+
+    def _advance(self, t: float, q: np.ndarray, force: np.ndarray) -> None:
+        tau_f = self.joint_torque(q, force) if self.joint_torque is not None else None
+        if tau_f is None or not np.all(np.isfinite(tau_f)):
+            return
+        direction = np.linalg.solve(self.inertia, tau_f) if self.inertia is not None else tau_f
+        scale = np.max(np.abs(direction) / self.vretreat)  # the fastest joint at its retreat speed
+        if not scale > 0:
+            return
+        step = direction / scale * max(t - self._last_t, 0.0)
+        ref = np.clip(self.q_ref + step, self.wall_lo, self.wall_hi)
+        if np.allclose(ref, self.q_ref, atol=1e-12, rtol=0.0) and self.force > self.limit:
+            self.blocked_at = self.blocked_at if self.blocked_at is not None else t
+        self.q_ref = ref
+
+    def torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """What to send now: compliant (yield), or following the retreat's reference; within the effort limits."""
+        if self.kind == "yield":
+            tau = -self.damping * qd
+            below, above = q < self.wall_lo, q > self.wall_hi
+            if below.any() or above.any():
+                push = np.where(below, self.wall_lo - q, 0.0) + np.where(above, self.wall_hi - q, 0.0)
+                tau += np.where(below | above, self.wall_k * push - self.wall_d * qd, 0.0)
+            if self.friction is not None:
+                tau += self.friction * np.tanh(qd / 0.02)  # Coulomb friction, smoothed near rest
+        else:
+            tau = self.hold_kp * (self.q_ref - q) - self.hold_kd * qd
+        if self.gravity is not None:
+            tau += self.gravity(q)
+        return np.clip(tau, -self.effort, self.effort)

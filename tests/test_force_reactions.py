@@ -1,0 +1,112 @@
+"""Force-limiting reactions (``safety.reactions``): on the interaction-force limit the robot yields or retreats
+instead of stopping stiffly, keeping every other rule; and the compliant test rig (a push through a spring)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+import yaml
+
+from rehabkit.core.run.runner import Runner
+from rehabkit.core.scenario.errors import ScenarioError
+from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.scenario.loads import Load
+from rehabkit.sim.loads import LoadApplier
+from tests.conftest import SCENARIOS
+
+FORCE = SCENARIOS / "safety" / "hit_force.yaml"  # the rig's push rises 30 N/s along world +y; the limit is 30 N
+PUSH = np.array([0.0, 1.0, 0.0])
+
+
+def _run(kind: str, **more):
+    over = {"safety.reactions": {"interaction-force": {"type": kind}}, "safety.stop_after_s": 1.0, "expect": {},
+            **more}
+    runner = Runner(load_scenario(FORCE, over))
+    result = runner.run()
+    a = runner.setup
+    t, q = result.trace.t, result.trace.q
+    k0 = int(np.searchsorted(t, a.safety.tripped_at - 1e-12))
+    hands = a.robot.model.to_world(a.robot.fk_batch(q[k0:])[:, :3, 3])
+    return result, a, k0, hands
+
+
+def test_a_yield_gives_way_along_the_push_within_its_speed_bound_and_the_ranges():
+    result, a, k0, hands = _run("yield")
+    (event,) = a.safety.events
+    assert event.rule == "interaction-force" and event.data["reaction"] == "yield" and "no stop" in event.message
+    m = result.metrics
+    assert np.isnan(m["stop_category"]) and m["joints_in_range"] == 1.0
+    moved = (hands[-1] - hands[0]) @ PUSH
+    assert moved > 0.1  # a set force, never relieved: the arm goes with it (10+ cm in the second after the trip)
+    speeds = np.degrees(np.abs(result.trace.qd[k0:]))
+    assert speeds.max() < 60.0  # the speed bound (max_speed_deg_s), not reached: no stop
+    lim = a.safety.limits
+    assert np.all(result.trace.q[k0:] >= lim.lower) and np.all(result.trace.q[k0:] <= lim.upper)
+
+
+def test_a_retreat_backs_off_at_its_speed_and_holds_once_the_force_is_released():
+    # the rig lets go 0.6 s after the trip (at 1.9 s): the retreat stops there and holds its posture
+    result, a, k0, hands = _run("retreat", **{"world.loads": [
+        {"name": "push", "body": "ft", "force_n": [0, 60, 0], "start_s": 0.3, "ramp_s": 2.0, "release_s": 1.9}]})
+    (event,) = a.safety.events
+    assert event.data["reaction"] == "retreat" and a.safety.reaction == "retreat"
+    t, qd = result.trace.t, np.degrees(np.abs(result.trace.qd))
+    going = (t > a.safety.tripped_at + 0.15) & (t < 1.85)
+    assert 18.0 < qd[going].max(axis=1).mean() < 22.0  # the fastest joint at retreat_speed_deg_s (20)
+    assert (hands[np.searchsorted(t[k0:], 1.85)] - hands[0]) @ PUSH > 0.02  # away along the force
+    assert qd[t > 2.2].max() < 0.5  # released: held still
+    assert result.metrics["joints_in_range"] == 1.0 and np.isnan(result.metrics["stop_category"])
+
+
+def test_a_reaction_still_stops_the_robot_at_its_speed_bound():
+    result, a, _, _ = _run("yield", **{"safety.reactions": {"interaction-force": {
+        "type": "yield", "yield_speed_deg_s": 40, "max_speed_deg_s": 45}}})
+    first, stop = a.safety.events
+    assert first.data["reaction"] == "yield"
+    assert stop.rule == "velocity" and stop.data == {"category": 2, "during": "yield"}
+    assert stop.value > stop.limit == pytest.approx(np.radians(45))
+    assert result.metrics["stop_category"] == 2
+
+
+def test_reactions_are_checked_where_written(tmp_path):
+    path = tmp_path / "s.yaml"
+    for safety, where, said in (
+            ({"interaction_force_n": 30, "reactions": {"interaction-force": {"type": "retreat", "release_n": 35}}},
+             "safety", "release_n (35 N) must be below interaction_force_n (30 N)"),
+            ({"reactions": {"position": {"type": "yield"}}}, "safety.reactions", "position"),
+            ({"reactions": {"interaction-force": {"type": "yield", "yield_speed_deg_s": 80}}},
+             "safety.reactions.interaction-force", "yield_speed_deg_s (80) must be below max_speed_deg_s (60)")):
+        path.write_text(yaml.safe_dump({"extends": str(FORCE), "safety": safety}))
+        with pytest.raises(ScenarioError) as err:
+            load_scenario(path)
+        text = str(err.value)
+        assert where in text and said in text, text
+
+
+def test_a_spring_rig_pushes_less_as_the_body_gives_way_and_never_pulls():
+    model = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body name="b"><joint name="x" type="slide" axis="0 1 0"/>'
+        '<geom size="0.05" mass="1"/></body></worldbody></mujoco>')
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    rig = LoadApplier(model, [Load(name="p", body="b", force_n=(0, 40, 0), start_s=0.0, ramp_s=1.0,
+                                   stiffness_n_m=2000)])
+    rig.apply(data, 0.0)  # contact: where the body is now
+    for t, given_way, expected in ((0.5, 0.0, 20.0), (0.5, 0.004, 12.0), (1.0, 0.015, 10.0), (1.0, 0.03, 0.0)):
+        data.qpos[0] = given_way
+        mujoco.mj_forward(model, data)
+        rig.apply(data, t)
+        assert data.xfrc_applied[1, :3] == pytest.approx([0.0, expected, 0.0], abs=1e-9)
+
+
+def test_a_yield_over_the_link_is_the_simulations():
+    """The host's safety layer reacts the same over the robot link (lock-step): the same trip, the same yield, the
+    arm carried as far by the push; the bridge's own backstop (wider ranges and speeds) never steps in."""
+    sim, a_sim, _, hands_sim = _run("yield")
+    link, a_link, _, hands_link = _run("yield", **{"backend.type": "hardware", "backend.clock": "lockstep"})
+    assert [e.rule for e in a_link.safety.events] == ["interaction-force"]
+    assert a_link.safety.tripped_at == pytest.approx(a_sim.safety.tripped_at, abs=0.002)
+    carried = [(h[-1] - h[0]) @ PUSH for h in (hands_sim, hands_link)]
+    assert carried[1] == pytest.approx(carried[0], rel=0.05)
+    assert link.metrics["joints_in_range"] == 1.0 and not a_link.backend.holding
