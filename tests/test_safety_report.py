@@ -20,8 +20,14 @@ def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, 
     assert main(["safety-report", "--out", str(tmp_path / "report")]) == 0
     md = (tmp_path / "report" / "safety_report.md").read_text()
     sections = dict(re.findall(r"^## (\S+)\n(.*?)(?=^## |\Z)", md, re.S | re.M))
-    assert set(sections) == {"hit-estop", "hit-force", "hit-link-loss", "hit-ramp-in", "hit-range", "hit-speed",
-                             "lexos-force"}
+    assert set(sections) == {"hit-estop", "hit-force", "hit-force-yield", "hit-link-loss", "hit-ramp-in", "hit-range",
+                             "hit-speed", "lexos-force", "lexos-force-yield"}
+    for name, limit in (("hit-force-yield", 30.0), ("lexos-force-yield", 25.0)):  # a reaction that limits the force
+        assert _row(sections[name], "stop category / reaction") == ["yield", "yield"]
+        assert all(float(f) <= 1.1 * limit for f in _row(sections[name], "peak force after the trigger [N]"))
+        assert _row(sections[name], "joints stayed in range after the trigger") == ["yes", "yes"]
+        # the rig's spring force (from where the mount went) reaching the limit, to the trip: the filter's lag
+        assert all(0 <= float(r) < 25 for r in _row(sections[name], "reaction time [ms]"))
     for name in ("hit-force", "lexos-force"):  # the force limit: the same force, the rig's push, both ways
         sim, link = (float(c.split(": ")[-1].split()[0]) for c in _row(sections[name], "trigger"))  # "…: 30.03 (…"
         assert abs(sim - link) < 0.1
@@ -39,4 +45,4 @@ def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, 
     assert sim == "n/a" and 5 <= float(link) <= 15  # the bridge's own hold, 10 ms after the last command
     assert all(r == "yes" for s in sections.values() for r in _row(s, "expectations met") if r != "n/a")
     html = (tmp_path / "report" / "safety_report.html").read_text()
-    assert html.count("data:image/png;base64,") == 7 and "<table>" in html
+    assert html.count("data:image/png;base64,") == 9 and "<table>" in html

@@ -19,7 +19,7 @@ def cmd_safety_report(args: argparse.Namespace) -> int:
         print("error: no safety-skill scenarios given (and none in scenarios/safety/)", file=sys.stderr)
         return EXIT_INVALID
     try:
-        runs = skill_runs(paths)
+        runs = skill_runs(paths, args.reactions.split(",") if args.reactions else None)
     except ScenarioError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_INVALID
@@ -29,9 +29,18 @@ def cmd_safety_report(args: argparse.Namespace) -> int:
     return EXIT_OK if all(r.passed for pair in runs for r in pair if r is not None) else EXIT_FAILED
 
 
+def _reactions(text: str) -> str:
+    wrong = [r for r in text.split(",") if r not in ("stop", "yield", "retreat")]
+    if wrong:
+        raise argparse.ArgumentTypeError(f"{', '.join(wrong)}: a reaction is stop, yield or retreat")
+    return text
+
+
 def add_parser(sub) -> None:
     r = sub.add_parser("safety-report", help="run safety-skill scenarios in simulation and over the link; write "
                                              "a report per skill (Markdown and HTML with plots)")
     r.add_argument("scenarios", nargs="*", help="skill scenarios (default: scenarios/safety/*.yaml)")
     r.add_argument("--out", default="out/safety_report", metavar="DIR")
+    r.add_argument("--reactions", metavar="LIST", type=_reactions, help="run each skill with an interaction-force "
+                   "limit once per reaction, side by side, e.g. stop,yield,retreat (default: as its scenario says)")
     r.set_defaults(func=cmd_safety_report)

@@ -18,19 +18,26 @@ ROWS = [  # (label, how to get it from a SkillRun, format)
     ("limit crossed at [s]", lambda r: r.onset_s, "{:.3f}"),
     ("stop triggered at [s]", lambda r: r.trip_s, "{:.3f}"),
     ("reaction time [ms]", lambda r: r.reaction_ms, "{:.1f}"),
-    ("stop category", lambda r: r.category, "{}"),
+    ("stop category / reaction", lambda r: r.category, "{}"),
     ("time to standstill [s]", lambda r: r.figures.get("stop_time_s"), "{:.3f}"),
     ("largest joint travel after the trigger [deg]", lambda r: r.figures.get("stop_distance_deg"), "{:.2f}"),
     ("hand path after the trigger [mm]", lambda r: _mm(r.figures.get("stop_distance_m")), "{:.1f}"),
     ("fastest joint after the trigger [deg/s]", lambda r: r.figures.get("stop_peak_speed_deg_s"), "{:.1f}"),
     ("peak interaction force [N]", lambda r: r.figures.get("ft_peak_force_n",
                                                            r.figures.get("peak_interaction_force_n")), "{:.1f}"),
+    ("peak force after the trigger [N]", lambda r: r.figures.get("force_after_trip_peak_n"), "{:.1f}"),
+    ("time above the force limit after the trigger [s]", lambda r: r.figures.get("force_above_limit_s"), "{:.3f}"),
+    ("joints stayed in range after the trigger", lambda r: _yes(r.figures.get("joints_in_range")), "{}"),
     ("force sensor bias tared [N]", lambda r: r.figures.get("ft_bias_n"), "{:.2f}"),
     ("force sensor noise raw / filtered [N]", lambda r: _pair(r.figures, "ft_noise_n", "ft_noise_filtered_n"), "{}"),
     ("ramp-in [s]", lambda r: r.figures.get("ramp_in_s"), "{:g}"),
     ("largest torque rate [N·m/s]", lambda r: r.figures.get("torque_rate_max_nm_s"), "{:.0f}"),
     ("notes", lambda r: "; ".join(r.notes) or None, "{}"),
 ]
+
+
+def _yes(v):
+    return None if v is None else ("yes" if v == 1.0 else "NO")
 
 
 def _mm(v):

@@ -6,8 +6,9 @@ Each scenario runs as written (simulation) and with ``backend.type: hardware`` o
 driving the robot's MuJoCo model (a scenario already on the hardware backend runs over the link only). Every run
 keeps its e-stop latches to itself; a scenario that presses the e-stop also shows the latch: the next session is
 refused until cleared, and the one after the clear ramps in. The reaction time is from the moment the limit was
-first crossed in truth (the rig's push reaching the force limit, a joint leaving its range or going too fast, the
-e-stop pressed, the link cut) to the safety layer's trip (or the bridge's hold).
+first crossed in truth (the rig's push reaching the force limit — a spring rig's from where its mount went — a
+joint leaving its range or going too fast, the e-stop pressed, the link cut) to the safety layer's trip (or the
+bridge's hold). ``--reactions`` runs each force skill once per force-limiting reaction (stop, yield, retreat).
 """
 
 from __future__ import annotations
@@ -46,10 +47,46 @@ class SkillRun:
         return 1e3 * (self.trip_s - self.onset_s)
 
 
-def _onset(sc, event: dict, trace) -> float | None:
+def _spring_push(setup, load, trace) -> np.ndarray | None:
+    """The force a spring load (``stiffness_n_m``) put on a force-torque sensor's mount at each step of the trace
+    [N], from where the mount was (the robot's kinematics at the traced postures); None where that can't be told
+    (then the limit's crossing is the measured force's, the filter's lag not counted)."""
+    import pinocchio as pin
+
+    sensor = next((s for s in setup.sensors.values() if getattr(s, "name", None) == load.body), None)
+    model = setup.robot.model
+    try:
+        pm = model.pin_model
+    except Exception:  # noqa: BLE001 (no Pinocchio model: a closed chain)
+        return None
+    if sensor is None or not pm.existFrame(sensor.body) or model.passive_joints:
+        return None  # (a passive joint's angle is not traced: where the mount went can't be told)
+    data, frame = pm.createData(), pm.getFrameId(sensor.body)
+    at = np.empty((len(trace.t), 3))
+    for k, q in enumerate(trace.q):
+        pin.framesForwardKinematics(pm, data, q)
+        at[k] = data.oMf[frame].act(np.asarray(sensor.position, float))
+    at = model.to_world(at)
+    full = float(np.linalg.norm(load.force_n))
+    along = np.asarray(load.force_n, float) / full
+    share = np.array([load.at(s) for s in trace.t])
+    k0 = int(np.searchsorted(trace.t, load.start_s - 1e-12))
+    if k0 >= len(trace.t):
+        return np.zeros(len(trace.t))
+    squeeze = share * full / load.stiffness_n_m - (at - at[k0]) @ along
+    return np.where(share > 0, load.stiffness_n_m * np.maximum(squeeze, 0.0), 0.0)
+
+
+def _onset(sc, event: dict, trace, setup=None) -> float | None:
     """When the limit the trip enforces was first crossed in truth."""
     rule, t = event["rule"], trace.t
-    if rule == "interaction-force" and sc.world.loads:
+    springs = [x for x in sc.world.loads if x.stiffness_n_m is not None] if sc.world else []
+    if rule == "interaction-force" and springs and setup is not None and len(springs) == len(sc.world.loads) == 1:
+        push = _spring_push(setup, springs[0], trace)
+        if push is not None:
+            over = np.flatnonzero(push >= event["limit"])
+            return float(t[over[0]]) if len(over) else None
+    if rule == "interaction-force" and sc.world.loads and not springs:
         grid = np.arange(0.0, sc.duration, 1e-4)
         push = np.linalg.norm(sum(np.outer([x.at(s) for s in grid], x.force_n) for x in sc.world.loads), axis=1)
         over = np.flatnonzero(push >= event["limit"])
@@ -75,8 +112,9 @@ def _onset(sc, event: dict, trace) -> float | None:
     return None
 
 
-def run_skill(path: Path, backend: str) -> SkillRun:
-    """Run one skill scenario on ``backend`` (``simulation`` or ``link``), its latches its own."""
+def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun:
+    """Run one skill scenario on ``backend`` (``simulation`` or ``link``), its latches its own; ``reaction``: the
+    interaction-force limit's reaction in place of the scenario's (stop, yield, retreat)."""
     from rehabkit.api import run_scenario
     from rehabkit.core.kinds.backend import EStopLatchedError
     from rehabkit.core.run.runner import Runner
@@ -84,11 +122,14 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     from rehabkit.core.scenario.loader import load_scenario
     from rehabkit.core.setup.errors import SetupError
 
-    overrides = LINK if backend == "link" else {}
+    overrides = dict(LINK) if backend == "link" else {}
+    if reaction is not None:
+        overrides["safety.reactions"] = {"interaction-force": {"type": reaction}}
     loaded = load_scenario(path, overrides)
     sc = loaded.model
     with tempfile.TemporaryDirectory() as state, own_state(Path(state)):
-        result = Runner(loaded).run()  # (loaded once: the scenario is read for the onsets too)
+        runner = Runner(loaded)
+        result = runner.run()  # (loaded once: the scenario is read for the onsets too)
         notes = []
         events = result.summary["safety"]["events"]
         if events and events[0]["rule"] == "e-stop":  # the latch: refused, cleared, ramped in
@@ -108,7 +149,8 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     m = result.summary["metrics"]
     figures = {k: m[k] for k in ("stop_time_s", "stop_distance_deg", "stop_distance_m", "stop_peak_speed_deg_s",
                                  "ft_peak_force_n", "peak_interaction_force_n", "ft_bias_n", "ft_noise_n",
-                                 "ft_noise_filtered_n") if m.get(k) is not None}
+                                 "ft_noise_filtered_n", "force_after_trip_peak_n", "force_above_limit_s",
+                                 "joints_in_range") if m.get(k) is not None}
     if not events:
         ramp = next((e for e in result.summary["safety"]["interventions"] if e["rule"] == "ramp-in"), None)
         tau = result.trace.tau
@@ -122,7 +164,7 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     names = result.summary["per_joint"]
     if ev.get("joint") in names:
         ev["_joint_index"] = list(names).index(ev["joint"])
-    onset, trip = _onset(sc, ev, result.trace), ev["t"]
+    onset, trip = _onset(sc, ev, result.trace, runner.setup), ev["t"]
     for later in result.summary["safety"]["interventions"]:  # what else acted while it stopped (a bridge's backstop)
         if later["t"] > ev["t"] and later["rule"] == "backend":
             notes.append(f"then at {later['t']:.3f} s: {later['cause']}")
@@ -135,16 +177,24 @@ def run_skill(path: Path, backend: str) -> SkillRun:
     # the event's own words: "measured: elbow_2 beyond its position limit (45.6°, limit 45.5°)", "interaction force
     # above its limit: 30.03 (limit 30)"
     trigger = f"{ev['rule']}: {ev['cause']}"
-    return SkillRun(sc.name or path.stem, backend, result.passed, trigger, onset, trip,
-                    ev["data"].get("category"), figures, notes, result.trace)
+    for later in result.summary["safety"]["events"][1:]:  # a reaction that ended in a stop
+        if later["data"].get("during"):
+            notes.append(f"then at {later['t']:.3f} s: {later['cause']}")
+    name = (sc.name or path.stem) + (f"-{reaction}" if reaction is not None else "")
+    return SkillRun(name, backend, result.passed, trigger, onset, trip,
+                    ev["data"].get("category", ev["data"].get("reaction")), figures, notes, result.trace)
 
 
-def skill_runs(paths: list[Path]) -> list[tuple[SkillRun | None, SkillRun]]:
-    """(simulation, link) per scenario; simulation None for a scenario on the hardware backend."""
+def skill_runs(paths: list[Path], reactions: list[str] | None = None) -> list[tuple[SkillRun | None, SkillRun]]:
+    """(simulation, link) per scenario; simulation None for a scenario on the hardware backend. With ``reactions``
+    a scenario with an interaction-force limit runs once per reaction (``stop``, ``yield``, ``retreat``)."""
     from rehabkit.core.scenario.loader import load_scenario
 
     out = []
     for path in paths:
-        on_link = load_scenario(path).model.backend.type == "hardware"
-        out.append((None if on_link else run_skill(path, "simulation"), run_skill(path, "link")))
+        sc = load_scenario(path).model
+        on_link = sc.backend.type == "hardware"
+        for reaction in (reactions or [None]) if sc.safety.interaction_force_n is not None else [None]:
+            out.append((None if on_link else run_skill(path, "simulation", reaction),
+                        run_skill(path, "link", reaction)))
     return out

@@ -51,7 +51,9 @@ def add_instruments(spec: mujoco.MjSpec, instruments) -> None:
         if ins.mount is not None:
             mount = spec.body(ins.mount)
             if mount is None:
-                mount = body.add_body(name=ins.mount, pos=ins.position, mass=MOUNT_KG,
+                # (ipos given: left out, MjSpec put the centre of mass as far again beyond the mount, where a
+                # test rig's push, applied at it, had a longer lever than the sensor it loads)
+                mount = body.add_body(name=ins.mount, pos=ins.position, ipos=[0.0, 0.0, 0.0], mass=MOUNT_KG,
                                       inertia=[1e-7, 1e-7, 1e-7], explicitinertial=True)
             site = mount.add_site(name=f"{ins.name}_site", size=[0.006, 0, 0], rgba=[0.9, 0.6, 0.1, 1])
         else:
