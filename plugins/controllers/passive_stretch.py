@@ -8,6 +8,11 @@ gravity compensation; the resistance is the PD's effort against the motion, its 
 over the last ``window_deg`` of travel; the torque cap counts from what holding the limb took as the stretch began
 (its weight). The person should be relaxed (no voluntary effort) and the speed low (below their stretch reflex's
 threshold).
+
+The stretch watches the interaction force rather than leave it to the safety envelope: going out it slows from half
+the force cap on (to a fifth of its speed at the cap, where it ends), and coming back — where a relaxed limb's
+tissues, pulled the other way, can press the cuffs harder than the stretch did — it slows from the cap on and waits
+at 95 % of the run's force limit until the force has eased.
 """
 
 from __future__ import annotations
@@ -72,6 +77,7 @@ class PassiveStretch(Controller):
                               getattr(getattr(context.patient, "comfort", None), "max_interaction_force_n", None))
                   if v is not None]
         self.max_force = config.max_force_n or (0.8 * min(limits) if limits else None)
+        self.limit_force = min(limits) if limits else None
         self.found: dict[str, float] = {}
         self.ended: dict[str, float] = {}
         self.q0: np.ndarray | None = None
@@ -107,7 +113,7 @@ class PassiveStretch(Controller):
         if self._phase == "out":
             key = f"passive_start_t_{'upper' if d > 0 else 'lower'}_{self.names[j]}"
             self.found.setdefault(key, self._t)  # (when this stretch began)
-            speed = math.radians(self.c.speed_deg_s)
+            speed = math.radians(self.c.speed_deg_s) * self._ease_out()
             r[j] += d * speed * self.dt
             limit = self.hi[j] if d > 0 else self.lo[j]
             if d * (r[j] - limit) >= 0:
@@ -116,7 +122,7 @@ class PassiveStretch(Controller):
             return d * speed
         if self._phase == "back":  # (easing into the return: a sudden reversal jerks the limb and the cuffs)
             self._back_s += self.dt
-            speed = math.radians(self.c.return_speed_deg_s) * min(1.0, self._back_s / EASE_S)
+            speed = math.radians(self.c.return_speed_deg_s) * min(1.0, self._back_s / EASE_S) * self._ease_back()
             step = -d * speed * self.dt
             if d * (r[j] + step - self.q0[j]) <= 0:
                 r[j], self._phase, self._pause = self.q0[j], "pause", 0.0
@@ -127,6 +133,25 @@ class PassiveStretch(Controller):
         if self._pause >= self.c.pause_s:
             self._move, self._phase, self._samples = self._move + 1, "out", []
         return 0.0
+
+    def _force_n(self) -> float | None:
+        f = self.force() if self.force is not None else None
+        return None if f is None else math.sqrt(float(f @ f))
+
+    def _ease_out(self) -> float:
+        """The stretch's speed factor: 1 below half the force cap, down to 0.2 at the cap."""
+        f = self._force_n()
+        if f is None or self.max_force is None:
+            return 1.0
+        return min(1.0, max(0.2, 1.0 - 0.8 * (f - 0.5 * self.max_force) / (0.5 * self.max_force)))
+
+    def _ease_back(self) -> float:
+        """The return's speed factor: 1 below the force cap, falling to 0 (waiting) at 95 % of the run's limit."""
+        f = self._force_n()
+        if f is None or self.max_force is None:
+            return 1.0
+        stop = 0.95 * self.limit_force if self.limit_force is not None else 1.2 * self.max_force
+        return min(1.0, max(0.0, (stop - f) / max(stop - self.max_force, 1e-9)))
 
     def _feel(self, j: int, d: int, q: np.ndarray, push: float) -> None:
         """The resistance against the motion (the PD's static part: its damping part is the start's transient,
