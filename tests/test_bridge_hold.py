@@ -8,6 +8,7 @@ import pytest
 from rehabkit.hardware.bridge import Bridge, BridgeLimits
 from rehabkit.hardware.plant import MujocoPlant
 from rehabkit.hardware.protocol import (
+    CMD_COMPLIANT,
     CMD_RESET,
     COMMAND,
     ENABLED,
@@ -61,14 +62,17 @@ def _started(hit, stale_s: float) -> Host:
     return host
 
 
-def _push_then_silence(host: Host, ticks: int, advance: bool = True) -> tuple[np.ndarray, list[int]]:
+def _push_then_silence(host: Host, ticks: int, advance: bool = True, flags: int = 0,
+                       seen: list | None = None) -> tuple[np.ndarray, list[int]]:
     q, qd, *_ = host.state
-    host.send(host.bridge.plant.gravity(q) + PUSH)  # the last command before the host goes quiet
+    host.send(host.bridge.plant.gravity(q) + PUSH, flags)  # the last command before the host goes quiet
     wrist, status = [], []
     for _ in range(ticks):
         q, qd, tau, st = host.tick(advance)
         wrist.append(q[5])
         status.append(st)
+        if seen is not None:
+            seen.append((q, qd, tau))
     return np.degrees(np.array(wrist) - Q0[5]), status
 
 
@@ -98,6 +102,23 @@ def test_a_gap_in_the_commands_is_held_through_not_pushed_through(bridges):
     assert stale.index(True) == 10 and all(stale[10:])  # 10 ticks of the push, then held
     assert not any(s & (HOLDING | WATCHDOG) for s in status) and all(s & ENABLED for s in status)
     assert held.bridge.stale_holds[0][1] == 190 and held.bridge.trips == []
+
+
+def test_a_gap_while_the_host_yields_is_bridged_without_stiffness(bridges):
+    """The host's safety layer yields (CMD_COMPLIANT): the bridge's hold through a gap damps and carries the arm's
+    weight but does not pull it back to where the gap began — the person pushing is not resisted."""
+    host, seen = bridges(0.010), []
+    wrist, status = _push_then_silence(host, 200, flags=CMD_COMPLIANT, seen=seen)
+    assert all(s & STALE for s in status[11:]) and host.bridge.compliant
+    effort = host.bridge.plant.effort
+    for (q, qd, _), (_, _, tau) in zip(seen[11:], seen[12:]):  # applied in the tick after a state: gravity, damping
+        np.testing.assert_allclose(tau, np.clip(host.bridge.plant.gravity(q) - 6.0 * qd, -effort, effort), atol=1e-9)
+    stiff, seen_stiff = bridges(0.010), []
+    _push_then_silence(stiff, 200, seen=seen_stiff)  # without the flag: the posture where the gap began is held
+    q_gap = seen_stiff[9][0]  # (read at the start of the tick the gap began in: the state before it)
+    (q, qd, _), (_, _, tau) = seen_stiff[50], seen_stiff[51]
+    np.testing.assert_allclose(tau, np.clip(60.0 * (q_gap - q) - 6.0 * qd + stiff.bridge.plant.gravity(q), -effort,
+                                            effort), atol=1e-9)
 
 
 def test_a_bridge_catching_up_after_its_own_stall_holds_too(bridges):

@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from rehabkit.core.kinds.backend import EStopLatchedError
-from rehabkit.core.kinds.capabilities import Instruments
+from rehabkit.core.kinds.capabilities import CompliantGaps, Instruments
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
 from rehabkit.core.plugins.hookspecs import hookimpl
@@ -46,6 +46,7 @@ from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 from rehabkit.hardware.protocol import (
     CLOCK,
     CMD_BRAKE,
+    CMD_COMPLIANT,
     CMD_ESTOP,
     CMD_LATCH,
     CMD_RESET,
@@ -65,7 +66,7 @@ from rehabkit.hardware.protocol import (
 LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
 
 
-class HardwareBackend(MirroredScene, Backend, Instruments):
+class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
     """The robot over UDP (a bridge in front of its drives, or of a MuJoCo plant); the scene mirrored on the host
     from the measured joints (drawn, scripted objects, cameras rendered in a process of their own)."""
 
@@ -235,6 +236,11 @@ class HardwareBackend(MirroredScene, Backend, Instruments):
 
     def command(self, tau: np.ndarray) -> None:
         self.tau = np.array(tau, float)
+
+    def comply(self, on: bool) -> None:
+        """Tell the bridge (with every command from now on) that the torques yield: its hold through a gap in the
+        commands is then damping and gravity compensation only."""
+        self._flags = self._flags | CMD_COMPLIANT if on else self._flags & ~CMD_COMPLIANT
 
     def engage_brakes(self) -> bool:
         """Tell the bridge to apply the robot's brakes (with every command from now on)."""

@@ -41,6 +41,7 @@ from rehabkit.hardware.protocol import (
     CLOCK,
     CMD_BRAKE,
     CMD_CLEAR,
+    CMD_COMPLIANT,
     CMD_ESTOP,
     CMD_LATCH,
     CMD_RESET,
@@ -123,6 +124,7 @@ class Bridge:
         self._state = np.zeros((3, plant.joints))  # the STATE message's rows, reused
         self._ramp_next = False  # the latch was cleared: the next session ramps in
         self.braked = False
+        self.compliant = False  # the host yields (CMD_COMPLIANT): a gap in the commands is bridged without stiffness
         if latch is not None and latch.latched() is not None:  # latched before this bridge started
             self.status = HOLDING | ESTOPPED
             self.hold_q = plant.read()[0]
@@ -179,9 +181,10 @@ class Bridge:
                 self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED | (RAMP_IN if ramp else 0), \
                     np.inf
                 self.waiting, self.since_command, self.held_ticks, self._ramp_next = True, 0, 0, False
-                self.braked = False
+                self.braked = self.compliant = False
                 continue
             self.last_valid = now
+            self.compliant = bool(msg.status & CMD_COMPLIANT)
             if msg.status & CMD_BRAKE and not self.braked:
                 self.braked = self.plant.brake()
             if msg.status & CMD_LATCH:  # the host's e-stop: it stops the robot now, the latch keeps it stopped
@@ -218,7 +221,10 @@ class Bridge:
                 self.held_ticks += 1
         tau = self.tau
         if self.hold_q is not None:
-            tau = np.clip(HOLD_KP * (self.hold_q - q) - HOLD_KD * qd + self.plant.gravity(q),
+            # a gap during the host's yield is bridged yielding (no stiffness toward where the gap began); a latched
+            # hold (watchdog, e-stop, limit) always holds the posture
+            stiff = 0.0 if self.compliant and not self.status & HOLDING else HOLD_KP
+            tau = np.clip(stiff * (self.hold_q - q) - HOLD_KD * qd + self.plant.gravity(q),
                           -self.plant.effort, self.plant.effort)
         self.plant.apply(tau)
         self.plant.advance()

@@ -63,6 +63,9 @@ CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint position
 CMD_CLEAR = 8  # clear a latched e-stop (a person's deliberate act at the host: `rehabkit estop clear --bridge`)
 CMD_BRAKE = 32  # apply the holding brakes (the host's safety stop has turned the torque off)
 CMD_LATCH = 16  # latch the e-stop for the sessions to come; this session's stop is the host's (its stop category)
+# the host's torques are a compliant reaction (its safety layer yields to the person): a gap in the commands is
+# bridged with damping and gravity compensation only, not a stiff hold (a bridge that predates it holds stiffly)
+CMD_COMPLIANT = 64
 # either way, lock-step only: this datagram also carries the link's clock at its 'sent at' (see the module's doc)
 TICK = 0x8000
 

@@ -190,6 +190,16 @@ class HostsBodies(Protocol):
         ...
 
 
+@runtime_checkable
+class CompliantGaps(Protocol):
+    """Drives a robot that bridges gaps in the commands on its own (a link's robot side), and can be told that the
+    host's torques are a compliant reaction (a yield), so that such a gap is bridged without stiffness."""
+
+    def comply(self, on: bool) -> None:
+        """From now on, until told otherwise, the host's torques yield to the person: no stiff hold in a gap."""
+        ...
+
+
 ABILITY: dict[type, str] = {
     WorkspaceTable: "has a workspace look-up table (robot.workspace)",
     RandomReach: "draws random reachable targets (robot.random_reach)",
@@ -207,6 +217,7 @@ BACKEND_ABILITY: dict[type, str] = {
     NamedJoints: "reads and sets joints by name",
     ExternalTorques: "applies a simulated person's torques",
     HostsBodies: "simulates a person's body in its scene",
+    CompliantGaps: "bridges gaps in the commands compliantly during a yield",
 }
 
 

@@ -69,6 +69,9 @@ class SafetyLayer:
         # the joint torques the interaction force exerts, (q, force) -> tau: a retreat's direction (the runner
         # sets it from the force's source)
         self.joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None
+        # told when a yield begins and ends (True/False): a robot side that bridges gaps in the commands on its own
+        # then bridges them yielding (the runner sets it for a backend that can: CompliantGaps)
+        self.on_yield: Callable[[bool], None] | None = None
         self._robot = robot
         self.saturated_steps = 0
         self._dt = dt
@@ -222,6 +225,8 @@ class SafetyLayer:
     def _escalate(self, t, q, qd, rule, joint, value, limit, why) -> np.ndarray:
         """A force-limiting reaction ends in a stop (its rule's category): a trip of its own."""
         kind, self.compliance = self.compliance.kind, None
+        if kind == "yield" and self.on_yield is not None:
+            self.on_yield(False)
         name = self.names[joint] if isinstance(joint, int) else joint
         category = self.stopping.category_of(rule)
         figure = f": {name + ' = ' if name else ''}{value:.4g} (limit {limit:.4g})" if value is not None else ""
@@ -329,6 +334,8 @@ class SafetyLayer:
             self.tripped_at = t
             self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
                                                self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque)
+            if reaction.type == "yield" and self.on_yield is not None:
+                self.on_yield(True)
             return
         category = self.stopping.category_of(rule)
         text += f"; {WORDS[category]}"

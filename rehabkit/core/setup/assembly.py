@@ -23,7 +23,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from rehabkit.core.kinds.capabilities import ExternalTorques, HostsBodies
+from rehabkit.core.kinds.capabilities import CompliantGaps, ExternalTorques, HostsBodies
 from rehabkit.core.kinds.interfaces import (
     Backend,
     Context,
@@ -211,6 +211,8 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()
         a.context = replace(a.context, bodies=bodies)
         a.backend = a.make("backend", sc.backend, ("backend",))
+        if isinstance(a.backend, CompliantGaps):  # (its gaps in the commands bridged yielding, in a yield)
+            a.safety.on_yield = a.backend.comply
     check_expectations(a)
     a.schedule = _schedule(a)
     return a
