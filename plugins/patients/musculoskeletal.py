@@ -151,6 +151,7 @@ class Musculoskeletal(EmbodiedPatient):
         self.peak = self.force_sum = self.effort_sum = 0.0
         self.steps = self.saturated = 0
         self.force = np.zeros(3)
+        self._worst = 0  # the strap pressing hardest at the last step
         self._t: list[float] = []
         self._rows: list[np.ndarray] = []
 
@@ -254,7 +255,7 @@ class Musculoskeletal(EmbodiedPatient):
         rows = self._strap_rows()
         forces = self.strap_forces(rows)
         sizes = [math.sqrt(float(f @ f)) for f in forces]
-        worst = int(np.argmax(sizes))
+        worst = self._worst = int(np.argmax(sizes))
         self.force = forces[worst]
         self.peak = max(self.peak, sizes[worst])
         self.force_sum += sizes[worst]
@@ -267,6 +268,20 @@ class Musculoskeletal(EmbodiedPatient):
 
     def interaction_force(self) -> np.ndarray:
         return self.force
+
+    def interaction_torque(self) -> np.ndarray:
+        return self.strap_torque()
+
+    def joint_torque(self, q: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """Jᵀ F at the point of the robot where the strap pressing hardest is fastened (MuJoCo's Jacobian of the
+        scene as it stands: ``q`` is the robot's posture in it)."""
+        m, d = self.m, self.d
+        eq = self.eqs[self._worst]
+        body = m.eq_obj1id[eq]
+        point = d.xpos[body] + d.xmat[body].reshape(3, 3) @ m.eq_data[eq, :3]
+        jacp = np.zeros((3, m.nv))
+        mujoco.mj_jac(m, d, jacp, None, point, body)
+        return jacp[:, self.robot_dofs].T @ np.asarray(force, float)
 
     def state(self) -> np.ndarray:
         """Each muscle group's mean activation and its least fatigued-away capacity (groups in catalogue order)."""

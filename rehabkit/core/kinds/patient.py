@@ -74,6 +74,16 @@ class EmbodiedPatient(Patient):
     def place(self) -> None:
         """Fit the person to the robot as it stands now (called by the backend's reset)."""
 
+    def joint_torque(self, q: np.ndarray, force: np.ndarray) -> np.ndarray | None:
+        """The robot's joint torques [N·m] from ``force`` (world frame) acting where the strap pressing hardest
+        now is fastened (how hard a force there can drive each joint); default None (unknown)."""
+        return None
+
+    def interaction_torque(self) -> np.ndarray | None:
+        """Every strap's force on the robot now, as torques on its joints [N·m] (a retreat moves away along them);
+        default None (unknown)."""
+        return None
+
     @abstractmethod
     def interaction_force(self) -> np.ndarray:
         """The largest strap force now, world frame [N]: what the safety envelope's force limit checks."""

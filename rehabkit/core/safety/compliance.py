@@ -31,6 +31,8 @@ import numpy as np
 from rehabkit.core.safety.stopping import mass_matrix
 from rehabkit.core.scenario.safety import ForceReaction
 
+SPEED_GRACE_S = 0.1  # how fast the allowance for the robot's own speed at the trip decays (time constant)
+
 
 class Compliance:
     """A force-limiting reaction under way (``yield`` or ``retreat``), from the trip at ``t0`` in state ``q0``.
@@ -43,7 +45,9 @@ class Compliance:
                  hi: np.ndarray, revolute: np.ndarray, effort: np.ndarray, inertia: np.ndarray | None,
                  gravity: Callable[[np.ndarray], np.ndarray] | None, friction: np.ndarray | None,
                  hold_kp: float, hold_kd: float,
-                 joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
+                 joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
+                 qd0: np.ndarray | None = None,
+                 push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
         self.reaction, self.kind, self.limit = reaction, reaction.type, limit_n
         self.release = reaction.release_n if reaction.release_n is not None else 0.6 * limit_n
         unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
@@ -69,15 +73,22 @@ class Compliance:
         self.gravity, self.friction, self.effort = gravity, friction, effort
         self.hold_kp, self.hold_kd = hold_kp, hold_kd
         self.joint_torque = joint_torque
+        self.push_torque = push_torque or joint_torque
         self.q_ref = np.clip(q0, self.wall_lo, self.wall_hi)
+        self.qd_ref = np.zeros(len(q0))
         self.moving = self.kind == "retreat"  # retreating (else holding where it went)
         self.blocked_at: float | None = None  # a retreat that reached a soft wall with the force still high
-        self._last_t = t0
+        self._last_t = self.t0 = t0
+        # the robot's own speed at the trip (a fast passive stretch that met a spastic catch) is damped out, not a
+        # breach of the bound: the bound allows it, decaying over SPEED_GRACE_S
+        self.v0 = np.nan_to_num(qd0) if qd0 is not None else np.zeros(len(q0))
+        self.qd0 = np.abs(self.v0)
         self.force = 0.0
 
     @classmethod
     def start(cls, reaction: ForceReaction, limit_n: float, t: float, q: np.ndarray, robot, lo: np.ndarray,
-              hi: np.ndarray, gravity, config, joint_torque=None) -> Compliance:
+              hi: np.ndarray, gravity, config, joint_torque=None, qd: np.ndarray | None = None,
+              push_torque=None) -> Compliance:
         """The reaction from the trip at ``t`` in posture ``q`` of ``robot`` (its model: inertia, friction, effort
         limits, joint kinds), with the layer's ranges, gravity and hold gains (``config``: the envelope)."""
         friction = None
@@ -87,9 +98,10 @@ class Compliance:
         except Exception:  # noqa: BLE001 (no dynamic model: nothing known to compensate)
             pass
         return cls(reaction, limit_n, t, np.asarray(q, float), lo, hi, robot.revolute, robot.limits.effort,
-                   mass_matrix(robot, q), gravity, friction, config.hold_kp, config.hold_kd, joint_torque)
+                   mass_matrix(robot, q), gravity, friction, config.hold_kp, config.hold_kd, joint_torque, qd,
+                   push_torque)
 
-    def broken(self, q: np.ndarray, qd: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple | None:
+    def broken(self, t: float, q: np.ndarray, qd: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple | None:
         """A rule the reaction keeps, broken now: ``(rule, joint index, value, limit, why)``; None while all hold."""
         bad = ~(np.isfinite(q) & np.isfinite(qd))
         if bad.any():
@@ -98,16 +110,17 @@ class Compliance:
         if outside.any():
             j = int(np.argmax(outside))
             return "position", j, float(q[j]), float(lo[j] if q[j] < lo[j] else hi[j]), "a joint beyond its range"
-        over = np.abs(qd) > self.vmax
+        bound = np.maximum(self.vmax, self.qd0 * math.exp(-(t - self.t0) / SPEED_GRACE_S))
+        over = np.abs(qd) > bound
         if over.any():
             j = int(np.argmax(over))
-            return "velocity", j, float(qd[j]), float(self.vmax[j]), f"a joint faster than the {self.kind}'s bound"
+            return "velocity", j, float(qd[j]), float(bound[j]), f"a joint faster than the {self.kind}'s bound"
         if self.blocked_at is not None:
             return "interaction-force", None, self.force, self.limit, "the force above its limit at a soft wall"
         return None
 
     def observe(self, t: float, q: np.ndarray, force: np.ndarray) -> None:
-        """The interaction force now (what the retreat follows and releases on)."""
+        """The interaction force now (what the retreat follows and releases on); a retreat's reference moves on."""
         self.force = float(np.linalg.norm(force))
         if self.kind != "retreat":
             return
@@ -115,28 +128,30 @@ class Compliance:
             self.moving = False
         elif not self.moving and self.force > self.limit:
             self.moving = True
+        # the speed the robot had at the trip, carried on and decaying (stopping it at once would press the person)
+        speed = self.v0 * math.exp(-(t - self.t0) / SPEED_GRACE_S)
         if self.moving:
-            self._advance(t, q, force)
-        self._last_t = t
-
-    def _advance(self, t: float, q: np.ndarray, force: np.ndarray) -> None:
-        tau_f = self.joint_torque(q, force) if self.joint_torque is not None else None
-        if tau_f is None or not np.all(np.isfinite(tau_f)):
-            return
-        direction = np.linalg.solve(self.inertia, tau_f) if self.inertia is not None else tau_f
-        scale = np.max(np.abs(direction) / self.vretreat)  # the fastest joint at its retreat speed
-        if not scale > 0:
-            return
-        step = direction / scale * max(t - self._last_t, 0.0)
-        ref = np.clip(self.q_ref + step, self.wall_lo, self.wall_hi)
-        if np.allclose(ref, self.q_ref, atol=1e-12, rtol=0.0) and self.force > self.limit:
+            speed = speed + self._away(q, force)
+        dt = max(t - self._last_t, 0.0)
+        ref = np.clip(self.q_ref + speed * dt, self.wall_lo, self.wall_hi)
+        if self.moving and dt > 0 and self.force > self.limit and np.allclose(ref, self.q_ref, atol=1e-12, rtol=0.0):
             self.blocked_at = self.blocked_at if self.blocked_at is not None else t
-        self.q_ref = ref
+        self.q_ref, self.qd_ref, self._last_t = ref, speed, t
+
+    def _away(self, q: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """The retreat's joint speeds: along M⁻¹ Jᵀ F, the fastest joint at its retreat speed (zero where the
+        force's direction in the joints is unknown)."""
+        tau_f = self.push_torque(q, force) if self.push_torque is not None else None
+        if tau_f is None or not np.all(np.isfinite(tau_f)):
+            return np.zeros_like(q)
+        direction = np.linalg.solve(self.inertia, tau_f) if self.inertia is not None else tau_f
+        scale = np.max(np.abs(direction) / self.vretreat)
+        return direction / scale if scale > 0 else np.zeros_like(q)
 
     def torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """What to send now: compliant (yield), or following the retreat's reference; within the effort limits."""
-        if self.kind == "yield":
-            tau = -self.damping * qd
+        if self.kind == "yield":  # damped toward the speed it had, decaying: braking at once would press the person
+            tau = -self.damping * (qd - self.v0 * math.exp(-(t - self.t0) / SPEED_GRACE_S))
             below, above = q < self.wall_lo, q > self.wall_hi
             if below.any() or above.any():
                 push = np.where(below, self.wall_lo - q, 0.0) + np.where(above, self.wall_hi - q, 0.0)
@@ -144,7 +159,7 @@ class Compliance:
             if self.friction is not None:
                 tau += self.friction * np.tanh(qd / 0.02)  # Coulomb friction, smoothed near rest
         else:
-            tau = self.hold_kp * (self.q_ref - q) - self.hold_kd * qd
+            tau = self.hold_kp * (self.q_ref - q) + self.hold_kd * (self.qd_ref - qd)
         if self.gravity is not None:
             tau += self.gravity(q)
         return np.clip(tau, -self.effort, self.effort)

@@ -69,6 +69,7 @@ class SafetyLayer:
         # the joint torques the interaction force exerts, (q, force) -> tau: a retreat's direction (the runner
         # sets it from the force's source)
         self.joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None
+        self.push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None  # all of it, now
         # told when a yield begins and ends (True/False): a robot side that bridges gaps in the commands on its own
         # then bridges them yielding (the runner sets it for a backend that can: CompliantGaps)
         self.on_yield: Callable[[bool], None] | None = None
@@ -217,7 +218,7 @@ class SafetyLayer:
 
     def _comply(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """The reaction's torque, unless a rule it keeps is broken: then the robot stops in that rule's category."""
-        broken = self.compliance.broken(q, qd, self.lo, self.hi)
+        broken = self.compliance.broken(t, q, qd, self.lo, self.hi)
         if broken is not None:
             return self._escalate(t, q, qd, *broken)
         return self.compliance.torque(t, q, qd)
@@ -333,7 +334,8 @@ class SafetyLayer:
             self._note(event)
             self.tripped_at = t
             self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
-                                               self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque)
+                                               self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque,
+                                               qd, self.push_torque)
             if reaction.type == "yield" and self.on_yield is not None:
                 self.on_yield(True)
             return

@@ -288,6 +288,7 @@ def _patient_and_safety(a: Assembly) -> None:
                            hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
     if a.force_source is not None:
         a.safety.joint_torque = a.force_source.joint_torque
+        a.safety.push_torque = a.force_source.push_torque
     off = sorted(r for r, c in a.safety.categories.items() if c < 2 and r in sc.safety.stop_category)
     if off and a.robot.model.brakes is None and a.context.note is not None:
         a.context.note(0.0, f"stop category 0/1 for {', '.join(off)}: the torque goes off, and robot "

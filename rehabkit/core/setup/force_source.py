@@ -25,9 +25,12 @@ class ForceSource:
     gave last (None before the first step), ``measured`` whether it is measured or estimated."""
 
     def __init__(self, read: Read, measured: bool,
-                 joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
+                 joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
+                 push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
         self._read, self.measured = read, measured
         self.joint_torque = joint_torque  # (q, force) -> the joint torques it exerts, where known
+        # (q, force) -> the joint torques of the whole interaction now (several straps: all of them); default the above
+        self.push_torque = push_torque or joint_torque
         self.last: np.ndarray | None = None
 
     def __call__(self, t: float, q: np.ndarray, tau_h: np.ndarray | None) -> np.ndarray:
@@ -71,8 +74,9 @@ def force_source(a, limit: float | None) -> ForceSource | None:
             return None if not seen or any(x is None for x in torques) else np.sum(torques, axis=0)
         return ForceSource(largest, True, all_torques)
     if isinstance(a.patient, EmbodiedPatient):
-        strapped = a.patient.interaction_force
-        return ForceSource(lambda t, q, tau_h: strapped(), True)
+        person = a.patient
+        return ForceSource(lambda t, q, tau_h: person.interaction_force(), True, person.joint_torque,
+                           lambda q, f: person.interaction_torque())
     if a.patient is not None and limit is not None:
         estimate = HandForce(a.robot.model)
         return ForceSource(lambda t, q, tau_h: estimate(q, tau_h), False, lambda q, f: estimate.jacobian(q).T @ f)
