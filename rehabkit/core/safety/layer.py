@@ -29,6 +29,7 @@ import numpy as np
 
 from rehabkit.core.safety.compliance import Compliance
 from rehabkit.core.safety.event import SafetyEvent
+from rehabkit.core.safety.keep_in import AXES, box_exit, world_box
 from rehabkit.core.safety.ramps import Ramps
 from rehabkit.core.safety.stopping import WORDS, Stopping
 from rehabkit.core.scenario.safety import SafetyConfig
@@ -37,9 +38,6 @@ from rehabkit.models.robot_model import RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
 _count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
-
-
-AXES = "xyz"
 
 
 class SafetyLayer:
@@ -81,14 +79,7 @@ class SafetyLayer:
         if config.keep_in is not None:
             if hand is None:
                 raise ValueError("safety.keep_in needs the hand's position; the runner passes it")
-            box = config.keep_in
-            lo, hi = np.array(box.min, float), np.array(box.max, float)
-            if box.frame == "base":  # kept in the world frame: the hand is measured there
-                corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
-                base = robot.base_pose
-                w = corners @ base[:3, :3].T + base[:3, 3]
-                lo, hi = w.min(axis=0), w.max(axis=0)
-            self._box = (lo, hi)
+            self._box = world_box(config.keep_in, robot.base_pose)
         self._hand = hand
         # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
         n = robot.dof
@@ -252,22 +243,14 @@ class SafetyLayer:
 
     def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
         """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
-        lo, hi = self._box
-        out = (points < lo) | (points > hi)
-        rows = np.flatnonzero(out.any(axis=1))
-        if not len(rows):
-            return None
-        k = int(rows[0])
-        a = int(np.argmax(out[k]))
-        below = bool(points[k, a] < lo[a])
-        return k, a, "min" if below else "max", float(lo[a] if below else hi[a])
+        return box_exit(self._box, points)
 
     def _outside_box(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
         x = self._hand(q)
         lo, hi = self._box
         if (x >= lo).all() and (x <= hi).all():  # the every-step case, kept cheap
             return False
-        found = self.box_exit(x[None])
+        found = box_exit(self._box, x[None])
         if found is None:  # NaN: the non-finite rule has it
             return False
         _, a, side, bound = found
