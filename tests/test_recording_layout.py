@@ -250,3 +250,36 @@ def test_a_sensor_names_each_value_it_reads(hit_rrd):
     rrd, result = hit_rrd
     names = recording(rrd)["sensors/encoders/position_deg"]["SeriesLines:names"][0]
     assert names == [f"{j} position [deg]" for j in result.setup.robot.model.joint_names]
+
+
+def test_a_urdf_robot_whose_link_is_a_mesh_file_is_drawn_with_it(tmp_path):
+    """A URDF whose hand is an STL mesh file (a tetrahedron, written beside it): the recording holds that mesh, its
+    vertices where the file put them in the hand's frame."""
+    from scipy.spatial.transform import Rotation
+
+    robots = SCENARIOS.parent / "examples" / "robots"
+    urdf = (robots / "arm4.urdf").read_text()
+    hand = '<origin xyz="0.05 0 0" rpy="0 1.5708 0"/><geometry><cylinder radius="0.02" length="0.1"/></geometry>'
+    assert hand in urdf
+    vertices = np.array([[0, 0, 0], [0.08, 0, 0], [0, 0.05, 0], [0, 0, 0.03]])
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    import struct
+
+    stl = bytearray(80) + struct.pack("<I", len(faces))  # binary STL, as MuJoCo reads it
+    for f in faces:
+        a, b, c = vertices[list(f)]
+        n = np.cross(b - a, c - a)
+        stl += struct.pack("<12fH", *(n / np.linalg.norm(n)), *a, *b, *c, 0)
+    (tmp_path / "tool.stl").write_bytes(bytes(stl))
+    (tmp_path / "arm4_mesh.urdf").write_text(urdf.replace(hand, '<geometry><mesh filename="tool.stl"/></geometry>'))
+    scenario = (robots / "urdf_arm4.yaml").read_text().replace("file: arm4.urdf", "file: arm4_mesh.urdf")
+    (tmp_path / "arm.yaml").write_text(scenario)
+    _run(tmp_path / "arm.yaml", {"duration": 0.2, "expect": {}, "world.objects": []}, tmp_path / "out")
+    data = recording(tmp_path / "out" / "run.rrd")
+    (path,) = [p for p, c in data.items() if "Mesh3D:vertex_positions" in c]
+    assert path.startswith("world/bodies/hand/")
+    drawn = np.array(data[path]["Mesh3D:vertex_positions"][0])
+    pose = data[path]
+    in_body = Rotation.from_quat(pose["Transform3D:quaternion"][0][0]).apply(drawn) + \
+        pose["Transform3D:translation"][0][0]
+    assert len(drawn) == 4 and np.allclose(np.sort(in_body, axis=0), np.sort(vertices, axis=0), atol=1e-6)
