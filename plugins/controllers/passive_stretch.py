@@ -11,8 +11,8 @@ threshold).
 
 The stretch watches the interaction force rather than leave it to the safety envelope: going out it slows from half
 the force cap on (to a fifth of its speed at the cap, where it ends), and coming back — where a relaxed limb's
-tissues, pulled the other way, can press the cuffs harder than the stretch did — it slows from the cap on and waits
-at 95 % of the run's force limit until the force has eased.
+tissues and weight, lifted back, can press the cuffs harder than the stretch did — it slows from half the run's force
+limit on and waits at 90 % of it until the force has eased.
 """
 
 from __future__ import annotations
@@ -146,12 +146,12 @@ class PassiveStretch(Controller):
         return min(1.0, max(0.2, 1.0 - 0.8 * (f - 0.5 * self.max_force) / (0.5 * self.max_force)))
 
     def _ease_back(self) -> float:
-        """The return's speed factor: 1 below the force cap, falling to 0 (waiting) at 95 % of the run's limit."""
+        """The return's speed factor: 1 below half the run's force limit, falling to 0 (waiting) at 90 % of it."""
         f = self._force_n()
         if f is None or self.max_force is None:
             return 1.0
-        stop = 0.95 * self.limit_force if self.limit_force is not None else 1.2 * self.max_force
-        return min(1.0, max(0.0, (stop - f) / max(stop - self.max_force, 1e-9)))
+        limit = self.limit_force if self.limit_force is not None else self.max_force / 0.8
+        return min(1.0, max(0.0, (0.9 * limit - f) / (0.4 * limit)))
 
     def _feel(self, j: int, d: int, q: np.ndarray, push: float) -> None:
         """The resistance against the motion (the PD's static part: its damping part is the start's transient,
