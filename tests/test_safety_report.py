@@ -21,7 +21,13 @@ def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, 
     md = (tmp_path / "report" / "safety_report.md").read_text()
     sections = dict(re.findall(r"^## (\S+)\n(.*?)(?=^## |\Z)", md, re.S | re.M))
     assert set(sections) == {"hit-estop", "hit-force", "hit-force-yield", "hit-link-loss", "hit-ramp-in", "hit-range",
-                             "hit-speed", "lexos-force", "lexos-force-yield"}
+                             "hit-speed", "lexos-force", "lexos-force-yield", "lexos-spastic-catch"}
+    # a person as the force's source: the MyoArm's spastic elbow flexors catch a fast passive extension; the robot
+    # yields and the cuff force stays at the limit (a stop and hold lets it reach ~40 N); simulation only
+    catch = sections["lexos-spastic-catch"]
+    assert _row(catch, "stop category / reaction") == ["yield", "n/a"]
+    assert float(_row(catch, "peak force after the trigger [N]")[0]) <= 1.1 * 25
+    assert "simulation only" in _row(catch, "notes")[0]
     for name, limit in (("hit-force-yield", 30.0), ("lexos-force-yield", 25.0)):  # a reaction that limits the force
         assert _row(sections[name], "stop category / reaction") == ["yield", "yield"]
         assert all(float(f) <= 1.1 * limit for f in _row(sections[name], "peak force after the trigger [N]"))
@@ -45,4 +51,4 @@ def test_the_report_gives_every_skill_in_simulation_and_over_the_link(tmp_path, 
     assert sim == "n/a" and 5 <= float(link) <= 15  # the bridge's own hold, 10 ms after the last command
     assert all(r == "yes" for s in sections.values() for r in _row(s, "expectations met") if r != "n/a")
     html = (tmp_path / "report" / "safety_report.html").read_text()
-    assert html.count("data:image/png;base64,") == 9 and "<table>" in html
+    assert html.count("data:image/png;base64,") == 10 and "<table>" in html

@@ -192,9 +192,24 @@ def skill_runs(paths: list[Path], reactions: list[str] | None = None) -> list[tu
 
     out = []
     for path in paths:
-        sc = load_scenario(path).model
-        on_link = sc.backend.type == "hardware"
+        loaded = load_scenario(path)
+        sc = loaded.model
+        on_link, person = sc.backend.type == "hardware", _embodied(loaded)
         for reaction in (reactions or [None]) if sc.safety.interaction_force_n is not None else [None]:
-            out.append((None if on_link else run_skill(path, "simulation", reaction),
-                        run_skill(path, "link", reaction)))
+            sim = None if on_link else run_skill(path, "simulation", reaction)
+            if person:  # the person lives in the simulated scene: a robot link drives a real one
+                sim.notes.append("simulation only: the person is simulated in the scene")
+            out.append((sim, None if person else run_skill(path, "link", reaction)))
     return out
+
+
+def _embodied(loaded) -> bool:
+    """The scenario's patient is a body in the simulated scene (a musculoskeletal arm)."""
+    from rehabkit.core.kinds.patient import EmbodiedPatient
+    from rehabkit.core.plugins.registry import default_registry
+
+    person = loaded.model.patient  # (the rehab layer's section: a profile whose model is a patient plugin's)
+    if person is None or person.model is None:
+        return False
+    factory = default_registry().get("patient", person.model.type).factory
+    return isinstance(factory, type) and issubclass(factory, EmbodiedPatient)
