@@ -28,6 +28,7 @@ from rehabkit.plugin import Context, Controller, Metric, SettingError, StrictMod
 
 MARGIN_DEG = 1.0  # the stretch stops this short of the robot's own limit
 EASE_S = 0.5  # the return reaches its speed over this long
+EASE_FILTER_S = 0.05  # the force the speed eases on, low-passed with this time constant
 
 
 class PassiveStretchConfig(StrictModel):
@@ -84,6 +85,8 @@ class PassiveStretch(Controller):
         self.joint_reference = None
         self._move, self._phase, self._pause, self._t, self._baseline, self._back_s = 0, "out", 0.0, 0.0, 0.0, 0.0
         self._samples: list[tuple[float, float]] = []  # (angle, resistance) on the way out
+        self._f_eased: float | None = None  # the low-passed force the speed eases on
+        self._eased_at = -1.0
 
     @staticmethod
     def duration(q0: np.ndarray, lower: np.ndarray, upper: np.ndarray, joints: list[int], config) -> float:
@@ -135,8 +138,17 @@ class PassiveStretch(Controller):
         return 0.0
 
     def _force_n(self) -> float | None:
+        """The interaction force the speed eases on, low-passed (EASE_FILTER_S): eased on the raw force, the speed
+        and the force it makes feed each other within a control step — a 125 Hz oscillation on a MyoArm's strap."""
         f = self.force() if self.force is not None else None
-        return None if f is None else math.sqrt(float(f @ f))
+        if f is None:
+            return None
+        size = math.sqrt(float(f @ f))
+        if self._eased_at != self._t:
+            a = self.dt / (EASE_FILTER_S + self.dt)
+            self._f_eased = size if self._f_eased is None else self._f_eased + a * (size - self._f_eased)
+            self._eased_at = self._t
+        return self._f_eased
 
     def _ease_out(self) -> float:
         """The stretch's speed factor: 1 below half the force cap, down to 0.2 at the cap."""
