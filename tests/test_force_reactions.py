@@ -111,3 +111,19 @@ def test_a_yield_over_the_link_is_the_simulations():
     assert carried[1] == pytest.approx(carried[0], rel=0.05)
     assert link.metrics["joints_in_range"] == 1.0 and not a_link.backend.holding
 
+
+
+def test_a_joint_without_limits_gets_no_wall():
+    """A continuous joint (infinite range) yields without a wall and a retreat's reference stays finite."""
+    from rehabkit.core.safety.compliance import Compliance
+    from rehabkit.core.scenario.safety import ForceReaction
+
+    lo, hi = np.array([-np.inf, -1.0]), np.array([np.inf, 1.0])
+    for kind in ("yield", "retreat"):
+        c = Compliance(ForceReaction(type=kind), 30.0, 0.0, np.zeros(2), lo, hi, np.array([True, True]),
+                       np.array([10.0, 10.0]), np.eye(2) * 0.1, None, None, 100.0, 5.0,
+                       lambda q, f: np.array([f[0], f[1]]) * 0.2)
+        assert np.all(np.isfinite(c.q_ref)) and c.wall_lo[0] == -np.inf and c.wall_k[0] == 0.0
+        c.observe(0.001, np.zeros(2), np.array([40.0, 0.0, 0.0]))
+        tau = c.torque(0.001, np.array([50.0, 0.9]), np.zeros(2))  # far out on the free joint, in the other's wall
+        assert np.all(np.isfinite(tau)) and (kind == "retreat" or (tau[0] == 0.0 and tau[1] < 0.0))

@@ -53,7 +53,9 @@ class Compliance:
         unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
         self.vmax = reaction.max_speed_deg_s * unit
         self.vretreat = reaction.retreat_speed_deg_s * unit
-        wall = np.minimum(reaction.wall_deg * unit, (hi - lo) / 4)
+        span = hi - lo
+        # (a joint without limits, a continuous one, has no wall)
+        wall = np.where(np.isfinite(span), np.minimum(reaction.wall_deg * unit, span / 4), 0.0)
         self.wall_lo, self.wall_hi = lo + wall, hi - wall
         mass = np.diag(inertia) if inertia is not None else np.full(len(q0), hold_kd * 0.1)
         self.inertia = inertia
@@ -68,7 +70,7 @@ class Compliance:
         else:  # where the force acts is unknown: a tenth of a second to damp a joint's own motion
             self.damping = mass / 0.1
         # a joint arriving at the speed bound stops within the wall's width: ½ m v² = ½ k w²
-        self.wall_k = mass * (self.vmax / wall) ** 2
+        self.wall_k = np.where(wall > 0, mass * (self.vmax / np.where(wall > 0, wall, 1.0)) ** 2, 0.0)
         self.wall_d = 2.0 * np.sqrt(self.wall_k * mass)
         self.gravity, self.friction, self.effort = gravity, friction, effort
         self.hold_kp, self.hold_kd = hold_kp, hold_kd
