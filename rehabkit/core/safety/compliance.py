@@ -18,7 +18,9 @@ by giving way (Bessler et al. 2021 frame the skill as limiting the force; admitt
   further and stops. Suits a pinch or a squeeze the robot itself caused (moving into the person or an obstacle):
   it gives back the space it took.
 
-Both keep every other rule of the envelope: the layer still checks the state each control step.
+Both keep every other rule of the envelope: the layer still checks the state each control step. A joint too light for
+the damping a yield needs at the control rate (damping · dt above half its inertia: a small wrist) is held where it was
+instead, and every hold's gains are kept within what a control period can apply stably to the joint's inertia.
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ class Compliance:
                  hold_kp: float, hold_kd: float,
                  joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
                  qd0: np.ndarray | None = None,
-                 push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None):
+                 push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
+                 dt: float = 1e-3):
         self.reaction, self.kind, self.limit = reaction, reaction.type, limit_n
         self.release = reaction.release_n if reaction.release_n is not None else 0.6 * limit_n
         unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
@@ -66,14 +69,24 @@ class Compliance:
             if all(r is not None for r in rows):
                 reach = np.linalg.norm(np.array(rows), axis=0)
         if reach is not None:
-            self.damping = np.maximum(reach * limit_n / (reaction.yield_speed_deg_s * unit), mass / 0.1)
+            damping = np.maximum(reach * limit_n / (reaction.yield_speed_deg_s * unit), mass / 0.1)
         else:  # where the force acts is unknown: a tenth of a second to damp a joint's own motion
-            self.damping = mass / 0.1
+            damping = mass / 0.1
+        # damping applied once a control period is stable only below ~2 m/dt; a joint that would need more (a light
+        # wrist: the force at its limit would spin it past the bound) is held where it was instead, with the hold's
+        # gains, while the others give way
+        self.held = damping > 0.5 * mass / dt
+        self.damping = np.where(self.held, 0.0, damping)
         # a joint arriving at the speed bound stops within the wall's width: ½ m v² = ½ k w²
         self.wall_k = np.where(wall > 0, mass * (self.vmax / np.where(wall > 0, wall, 1.0)) ** 2, 0.0)
         self.wall_d = 2.0 * np.sqrt(self.wall_k * mass)
         self.gravity, self.friction, self.effort = gravity, friction, effort
-        self.hold_kp, self.hold_kd = hold_kp, hold_kd
+        # the hold's gains, within what a control period can apply stably to each joint's inertia (a light wrist cannot
+        # take a heavy shoulder's damping: kd dt / m below 1/2, then critically damped)
+        kd_cap = 0.5 * mass / dt
+        capped = hold_kd > kd_cap
+        self.hold_kd = np.where(capped, kd_cap, hold_kd)
+        self.hold_kp = np.where(capped, np.minimum(hold_kp, self.hold_kd**2 / (4 * mass)), hold_kp)
         self.joint_torque = joint_torque
         self.push_torque = push_torque or joint_torque
         self.q_ref = np.clip(q0, self.wall_lo, self.wall_hi)
@@ -90,7 +103,7 @@ class Compliance:
     @classmethod
     def start(cls, reaction: ForceReaction, limit_n: float, t: float, q: np.ndarray, robot, lo: np.ndarray,
               hi: np.ndarray, gravity, config, joint_torque=None, qd: np.ndarray | None = None,
-              push_torque=None) -> Compliance:
+              push_torque=None, dt: float = 1e-3) -> Compliance:
         """The reaction from the trip at ``t`` in posture ``q`` of ``robot`` (its model: inertia, friction, effort
         limits, joint kinds), with the layer's ranges, gravity and hold gains (``config``: the envelope)."""
         friction = None
@@ -101,10 +114,12 @@ class Compliance:
             pass
         return cls(reaction, limit_n, t, np.asarray(q, float), lo, hi, robot.revolute, robot.limits.effort,
                    mass_matrix(robot, q), gravity, friction, config.hold_kp, config.hold_kd, joint_torque, qd,
-                   push_torque)
+                   push_torque, dt)
 
-    def broken(self, t: float, q: np.ndarray, qd: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple | None:
-        """A rule the reaction keeps, broken now: ``(rule, joint index, value, limit, why)``; None while all hold."""
+    def broken(self, t: float, q: np.ndarray, qd: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+               vmax: np.ndarray) -> tuple | None:
+        """A rule the reaction keeps, broken now: ``(rule, joint index, value, limit, why)``; None while all hold.
+        ``vmax``: the run's speed limits, which a held joint keeps (the reaction's bound is for those giving way)."""
         bad = ~(np.isfinite(q) & np.isfinite(qd))
         if bad.any():
             return "non-finite", int(np.argmax(bad)), None, None, "a non-finite state"
@@ -112,7 +127,7 @@ class Compliance:
         if outside.any():
             j = int(np.argmax(outside))
             return "position", j, float(q[j]), float(lo[j] if q[j] < lo[j] else hi[j]), "a joint beyond its range"
-        bound = np.maximum(self.vmax, self.qd0 * math.exp(-(t - self.t0) / SPEED_GRACE_S))
+        bound = np.where(self.held, vmax, np.maximum(self.vmax, self.qd0 * math.exp(-(t - self.t0) / SPEED_GRACE_S)))
         over = np.abs(qd) > bound
         if over.any():
             j = int(np.argmax(over))
@@ -160,6 +175,8 @@ class Compliance:
                 tau += np.where(below | above, self.wall_k * push - self.wall_d * qd, 0.0)
             if self.friction is not None:
                 tau += self.friction * np.tanh(qd / 0.02)  # Coulomb friction, smoothed near rest
+            if self.held.any():
+                tau = np.where(self.held, self.hold_kp * (self.q_ref - q) - self.hold_kd * qd, tau)
         else:
             tau = self.hold_kp * (self.q_ref - q) + self.hold_kd * (self.qd_ref - qd)
         if self.gravity is not None:

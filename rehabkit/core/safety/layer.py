@@ -209,7 +209,7 @@ class SafetyLayer:
 
     def _comply(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """The reaction's torque, unless a rule it keeps is broken: then the robot stops in that rule's category."""
-        broken = self.compliance.broken(t, q, qd, self.lo, self.hi)
+        broken = self.compliance.broken(t, q, qd, self.lo, self.hi, self.vmax)
         if broken is not None:
             return self._escalate(t, q, qd, *broken)
         return self.compliance.torque(t, q, qd)
@@ -318,7 +318,7 @@ class SafetyLayer:
             self.tripped_at = t
             self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
                                                self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque,
-                                               qd, self.push_torque)
+                                               qd, self.push_torque, self._dt)
             if reaction.type == "yield" and self.on_yield is not None:
                 self.on_yield(True)
             return
