@@ -30,7 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rehabkit.core.safety.stopping import mass_matrix
+from rehabkit.core.safety.stopping import joint_inertia, mass_matrix, stable_gains
 from rehabkit.core.scenario.safety import ForceReaction
 
 SPEED_GRACE_S = 0.1  # how fast the allowance for the robot's own speed at the trip decays (time constant)
@@ -50,7 +50,7 @@ class Compliance:
                  joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
                  qd0: np.ndarray | None = None,
                  push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
-                 dt: float = 1e-3):
+                 dt: float = 1e-3, joint_mass: np.ndarray | None = None):
         self.reaction, self.kind, self.limit = reaction, reaction.type, limit_n
         self.release = reaction.release_n if reaction.release_n is not None else 0.6 * limit_n
         unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
@@ -60,7 +60,8 @@ class Compliance:
         # (a joint without limits, a continuous one, has no wall)
         wall = np.where(np.isfinite(span), np.minimum(reaction.wall_deg * unit, span / 4), 0.0)
         self.wall_lo, self.wall_hi = lo + wall, hi - wall
-        mass = np.diag(inertia) if inertia is not None else np.full(len(q0), hold_kd * 0.1)
+        mass = joint_mass if joint_mass is not None else (
+            np.diag(inertia) if inertia is not None else np.full(len(q0), hold_kd * 0.1))
         self.inertia = inertia
         # the torque per newton each joint can get from the force (the norm of its row of Jᵀ), at the trip
         reach = None
@@ -72,21 +73,17 @@ class Compliance:
             damping = np.maximum(reach * limit_n / (reaction.yield_speed_deg_s * unit), mass / 0.1)
         else:  # where the force acts is unknown: a tenth of a second to damp a joint's own motion
             damping = mass / 0.1
-        # damping applied once a control period is stable only below ~2 m/dt; a joint that would need more (a light
-        # wrist: the force at its limit would spin it past the bound) is held where it was instead, with the hold's
-        # gains, while the others give way
+        # damping applied once a control period keeps a joint's motion decaying only up to ~m/2dt; a joint that would
+        # need more (a light wrist: the force at its limit would spin it past the bound) is held where it was
+        # instead, with the hold's gains, while the others give way
         self.held = damping > 0.5 * mass / dt
         self.damping = np.where(self.held, 0.0, damping)
         # a joint arriving at the speed bound stops within the wall's width: ½ m v² = ½ k w²
         self.wall_k = np.where(wall > 0, mass * (self.vmax / np.where(wall > 0, wall, 1.0)) ** 2, 0.0)
         self.wall_d = 2.0 * np.sqrt(self.wall_k * mass)
         self.gravity, self.friction, self.effort = gravity, friction, effort
-        # the hold's gains, within what a control period can apply stably to each joint's inertia (a light wrist cannot
-        # take a heavy shoulder's damping: kd dt / m below 1/2, then critically damped)
-        kd_cap = 0.5 * mass / dt
-        capped = hold_kd > kd_cap
-        self.hold_kd = np.where(capped, kd_cap, hold_kd)
-        self.hold_kp = np.where(capped, np.minimum(hold_kp, self.hold_kd**2 / (4 * mass)), hold_kp)
+        # the hold's gains, within what a control period can apply stably to each joint's inertia
+        self.hold_kp, self.hold_kd = stable_gains(hold_kp, hold_kd, mass, dt)
         self.joint_torque = joint_torque
         self.push_torque = push_torque or joint_torque
         self.q_ref = np.clip(q0, self.wall_lo, self.wall_hi)
@@ -114,7 +111,7 @@ class Compliance:
             pass
         return cls(reaction, limit_n, t, np.asarray(q, float), lo, hi, robot.revolute, robot.limits.effort,
                    mass_matrix(robot, q), gravity, friction, config.hold_kp, config.hold_kd, joint_torque, qd,
-                   push_torque, dt)
+                   push_torque, dt, joint_inertia(robot, q))
 
     def broken(self, t: float, q: np.ndarray, qd: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                vmax: np.ndarray) -> tuple | None:

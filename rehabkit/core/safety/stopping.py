@@ -79,6 +79,35 @@ def mass_matrix(robot, q: np.ndarray) -> np.ndarray | None:
         return None
 
 
+def joint_inertia(robot, q: np.ndarray) -> np.ndarray | None:
+    """Each joint's inertia at ``q`` as its own torque meets it, the other joints free: 1 / (M⁻¹)ⱼⱼ with its rotor's
+    (armature) on the diagonal [kg·m²; kg for a sliding joint] — a wrist on a moving arm is lighter than Mⱼⱼ says —,
+    or None without a dynamic model."""
+    inertia = mass_matrix(robot, q)
+    if inertia is None:
+        return None
+    try:
+        rotor = np.asarray(robot.pin_model.armature, float)[: len(q)]
+    except Exception:  # noqa: BLE001 (no rotor inertia known)
+        rotor = np.zeros(len(q))
+    return 1.0 / np.diag(np.linalg.inv(inertia + np.diag(rotor)))
+
+
+def stable_gains(kp: float | np.ndarray, kd: float | np.ndarray, inertia: np.ndarray | None,
+                 dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """PD gains per joint that a control period ``dt`` can apply stably: damping at most half the inertia / dt (a
+    joint's speed decays without changing sign within a period, with a margin for the state's delay), the stiffness
+    then at most critical for it (kd² / 4 m). A light joint (a small wrist) cannot take a heavy one's gains: at
+    kd·dt/m above 2 the hold oscillates and grows."""
+    kp, kd = np.asarray(kp, float), np.asarray(kd, float)
+    if inertia is None:
+        return kp, kd
+    cap = 0.5 * inertia / dt
+    capped = kd > cap
+    kd_eff = np.where(capped, cap, kd)
+    return np.where(capped, np.minimum(kp, kd_eff**2 / (4 * inertia)), kp), kd_eff
+
+
 def stop_figures(t: np.ndarray, q: np.ndarray, qd: np.ndarray, hand: np.ndarray | None, trip_t: float,
                  revolute: np.ndarray) -> dict[str, float]:
     """Time from the trigger to standstill [s], the largest joint travel [deg, or mm for a sliding joint] and the
@@ -119,6 +148,7 @@ class Stopping:
         self.ramp: ControlledStop | None = None
         self.limp = False  # category 1 at standstill: the torque is off
         self.hold_q: np.ndarray | None = None
+        self._gains: tuple[np.ndarray, np.ndarray] | None = None  # the hold's, per joint (stable_gains), made once
 
     def category_of(self, rule: str) -> int:
         return self.by_rule.get(rule, self.by_rule["default"])
@@ -143,9 +173,18 @@ class Stopping:
         self.note(SafetyEvent(t, "brakes", None, None, None, f"t={t:.3f}s: {cause}", {"engaged": engaged},
                               cause=cause))
 
+    def gains(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The hold's stiffness and damping per joint: the envelope's, within what a control period can apply stably
+        to each joint's inertia (taken where the robot first needs holding)."""
+        if self._gains is None:
+            inertia = joint_inertia(self.robot, np.where(np.isfinite(q), q, 0.0))
+            self._gains = stable_gains(self.config.hold_kp, self.config.hold_kd, inertia, self.dt)
+        return self._gains
+
     def hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """PD to ``posture`` with gravity compensation, within the effort limits."""
-        tau = self.config.hold_kp * (posture - q) - self.config.hold_kd * qd
+        kp, kd = self.gains(q)
+        tau = kp * (posture - q) - kd * qd
         if self.gravity is not None:
             tau += self.gravity(q)
         return np.clip(tau, -self.effort, self.effort)
@@ -160,7 +199,8 @@ class Stopping:
         if stop is not None:
             if not stop.over(t):  # on the deceleration ramp
                 q_r, qd_r = stop.reference(t)
-                tau = self.config.hold_kp * (q_r - q) + self.config.hold_kd * (qd_r - qd)
+                kp, kd = self.gains(q)
+                tau = kp * (q_r - q) + kd * (qd_r - qd)
                 if stop.feedforward is not None:
                     tau += stop.feedforward
                 if self.gravity is not None:
