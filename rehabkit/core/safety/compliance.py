@@ -51,7 +51,7 @@ class Compliance:
                  qd0: np.ndarray | None = None,
                  push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
                  dt: float = 1e-3, joint_mass: np.ndarray | None = None):
-        self.reaction, self.kind, self.limit = reaction, reaction.type, limit_n
+        self.kind, self.limit = reaction.type, limit_n
         self.release = reaction.release_n if reaction.release_n is not None else 0.6 * limit_n
         unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
         self.vmax = reaction.max_speed_deg_s * unit
@@ -84,7 +84,6 @@ class Compliance:
         self.gravity, self.friction, self.effort = gravity, friction, effort
         # the hold's gains, within what a control period can apply stably to each joint's inertia
         self.hold_kp, self.hold_kd = stable_gains(hold_kp, hold_kd, mass, dt)
-        self.joint_torque = joint_torque
         self.push_torque = push_torque or joint_torque
         self.q_ref = np.clip(q0, self.wall_lo, self.wall_hi)
         self.qd_ref = np.zeros(len(q0))
@@ -94,7 +93,6 @@ class Compliance:
         # the robot's own speed at the trip (a fast passive stretch that met a spastic catch) is damped out, not a
         # breach of the bound: the bound allows it, decaying over SPEED_GRACE_S
         self.v0 = np.nan_to_num(qd0) if qd0 is not None else np.zeros(len(q0))
-        self.qd0 = np.abs(self.v0)
         self.force = 0.0
 
     @classmethod
@@ -124,7 +122,8 @@ class Compliance:
         if outside.any():
             j = int(np.argmax(outside))
             return "position", j, float(q[j]), float(lo[j] if q[j] < lo[j] else hi[j]), "a joint beyond its range"
-        bound = np.where(self.held, vmax, np.maximum(self.vmax, self.qd0 * math.exp(-(t - self.t0) / SPEED_GRACE_S)))
+        carried = np.abs(self.v0) * math.exp(-(t - self.t0) / SPEED_GRACE_S)
+        bound = np.where(self.held, vmax, np.maximum(self.vmax, carried))
         over = np.abs(qd) > bound
         if over.any():
             j = int(np.argmax(over))

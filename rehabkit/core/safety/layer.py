@@ -220,14 +220,9 @@ class SafetyLayer:
         if kind == "yield" and self.on_yield is not None:
             self.on_yield(False)
         name = self.names[joint] if isinstance(joint, int) else joint
-        category = self.stopping.category_of(rule)
         figure = f": {name + ' = ' if name else ''}{value:.4g} (limit {limit:.4g})" if value is not None else ""
         cause = f"while the robot {'yielded' if kind == 'yield' else 'retreated'}, {why}{figure}"
-        event = SafetyEvent(t, rule, name, value, limit, f"t={t:.3f}s: {cause}; {WORDS[category]}",
-                            {"category": category, "during": kind}, cause=cause)
-        self.events.append(event)
-        self._note(event)
-        self.stopping.begin(t, category, q, qd)
+        self._stop(t, q, qd, rule, name, value, limit, cause, {"during": kind})
         return self.stopping.torque(t, q, qd)
 
     def trip(self, t: float, q: np.ndarray, rule: str, message: str, qd: np.ndarray | None = None,
@@ -311,10 +306,8 @@ class SafetyLayer:
         if reaction is not None and reaction.type != "stop":
             words = {"yield": "yield: compliant, gravity compensated, no stop",
                      "retreat": "retreat: away along the force, then hold"}[reaction.type]
-            event = SafetyEvent(t, rule, name, value, limit, f"{text}; {words}",
-                                {**(data or {}), "reaction": reaction.type}, cause=cause)
-            self.events.append(event)
-            self._note(event)
+            self._record(SafetyEvent(t, rule, name, value, limit, f"{text}; {words}",
+                                     {**(data or {}), "reaction": reaction.type}, cause=cause))
             self.tripped_at = t
             self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
                                                self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque,
@@ -322,11 +315,18 @@ class SafetyLayer:
             if reaction.type == "yield" and self.on_yield is not None:
                 self.on_yield(True)
             return
+        self.tripped_at = t
+        self._stop(t, q, qd, rule, name, value, limit, cause, data)
+
+    def _stop(self, t, q, qd, rule, name, value, limit, cause, data=None) -> None:
+        """The stop a trip begins (its rule's category), as an event: a rule broken, or a reaction that ended in one."""
         category = self.stopping.category_of(rule)
-        text += f"; {WORDS[category]}"
-        event = SafetyEvent(t, rule, name, value, limit, text, {**(data or {}), "category": category}, cause=cause)
+        self._record(SafetyEvent(t, rule, name, value, limit, f"t={t:.3f}s: {cause}; {WORDS[category]}",
+                                 {**(data or {}), "category": category}, cause=cause))
+        self.stopping.begin(t, category, q, qd)
+
+    def _record(self, event: SafetyEvent) -> None:
+        """A trip: in the events and the interventions."""
         self.events.append(event)
         self._note(event)
-        self.tripped_at = t
-        self.stopping.begin(t, category, q, qd)
 

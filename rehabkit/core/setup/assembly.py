@@ -55,7 +55,7 @@ from rehabkit.core.setup.checks import (
     has,
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
-from rehabkit.core.setup.force_source import ForceSource, LastForce, force_source
+from rehabkit.core.setup.force_source import ForceSource, LastForce, check_reaction, force_source
 from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
 from rehabkit.core.setup.space import JointSpace, reference_space
 from rehabkit.core.setup.targets import resolve_targets
@@ -282,7 +282,7 @@ def _patient_and_safety(a: Assembly) -> None:
               if v is not None]
     force_limit = min(limits) if limits else None
     a.force_source = force_source(a, force_limit)
-    _check_reaction(a, force_limit)
+    check_reaction(a, force_limit)
     a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
                            hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
@@ -294,28 +294,6 @@ def _patient_and_safety(a: Assembly) -> None:
         a.context.note(0.0, f"stop category 0/1 for {', '.join(off)}: the torque goes off, and robot "
                             f"'{a.robot.model.name}' has no brakes: after such a stop it is free to move (its weight, "
                             "the person)")
-
-
-def _check_reaction(a: Assembly, limit: float | None) -> None:
-    """A force-limiting reaction needs a force limit, and a retreat a release below it and a force whose point of
-    action is known (its direction in the joints)."""
-    reaction = a.sc.safety.reactions.get("interaction-force")
-    if reaction is None or reaction.type == "stop":
-        return
-    at = ("safety", "reactions", "interaction-force")
-    if limit is None:
-        raise PluginSetupError(a.loaded.source, (*at, "type"), f"a '{reaction.type}' reaction needs an "
-                               "interaction-force limit: set safety.interaction_force_n (or the patient's comfort)")
-    if reaction.type != "retreat":
-        return
-    if reaction.release_n is not None and reaction.release_n >= limit:
-        raise PluginSetupError(a.loaded.source, (*at, "release_n"), f"release_n ({reaction.release_n:g} N) must "
-                               f"be below the run's force limit ({limit:g} N): the retreat ends below it")
-    if a.force_source is None or a.force_source.joint_torque is None:
-        raise PluginSetupError(a.loaded.source, (*at, "type"), "a retreat moves along the force, so it needs to "
-                               "know where on the robot the force acts: a force-torque sensor (sensors: {ft: {type: "
-                               "force-torque}}) or a simulated patient; this run's force source does not say "
-                               "(use yield)")
 
 
 def _schedule(a: Assembly) -> Schedule:

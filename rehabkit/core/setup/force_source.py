@@ -89,3 +89,26 @@ def force_source(a, limit: float | None) -> ForceSource | None:
                                "{type: force-torque}}) or a simulated patient (patient.model); backend "
                                f"'{a.sc.backend.type}' measures none")
     return None
+
+
+def check_reaction(a, limit: float | None) -> None:
+    """A force-limiting reaction (``safety.reactions``) needs a force limit, and a retreat a release below it and a
+    source whose force's point of action is known (its direction in the joints); ``a``: the run's assembly, its force
+    source chosen."""
+    reaction = a.sc.safety.reactions.get("interaction-force")
+    if reaction is None or reaction.type == "stop":
+        return
+    at = ("safety", "reactions", "interaction-force")
+    if limit is None:
+        raise PluginSetupError(a.loaded.source, (*at, "type"), f"a '{reaction.type}' reaction needs an "
+                               "interaction-force limit: set safety.interaction_force_n (or the patient's comfort)")
+    if reaction.type != "retreat":
+        return
+    if reaction.release_n is not None and reaction.release_n >= limit:
+        raise PluginSetupError(a.loaded.source, (*at, "release_n"), f"release_n ({reaction.release_n:g} N) must "
+                               f"be below the run's force limit ({limit:g} N): the retreat ends below it")
+    if a.force_source is None or a.force_source.joint_torque is None:
+        raise PluginSetupError(a.loaded.source, (*at, "type"), "a retreat moves along the force, so it needs to "
+                               "know where on the robot the force acts: a force-torque sensor (sensors: {ft: {type: "
+                               "force-torque}}) or a simulated patient; this run's force source does not say "
+                               "(use yield)")
