@@ -29,7 +29,7 @@ import zlib
 
 import numpy as np
 
-from rehabkit.hardware.protocol import CLOCK, CRC, HEADER, STATE, TICK, encode, link_tick
+from rehabkit.hardware.protocol import CLOCK, CRC, HEADER, PLAIN, STATE, TICK, encode, link_tick
 
 
 def split_tick(data: bytes) -> tuple[bytes, bytes]:
@@ -110,7 +110,7 @@ def main() -> None:
         dest = bridge if addr == host else host
         if dest is None:
             continue
-        tick = link_tick(data, args.robot_id) if args.lockstep else None
+        tick = link_tick(PLAIN.open(data)[0] or b"", args.robot_id) if args.lockstep else None  # (no key: plain)
         if tick is None:
             if (passed := relay.impair(data, dest, host, now)) is not None:
                 sock.sendto(passed, dest)

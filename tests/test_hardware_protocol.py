@@ -52,8 +52,10 @@ def _forge(data: bytes, offset: int, fmt: str, value) -> bytes:
 
 
 @pytest.mark.parametrize("mutate, reason", [
-    (lambda d: d[:-1], "length"),
-    (lambda d: d + b"\0", "length"),
+    (lambda d: d[:20], "length"),  # shorter than a header and a checksum
+    (lambda d: d[:-1], "checksum"),  # (the trailer is checked first: a datagram cut or padded no longer matches it)
+    (lambda d: d + b"\0", "checksum"),
+    (lambda d: _forge(d, HEADER.size - 4, "<I", 5), "authenticated"),  # sealed in a session: no key here to check it
     (lambda d: d[:30] + bytes([d[30] ^ 0xFF]) + d[31:], "checksum"),  # a flipped bit in the body
     (lambda d: _forge(d, 0, "<2s", b"XX"), "magic"),
     (lambda d: _forge(d, 2, "<B", 9), "version"),
@@ -106,5 +108,5 @@ def test_instrument_values_travel_with_the_state_and_their_count_is_checked():
     rx = Receiver(STATE, robot=7, joints=6, measured=1, instruments=6)
     assert rx.accept(encode(STATE, 7, 2, values, measured=np.array([0.25]))) is None
     assert rx.dropped == {"instruments": 1}
-    truncated = data[:-12] + data[-4:]  # (its checksum no longer matches: only 'length' can be said)
-    assert rx.accept(truncated) is None and rx.dropped["length"] == 1
+    truncated = _forge(data[:-12], 0, "<2s", b"RK")  # (resealed: a well-formed datagram one value short)
+    assert rx.accept(truncated) is None and rx.dropped["joints"] == 1

@@ -122,12 +122,14 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     thread.start()
     try:
         t0 = time.monotonic()
-        status = clear_over_link("127.0.0.1", restarted.port, "hit", 1)
+        status = clear_over_link("127.0.0.1", restarted.port, 1, "Dr. Ana Ruiz")
         assert not status & ESTOPPED and status & HOLDING  # still held: only a reset starts a session
         assert time.monotonic() - t0 < 1.0
     finally:
         thread.join()
-    assert json.loads(latch.path.read_text())["cleared_by"].startswith("host command from 127.0.0.1")
+    record = json.loads(latch.path.read_text())  # who cleared it, from where, in which session's key (none here)
+    assert record["cleared_by"] == "Dr. Ana Ruiz" and record["via"] == "the link from 127.0.0.1"
+    assert record["key_id"].startswith("none")
 
 
 def test_the_keypad_at_the_robot_presses_and_clears_the_estop(tmp_path):

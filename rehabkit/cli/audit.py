@@ -10,13 +10,21 @@ from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
 from rehabkit.core.log.safety_log import KEY_ENV, LOG, audit_key, verify
 
 
+def _link(link: dict | None) -> str:
+    """A robot link's record: the bridge, and the session's key id (or that it had none)."""
+    if not link:
+        return ""
+    return f"  link {link.get('bridge')}: " + (f"session {link['session']}, key {link['key_id']}" if "key_id" in link
+                                               else str(link.get("session")))
+
+
 def _line(record: dict) -> str:
     kind = record.get("kind")
     if kind == "run":
         s = record.get("scenario", {})
         return (f"run      {record.get('time')}  rehabkit {record.get('software', {}).get('rehabkit')}  "
                 f"{s.get('file')} (sha256 {str(s.get('sha256'))[:12]}…)  patient {record.get('patient')}  "
-                f"backend {record.get('backend')}  seed {record.get('seed')}")
+                f"backend {record.get('backend')}  seed {record.get('seed')}" + _link(record.get("link")))
     if kind == "limits":
         narrowed = {j: list(v["narrowed_by"]) for j, v in record.get("joints", {}).items() if v.get("narrowed_by")}
         return (f"limits   {len(record.get('joints', {}))} joints, narrowed: {narrowed or 'none'}; interaction force "

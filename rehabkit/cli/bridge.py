@@ -24,9 +24,22 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     from rehabkit.hardware.bridge import Bridge, BridgeLimits
     from rehabkit.hardware.plant import MujocoPlant
 
+    where = _listen(args)
+    if isinstance(where, str):
+        _err(f"error: {where}")
+        return EXIT_INVALID
+    host, port, key = where
     registry = default_registry()
     info = registry.get("robot", args.robot)
     robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), None)
+    if key is not None:
+        from rehabkit.hardware.security.keys import KeyFileError, check_robot
+
+        try:
+            check_robot(key, f"{robot.model.name}-{args.robot_id}")
+        except KeyFileError as exc:
+            _err(f"error: --key: {exc}")
+            return EXIT_INVALID
     try:
         instruments = [Instrument(**{**i, "position": tuple(i["position"]), "bias": tuple(i.get("bias", (0, 0, 0)))})
                        for i in json.loads(args.instruments or "[]")]
@@ -55,26 +68,68 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     backstop = BridgeLimits(lower, upper, velocity, margin=np.radians(args.limit_margin_deg))
     from rehabkit.hardware.config import HardwareConfig  # its defaults are the host's: a bridge by hand agrees
 
-    host = HardwareConfig.model_fields
-    watchdog_ms = host["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
-    stale_ms = host["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
+    defaults = HardwareConfig.model_fields
+    watchdog_ms = defaults["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
+    stale_ms = defaults["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
     latch = EStopLatch.for_robot(robot.model.name, args.robot_id, args.latch_file)  # (as the host names it)
     from rehabkit.hardware.keypad import Keypad
 
-    bridge = Bridge(plant, args.robot_id, args.port, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,
-                    limits=backstop, latch=latch, keypad=Keypad() if args.keypad else None)
-    print(f"bridge: {args.robot} on udp://127.0.0.1:{bridge.port}", flush=True)
+    bridge = Bridge(plant, args.robot_id, port, host=host, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,
+                    limits=backstop, latch=latch, keypad=Keypad() if args.keypad else None, key=key)
+    print(f"bridge: {args.robot} on udp://{host}:{bridge.port}", flush=True)
+    if key is not None:
+        print(f"bridge: authenticated sessions only, {key}", file=sys.stderr, flush=True)
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
-        (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
+            (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
+    finally:
+        if args.stats:
+            from rehabkit.core.io import atomic_write_json
+
+            atomic_write_json(args.stats, bridge.link_stats())
     return EXIT_OK
+
+
+def _listen(args: argparse.Namespace) -> tuple[str, int, object] | str:
+    """Where the bridge listens and its key, or why it must not start: beyond loopback only with a key."""
+    import ipaddress
+
+    from rehabkit.hardware.security.keys import KeyFileError, load_key
+
+    host, port = "127.0.0.1", args.port
+    if args.listen:
+        host, _, given = args.listen.rpartition(":")
+        if not host or not given.isdigit():
+            return f"--listen takes HOST:PORT (e.g. 0.0.0.0:7000 or 192.168.1.20:7000), not '{args.listen}'"
+        host, port = host.strip("[]"), int(given)
+    key = None
+    if args.key:
+        try:
+            key = load_key(args.key)
+        except KeyFileError as exc:
+            return f"--key: {exc}"
+    try:
+        loopback = ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        loopback = host == "localhost"
+    if not loopback and key is None:
+        return (f"--listen {args.listen}: beyond this machine's loopback anyone on the network could drive the robot; "
+                f"give the bridge the robot's key (`rehabkit keys new {args.robot}-{args.robot_id}`, then --key FILE, "
+                "the same file as the host's backend.key_file)")
+    return host, port, key
 
 
 def add_parser(sub) -> None:
     b = sub.add_parser("bridge", help="serve a robot over UDP (its MuJoCo model as the plant), next to its drives")
     b.add_argument("robot", help="robot plugin name")
-    b.add_argument("--port", type=int, default=0, help="UDP port (0: any free one; printed)")
+    b.add_argument("--port", type=int, default=0, help="UDP port on loopback (0: any free one; printed)")
+    b.add_argument("--listen", metavar="HOST:PORT", help="listen there instead (beyond loopback only with --key)")
+    b.add_argument("--key", metavar="FILE", help="the robot's link key (`rehabkit keys new ROBOT-ID`): serve "
+                   "authenticated sessions only")
+    b.add_argument("--stats", metavar="FILE", help="at exit, write what the link accepted and dropped (by reason) and "
+                   "its sessions (key ids) as JSON")
     b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section)")
     b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
     b.add_argument("--robot-id", type=int, default=1)

@@ -13,41 +13,41 @@ from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
 from rehabkit.core.safety.estop import EStopLatch, all_latches
 
 
-def clear_over_link(host: str, port: int, robot: str, robot_id: int, timeout: float = 2.0) -> int:
-    """Send the bridge a clear command and wait for a state saying its e-stop is no longer latched; the status."""
-    import numpy as np
+def clear_over_link(host: str, port: int, robot_id: int, by: str, key_file: str | None = None,
+                    timeout: float = 2.0) -> int:
+    """Tell the bridge ``by`` (a person's name) clears its e-stop, in an authenticated session given the robot's
+    key; wait for a state saying it is no longer latched. Its status."""
+    from rehabkit.hardware.clock import wait_readable
+    from rehabkit.hardware.protocol import CLEAR, ESTOPPED, HEADER, PLAIN, STATE, pack_bytes
+    from rehabkit.hardware.security.handshake import handshake, peek_kind, refusal
+    from rehabkit.hardware.security.keys import load_key
 
-    from rehabkit.core.plugins.registry import default_registry
-    from rehabkit.hardware.protocol import CMD_CLEAR, COMMAND, ESTOPPED, encode
-
-    info = default_registry().get("robot", robot)
-    dof = info.factory(info.config.model_validate({"type": robot}), None).model.dof
+    key = load_key(key_file) if key_file else None
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.settimeout(0.05)
+    sock.setblocking(False)
+    seq = iter(range(1, 1 << 31))
     try:
+        link = handshake(sock, (host, port), key, robot_id, lambda: next(seq), timeout) if key else PLAIN
         until = time.monotonic() + timeout
         while time.monotonic() < until:
-            sock.sendto(encode(COMMAND, robot_id, 1, np.zeros(dof), status=CMD_CLEAR), (host, port))
-            try:
-                data = sock.recv(65536)
-            except (TimeoutError, ConnectionRefusedError):
-                continue
-            status = _status(data, robot_id)
-            if status is not None and not status & ESTOPPED:
-                return status
+            sock.sendto(link.seal(pack_bytes(CLEAR, robot_id, next(seq), by.encode(), link.id)), (host, port))
+            answer_by = time.monotonic() + 0.05
+            while wait_readable(sock, answer_by - time.monotonic()):
+                try:
+                    data = sock.recv(65536)
+                except (BlockingIOError, ConnectionRefusedError):
+                    break
+                if peek_kind(data) != STATE:
+                    if (why := refusal(data, robot_id, key)) is not None:
+                        raise PermissionError(f"the bridge at udp://{host}:{port} refuses: {why}; clear it with the "
+                                              "robot's key: --key FILE")
+                    continue
+                plain, _ = link.open(data)
+                if plain is not None and not HEADER.unpack_from(plain)[9] & ESTOPPED:
+                    return HEADER.unpack_from(plain)[9]
         raise TimeoutError(f"no state from the bridge at udp://{host}:{port} saying it is cleared within {timeout:g} s")
     finally:
         sock.close()
-
-
-def _status(data: bytes, robot_id: int) -> int | None:
-    from rehabkit.hardware.protocol import CRC, HEADER, MAGIC, STATE, VERSION
-
-    if len(data) < HEADER.size + CRC.size:
-        return None
-    magic, version, kind, rid, *_rest = HEADER.unpack_from(data)
-    ok = magic == MAGIC and version == VERSION and kind == STATE and rid == robot_id
-    return HEADER.unpack_from(data)[9] if ok else None
 
 
 def cmd_estop(args: argparse.Namespace) -> int:
@@ -68,9 +68,15 @@ def cmd_estop(args: argparse.Namespace) -> int:
         if not robot or not rid.isdigit() or not port.isdigit():
             print("error: --bridge HOST:PORT clears NAME = ROBOT-ID (e.g. hit-1)", file=sys.stderr)
             return EXIT_INVALID
+        from rehabkit.hardware.security.handshake import LinkRefusedError
+        from rehabkit.hardware.security.keys import KeyFileError
+
         try:
-            clear_over_link(host or "127.0.0.1", int(port), robot, int(rid))
-        except (TimeoutError, OSError, KeyError, ValueError) as exc:
+            clear_over_link(host or "127.0.0.1", int(port), int(rid), args.by, args.key)
+        except (KeyFileError, LinkRefusedError, PermissionError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_INVALID
+        except (TimeoutError, OSError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_FAILED
         print(f"{args.name}: cleared at the bridge udp://{args.bridge} (by {args.by}); the next session ramps in")
@@ -98,4 +104,6 @@ def add_parser(sub) -> None:
     e.add_argument("name", nargs="?", help="the latch: ROBOT-ID behind a bridge (hit-1), sim-ROBOT in simulation")
     e.add_argument("--by", help="who clears it (kept in the latch's record)")
     e.add_argument("--bridge", metavar="HOST:PORT", help="tell this running bridge to clear its latch")
+    e.add_argument("--key", metavar="FILE", help="the robot's link key: a bridge with a key clears only in an "
+                   "authenticated session")
     e.set_defaults(func=cmd_estop)

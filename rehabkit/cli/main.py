@@ -239,6 +239,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.cli.estop import add_parser as add_estop
 
     add_estop(sub)
+    from rehabkit.cli.keys import add_parser as add_keys
+
+    add_keys(sub)
     from rehabkit.cli.assess import add_parser as add_assess
 
     add_assess(sub)

@@ -31,6 +31,7 @@ import numpy as np
 
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import CompliantGaps, Instruments
+from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
 from rehabkit.core.plugins.hookspecs import hookimpl
@@ -39,7 +40,7 @@ from rehabkit.core.safety.layer import SafetyEvent
 from rehabkit.core.setup.limits import first_breach
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
 from rehabkit.hardware.clock import wait_readable, wait_until
-from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkLostError
+from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
@@ -54,6 +55,7 @@ from rehabkit.hardware.protocol import (
     ESTOPPED,
     HOLDING,
     LIMIT,
+    PLAIN,
     RAMP_IN,
     STATE,
     TICK,
@@ -62,8 +64,11 @@ from rehabkit.hardware.protocol import (
     encode,
     link_tick,
 )
+from rehabkit.hardware.security.handshake import HANDSHAKE, LinkRefusedError, handshake, peek_kind, refusal
+from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key
 
 LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
+RESEND_S = 0.05  # lock-step: a tick not answered within this (wall time) is sent again (it or its answer was lost)
 
 
 class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
@@ -81,10 +86,19 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                                                "bridge_stale_ms": beat.hold_after})
         self.config, self.timestep = config, config.timestep
         self.realtime = config.clock == "realtime"  # else the link's clock is the count of ticks, self.clock
-        self.clock, self._clock_seq, self._answered = 0, 0, -1.0
+        self.clock, self._answered = 0, -1.0
         robot = context.robot
         self.n = robot.model.dof
         self.robot_name = robot.model.name  # (its e-stop latch at the bridge: <name>-<robot id>)
+        self.key = None
+        if config.key_file is not None:
+            try:
+                self.key = load_key(context.resolve(config.key_file))
+                check_robot(self.key, f"{self.robot_name}-{config.robot_id}")
+            except KeyFileError as exc:
+                raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
+        self.link = PLAIN  # the session once the handshake is done (with a key)
+        self._note = context.note
         self.brakes = robot.model.brakes is not None
         self._flags = 0  # sent with every command (the brakes, once applied)
         self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
@@ -107,6 +121,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured),
                            instruments=len(self.instruments), max_age=config.max_age_s)
         self.seq, self.tau = 0, np.zeros(self.n)
+        self._last_sent: tuple | None = None  # lock-step: the command carrying the tick, to send again if lost
         self.q, self.qd = np.zeros(self.n), np.zeros(self.n)
         self.applied = np.zeros(self.n)
         self.status = 0
@@ -129,29 +144,42 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
     def _now(self) -> float:
         return time.monotonic() if self.realtime else self.clock * self.timestep
 
+    def _next_seq(self) -> int:
+        self.seq += 1  # (one count for every datagram this end sends: a session's nonces never repeat)
+        return self.seq
+
     def _send(self, values: np.ndarray, flags: int = 0, tick: bool = False) -> float:
         """A command; with ``tick`` (lock-step) it also tells the bridge to tick at the link's time (the clock
         rides on it: see :mod:`rehabkit.hardware.protocol`)."""
-        self.seq += 1
         sent = self._now()
-        self.sock.sendto(encode(COMMAND, self.config.robot_id, self.seq, values, sent_at=sent,
-                                status=flags | (TICK if tick else 0)), self.addr)
+        self._last_sent = (COMMAND, values, sent, flags | (TICK if tick else 0))
+        self._transmit(self._last_sent)
         return sent
+
+    def _transmit(self, what: tuple) -> None:
+        kind, values, sent, status = what
+        self.sock.sendto(encode(kind, self.config.robot_id, self._next_seq(), values, sent_at=sent, status=status,
+                                link=self.link), self.addr)
 
     def _tick_lockstep(self, timeout: float = LOCKSTEP_REPLY_S, sent: bool = False) -> bool:
         """Lock-step: tell the bridge to tick at the link's time (``sent``: a command carrying the tick has gone),
-        wait (in wall time) until it says it has, taking the states that came meanwhile; the clock advances one
-        tick. False if it did not answer in ``timeout``."""
+        wait (in wall time) until it says it has, taking the states that came meanwhile, and ask again each
+        ``RESEND_S`` without an answer (a datagram lost to a full socket buffer); the clock advances one tick.
+        False if it did not answer in ``timeout``."""
         t = self.clock * self.timestep
         if not sent:
-            self._clock_seq += 1
-            self.sock.sendto(encode(CLOCK, self.config.robot_id, self._clock_seq, np.zeros(0), t), self.addr)
+            self._last_sent = (CLOCK, np.zeros(0), t, 0)
+            self._transmit(self._last_sent)
         self.clock += 1
         done = t + 0.5 * self.timestep  # the bridge answers with the time its tick ends, t + its timestep
         until = time.monotonic() + timeout
         while self._answered < done:
-            if not wait_readable(self.sock, until - time.monotonic()):
+            now = time.monotonic()
+            if now >= until:
                 return False
+            if not wait_readable(self.sock, min(until, now + RESEND_S) - now):
+                self._transmit(self._last_sent)  # (the same tick again: the bridge ticks once, answers again)
+                continue
             self._receive()
         return True
 
@@ -162,11 +190,19 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             except (BlockingIOError, ConnectionRefusedError):
                 return
             now = self._now()
-            if not self.realtime and (tick := link_tick(data, self.config.robot_id)) is not None:
+            if peek_kind(data) in HANDSHAKE:  # outside a handshake only a refusal matters: a bridge needing a key
+                if (why := refusal(data, self.config.robot_id, self.key)) is not None:
+                    self._refused = why
+                continue
+            plain, why = self.link.open(data)
+            if plain is None:
+                self.rx.dropped[why] += 1
+                continue
+            if not self.realtime and (tick := link_tick(plain, self.config.robot_id)) is not None:
                 self._answered = max(self._answered, tick[0])
                 if tick[1]:  # a bare clock: no state in it
                     continue
-            msg = self.rx.accept(data, now)
+            msg = self.rx.take(plain, now)
             if msg is None:
                 continue
             self.q, self.qd = msg.values[0].copy(), msg.values[1].copy()  # new arrays: other threads may hold the old
@@ -203,9 +239,26 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
 
     # -- Backend ----------------------------------------------------------------
 
+    def _open_session(self) -> None:
+        """The handshake with the bridge, with this robot's key: every datagram from now on is in the session."""
+        where = f"udp://{self.addr[0]}:{self.addr[1]}"
+        try:
+            self.link = handshake(self.sock, self.addr, self.key, self.config.robot_id, self._next_seq)
+        except LinkRefusedError as exc:
+            raise LinkKeyError(where, str(self.key.path), str(exc)) from None
+        except TimeoutError:
+            raise LinkLostError(f"the bridge at {where} does not answer a handshake (is `rehabkit bridge` running "
+                                "there, for this robot and robot_id, with its --key?)") from None
+        if self._note is not None:
+            self._note(0.0, f"link: authenticated session {self.link.id:08x} with the bridge at {where}, key "
+                            f"{self.key.id}")
+
     def reset(self, q0: np.ndarray) -> None:
         if self.frames is not None:
             self.frames.wait_ready()  # started with the backend; up before the loop
+        if self.key is not None and self.link is PLAIN:
+            self._open_session()
+        self._refused = None
         limit = time.monotonic() + 5.0
         while time.monotonic() < limit:  # the bridge may still be starting: ask until it answers from q0
             self._send(np.asarray(q0, float), CMD_RESET, tick=not self.realtime)
@@ -215,6 +268,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                 self._receive()
             else:
                 self._tick_lockstep(0.2, sent=True)
+            if self._refused is not None:
+                raise LinkKeyError(f"udp://{self.addr[0]}:{self.addr[1]}", None, self._refused)
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
                 raise EStopLatchedError(self._latched_message(), f"{self.robot_name}-{self.config.robot_id}",
                                         f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
@@ -312,6 +367,13 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                f"{self.addr[0]}:{self.addr[1]}` while it runs, or the bridge's keypad")
         return (f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it "
                 f"with {how}")
+
+    def provenance(self) -> dict[str, str]:
+        """The bridge this run drove and the session's key id (the safety log's run record)."""
+        where = {"bridge": f"udp://{self.addr[0]}:{self.addr[1]}"}
+        if self.link is PLAIN:
+            return {**where, "session": "none: a link without a key (loopback)"}
+        return {**where, "session": f"{self.link.id:08x}", "key_id": self.key.id}
 
     @property
     def holding(self) -> bool:

@@ -13,39 +13,43 @@ command arrives for ``watchdog_s`` while running, or an e-stop command comes, th
 latched (status ``HOLDING``) and only a reset from the host re-enables the robot. An e-stop
 (a host's, or the button at the robot: :meth:`Bridge.press_estop`, or the bridge's keypad: ``e``) is
 latched further, in the bridge's latch file (:mod:`rehabkit.core.safety.estop`): across sessions and
-restarts, resets are refused (status ``ESTOPPED``) until a person clears it (``CMD_CLEAR`` from
-``rehabkit estop clear --bridge``, the keypad's ``c``, or the latch file cleared while the bridge is down);
+restarts, resets are refused (status ``ESTOPPED``) until a person clears it (a ``CLEAR`` with their name from
+``rehabkit estop clear --bridge``: in an authenticated session when the bridge has a key; the keypad's ``c``; or the
+latch file cleared while the bridge is down);
 the session after that tells the host to ramp in (status ``RAMP_IN``). Given the
 run's joint limits, the bridge is also a backstop to the host's safety layer: a joint beyond
 its range or speed by more than a margin (wider than the host's, which acts first) latches
 the hold too (status ``LIMIT``), whatever the host is doing. Real drives plug in as another
 :class:`~rehabkit.hardware.plant.Plant`; :class:`~rehabkit.hardware.plant.MujocoPlant` is the robot's MuJoCo
 model as the plant, for tests and hardware-in-the-loop rehearsal.
+
+Given the robot's key (``key``), the bridge serves authenticated sessions only (:mod:`rehabkit.hardware.security`):
+a datagram that is not authentic, or was seen before, is counted by reason and never applied, never resets, never
+clears and never feeds the watchdog.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import socket
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from rehabkit.core.safety.estop import EStopLatch
+from rehabkit.hardware.bridge_link import BridgeLink
 from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.keypad import Keypad, handle
 from rehabkit.hardware.plant import Plant
 from rehabkit.hardware.protocol import (
+    CLEAR,
     CLOCK,
     CMD_BRAKE,
-    CMD_CLEAR,
     CMD_COMPLIANT,
     CMD_ESTOP,
     CMD_LATCH,
     CMD_RESET,
-    COMMAND,
     ENABLED,
     ESTOPPED,
     HOLDING,
@@ -55,10 +59,10 @@ from rehabkit.hardware.protocol import (
     STATE,
     TICK,
     WATCHDOG,
-    Receiver,
-    encode,
+    clear_name,
     link_tick,
 )
+from rehabkit.hardware.security.keys import LinkKey
 
 HOLD_KP, HOLD_KD = 60.0, 6.0
 
@@ -98,26 +102,22 @@ class Bridge:
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
                  watchdog_s: float = 0.005, stale_s: float = 0.010, limits: BridgeLimits | None = None,
-                 latch: EStopLatch | None = None, keypad: Keypad | None = None):
+                 latch: EStopLatch | None = None, keypad: Keypad | None = None, key: LinkKey | None = None):
         self.plant, self.robot_id, self.watchdog_s, self.limits = plant, robot_id, watchdog_s, limits
         self.latch, self.keypad = latch, keypad
         self.stale_ticks = max(1, round(stale_s / plant.timestep))
         self.since_command = 0  # plant ticks since the newest torque command
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
         self.held_ticks = 0  # since the reset, sent with each state
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind((host, port))
-        self.sock.setblocking(False)
-        self.port = self.sock.getsockname()[1]
-        # a host's reset opens its session: a new run (a new host process) numbers its commands from 1 again
-        self.rx = Receiver(COMMAND, robot_id, plant.joints, restart=CMD_RESET | CMD_CLEAR)  # (a new sender's)
+        self.link = BridgeLink(robot_id, plant.joints, host, port, key)
+        self.sock, self.port, self.rx = self.link.sock, self.link.port, self.link.rx
         self.peer = None
         self.tau = np.zeros(plant.joints)
         self.status = 0
         self.hold_q: np.ndarray | None = None
         self.last_valid = -np.inf
         self.echo = 0.0
-        self.seq = 0
+        self._last_tick, self._answer = -math.inf, None  # lock-step: the newest tick done and the answer sent
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
@@ -146,32 +146,30 @@ class Bridge:
         self._press(by, "robot")
         self._hold(now, "e-stop", ESTOPPED)
 
-    def clear_estop(self, by: str) -> None:
-        """A person cleared the e-stop: the robot stays held until the host's next reset, which then ramps in."""
+    def clear_estop(self, by: str, **how: str) -> None:
+        """A person (``by``) cleared the e-stop (``how``: over which link, recorded with it): the robot stays held until
+        the host's next reset, which then ramps in."""
         if self.latch is not None:
-            self.latch.clear(by)
+            self.latch.clear(by, **how)
         if self.status & ESTOPPED:
             self.status = (self.status & ~ESTOPPED) | HOLDING
             self.status &= ~ENABLED
             self._ramp_next = True
 
-    def _arrived(self) -> list[tuple[bytes, tuple]]:
-        out = []
-        while True:
-            try:
-                out.append(self.sock.recvfrom(65536))
-            except BlockingIOError:
-                return out
-
     def _receive(self, now: float, inbox: list[tuple[bytes, tuple]]) -> None:
-        for data, addr in inbox:
-            msg = self.rx.accept(data, now)
+        for plain, addr in inbox:
+            if plain[3] == CLEAR:
+                name = clear_name(plain, self.robot_id)
+                if name is None:
+                    self.rx.dropped["clear"] += 1
+                    continue
+                self.peer = addr
+                self.clear_estop(name, via=f"the link from {addr[0]}", key_id=self.link.key_id)
+                continue
+            msg = self.rx.take(plain, now)
             if msg is None:
                 continue
             self.peer, self.echo = addr, msg.sent_at
-            if msg.status & CMD_CLEAR:
-                self.clear_estop(f"host command from {addr[0]}")
-                continue
             if msg.status & CMD_RESET:  # also the way back from a hold: held at q0 until the first command
                 if self.status & ESTOPPED:  # latched: no session starts, the robot stays held where it is
                     continue
@@ -203,7 +201,7 @@ class Bridge:
     def tick(self, now: float, inbox: list[tuple[bytes, tuple]] | None = None) -> bool:
         """One cycle: commands in (what arrived, or ``inbox``: those a lock-step clock gathered), watchdog, torques,
         plant step, state out (in lock-step carrying the clock's answer); False if there was no peer to send it."""
-        self._receive(now, self._arrived() if inbox is None else inbox)
+        self._receive(now, self.link.arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
@@ -231,15 +229,18 @@ class Bridge:
         if self.peer is None:
             return False
         q, qd = self.plant.read()
-        self.seq += 1
         sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
         state = self._state
         state[0], state[1], state[2] = q, qd, tau
-        self.sock.sendto(encode(STATE, self.robot_id, self.seq, state, sent, echo=self.echo,
-                                status=self.status | (TICK if self.lockstep else 0), held=self.held_ticks,
-                                measured=self.plant.read_measured(),
-                                instruments=self.plant.read_instruments()), self.peer)
+        self._answer = (STATE, state.copy() if self.lockstep else state, sent, self.echo,
+                        self.status | (TICK if self.lockstep else 0), self.held_ticks, self.plant.read_measured(),
+                        self.plant.read_instruments())
+        self.link.send(self._answer, self.peer)
         return True
+
+    def link_stats(self) -> dict:
+        """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""
+        return self.link.stats()
 
     def serve(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given
@@ -276,21 +277,30 @@ class Bridge:
                         return
                     continue
                 data, addr = self.sock.recvfrom(65536)
-                tick = link_tick(data, self.robot_id)
+                plain = self.link.open(data, addr)
+                if plain is None:
+                    continue
+                tick = link_tick(plain, self.robot_id)
                 if tick is None or not tick[1]:
-                    inbox.append((data, addr))
+                    inbox.append((plain, addr))
                 if tick is None:
                     continue
                 now = tick[0]
                 if duration is not None and now >= duration:
                     return
+                if now <= self._last_tick:  # the host asks again (its tick or our answer was lost): answer again
+                    self._receive(now, inbox)
+                    inbox = []
+                    if self._answer is not None:
+                        self.link.send(self._answer, addr)
+                    continue
+                self._last_tick = now
                 if self.keypad is not None:
                     handle(self, self.keypad.poll(), now)
                 answered = self.tick(now, inbox) and self.peer == addr
                 inbox = []
                 if not answered:
-                    self.seq += 1
-                    self.sock.sendto(encode(CLOCK, self.robot_id, self.seq, np.zeros(0), now + self.plant.timestep),
-                                     addr)
+                    self._answer = (CLOCK, np.zeros(0), now + self.plant.timestep, 0.0, 0, 0, None, None)
+                    self.link.send(self._answer, addr)
         finally:
             self.sock.close()

@@ -31,6 +31,8 @@ def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
            "--instruments", json.dumps([asdict(i) for i in context.instruments]),
            "--loads", json.dumps([x.model_dump(mode="json") for x in (context.world.loads if context.world else [])]),
            "--seed", str(context.seed or 0)]
+    if config.key_file is not None:  # the same key file (the path, never the key, on the command line)
+        cmd += ["--key", str(context.resolve(config.key_file))]
     # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
     log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)

@@ -7,10 +7,22 @@ from typing import Literal
 from pydantic import Field
 
 from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
+from rehabkit.models.strict import FilePath
 
 
 class LinkLostError(BackendFaultError):
     """No valid state from the robot for longer than allowed."""
+
+
+class LinkKeyError(BackendFaultError):
+    """The bridge and this host do not share the robot's key: ``bridge`` (its address), ``key_file`` (this host's,
+    or None), ``problem`` (which side lacks what, naming key ids)."""
+
+    def __init__(self, bridge: str, key_file: str | None, problem: str):
+        self.bridge, self.key_file, self.problem = bridge, key_file, problem
+        fix = (f"give both ends the same key file (the bridge's --key, this scenario's backend.key_file: {key_file})"
+               if key_file else "set backend.key_file to the robot's key file (the one the bridge was given)")
+        super().__init__(f"the bridge at {bridge} refuses this host's session: {problem}; {fix}")
 
 
 class BridgeHoldError(BackendFaultError):
@@ -31,6 +43,9 @@ class HardwareConfig(StrictModel):
         "the bridge ticks once per host tick, on the host's clock (a simulated plant only: deterministic and "
         "faster than real time, for tests and rehearsals; the bridge must be started with --lockstep)")
     robot_id: int = Field(1, ge=0)
+    key_file: FilePath | None = Field(
+        None, description="the robot's link key (`rehabkit keys new ROBOT-ID`; the same file at the bridge): the "
+        "link then runs in authenticated sessions only. Needed for a bridge beyond this machine's loopback")
     timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
     # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
     # and then; with an RT kernel both can be far tighter (the watchdog tests run the bridge's at 5 ms)

@@ -5,7 +5,7 @@ One datagram is one message, little-endian::
     header  magic 'RK' (2s) · version (B) · kind (B) · robot id (I) · sequence (I)
             · sent at (d, sender's monotonic clock [s]) · echo (d, the peer's last 'sent at' seen)
             · joint count n (H) · measured-only joint count m (H) · status bits (H) · held ticks (H)
-            · instrument values k (H)
+            · instrument values k (H) · session id (I; 0: none)
     body    STATE:   q, q̇, τ (3 × n doubles), then the m measured-only joints' positions, then the k values of
                      the robot's instruments (force-torque sensors, accelerometers: 3 each, in the order the
                      run's sensors declare them, read by the plant at the tick that state closes)
@@ -13,7 +13,14 @@ One datagram is one message, little-endian::
             CLOCK:   nothing (n = m = 0): in lock-step, the host's "advance to 'sent at'" and the bridge's
                      "done, the link's time is now 'sent at'"; never applied, never dropped by a link impairment
                      relay (it is the clock, not data)
-    trailer CRC-32 of everything before it (I)
+            CLEAR:   the name of the person clearing a latched e-stop, UTF-8 (k = its length in bytes)
+            (the handshake's kinds: :mod:`rehabkit.hardware.security.handshake`)
+    trailer session id 0 (a link without a key, loopback only): CRC-32 of everything before it (I);
+            else the body is encrypted and header and body authenticated in the session
+            (:class:`~rehabkit.hardware.security.session.Session`: ChaCha20-Poly1305, a 16-byte tag)
+
+Each end opens a datagram once (its link's :meth:`open`: the checksum, or the session's tag and anti-replay
+window) and reads what it says from the opened bytes (header and body): :func:`link_tick`, :meth:`Receiver.take`.
 
 In lock-step the clock usually rides on the data: a COMMAND with the ``TICK`` status bit is the command and
 then the host's CLOCK at its 'sent at'; a STATE with ``TICK`` is the state and then the bridge's CLOCK at its
@@ -44,11 +51,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 6  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
-# 5: instrument values in STATE; 6: the lock-step clock rides on COMMAND and STATE (TICK)
-STATE, COMMAND, CLOCK = 1, 2, 3
-HEADER = struct.Struct("<2sBBIIddHHHHH")
+VERSION = 7  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
+# 5: instrument values in STATE; 6: the lock-step clock rides on COMMAND and STATE (TICK); 7: authenticated sessions,
+# CLEAR with a person's name
+STATE, COMMAND, CLOCK, CLEAR = 1, 2, 3, 4
+HEADER = struct.Struct("<2sBBIIddHHHHHI")
+SEQ = struct.Struct("<I")  # the sequence number, at SEQ_AT in the header
+SEQ_AT, SESSION_AT = 8, HEADER.size - 4
 CRC = struct.Struct("<I")
+NAME_BYTES = 64  # a CLEAR's name at most
 
 # status bits (bridge → host)
 ENABLED, HOLDING, ESTOPPED, WATCHDOG = 1, 2, 4, 8
@@ -60,7 +71,7 @@ LIMIT = 32
 RAMP_IN = 64
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
-CMD_CLEAR = 8  # clear a latched e-stop (a person's deliberate act at the host: `rehabkit estop clear --bridge`)
+CMD_CLEAR = 8  # (v6 and before: clear a latched e-stop; now a CLEAR datagram with the person's name)
 CMD_BRAKE = 32  # apply the holding brakes (the host's safety stop has turned the torque off)
 CMD_LATCH = 16  # latch the e-stop for the sessions to come; this session's stop is the host's (its stop category)
 # the host's torques are a compliant reaction (its safety layer yields to the person): a gap in the commands is
@@ -90,10 +101,11 @@ class Message:
         return self.values.shape[-1]
 
 
-def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
-           status: int = 0, held: int = 0, measured: np.ndarray | None = None,
-           instruments: np.ndarray | None = None) -> bytes:
-    """One datagram (``values``: (3, n) for STATE, (n,) for COMMAND; ``measured``, ``instruments``: STATE only)."""
+def pack(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
+         status: int = 0, held: int = 0, measured: np.ndarray | None = None, instruments: np.ndarray | None = None,
+         session: int = 0) -> bytes:
+    """A datagram's header and body, before its link seals it (``values``: (3, n) for STATE, (n,) for COMMAND;
+    ``measured``, ``instruments``: STATE only)."""
     values = np.ascontiguousarray(values, dtype="<f8")
     extra = np.ascontiguousarray(np.zeros(0) if measured is None else measured, dtype="<f8").ravel()
     readings = np.ascontiguousarray(np.zeros(0) if instruments is None else instruments, dtype="<f8").ravel()
@@ -106,22 +118,72 @@ def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float |
         raise ValueError("commands carry no measured-only joints or instruments")
     head = HEADER.pack(MAGIC, VERSION, kind, robot, seq & 0xFFFFFFFF,
                        time.monotonic() if sent_at is None else sent_at, echo, n, len(extra), status, held & 0xFFFF,
-                       len(readings))
-    body = head + values.tobytes() + extra.tobytes() + readings.tobytes()
-    return body + CRC.pack(zlib.crc32(body))
+                       len(readings), session)
+    return head + values.tobytes() + extra.tobytes() + readings.tobytes()
 
 
-def link_tick(data: bytes, robot: int) -> tuple[float, bool] | None:
-    """The lock-step clock time an intact datagram of ``robot`` carries and whether it is a bare CLOCK (else the
-    time rides on a COMMAND or STATE with ``TICK``), or None: no clock in it (or not intact)."""
-    size = len(data) - CRC.size
-    if size < HEADER.size or CRC.unpack_from(data, size)[0] != zlib.crc32(data[:size]):
+def pack_bytes(kind: int, robot: int, seq: int, body: bytes, session: int = 0, sent_at: float = 0.0) -> bytes:
+    """A datagram of ``kind`` whose body is bytes (a CLEAR's name, the handshake's): k counts them."""
+    return HEADER.pack(MAGIC, VERSION, kind, robot, seq & 0xFFFFFFFF, sent_at, 0.0, 0, 0, 0, 0, len(body),
+                       session) + body
+
+
+class PlainLink:
+    """A link without a key (loopback only): datagrams carry a CRC-32 against noise, nothing against anyone."""
+
+    id = 0  # its session id
+
+    @staticmethod
+    def seal(plain: bytes) -> bytes:
+        return plain + CRC.pack(zlib.crc32(plain))
+
+    @staticmethod
+    def open(data: bytes) -> tuple[bytes | None, str]:
+        """Header and body of an intact datagram, or None and why not."""
+        size = len(data) - CRC.size
+        if size < HEADER.size:
+            return None, "length"
+        if CRC.unpack_from(data, size)[0] != zlib.crc32(data[:size]):
+            return None, "checksum"
+        if SEQ.unpack_from(data, SESSION_AT)[0]:
+            return None, "authenticated"  # (sealed in a session this end has no key for)
+        return data[:size], ""
+
+
+PLAIN = PlainLink()
+
+
+def encode(kind: int, robot: int, seq: int, values: np.ndarray, sent_at: float | None = None, echo: float = 0.0,
+           status: int = 0, held: int = 0, measured: np.ndarray | None = None,
+           instruments: np.ndarray | None = None, link=PLAIN) -> bytes:
+    """One datagram, sealed by ``link`` (a :class:`~rehabkit.hardware.security.session.Session`, or :data:`PLAIN`)."""
+    return link.seal(pack(kind, robot, seq, values, sent_at, echo, status, held, measured, instruments, link.id))
+
+
+def clear_name(plain: bytes, robot: int) -> str | None:
+    """The name an opened CLEAR datagram of ``robot`` carries, or None (not one, or no usable name)."""
+    if len(plain) <= HEADER.size or len(plain) > HEADER.size + NAME_BYTES:
         return None
-    magic, version, kind, rid, _seq, sent_at, _echo, _n, _m, status, *_ = HEADER.unpack_from(data)
+    magic, version, kind, rid, *_rest, k, _session = HEADER.unpack_from(plain)
+    if (magic, version, kind, rid, k) != (MAGIC, VERSION, CLEAR, robot, len(plain) - HEADER.size):
+        return None
+    try:
+        name = plain[HEADER.size:].decode("utf-8").strip()
+    except UnicodeDecodeError:
+        return None
+    return name if name and name.isprintable() else None
+
+
+def link_tick(plain: bytes, robot: int) -> tuple[float, bool] | None:
+    """The lock-step clock time an opened datagram of ``robot`` carries and whether it is a bare CLOCK (else the
+    time rides on a COMMAND or STATE with ``TICK``), or None: no clock in it."""
+    if len(plain) < HEADER.size:
+        return None
+    magic, version, kind, rid, _seq, sent_at, _echo, _n, _m, status, *_ = HEADER.unpack_from(plain)
     if magic != MAGIC or version != VERSION or rid != robot or not math.isfinite(sent_at):
         return None
     if kind == CLOCK:
-        return (sent_at, True) if size == HEADER.size else None
+        return (sent_at, True) if len(plain) == HEADER.size else None
     return (sent_at, False) if status & TICK else None
 
 
@@ -142,13 +204,22 @@ class Receiver:
     instruments: int = 0  # instrument values each STATE carries
     max_age: float | None = None  # seconds; None: senders do not share our clock
     last_seq: int | None = None
-    restart: int = 0  # status bits that open a new session: its sequence numbers start over
+    restart: int = 0  # status bits that open a new session: its sequence numbers start over (a link without a key)
+    link: object = PLAIN  # opens datagrams: checksum, or a session's authentication and anti-replay window
     accepted: int = 0
     dropped: Counter = field(default_factory=Counter)
 
     def accept(self, data: bytes, now: float | None = None) -> Message | None:
-        """The message if it may be applied, else ``None`` (and the reason counted)."""
-        msg, reason = self._parse(data)
+        """The message in a datagram as it came if it may be applied, else ``None`` (and the reason counted)."""
+        plain, reason = self.link.open(data)
+        if plain is None:
+            self.dropped[reason] += 1
+            return None
+        return self.take(plain, now)
+
+    def take(self, plain: bytes, now: float | None = None) -> Message | None:
+        """The message in an opened datagram (header and body) if it may be applied, else ``None`` (counted)."""
+        msg, reason = self._parse(plain)
         if msg is None:
             self.dropped[reason] += 1
             return None
@@ -164,17 +235,12 @@ class Receiver:
         self.accepted += 1
         return msg
 
-    def _parse(self, data: bytes) -> tuple[Message | None, str]:
+    def _parse(self, plain: bytes) -> tuple[Message | None, str]:
         per_joint = 3 if self.kind == STATE else 1
         count = per_joint * self.joints + self.measured + self.instruments
-        expected = HEADER.size + 8 * count + CRC.size
-        intact = len(data) >= HEADER.size + CRC.size and \
-            CRC.unpack_from(data, len(data) - CRC.size)[0] == zlib.crc32(data[: len(data) - CRC.size])
-        if len(data) != expected:  # an intact datagram of another size: say which count differs
-            return None, self._counts(data) if intact else "length"
-        if not intact:
-            return None, "checksum"
-        magic, version, kind, robot, seq, sent_at, echo, n, m, status, held, k = HEADER.unpack_from(data)
+        if len(plain) != HEADER.size + 8 * count:  # another size: say which count differs
+            return None, self._counts(plain) if len(plain) >= HEADER.size else "length"
+        magic, version, kind, robot, seq, sent_at, echo, n, m, status, held, k, _session = HEADER.unpack_from(plain)
         if magic != MAGIC:
             return None, "magic"
         if version != VERSION:
@@ -184,8 +250,8 @@ class Receiver:
         if robot != self.robot:
             return None, "robot"
         if n != self.joints or m != self.measured or k != self.instruments:
-            return None, self._counts(data)
-        values = np.frombuffer(data, dtype="<f8", count=count, offset=HEADER.size)
+            return None, self._counts(plain)
+        values = np.frombuffer(plain, dtype="<f8", count=count, offset=HEADER.size)
         if not (np.all(np.isfinite(values)) and math.isfinite(sent_at) and math.isfinite(echo)):
             return None, "non-finite"
         head = values[: per_joint * n]
@@ -193,10 +259,12 @@ class Receiver:
         rest = values[per_joint * n:]
         return Message(kind, robot, seq, sent_at, echo, status, held, head.copy(), rest[:m].copy(), rest[m:].copy()), ""
 
-    def _counts(self, data: bytes) -> str:
-        """Why an intact datagram does not fit: another protocol version, joint count or instrument count."""
-        fields = HEADER.unpack_from(data)
+    def _counts(self, plain: bytes) -> str:
+        """Why an intact datagram does not fit: another protocol version, kind, joint count or instrument count."""
+        fields = HEADER.unpack_from(plain)
         if fields[0] != MAGIC or fields[1] != VERSION:
             return "version"
+        if fields[2] != self.kind:
+            return "kind"
         n, m, k = fields[7], fields[8], fields[11]
         return "instruments" if (n, m) == (self.joints, self.measured) and k != self.instruments else "joints"

@@ -147,5 +147,10 @@ class Backend(ABC):
         commands); default none."""
         return []
 
+    def provenance(self) -> dict[str, str]:
+        """Who the commands went to and how, for the safety log's run record (a robot link: its address, whether
+        its session was authenticated and under which key id; never a secret); default nothing to add."""
+        return {}
+
     def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

@@ -97,6 +97,7 @@ def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dic
          "software": {"rehabkit": summary["rehabkit_version"]},
          "scenario": {"file": str(a.loaded.path), "sha256": hashlib.sha256(scenario_text.encode()).hexdigest()},
          "plugins": plugins, "patient": patient.get("id"), "backend": sc.backend.type,
+         **({"link": link} if (link := a.backend.provenance()) else {}),
          "seed": sc.seed, "keyed": audit_key() is not None},
         {"kind": "limits", "joints": joints, "interaction_force_n": safety.interaction_force_n,
          "keep_in": safety.keep_in.model_dump(mode="json") if safety.keep_in is not None else None,

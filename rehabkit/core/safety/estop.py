@@ -79,11 +79,13 @@ class EStopLatch:
         if self.latched() is None:
             self._write({"latched": True, "since": _now(), "reason": reason, "by": by, "ramp_in_pending": False})
 
-    def clear(self, by: str) -> dict | None:
-        """Clear it, deliberately (``by``: who); the next session must ramp in. The press cleared, or None."""
+    def clear(self, by: str, **how: str) -> dict | None:
+        """Clear it, deliberately (``by``: who; ``how``: e.g. over which link, with which key id, kept with it); the
+        next session must ramp in. The press cleared, or None."""
         was = self.latched()
         if was is not None:
-            self._write({"latched": False, "cleared": _now(), "cleared_by": by, "was": was, "ramp_in_pending": True})
+            self._write({"latched": False, "cleared": _now(), "cleared_by": by, **how, "was": was,
+                         "ramp_in_pending": True})
         return was
 
     def take_ramp_in(self) -> bool:

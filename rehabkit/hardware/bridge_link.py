@@ -1,0 +1,81 @@
+"""The bridge's end of the robot link: its UDP socket, the gate that answers handshakes and opens datagrams
+(:class:`~rehabkit.hardware.security.handshake.BridgeGate`), the command receiver, and the count of all it refused."""
+
+from __future__ import annotations
+
+import socket
+import sys
+import time
+
+from rehabkit.hardware.protocol import CMD_RESET, COMMAND, Receiver, encode
+from rehabkit.hardware.security.handshake import HANDSHAKE, BridgeGate, peek_kind
+from rehabkit.hardware.security.keys import LinkKey
+
+
+class BridgeLink:
+    """Where the bridge listens (``host``, ``port``; 0: any free port), for ``robot_id`` with ``joints`` commanded
+    joints; given ``key``, in authenticated sessions only."""
+
+    def __init__(self, robot_id: int, joints: int, host: str = "127.0.0.1", port: int = 0,
+                 key: LinkKey | None = None):
+        self.robot_id = robot_id
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((host, port))
+        self.sock.setblocking(False)
+        self.port = self.sock.getsockname()[1]
+        # with a key a proven handshake opens a session; without, a host's reset does (a new run, a new host
+        # process, numbers its commands from 1 again)
+        self.gate = BridgeGate(key, robot_id)
+        self.rx = Receiver(COMMAND, robot_id, joints, restart=0 if key is not None else CMD_RESET)
+        self.sessions: list[dict] = []  # each authenticated session: when, from where, its id and key id
+
+    @property
+    def key_id(self) -> str:
+        """The key of the session in use, as the safety log and the latch file record it."""
+        return self.gate.session.key_id if self.gate.session is not None else "none (a link without a key)"
+
+    def arrived(self) -> list[tuple[bytes, tuple]]:
+        """What came since the last tick, opened (handshakes answered, the rest refused and counted)."""
+        out = []
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(65536)
+            except BlockingIOError:
+                return out
+            if (plain := self.open(data, addr)) is not None:
+                out.append((plain, addr))
+
+    def open(self, data: bytes, addr: tuple) -> bytes | None:
+        """A datagram's header and body if it is one to read (intact; with a key, authentic and not seen before);
+        a handshake is answered here, at once; what is refused is counted by reason."""
+        if peek_kind(data) in HANDSHAKE:
+            was = self.gate.session
+            reply, why = self.gate.reply(data)
+            if why:
+                self.rx.dropped[f"handshake-{why}"] += 1
+            if self.gate.session is not was:  # a new session, proven: its numbers start afresh
+                self.rx.last_seq = None
+                self.sessions.append({"at": time.time(), "from": f"{addr[0]}:{addr[1]}",
+                                      "session": f"{self.gate.id:08x}", "key_id": self.key_id})
+                print(f"bridge: session {self.gate.id:08x} from {addr[0]}:{addr[1]} with key {self.key_id}",
+                      file=sys.stderr, flush=True)
+            if reply is not None:
+                self.sock.sendto(reply, addr)
+            return None
+        plain, why = self.gate.open(data)
+        if plain is None:
+            self.rx.dropped[why] += 1
+            if why == "unauthenticated" and (refusal := self.gate.refuse_unauthenticated(time.monotonic())):
+                self.sock.sendto(refusal, addr)  # (a host without the key is told, not left waiting)
+        return plain
+
+    def send(self, what: tuple, addr: tuple) -> None:
+        """A STATE or CLOCK (``what``: kind, values, sent at, echo, status, held, measured, instruments), sealed."""
+        kind, values, sent, echo, status, held, measured, instruments = what
+        self.sock.sendto(encode(kind, self.robot_id, self.gate.next_seq(), values, sent, echo=echo, status=status,
+                                held=held, measured=measured, instruments=instruments, link=self.gate), addr)
+
+    def stats(self) -> dict:
+        """What the link accepted and refused (by reason), and its sessions: ``rehabkit bridge --stats``."""
+        return {"commands_accepted": self.rx.accepted, "dropped": dict(sorted(self.rx.dropped.items())),
+                "dropped_total": sum(self.rx.dropped.values()), "sessions": self.sessions}

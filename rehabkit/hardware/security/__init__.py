@@ -1,0 +1,1 @@
+"""The robot link's security: keys, authenticated sessions, the handshake."""

@@ -1,0 +1,125 @@
+"""Link keys: one secret per robot (``<robot>-<robot id>``, as its e-stop latch is named), kept in a small text file
+readable by its owner only, the same file at the host and at the bridge (``rehabkit keys new hit-1``).
+
+The file says which robot the key is for and its key id (the first 8 bytes of a SHA-256 of the secret: safe to
+show, to log and to compare, it names the key without revealing it); the secret itself is never printed, logged
+or written anywhere else. A file others can read is refused, as ``ssh`` refuses such a private key.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import os
+import re
+import secrets
+import stat
+import tempfile
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+KEY_BYTES = 32
+_ROBOT_RE = re.compile(r"^[a-z0-9][a-z0-9_.-]*-[0-9]+$")
+HEADLINE = "# rehabkit link key: secret. Keep it owner-only (chmod 600); the same file at the host and at the bridge."
+
+
+class KeyFileError(ValueError):
+    """A key file that cannot be used: ``path``, what is wrong (``problem``) and how to put it right (``fix``)."""
+
+    def __init__(self, path: str | Path, problem: str, fix: str):
+        self.path, self.problem, self.fix = str(path), problem, fix
+        super().__init__(f"key file {path}: {problem}; {fix}")
+
+
+def key_id(secret: bytes) -> str:
+    """The key's public name: 16 hex digits of a SHA-256 of the secret."""
+    return hashlib.sha256(b"rehabkit link key id\0" + secret).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class LinkKey:
+    """A robot's link key: ``robot`` (``hit-1``), the secret (never shown) and where it was read from."""
+
+    robot: str
+    secret: bytes = field(repr=False)
+    path: Path | None = None
+
+    @property
+    def id(self) -> str:
+        return key_id(self.secret)
+
+    def __str__(self) -> str:
+        return f"key {self.id} for {self.robot}" + (f" ({self.path})" if self.path else "")
+
+
+def default_key_path(robot: str) -> Path:
+    """Where ``rehabkit keys new ROBOT`` writes by default: ``$REHABKIT_STATE/keys/ROBOT.key``."""
+    from rehabkit.core.safety.estop import state_dir
+
+    return state_dir() / "keys" / f"{robot}.key"
+
+
+def new_key(robot: str, out: str | Path, replace: bool = False) -> LinkKey:
+    """A fresh key for ``robot`` written to ``out`` whole (temp, then rename), readable by its owner only;
+    an existing file is kept unless ``replace`` (rotating a key is a deliberate act)."""
+    if not _ROBOT_RE.match(robot):
+        raise KeyFileError(out, f"'{robot}' is not a robot's link name", "name it ROBOT-ID as its e-stop latch is "
+                           "named, e.g. hit-1 (robot hit, robot_id 1)")
+    out = Path(out)
+    if out.exists() and not replace:
+        raise KeyFileError(out, "exists", "pass --replace to rotate the key (then give the new file to both ends)")
+    key = LinkKey(robot, secrets.token_bytes(KEY_BYTES), out)
+    text = (f"{HEADLINE}\nrobot: {robot}\nid: {key.id}\ncreated: {datetime.now(UTC).isoformat(timespec='seconds')}\n"
+            f"secret: {base64.urlsafe_b64encode(key.secret).decode()}\n")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")  # (created 0600)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return key
+
+
+def load_key(path: str | Path) -> LinkKey:
+    """The key in ``path``; refused (:class:`KeyFileError`) when missing, readable by others, or malformed."""
+    path = Path(path).expanduser()
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise KeyFileError(path, "no such file", "make one with `rehabkit keys new ROBOT-ID --out FILE` and give "
+                           "the same file to the bridge") from None
+    if not stat.S_ISREG(mode):
+        raise KeyFileError(path, "not a file", "name the key file itself")
+    if mode & 0o077:
+        raise KeyFileError(path, f"readable by others (mode {stat.S_IMODE(mode):o})", f"chmod 600 {path}")
+    fields = {}
+    for line in path.read_text(errors="replace").splitlines():
+        name, sep, value = line.partition(":")
+        if sep and not line.startswith("#"):
+            fields[name.strip()] = value.strip()
+    try:
+        secret = base64.urlsafe_b64decode(fields["secret"].encode())
+        robot = fields["robot"]
+    except (KeyError, ValueError):
+        raise KeyFileError(path, "not a rehabkit link key (no robot or secret line)",
+                           "make one with `rehabkit keys new ROBOT-ID`") from None
+    if len(secret) != KEY_BYTES:
+        raise KeyFileError(path, f"its secret is {len(secret)} bytes, not {KEY_BYTES}", "make a new key")
+    key = LinkKey(robot, secret, path)
+    if fields.get("id", key.id) != key.id:
+        raise KeyFileError(path, f"its id line says {fields['id']} but the secret's id is {key.id} (edited?)",
+                           "make a new key")
+    return key
+
+
+def check_robot(key: LinkKey, robot: str) -> None:
+    """Refuse a key made for another robot than ``robot`` (``hit-1``)."""
+    if key.robot != robot:
+        raise KeyFileError(key.path or "?", f"the key is for robot {key.robot}, this link is {robot}",
+                           f"use {robot}'s key (`rehabkit keys new {robot}` makes one)")
