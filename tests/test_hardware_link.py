@@ -62,14 +62,20 @@ def test_hit_round_trip_over_the_link_tracks_like_the_simulation(scenario_run):
 
 @pytest.mark.realtime
 @pytest.mark.xdist_group("realtime")  # paced tests one after the other, not side by side
-def test_hit_round_trip_over_a_real_time_link(scenario_run):
+def test_hit_round_trip_over_a_real_time_link(scenario_run, tmp_path):
     """Real time shows what the lock-step clock cannot: the host keeping its 1 kHz deadlines against a bridge ticking
-    on its own clock, round trips measured on the wall clock. The watchdogs are longer than the defaults because
-    this shared VM at times stalls a process for 50 ms and more (benchmarks/link_loop.py measures it); a stall the
-    bridge holds through is an intervention, not a failure; the tracking tolerance allows for it."""
-    realtime = {"backend": {"type": "hardware", "bridge_watchdog_ms": 200, "state_timeout_s": 0.5}}
+    on its own clock, round trips measured on the wall clock — here in an authenticated session, as a lab runs it.
+    The watchdogs are longer than the defaults because this shared VM at times stalls a process for 50 ms and more
+    (benchmarks/link_loop.py measures it); a stall the bridge holds through is an intervention, not a failure; the
+    tracking tolerance allows for it."""
+    from rehabkit.hardware.security.keys import new_key
+
+    key = new_key("hit-1", tmp_path / "hit-1.key")
+    realtime = {"backend": {"type": "hardware", "bridge_watchdog_ms": 200, "state_timeout_s": 0.5,
+                            "key_file": str(key.path)}}
     sim = scenario_run(SCENARIOS / "hit_roundtrip.yaml")
     hw = run_scenario(SCENARIOS / "hit_roundtrip.yaml", realtime)
+    assert [n["text"] for n in hw.summary["notes"]][0].endswith(f"key {key.id}")  # (said: the session's key id)
     m = hw.metrics
     assert m["safety_events"] == 0, hw.summary["safety"]
     assert m["link_ticks"] == 8500 and m["rtt_median_ms"] < 5.0 and m["tick_lateness_median_ms"] < 1.0

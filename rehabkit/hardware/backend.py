@@ -115,7 +115,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         port = config.port
         if config.spawn_bridge:
             self.process, port = spawn_bridge(context, config)
-        self.addr = (config.host, port)
+        self.addr = (socket.gethostbyname(config.host), port)  # (as datagrams from it say where they came from)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured),
@@ -186,7 +186,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
     def _receive(self) -> None:
         while True:
             try:
-                data = self.sock.recv(65536)
+                data, came_from = self.sock.recvfrom(65536)
             except (BlockingIOError, ConnectionRefusedError):
                 return
             now = self._now()
@@ -195,6 +195,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                     self._refused = why
                 continue
             plain, why = self.link.open(data)
+            if plain is not None and self.key is not None and came_from != self.addr:
+                plain, why = None, "other-address"  # (authentic but raced from elsewhere: the session is the bridge's)
             if plain is None:
                 self.rx.dropped[why] += 1
                 continue

@@ -6,6 +6,7 @@ from __future__ import annotations
 import socket
 import sys
 import time
+from collections import Counter
 
 from rehabkit.hardware.protocol import CMD_RESET, COMMAND, Receiver, encode
 from rehabkit.hardware.security.handshake import HANDSHAKE, BridgeGate, peek_kind
@@ -28,6 +29,7 @@ class BridgeLink:
         self.gate = BridgeGate(key, robot_id)
         self.rx = Receiver(COMMAND, robot_id, joints, restart=0 if key is not None else CMD_RESET)
         self.sessions: list[dict] = []  # each authenticated session: when, from where, its id and key id
+        self.opened_from: Counter = Counter()  # datagrams let in, by the address they came from
 
     @property
     def key_id(self) -> str:
@@ -50,7 +52,7 @@ class BridgeLink:
         a handshake is answered here, at once; what is refused is counted by reason."""
         if peek_kind(data) in HANDSHAKE:
             was = self.gate.session
-            reply, why = self.gate.reply(data)
+            reply, why = self.gate.reply(data, addr)
             if why:
                 self.rx.dropped[f"handshake-{why}"] += 1
             if self.gate.session is not was:  # a new session, proven: its numbers start afresh
@@ -62,8 +64,10 @@ class BridgeLink:
             if reply is not None:
                 self.sock.sendto(reply, addr)
             return None
-        plain, why = self.gate.open(data)
-        if plain is None:
+        plain, why = self.gate.open(data, addr)
+        if plain is not None:
+            self.opened_from[f"{addr[0]}:{addr[1]}"] += 1
+        else:
             self.rx.dropped[why] += 1
             if why == "unauthenticated" and (refusal := self.gate.refuse_unauthenticated(time.monotonic())):
                 self.sock.sendto(refusal, addr)  # (a host without the key is told, not left waiting)
@@ -78,4 +82,5 @@ class BridgeLink:
     def stats(self) -> dict:
         """What the link accepted and refused (by reason), and its sessions: ``rehabkit bridge --stats``."""
         return {"commands_accepted": self.rx.accepted, "dropped": dict(sorted(self.rx.dropped.items())),
-                "dropped_total": sum(self.rx.dropped.values()), "sessions": self.sessions}
+                "dropped_total": sum(self.rx.dropped.values()), "sessions": self.sessions,
+                "opened_from": dict(self.opened_from)}

@@ -23,7 +23,7 @@ from collections import OrderedDict
 
 from rehabkit.hardware.protocol import HEADER, MAGIC, SEQ, SESSION_AT, VERSION, PlainLink, pack_bytes
 from rehabkit.hardware.security.keys import LinkKey
-from rehabkit.hardware.security.session import KEY_ID, MAC, NONCE, TAG, Session, proof, session_for
+from rehabkit.hardware.security.session import KEY_ID, MAC, NONCE, Session, proof, session_for
 
 HELLO, CHALLENGE, PROOF, WELCOME, REFUSED = 5, 6, 7, 8, 9
 HANDSHAKE = frozenset((HELLO, CHALLENGE, PROOF, WELCOME, REFUSED))
@@ -60,15 +60,16 @@ class BridgeGate:
     def __init__(self, key: LinkKey | None, robot: int):
         self.key, self.robot = key, robot
         self.session: Session | None = None
+        self.peer: tuple | None = None  # the address that proved the session
         self.sessions = 0  # proven so far
         self._pending: OrderedDict[bytes, tuple[bytes, float]] = OrderedDict()  # Nb → (Nh, issued at)
         self._plain = PlainLink()
         self.seq = 0
         self._budget, self._refilled = ANSWERS_PER_S, 0.0
 
-    def reply(self, data: bytes, now: float | None = None) -> tuple[bytes | None, str]:
-        """A handshake datagram (after :func:`peek_kind`): the reply to send back (or None) and, if it was refused,
-        why (counted by the caller); a proven PROOF opens a new session (:attr:`session`)."""
+    def reply(self, data: bytes, addr: tuple, now: float | None = None) -> tuple[bytes | None, str]:
+        """A handshake datagram from ``addr`` (after :func:`peek_kind`): the reply to send back (or None) and, if it
+        was refused, why (counted by the caller); a proven PROOF opens a new session (:attr:`session`) with it."""
         now = time.monotonic() if now is None else now
         plain, why = self._plain.open(data)
         got = handshake_body(plain, self.robot) if plain is not None else None
@@ -99,6 +100,7 @@ class BridgeGate:
             return None, "bad-proof"
         del self._pending[nb]  # (one proof per nonce: a replayed PROOF finds none)
         self.session = session_for(self.key, self.robot, nh, nb, host=False)
+        self.peer = addr  # the session is the proven host's, at its address only
         self.sessions += 1
         self.seq = 0
         return self.seal(pack_bytes(WELCOME, self.robot, self.next_seq(), b"", self.session.id)), ""
@@ -110,15 +112,19 @@ class BridgeGate:
     def seal(self, plain: bytes) -> bytes:
         return (self.session or self._plain).seal(plain)
 
-    def open(self, data: bytes) -> tuple[bytes | None, str]:
-        """Header and body of a datagram this bridge may read: in the session when it has a key, else intact."""
+    def open(self, data: bytes, addr: tuple) -> tuple[bytes | None, str]:
+        """Header and body of a datagram from ``addr`` this bridge may read: in the session, from the host that
+        proved it, when it has a key; else intact."""
         if self.key is None:
             return self._plain.open(data)
         if self.session is None:
-            if len(data) < HEADER.size + TAG:
+            if len(data) < HEADER.size:
                 return None, "length"
             return None, "other-session" if SEQ.unpack_from(data, SESSION_AT)[0] else "unauthenticated"
-        return self.session.open(data)
+        plain, why = self.session.open(data)
+        if plain is not None and addr != self.peer:  # authentic, and raced from elsewhere: not the host's copy
+            return None, "other-address"
+        return plain, why
 
     @property
     def id(self) -> int:

@@ -49,6 +49,9 @@ class LinkKey:
     def id(self) -> str:
         return key_id(self.secret)
 
+    def __repr__(self) -> str:
+        return f"LinkKey({self.robot!r}, id={self.id}, path={str(self.path)!r})"
+
     def __str__(self) -> str:
         return f"key {self.id} for {self.robot}" + (f" ({self.path})" if self.path else "")
 

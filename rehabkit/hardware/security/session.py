@@ -68,11 +68,13 @@ class Session:
 
     def open(self, data: bytes) -> tuple[bytes | None, str]:
         """Header and body of an authentic datagram of this session not seen before, or None and why not."""
-        if len(data) < HEADER.size + TAG:
+        if len(data) < HEADER.size:
             return None, "length"
         sid = SEQ.unpack_from(data, SESSION_AT)[0]
         if sid != self.id:
             return None, "unauthenticated" if sid == 0 else "other-session"
+        if len(data) < HEADER.size + TAG:
+            return None, "length"
         seq = SEQ.unpack_from(data, SEQ_AT)[0]
         if not self.window.fresh(seq):
             return None, "replayed"

@@ -1,0 +1,223 @@
+"""An attacker on the robot link, for tests/test_link_attacks.py and benchmarks/link_attacks.py (a process of its own).
+
+    python tests/link_attacker.py BRIDGE_PORT --joints N [--robot-id 1] [--count N] [--flood-s S] [--after N]
+                                  [--earlier CAPTURE] [--save CAPTURE] [--report REPORT.json] [--seed S]
+
+It sits on the path between host and bridge (the host is pointed at the port it prints, ``attacker: PORT``) and
+forwards every datagram unchanged both ways, keeping a copy: what a machine on the lab's network can capture.
+Once the run is under way (``--after`` host datagrams relayed) it attacks from a socket of its own, in turn, each
+attack ``--count`` datagrams (the flood: ``--flood-s`` seconds):
+
+  forged     well-formed, CRC-valid datagrams without the key: torque commands, resets, CLEARs with a name,
+             lock-step CLOCKs ahead of time to the bridge, states with 1000-rad joints to the host
+  replayed   datagrams captured from this session (to where they went) and from an earlier one (``--earlier``)
+  tampered   captured datagrams with one bit flipped
+  wrong-key  HELLOs under another key id, PROOFs with a wrong MAC to the bridge's own challenges, this session's
+             and an earlier session's PROOF and HELLO again
+  flood      as fast as one process can send, to the bridge's port: random bytes, replays, HELLOs
+
+On SIGTERM it writes the report (datagrams sent and answers received per attack) and the capture (``--save``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import signal
+import socket
+import struct
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rehabkit.hardware.protocol import CLEAR, CLOCK, CMD_RESET, COMMAND, PLAIN, STATE, encode, pack_bytes
+from rehabkit.hardware.security.handshake import CHALLENGE, HELLO, PROOF, peek_kind
+
+RECORD = struct.Struct("<BH")  # direction (0: host → bridge, 1: bridge → host), length
+
+
+def save(path: str, capture: list[tuple[int, bytes]]) -> None:
+    with open(path, "wb") as f:
+        for way, data in capture:
+            f.write(RECORD.pack(way, len(data)) + data)
+
+
+def load(path: str | None) -> list[tuple[int, bytes]]:
+    if not path or not os.path.exists(path):
+        return []
+    raw, out, at = Path(path).read_bytes(), [], 0
+    while at < len(raw):
+        way, n = RECORD.unpack_from(raw, at)
+        out.append((way, raw[at + RECORD.size : at + RECORD.size + n]))
+        at += RECORD.size + n
+    return out
+
+
+def flip(data: bytes, rng: np.random.Generator) -> bytes:
+    """``data`` with one random bit flipped."""
+    bit = int(rng.integers(8 * len(data)))
+    flipped = bytearray(data)
+    flipped[bit // 8] ^= 1 << bit % 8
+    return bytes(flipped)
+
+
+def flood(bridge: tuple, seconds: float, samples: list[bytes], hello: bytes, seed: int, sent) -> None:
+    """As fast as it can for ``seconds``: random bytes, replays, HELLOs (a process of its own)."""
+    rng = np.random.default_rng(seed)
+    junk = [bytes(rng.integers(0, 256, int(rng.integers(1, 200)), dtype=np.uint8)) for _ in range(256)]
+    pool = junk + samples[:256] + [hello] * 16
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    n, until = 0, time.monotonic() + seconds
+    while time.monotonic() < until:
+        for data in pool:
+            try:  # noqa: SIM105 (the fastest loop: no context manager per datagram)
+                sock.sendto(data, bridge)
+            except OSError:  # (a full send buffer: go on)
+                pass
+        n += len(pool)
+    sent.value = n
+
+
+class Attacker:
+    def __init__(self, args: argparse.Namespace):
+        self.args, self.bridge = args, ("127.0.0.1", args.bridge_port)
+        self.rng = np.random.default_rng(args.seed)
+        self.host: tuple | None = None
+        self.capture: list[tuple[int, bytes]] = []
+        self.earlier = load(args.earlier)
+        self.report: dict[str, dict[str, int]] = {}
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # the attacker's own (not the relay's)
+        self.sock.setblocking(False)
+        self.answers: dict[int, int] = {}
+        self.challenges: list[bytes] = []
+        self.in_flight = 0  # datagrams still to tamper with in flight
+        self.relayed = 0
+
+    def forward(self, data: bytes) -> bytes:
+        """What the relay passes on: ``data``, or (while tampering in flight, one in ten) with a bit flipped."""
+        self.relayed += 1
+        if self.in_flight > 0 and self.rng.random() < 0.1:
+            self.in_flight -= 1
+            self.report.setdefault("tampered in flight", {"sent": 0})["sent"] += 1
+            return flip(data, self.rng)
+        return data
+
+    def send(self, attack: str, data: bytes, to: tuple) -> None:
+        self.sock.sendto(data, to)
+        self.report.setdefault(attack, {"sent": 0})["sent"] += 1
+        self._drain(attack)
+
+    def _drain(self, attack: str) -> None:
+        while True:
+            try:
+                data = self.sock.recv(65536)
+            except BlockingIOError:
+                return
+            kind = peek_kind(data)
+            self.report[attack]["answers"] = self.report[attack].get("answers", 0) + 1
+            if kind == CHALLENGE:
+                self.challenges.append(data)
+
+    def run(self) -> None:
+        a, n, j, rid = self.args, self.args.count, self.args.joints, self.args.robot_id
+        if n == 0:  # only on the path, capturing (an earlier session for the next run to replay)
+            return
+        while len([1 for way, _ in self.capture if way == 0]) < a.after or self.host is None:
+            time.sleep(0.01)
+        rng = self.rng
+        for i in range(n):  # forged, without the key
+            seq = 10**6 + i
+            self.send("forged", encode(COMMAND, rid, seq, rng.uniform(-50, 50, j)), self.bridge)
+            self.send("forged", encode(COMMAND, rid, seq + 1, rng.uniform(-1, 1, j), status=CMD_RESET), self.bridge)
+            self.send("forged", PLAIN.seal(pack_bytes(CLEAR, rid, seq + 2, b"mallory")), self.bridge)
+            self.send("forged", encode(CLOCK, rid, seq + 3, np.zeros(0), 1e3 + i), self.bridge)
+            self.send("forged", encode(STATE, rid, seq + 4, np.full((3, j), 1e3)), self.host)
+        now = list(self.capture)
+        for i in range(n):  # replayed: this session's (the newest, inside the window, and older) and an earlier one's
+            way, data = now[-1 - int(rng.integers(0, min(len(now), 64)))] if i % 2 else now[int(rng.integers(len(now)))]
+            self.send("replayed", data, self.bridge if way == 0 else self.host)
+            if self.earlier:
+                way, data = self.earlier[int(rng.integers(len(self.earlier)))]
+                self.send("replayed", data, self.bridge if way == 0 else self.host)
+        for _ in range(n):  # tampered: one bit flipped in a captured datagram
+            way, data = self.capture[-1 - int(rng.integers(0, min(len(self.capture), 256)))]
+            self.send("tampered", flip(data, rng), self.bridge if way == 0 else self.host)
+        self.in_flight = n // 4  # and in flight: the relay flips a bit in one in ten it forwards, instead of it
+        while self.in_flight > 0:
+            time.sleep(0.01)
+        hellos = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == HELLO]
+        proofs = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == PROOF]
+        for i in range(n):  # wrong key
+            nonce = bytes(rng.integers(0, 256, 16, dtype=np.uint8))
+            self.send("wrong-key", PLAIN.seal(pack_bytes(HELLO, rid, 2 * i + 1, bytes(8) + nonce)), self.bridge)
+            if hellos:  # the right key id (it is public), then a proof it cannot make
+                self.send("wrong-key", hellos[i % len(hellos)], self.bridge)
+            for challenge in self.challenges[-4:]:
+                body = challenge[-(8 + 16 + 16 + 32 + 4):-4]
+                proof = body[:40] + bytes(rng.integers(0, 256, 32, dtype=np.uint8))
+                self.send("wrong-key", PLAIN.seal(pack_bytes(PROOF, rid, 2 * i + 2, proof)), self.bridge)
+            self.challenges.clear()
+            for proof in proofs:
+                self.send("wrong-key", proof, self.bridge)
+            time.sleep(0.001)  # (the bridge answers 20 a second outside a session: some get a challenge)
+        if a.flood_s > 0:
+            sent = multiprocessing.get_context("fork").Value("q", 0)
+            samples = [d for _, d in self.capture[-256:]]
+            p = multiprocessing.get_context("fork").Process(
+                target=flood, args=(self.bridge, a.flood_s, samples, hellos[0] if hellos else b"", a.seed, sent))
+            p.start()
+            p.join()
+            self.report["flood"] = {"sent": int(sent.value), "seconds": a.flood_s}
+        self.report["done"] = {"at": time.time()}
+
+    def finish(self) -> None:
+        if self.args.save:
+            save(self.args.save, self.capture)
+        if self.args.report:
+            tmp = self.args.report + ".tmp"
+            with open(tmp, "w") as f:
+                json.dump({**self.report, "captured": len(self.capture)}, f, indent=1)
+            os.replace(tmp, self.args.report)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("bridge_port", type=int)
+    p.add_argument("--joints", type=int, required=True)
+    p.add_argument("--robot-id", type=int, default=1)
+    p.add_argument("--count", type=int, default=200)
+    p.add_argument("--flood-s", type=float, default=1.0)
+    p.add_argument("--after", type=int, default=300, help="host datagrams relayed before the attacks begin")
+    p.add_argument("--earlier", default=None)
+    p.add_argument("--save", default=None)
+    p.add_argument("--report", default=None)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    attacker = Attacker(args)
+    relay = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    relay.bind(("127.0.0.1", 0))
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(0)))
+    print(f"attacker: {relay.getsockname()[1]}", flush=True)
+    threading.Thread(target=attacker.run, daemon=True).start()
+    try:
+        while True:
+            data, addr = relay.recvfrom(65536)
+            # forwarded first, then kept: a replay never overtakes the datagram it copies
+            if addr == attacker.bridge:
+                if attacker.host is not None:
+                    relay.sendto(attacker.forward(data), attacker.host)
+                attacker.capture.append((1, data))
+            else:
+                attacker.host = addr
+                relay.sendto(attacker.forward(data), attacker.bridge)
+                attacker.capture.append((0, data))
+    finally:
+        attacker.finish()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,241 @@
+"""The authenticated robot link: keys, the session's seal and anti-replay window, the handshake, and the HIT round trip
+attacked from a second process while it runs (tests/link_attacker.py): nothing from the attacker is applied."""
+
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from rehabkit.api import run_scenario
+from rehabkit.hardware.protocol import COMMAND, HEADER, STATE, Receiver, encode
+from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake, peek_kind
+from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key, new_key
+from rehabkit.hardware.security.session import ReplayWindow
+from tests.conftest import ROOT, SCENARIOS
+
+HIT = SCENARIOS / "hit_roundtrip.yaml"
+HOST, BRIDGE = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
+
+
+@pytest.fixture
+def key(tmp_path):
+    return new_key("hit-1", tmp_path / "hit-1.key")
+
+
+def _shake(key, gate: BridgeGate, robot: int = 1, host_key=None):
+    """A handshake in process: host → gate → host → gate → host; the host's session (or None) and the gate's."""
+    host = HostHandshake(host_key or key, robot)
+    seq = iter(range(1, 100))
+    for _ in range(2):
+        reply, _why = gate.reply(host.next(next(seq)), HOST)
+        session = host.take(reply) if reply is not None else None
+    return session, host
+
+
+def test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret(key, tmp_path):
+    assert stat.S_IMODE(key.path.stat().st_mode) == 0o600
+    text = key.path.read_text()
+    assert f"id: {key.id}" in text and "robot: hit-1" in text
+    assert key.secret.hex() not in repr(key) + str(key)  # (a key printed in a log says its id, not its secret)
+    assert load_key(key.path) == key
+    with pytest.raises(KeyFileError, match="exists"):  # a rotation is deliberate
+        new_key("hit-1", key.path)
+    assert new_key("hit-1", key.path, replace=True).id != key.id
+    key.path.chmod(0o644)
+    with pytest.raises(KeyFileError, match=f"readable by others.*chmod 600 {key.path}"):
+        load_key(key.path)
+    with pytest.raises(KeyFileError, match="no such file"):
+        load_key(tmp_path / "none.key")
+    with pytest.raises(KeyFileError, match="the key is for robot hit-1, this link is lexos-1"):
+        check_robot(key, "lexos-1")
+
+
+def test_the_window_takes_each_number_once_and_nothing_older_than_64():
+    w = ReplayWindow()
+    seen = []
+    for seq in (1, 3, 2, 3, 100, 40, 37, 36, 37, 101, 100):
+        fresh = w.fresh(seq)
+        if fresh:
+            w.mark(seq)
+        seen.append(fresh)
+    assert seen == [True, True, True, False, True, True, True, False, False, True, False]  # 36 < 101 - 64: too old
+
+
+def test_a_session_opens_what_its_peer_sealed_once_and_nothing_altered(key):
+    gate = BridgeGate(key, 1)
+    session, _ = _shake(key, gate)
+    assert session is not None and gate.session.id == session.id and gate.peer == HOST
+    data = encode(COMMAND, 1, 7, np.array([0.5, -1.0, 2.0]), sent_at=1.0, link=session)
+    assert data[HEADER.size:-16] != np.array([0.5, -1.0, 2.0]).tobytes()  # the body is encrypted
+    for bit in range(8 * len(data)):  # every single-bit change anywhere is refused, and moves nothing
+        flipped = bytearray(data)
+        flipped[bit // 8] ^= 1 << bit % 8
+        plain, why = gate.open(bytes(flipped), HOST)
+        assert plain is None and why in {"authentication", "other-session", "unauthenticated", "length"}, (bit, why)
+    rx = Receiver(COMMAND, 1, 3)
+    plain, _ = gate.open(data, HOST)
+    assert rx.take(plain).values.tolist() == [0.5, -1.0, 2.0]
+    assert gate.open(data, HOST) == (None, "replayed")
+    assert gate.open(encode(COMMAND, 1, 8, np.zeros(3)), HOST) == (None, "unauthenticated")  # a CRC is no key
+    assert gate.open(encode(COMMAND, 1, 9, np.zeros(3), link=session), ("127.0.0.1", 9)) == (None, "other-address")
+    with pytest.raises(ValueError, match="never repeats"):
+        encode(COMMAND, 1, 9, np.zeros(3), link=session)  # (a repeated nonce would give the key away)
+
+
+def test_the_handshake_refuses_another_key_and_a_replayed_proof_and_a_new_one_ends_the_old_session(key, tmp_path):
+    gate = BridgeGate(key, 1)
+    other = new_key("hit-1", tmp_path / "other.key")
+    session, host = _shake(key, gate, host_key=other)
+    assert session is None and host.problem == f"the bridge holds another key (its key id {key.id}, this key's " \
+                                               f"{other.id})"
+    first, host = _shake(key, gate)
+    proof = host.next(99)
+    assert gate.reply(proof, HOST) == (None, "stale-proof")  # each nonce proves once
+    second, _ = _shake(key, gate)
+    assert second.id != first.id and gate.session.id == second.id
+    assert gate.open(encode(COMMAND, 1, 50, np.zeros(3), link=first), HOST) == (None, "other-session")
+    assert _shake(key, BridgeGate(None, 1))[1].problem == "the bridge has no key (it was started without --key)"
+
+
+@pytest.fixture(scope="module")
+def linked(tmp_path_factory):
+    """A key, a bridge's gate and the host's session with it (one handshake for all the fuzzed inputs)."""
+    key = new_key("hit-1", tmp_path_factory.mktemp("key") / "hit-1.key")
+    gate = BridgeGate(key, 1)
+    return key, gate, _shake(key, gate)[0]
+
+
+@settings(max_examples=2000, deadline=None, database=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(junk=st.binary(max_size=200), flips=st.lists(st.integers(0, 8 * 120 - 1), min_size=1, max_size=4),
+       head=st.sampled_from(["junk", "state", "command", "hello"]))
+def test_the_decoder_and_the_handshake_never_raise_and_never_let_in_what_was_not_sealed(linked, junk, flips, head):
+    key, gate, session = linked
+    base = {"junk": lambda: junk, "state": lambda: _sealed_state(session),
+            "command": lambda: encode(COMMAND, 1, 5, np.ones(6)), "hello": lambda: HostHandshake(key, 1).next(1)}[head]()
+    data = bytearray(base)
+    for bit in flips:
+        if bit < 8 * len(data):
+            data[bit // 8] ^= 1 << bit % 8
+    data = bytes(data)
+    if peek_kind(data) in (5, 6, 7, 8, 9):
+        gate.reply(data, HOST)  # answered or refused, never raises
+        assert gate.session.id == session.id  # no session is opened without the key
+    else:
+        opened = gate.open(data, HOST)[0]
+        assert opened is None or head == "state" and data == base  # (untouched, the host's own: authentic)
+    Receiver(STATE, 1, 6).accept(data)  # the keyless decoder too
+
+
+def _sealed_state(session):
+    return encode(STATE, 1, session.last_sent + 1, np.ones((3, 6)), link=session)
+
+
+def _start(cmd, prefix):
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
+    line = proc.stdout.readline()
+    assert line.startswith(prefix), line
+    return proc, int(line.rsplit(":", 1)[1])
+
+
+def _bridge(key, stats):
+    return _start([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--lockstep", "--key", str(key.path),
+                   "--stats", str(stats)], "bridge:")
+
+
+def _stop(proc, sig=signal.SIGINT):
+    proc.send_signal(sig)
+    proc.wait(10)
+    proc.stdout.close()
+
+
+def _over(port, key):
+    return run_scenario(HIT, {"backend": {"type": "hardware", "clock": "lockstep", "spawn_bridge": False,
+                                          "port": port, "key_file": str(key.path)}})
+
+
+def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_nothing_of_the_attackers(key, tmp_path):
+    """A second process on the path forges, replays (this session's datagrams and an earlier one's), tampers (a
+    captured datagram, and in flight), tries other keys and floods the bridge for a second; the robot moves as in the
+    unattacked run, sample for sample, with no safety event; the bridge let in datagrams from the host's address
+    alone, and every drop is counted by reason at both ends. (The full figures: benchmarks/link_attacks.py.)"""
+    runs = []
+    for count in (0, 60):  # on the path both times; the first only captures (the earlier session the second replays)
+        bridge, port = _bridge(key, tmp_path / f"bridge{count}.json")
+        try:
+            attacker, port = _start([sys.executable, str(ROOT / "tests" / "link_attacker.py"), str(port),
+                                     "--joints", "6", "--count", str(count), "--flood-s", "1",
+                                     "--earlier", str(tmp_path / "capture"), "--save", str(tmp_path / "capture"),
+                                     "--report", str(tmp_path / f"attack{count}.json")], "attacker:")
+            try:
+                runs.append(_over(port, key))
+            finally:
+                _stop(attacker, signal.SIGTERM)
+        finally:
+            _stop(bridge)
+    clean, attacked = runs
+    assert np.array_equal(attacked.trace.q, clean.trace.q) and np.array_equal(attacked.trace.tau, clean.trace.tau)
+    assert attacked.summary["safety"]["events"] == [] and attacked.metrics["link_ticks"] == 8500
+    report = json.loads((tmp_path / "attack60.json").read_text())
+    assert "done" in report and report["flood"]["sent"] > 10_000 and report["replayed"]["sent"] == 120
+    stats = json.loads((tmp_path / "bridge60.json").read_text())
+    (host_at,) = stats["opened_from"]  # one address let in: the host's (through the relay)
+    assert stats["sessions"][0]["from"] == host_at and stats["sessions"][0]["key_id"] == key.id
+    dropped = stats["dropped"]
+    for reason in ("unauthenticated", "replayed", "other-session", "handshake-other-key", "handshake-stale-proof"):
+        assert dropped[reason] > 0, dropped
+    assert dropped["unauthenticated"] >= 4 * 60  # every forged torque, reset, clear and clock
+    m = attacked.metrics
+    assert m["states_dropped_unauthenticated"] >= 60 and m["states_dropped_replayed"] > 0
+    assert m["states_dropped_authentication"] > 0  # (tampered in flight: the host asked again)
+
+
+def test_a_bridge_beyond_loopback_needs_a_key_and_a_host_with_the_wrong_key_is_told_which(key, tmp_path):
+    cli = [sys.executable, "-m", "rehabkit.cli"]
+    out = subprocess.run([*cli, "bridge", "hit", "--listen", "0.0.0.0:0"], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 2 and "beyond this machine's loopback anyone on the network could drive the robot" in \
+        out.stderr and "--key FILE" in out.stderr
+    other = new_key("hit-1", tmp_path / "other.key")
+    bridge, port = _bridge(key, tmp_path / "stats.json")
+    try:
+        scenario = tmp_path / "lab.yaml"
+        scenario.write_text(f"extends: {HIT}\nbackend: {{type: hardware, clock: lockstep, spawn_bridge: false, "
+                            f"port: {port}, key_file: other.key}}\n")
+        out = subprocess.run([*cli, "run", str(scenario), "--out", str(tmp_path / "run")], capture_output=True,
+                             text=True, cwd=ROOT)
+        assert out.returncode == 2 and not (tmp_path / "run" / "summary.json").exists()
+        assert f"the bridge at udp://127.0.0.1:{port} refuses this host's session: the bridge holds another key (its " \
+               f"key id {key.id}, this key's {other.id})" in out.stderr and str(other.path) in out.stderr
+        scenario.write_text(scenario.read_text().replace(", key_file: other.key", ""))
+        out = subprocess.run([*cli, "run", str(scenario)], capture_output=True, text=True, cwd=ROOT)
+        assert out.returncode == 2 and "the bridge needs a key (it was started with --key)" in out.stderr \
+            and "set backend.key_file" in out.stderr
+    finally:
+        _stop(bridge)
+    assert json.loads((tmp_path / "stats.json").read_text())["dropped"]["unauthenticated"] > 0
+
+
+def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_name(key, tmp_path):
+    from rehabkit.cli.estop import clear_over_link
+    from rehabkit.core.safety.estop import EStopLatch
+
+    latch = EStopLatch.for_robot("hit", 1, tmp_path / "hit-1.json")
+    latch.press("e-stop at the robot", "robot")
+    bridge, port = _start([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--key", str(key.path),
+                           "--latch-file", str(latch.path)], "bridge:")
+    try:
+        with pytest.raises(PermissionError, match="needs a key"):  # a clear without the key: refused, and said
+            clear_over_link("127.0.0.1", port, 1, "mallory", timeout=0.5)
+        assert latch.latched() is not None
+        clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(key.path))
+    finally:
+        _stop(bridge)
+    record = json.loads(latch.path.read_text())
+    assert not record["latched"] and record["cleared_by"] == "Dr. Ana Ruiz" and record["key_id"] == key.id
+    assert os.stat(latch.path).st_size > 0
