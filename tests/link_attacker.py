@@ -2,6 +2,7 @@
 
     python tests/link_attacker.py BRIDGE_PORT --joints N [--robot-id 1] [--count N] [--flood-s S] [--after N]
                                   [--earlier CAPTURE] [--save CAPTURE] [--report REPORT.json] [--seed S]
+                                  [--attacks forged,replayed,tampered,wrong-key,flood]
 
 It sits on the path between host and bridge (the host is pointed at the port it prints, ``attacker: PORT``) and
 forwards every datagram unchanged both ways, keeping a copy: what a machine on the lab's network can capture.
@@ -128,8 +129,8 @@ class Attacker:
             return
         while len([1 for way, _ in self.capture if way == 0]) < a.after or self.host is None:
             time.sleep(0.01)
-        rng = self.rng
-        for i in range(n):  # forged, without the key
+        rng, attacks = self.rng, set(a.attacks.split(","))
+        for i in range(n if "forged" in attacks else 0):  # forged, without the key
             seq = 10**6 + i
             self.send("forged", encode(COMMAND, rid, seq, rng.uniform(-50, 50, j)), self.bridge)
             self.send("forged", encode(COMMAND, rid, seq + 1, rng.uniform(-1, 1, j), status=CMD_RESET), self.bridge)
@@ -137,21 +138,23 @@ class Attacker:
             self.send("forged", encode(CLOCK, rid, seq + 3, np.zeros(0), 1e3 + i), self.bridge)
             self.send("forged", encode(STATE, rid, seq + 4, np.full((3, j), 1e3)), self.host)
         now = list(self.capture)
-        for i in range(n):  # replayed: this session's (the newest, inside the window, and older) and an earlier one's
+        # replayed: this session's (the newest, inside the window, and older) and an earlier one's
+        for i in range(n if "replayed" in attacks else 0):
             way, data = now[-1 - int(rng.integers(0, min(len(now), 64)))] if i % 2 else now[int(rng.integers(len(now)))]
             self.send("replayed", data, self.bridge if way == 0 else self.host)
             if self.earlier:
                 way, data = self.earlier[int(rng.integers(len(self.earlier)))]
                 self.send("replayed", data, self.bridge if way == 0 else self.host)
-        for _ in range(n):  # tampered: one bit flipped in a captured datagram
+        for _ in range(n if "tampered" in attacks else 0):  # tampered: one bit flipped in a captured datagram
             way, data = self.capture[-1 - int(rng.integers(0, min(len(self.capture), 256)))]
             self.send("tampered", flip(data, rng), self.bridge if way == 0 else self.host)
-        self.in_flight = n // 4  # and in flight: the relay flips a bit in one in ten it forwards, instead of it
+        # and in flight: the relay flips a bit in one in ten it forwards, instead of forwarding it
+        self.in_flight = min(n // 4, 100) if "tampered" in attacks else 0
         while self.in_flight > 0:
             time.sleep(0.01)
         hellos = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == HELLO]
         proofs = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == PROOF]
-        for i in range(n):  # wrong key
+        for i in range(n if "wrong-key" in attacks else 0):  # wrong key
             nonce = bytes(rng.integers(0, 256, 16, dtype=np.uint8))
             self.send("wrong-key", PLAIN.seal(pack_bytes(HELLO, rid, 2 * i + 1, bytes(8) + nonce)), self.bridge)
             if hellos:  # the right key id (it is public), then a proof it cannot make
@@ -164,14 +167,15 @@ class Attacker:
             for proof in proofs:
                 self.send("wrong-key", proof, self.bridge)
             time.sleep(0.001)  # (the bridge answers 20 a second outside a session: some get a challenge)
-        if a.flood_s > 0:
+        if a.flood_s > 0 and "flood" in attacks:
             sent = multiprocessing.get_context("fork").Value("q", 0)
             samples = [d for _, d in self.capture[-256:]]
             p = multiprocessing.get_context("fork").Process(
                 target=flood, args=(self.bridge, a.flood_s, samples, hellos[0] if hellos else b"", a.seed, sent))
+            start = time.time()
             p.start()
             p.join()
-            self.report["flood"] = {"sent": int(sent.value), "seconds": a.flood_s}
+            self.report["flood"] = {"sent": int(sent.value), "seconds": a.flood_s, "from": start, "to": time.time()}
         self.report["done"] = {"at": time.time()}
 
     def finish(self) -> None:
@@ -196,6 +200,7 @@ def main() -> None:
     p.add_argument("--save", default=None)
     p.add_argument("--report", default=None)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--attacks", default="forged,replayed,tampered,wrong-key,flood", help="which, comma-separated")
     args = p.parse_args()
     attacker = Attacker(args)
     relay = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

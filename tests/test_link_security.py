@@ -118,7 +118,8 @@ def linked(tmp_path_factory):
 def test_the_decoder_and_the_handshake_never_raise_and_never_let_in_what_was_not_sealed(linked, junk, flips, head):
     key, gate, session = linked
     base = {"junk": lambda: junk, "state": lambda: _sealed_state(session),
-            "command": lambda: encode(COMMAND, 1, 5, np.ones(6)), "hello": lambda: HostHandshake(key, 1).next(1)}[head]()
+            "command": lambda: encode(COMMAND, 1, 5, np.ones(6)),
+            "hello": lambda: HostHandshake(key, 1).next(1)}[head]()
     data = bytearray(base)
     for bit in flips:
         if bit < 8 * len(data):

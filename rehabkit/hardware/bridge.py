@@ -39,7 +39,7 @@ import numpy as np
 
 from rehabkit.core.safety.estop import EStopLatch
 from rehabkit.hardware.bridge_link import BridgeLink
-from rehabkit.hardware.clock import wait_readable, wait_until
+from rehabkit.hardware.clock import wait_until
 from rehabkit.hardware.keypad import Keypad, handle
 from rehabkit.hardware.plant import Plant
 from rehabkit.hardware.protocol import (
@@ -260,7 +260,7 @@ class Bridge:
                 deadline += period
                 wait_until(deadline)
         finally:
-            self.sock.close()
+            self.link.close()
 
     def serve_lockstep(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick when the host's clock says so, not the wall's: each tick from the host (a command carrying it, or a
@@ -272,11 +272,12 @@ class Bridge:
         inbox: list[tuple[bytes, tuple]] = []
         try:
             while True:
-                if not wait_readable(self.sock, 0.5):
+                got = self.link.next(0.5)
+                if got is None:
                     if parent is not None and os.getppid() != parent:
                         return
                     continue
-                data, addr = self.sock.recvfrom(65536)
+                data, addr = got
                 plain = self.link.open(data, addr)
                 if plain is None:
                     continue
@@ -303,4 +304,4 @@ class Bridge:
                     self._answer = (CLOCK, np.zeros(0), now + self.plant.timestep, 0.0, 0, 0, None, None)
                     self.link.send(self._answer, addr)
         finally:
-            self.sock.close()
+            self.link.close()

@@ -22,12 +22,13 @@ def wait_until(deadline: float) -> None:
             time.sleep(left - SPIN_S)
 
 
-def wait_readable(sock: socket.socket, timeout: float, poll: float | None = None) -> bool:
-    """True once ``sock`` has a datagram to read, False after ``timeout`` seconds without one."""
+def wait_readable(sock: socket.socket | list[socket.socket], timeout: float, poll: float | None = None) -> bool:
+    """True once ``sock`` (or one of several) has a datagram to read, False after ``timeout`` seconds without one."""
+    socks = [sock] if isinstance(sock, socket.socket) else sock
     start = time.monotonic()
     poll_end = start + min(POLL_S if poll is None else poll, timeout)
     while time.monotonic() < poll_end:
-        if select.select([sock], [], [], 0)[0]:
+        if select.select(socks, [], [], 0)[0]:
             return True
     left = start + timeout - time.monotonic()
-    return left > 0 and bool(select.select([sock], [], [], left)[0])
+    return left > 0 and bool(select.select(socks, [], [], left)[0])
