@@ -9,7 +9,11 @@ expectations met, and tracking against the simulation. Repeat with ``--repeats``
 same scenario over the lock-step link (``backend.clock=lockstep``): its loop's wall time against
 the simulation's and the real-time link's, and its largest deviation from the simulated path.
 
-    python benchmarks/link_loop.py [--repeats N] [--scenarios hit_roundtrip lexos_reaching]
+Then authentication (``--auth``, default on): the cost of sealing and opening one datagram in a session against the
+checksum of a link without a key [µs], and the HIT round trip in real time without a key and with one, alternating,
+side by side: deadline misses, tick lateness, round trips.
+
+    python benchmarks/link_loop.py [--repeats N] [--scenarios hit_roundtrip lexos_reaching] [--no-auth]
 """
 
 from __future__ import annotations
@@ -40,12 +44,79 @@ def baseline(seconds: float) -> tuple[float, float]:
     return float(np.mean(late > 1.0)), float(np.percentile(late, 99))
 
 
+def datagram_cost(n: int = 20000) -> None:
+    """Per datagram, a STATE of 6 joints (the bridge sends one a tick) and a COMMAND (the host's): encoded and taken
+    in, without a key (CRC-32) and in a session (ChaCha20-Poly1305) [µs]."""
+    import tempfile
+
+    from rehabkit.hardware.protocol import COMMAND, STATE, Receiver, encode
+    from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake
+    from rehabkit.hardware.security.keys import new_key
+
+    with tempfile.TemporaryDirectory() as tmp:
+        key = new_key("hit-1", Path(tmp) / "hit-1.key")
+    gate, host = BridgeGate(key, 1), HostHandshake(key, 1)
+    for seq in (1, 2):
+        reply, _ = gate.reply(host.next(seq), ("127.0.0.1", 9))
+        session = host.take(reply)
+    state, cmd = np.arange(18.0).reshape(3, 6), np.arange(6.0)
+    print(f"{'per datagram [us]':24s} {'encode':>8s} {'take in':>8s} {'size [B]':>9s}")
+    for label, kind, values, joints in (("STATE", STATE, state, 6), ("COMMAND", COMMAND, cmd, 6)):
+        for keyed in (False, True):
+            rx = Receiver(kind, 1, joints)
+            t0 = time.perf_counter()
+            if keyed:  # the host seals commands for the bridge, the bridge states for the host: time one direction
+                sealer, opener = (session, gate) if kind == COMMAND else (gate, session)
+                data = [encode(kind, 1, sealer.last_sent + 1 + i if sealer is session else gate.next_seq(), values,
+                               sent_at=1.0, link=sealer) for i in range(n)]
+                t1 = time.perf_counter()
+                for d in data:
+                    opened = opener.open(d, ("127.0.0.1", 9)) if opener is gate else opener.open(d)
+                    rx.take(opened[0])
+            else:
+                data = [encode(kind, 1, i + 1, values, sent_at=1.0) for i in range(n)]
+                t1 = time.perf_counter()
+                for d in data:
+                    rx.accept(d)
+            t2 = time.perf_counter()
+            assert rx.accepted == n
+            print(f"{label + (' sealed' if keyed else ' CRC-32'):24s} {1e6 * (t1 - t0) / n:8.2f} "
+                  f"{1e6 * (t2 - t1) / n:8.2f} {len(data[0]):9d}")
+
+
+def auth_side_by_side(repeats: int) -> None:
+    """The HIT round trip over the real-time link without a key and with one, alternating."""
+    import tempfile
+
+    from rehabkit.hardware.security.keys import new_key
+
+    path = ROOT / "scenarios" / "hit_roundtrip.yaml"
+    with tempfile.TemporaryDirectory() as tmp:
+        key = new_key("hit-1", Path(tmp) / "hit-1.key")
+        print(f"\n{'HIT real time':16s} {'miss':>7s} {'late p99':>9s} {'late max':>9s} {'rtt p50':>8s} {'rtt p99':>8s} "
+              f"{'dropped':>8s} {'events':>6s}")
+        for _ in range(repeats):
+            for label, extra in (("no key", []), ("authenticated", [f"backend.key_file={key.path}"])):
+                m = run_scenario(path, ["backend.type=hardware", *extra]).metrics
+                print(f"{label:16s} {m['deadline_miss_rate']:7.2%} {m['tick_lateness_p99_ms']:8.2f}  "
+                      f"{m['tick_lateness_max_ms']:8.2f}  {m['rtt_median_ms']:8.2f} {m['rtt_p99_ms']:8.2f} "
+                      f"{m['states_dropped']:8.0f} {m['safety_events']:6.0f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--scenarios", nargs="+", default=["hit_roundtrip", "lexos_reaching"])
+    ap.add_argument("--no-auth", dest="auth", action="store_false", help="skip the authentication figures")
+    ap.add_argument("--auth-only", action="store_true", help="only the authentication figures")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cpus, python {platform.python_version()}\n")
+    if args.auth:
+        datagram_cost()
+        auth_side_by_side(args.repeats)
+        print()
+    if args.auth_only:
+        return
     print(f"{'scenario':16s} {'baseline miss':>13s} {'link miss':>9s} {'ratio':>6s} {'late p99':>9s} "
           f"{'rtt p50':>8s} {'rtt p99':>8s} {'expect':>7s} {'rms vs sim':>10s}")
     for name in args.scenarios:

@@ -138,8 +138,8 @@ def _sealed_state(session):
     return encode(STATE, 1, session.last_sent + 1, np.ones((3, 6)), link=session)
 
 
-def _start(cmd, prefix):
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
+def _start(cmd, prefix, cwd=ROOT):
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=cwd)
     line = proc.stdout.readline()
     assert line.startswith(prefix), line
     return proc, int(line.rsplit(":", 1)[1])
@@ -240,3 +240,46 @@ def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_n
     record = json.loads(latch.path.read_text())
     assert not record["latched"] and record["cleared_by"] == "Dr. Ana Ruiz" and record["key_id"] == key.id
     assert os.stat(latch.path).st_size > 0
+
+
+def test_the_readmes_lab_network_commands_run_as_written(tmp_path):
+    """The README's "On a lab network" block, run as written at the robot and the host — with this machine's loopback
+    standing in for the robot computer's address and the bridge's port its own (7000 may be taken), on the lock-step
+    clock (the real-time link is tests/test_hardware_link.py's, authenticated too) — then the key rotated."""
+    import re
+    import shlex
+
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("### On a lab network"):]
+    commands = [c.split("#")[0].strip() for c in re.search(r"```bash\n(.*?)```", section, re.S)[1].splitlines()]
+    scenario = re.search(r"```yaml\n(.*?)```", section, re.S)[1]
+    keys_new, bridge_cmd, run_cmd, clear_cmd = commands
+    assert run_cmd == "rehabkit run lab_hit.yaml"
+    cli = [sys.executable, "-m", "rehabkit.cli"]
+
+    def run(command: str, **kw):
+        return subprocess.run([*cli, *shlex.split(command)[1:]], capture_output=True, text=True, cwd=tmp_path,
+                              env={**os.environ, "REHABKIT_STATE": str(tmp_path / "state")}, **kw)
+
+    made = run(keys_new)
+    assert made.returncode == 0 and stat.S_IMODE((tmp_path / "keys" / "hit-1.key").stat().st_mode) == 0o600
+    key = load_key(tmp_path / "keys" / "hit-1.key")
+    assert key.id in made.stdout and key.secret.hex() not in made.stdout
+    bridge, port = _start([*cli, *shlex.split(bridge_cmd.replace(":7000", ":0"))[1:], "--lockstep"], "bridge:",
+                          cwd=tmp_path)
+    try:
+        (tmp_path / "lab_hit.yaml").write_text(
+            scenario.replace("scenarios/", f"{ROOT}/scenarios/").replace("192.168.1.20", "127.0.0.1")
+            .replace("port: 7000", f"port: {port}").replace("type: hardware,", "type: hardware, clock: lockstep,"))
+        done = run(run_cmd)
+        assert done.returncode == 0, done.stderr
+        notes = json.loads((tmp_path / "out" / "lab_hit" / "summary.json").read_text())["notes"]
+        assert notes[0]["text"].endswith(f"key {key.id}")
+        cleared = run(clear_cmd.replace("192.168.1.20:7000", f"127.0.0.1:{port}"))
+        assert cleared.returncode == 0 and "cleared at the bridge" in cleared.stdout, cleared.stderr
+        rotated = run("rehabkit keys new hit-1 --out keys/hit-1.key --replace")
+        assert rotated.returncode == 0 and load_key(tmp_path / "keys" / "hit-1.key").id != key.id
+        refused = run(run_cmd)  # the bridge still holds the old key: the host is told, with both ids
+        assert refused.returncode == 2 and f"its key id {key.id}" in refused.stderr
+    finally:
+        _stop(bridge)

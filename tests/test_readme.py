@@ -44,6 +44,8 @@ EXECUTED_ELSEWHERE = {
         "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",
     "rehabkit plugins --fields musculoskeletal":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
+    "rehabkit keys new hit-1 --out keys/hit-1.key --replace":
+        "tests/test_link_security.py::test_the_readmes_lab_network_commands_run_as_written",
     "rehabkit plugins --fields dh":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
 }

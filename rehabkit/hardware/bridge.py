@@ -238,6 +238,12 @@ class Bridge:
         self.link.send(self._answer, self.peer)
         return True
 
+    def _status_to(self, addr: tuple) -> None:
+        """The state as it stands (status bits up to date), outside the lock-step clock's ticks."""
+        q, qd = self.plant.read()
+        self.link.send((STATE, np.stack([q, qd, self.tau]), None, self.echo, self.status, self.held_ticks,
+                        self.plant.read_measured(), self.plant.read_instruments()), addr)
+
     def link_stats(self) -> dict:
         """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""
         return self.link.stats()
@@ -280,6 +286,10 @@ class Bridge:
                 data, addr = got
                 plain = self.link.open(data, addr)
                 if plain is None:
+                    continue
+                if plain[3] == CLEAR:  # a person's act, not the clock's: done now, and answered with the status
+                    self._receive(self._last_tick, [(plain, addr)])
+                    self._status_to(addr)
                     continue
                 tick = link_tick(plain, self.robot_id)
                 if tick is None or not tick[1]:
