@@ -131,7 +131,7 @@ def fuzz(inputs: int) -> None:
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 
-    from rehabkit.hardware.protocol import COMMAND, STATE, Receiver, encode
+    from rehabkit.hardware.link.protocol import COMMAND, STATE, Receiver, encode
     from rehabkit.hardware.security.handshake import HANDSHAKE, BridgeGate, HostHandshake, peek_kind
 
     with tempfile.TemporaryDirectory() as tmp:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rehabkit.api import run_scenario
-from rehabkit.hardware.clock import wait_until
+from rehabkit.hardware.link.clock import wait_until
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -49,7 +49,7 @@ def datagram_cost(n: int = 20000) -> None:
     in, without a key (CRC-32) and in a session (ChaCha20-Poly1305) [µs]."""
     import tempfile
 
-    from rehabkit.hardware.protocol import COMMAND, STATE, Receiver, encode
+    from rehabkit.hardware.link.protocol import COMMAND, STATE, Receiver, encode
     from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake
     from rehabkit.hardware.security.keys import new_key
 

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.hardware.protocol import CLEAR, CLOCK, CMD_RESET, COMMAND, PLAIN, STATE, encode, pack_bytes
+from rehabkit.hardware.link.protocol import CLEAR, CLOCK, CMD_RESET, COMMAND, PLAIN, STATE, encode, pack_bytes
 from rehabkit.hardware.security.handshake import CHALLENGE, HELLO, PROOF, peek_kind
 
 RECORD = struct.Struct("<BH")  # direction (0: host → bridge, 1: bridge → host), length

@@ -29,7 +29,7 @@ import zlib
 
 import numpy as np
 
-from rehabkit.hardware.protocol import CLOCK, CRC, HEADER, PLAIN, STATE, TICK, encode, link_tick
+from rehabkit.hardware.link.protocol import CLOCK, CRC, HEADER, PLAIN, STATE, TICK, encode, link_tick
 
 
 def split_tick(data: bytes) -> tuple[bytes, bytes]:

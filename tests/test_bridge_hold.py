@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from rehabkit.hardware.bridge import Bridge, BridgeLimits
-from rehabkit.hardware.plant import MujocoPlant
-from rehabkit.hardware.protocol import (
+from rehabkit.hardware.link.protocol import (
     CMD_COMPLIANT,
     CMD_RESET,
     COMMAND,
@@ -20,6 +19,7 @@ from rehabkit.hardware.protocol import (
     Receiver,
     encode,
 )
+from rehabkit.hardware.plant import MujocoPlant
 
 Q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
 PUSH = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # on the wrist: alone, it spins the wrist in a few hundred ms

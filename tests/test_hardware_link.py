@@ -10,7 +10,7 @@ import pytest
 from rehabkit.api import run_scenario
 from rehabkit.core.kinds.interfaces import Context
 from rehabkit.hardware.backend import BridgeHoldError, HardwareBackend, HardwareConfig
-from rehabkit.hardware.protocol import COMMAND, ESTOPPED, WATCHDOG, encode
+from rehabkit.hardware.link.protocol import COMMAND, ESTOPPED, WATCHDOG, encode
 from rehabkit.testing import group
 from tests.conftest import SCENARIOS
 
@@ -164,9 +164,9 @@ def test_forged_and_malformed_commands_never_move_the_robot(link):
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     push = np.full(robot.model.dof, 50.0)
     for i in range(200):  # a wrong robot id, random bytes, a truncated datagram, among real commands
-        sock.sendto(encode(COMMAND, 99, backend.seq + 1000 + i, push), backend.addr)
+        sock.sendto(encode(COMMAND, 99, backend.wire.seq + 1000 + i, push), backend.addr)
         sock.sendto(bytes(np.random.default_rng(i).integers(0, 256, 120, dtype=np.uint8)), backend.addr)
-        sock.sendto(encode(COMMAND, 1, backend.seq + 1000 + i, push)[:-3], backend.addr)
+        sock.sendto(encode(COMMAND, 1, backend.wire.seq + 1000 + i, push)[:-3], backend.addr)
         _hold(backend, robot, q0, 1)
     sock.close()
     _, q, _ = backend.state()

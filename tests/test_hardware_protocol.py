@@ -6,7 +6,7 @@ import zlib
 import numpy as np
 import pytest
 
-from rehabkit.hardware.protocol import COMMAND, HEADER, STATE, Receiver, encode, newer
+from rehabkit.hardware.link.protocol import COMMAND, HEADER, STATE, Receiver, encode, newer
 
 
 def _state(seq, n=6, sent_at=100.0, robot=7):

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rehabkit.api import run_scenario
-from rehabkit.hardware.protocol import COMMAND, HEADER, STATE, Receiver, encode
+from rehabkit.hardware.link.protocol import COMMAND, HEADER, STATE, Receiver, encode
 from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake, peek_kind
 from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key, new_key
 from rehabkit.hardware.security.session import ReplayWindow

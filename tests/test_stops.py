@@ -109,8 +109,8 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     from rehabkit.cli.estop import clear_over_link
     from rehabkit.core.safety.estop import EStopLatch
     from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.link.protocol import ESTOPPED, HOLDING
     from rehabkit.hardware.plant import MujocoPlant
-    from rehabkit.hardware.protocol import ESTOPPED, HOLDING
 
     latch = EStopLatch(tmp_path / "hit-1.json", "hit-1")
     bridge = Bridge(MujocoPlant(hit), latch=latch)

@@ -17,8 +17,8 @@ def clear_over_link(host: str, port: int, robot_id: int, by: str, key_file: str 
                     timeout: float = 2.0) -> int:
     """Tell the bridge ``by`` (a person's name) clears its e-stop, in an authenticated session given the robot's
     key; wait for a state saying it is no longer latched. Its status."""
-    from rehabkit.hardware.clock import wait_readable
-    from rehabkit.hardware.protocol import CLEAR, ESTOPPED, HEADER, PLAIN, STATE, pack_bytes
+    from rehabkit.hardware.link.clock import wait_readable
+    from rehabkit.hardware.link.protocol import CLEAR, ESTOPPED, HEADER, PLAIN, STATE, pack_bytes
     from rehabkit.hardware.security.handshake import handshake, peek_kind, refusal
     from rehabkit.hardware.security.keys import load_key
 

@@ -24,7 +24,6 @@ pixels rendered in a process of their own (:mod:`~rehabkit.hardware.frame_server
 from __future__ import annotations
 
 import math
-import socket
 import time
 
 import numpy as np
@@ -39,13 +38,11 @@ from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.safety.layer import SafetyEvent
 from rehabkit.core.setup.limits import first_breach
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
-from rehabkit.hardware.clock import wait_readable, wait_until
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
-from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
-from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
-from rehabkit.hardware.protocol import (
-    CLOCK,
+from rehabkit.hardware.link.clock import wait_until
+from rehabkit.hardware.link.host_end import LOCKSTEP_REPLY_S, HostLink
+from rehabkit.hardware.link.protocol import (
     CMD_BRAKE,
     CMD_COMPLIANT,
     CMD_ESTOP,
@@ -61,14 +58,10 @@ from rehabkit.hardware.protocol import (
     TICK,
     WATCHDOG,
     Receiver,
-    encode,
-    link_tick,
 )
-from rehabkit.hardware.security.handshake import HANDSHAKE, LinkRefusedError, handshake, peek_kind, refusal
+from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
+from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key
-
-LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
-RESEND_S = 0.05  # lock-step: a tick not answered within this (wall time) is sent again (it or its answer was lost)
 
 
 class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
@@ -85,8 +78,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                                                "state_timeout_s": beat.state_timeout_ms / 1e3,
                                                "bridge_stale_ms": beat.hold_after})
         self.config, self.timestep = config, config.timestep
-        self.realtime = config.clock == "realtime"  # else the link's clock is the count of ticks, self.clock
-        self.clock, self._answered = 0, -1.0
+        self.realtime = config.clock == "realtime"  # else the link's clock is the count of ticks (HostLink.clock)
         robot = context.robot
         self.n = robot.model.dof
         self.robot_name = robot.model.name  # (its e-stop latch at the bridge: <name>-<robot id>)
@@ -97,7 +89,6 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                 check_robot(self.key, f"{self.robot_name}-{config.robot_id}")
             except KeyFileError as exc:
                 raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
-        self.link = PLAIN  # the session once the handshake is done (with a key)
         self._note = context.note
         self.brakes = robot.model.brakes is not None
         self._flags = 0  # sent with every command (the brakes, once applied)
@@ -115,13 +106,10 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         port = config.port
         if config.spawn_bridge:
             self.process, port = spawn_bridge(context, config)
-        self.addr = (socket.gethostbyname(config.host), port)  # (as datagrams from it say where they came from)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setblocking(False)
         self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured),
                            instruments=len(self.instruments), max_age=config.max_age_s)
-        self.seq, self.tau = 0, np.zeros(self.n)
-        self._last_sent: tuple | None = None  # lock-step: the command carrying the tick, to send again if lost
+        self.wire = HostLink(config.host, port, config.robot_id, self.key, self.rx, config.timestep)
+        self.addr, self.tau = self.wire.addr, np.zeros(self.n)
         self.q, self.qd = np.zeros(self.n), np.zeros(self.n)
         self.applied = np.zeros(self.n)
         self.status = 0
@@ -142,68 +130,20 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
     # -- link ------------------------------------------------------------------
 
     def _now(self) -> float:
-        return time.monotonic() if self.realtime else self.clock * self.timestep
-
-    def _next_seq(self) -> int:
-        self.seq += 1  # (one count for every datagram this end sends: a session's nonces never repeat)
-        return self.seq
+        return time.monotonic() if self.realtime else self.wire.clock * self.timestep
 
     def _send(self, values: np.ndarray, flags: int = 0, tick: bool = False) -> float:
         """A command; with ``tick`` (lock-step) it also tells the bridge to tick at the link's time (the clock
-        rides on it: see :mod:`rehabkit.hardware.protocol`)."""
+        rides on it: see :mod:`rehabkit.hardware.link.protocol`)."""
         sent = self._now()
-        self._last_sent = (COMMAND, values, sent, flags | (TICK if tick else 0))
-        self._transmit(self._last_sent)
+        self.wire.send(COMMAND, values, sent, flags | (TICK if tick else 0))
         return sent
 
-    def _transmit(self, what: tuple) -> None:
-        kind, values, sent, status = what
-        self.sock.sendto(encode(kind, self.config.robot_id, self._next_seq(), values, sent_at=sent, status=status,
-                                link=self.link), self.addr)
-
     def _tick_lockstep(self, timeout: float = LOCKSTEP_REPLY_S, sent: bool = False) -> bool:
-        """Lock-step: tell the bridge to tick at the link's time (``sent``: a command carrying the tick has gone),
-        wait (in wall time) until it says it has, taking the states that came meanwhile, and ask again each
-        ``RESEND_S`` without an answer (a datagram lost to a full socket buffer); the clock advances one tick.
-        False if it did not answer in ``timeout``."""
-        t = self.clock * self.timestep
-        if not sent:
-            self._last_sent = (CLOCK, np.zeros(0), t, 0)
-            self._transmit(self._last_sent)
-        self.clock += 1
-        done = t + 0.5 * self.timestep  # the bridge answers with the time its tick ends, t + its timestep
-        until = time.monotonic() + timeout
-        while self._answered < done:
-            now = time.monotonic()
-            if now >= until:
-                return False
-            if not wait_readable(self.sock, min(until, now + RESEND_S) - now):
-                self._transmit(self._last_sent)  # (the same tick again: the bridge ticks once, answers again)
-                continue
-            self._receive()
-        return True
+        return self.wire.tick_lockstep(self._receive, timeout, sent)
 
     def _receive(self) -> None:
-        while True:
-            try:
-                data, came_from = self.sock.recvfrom(65536)
-            except (BlockingIOError, ConnectionRefusedError):
-                return
-            now = self._now()
-            if peek_kind(data) in HANDSHAKE:  # outside a handshake only a refusal matters: a bridge needing a key
-                if (why := refusal(data, self.config.robot_id, self.key)) is not None:
-                    self._refused = why
-                continue
-            plain, why = self.link.open(data)
-            if plain is not None and self.key is not None and came_from != self.addr:
-                plain, why = None, "other-address"  # (authentic but raced from elsewhere: the session is the bridge's)
-            if plain is None:
-                self.rx.dropped[why] += 1
-                continue
-            if not self.realtime and (tick := link_tick(plain, self.config.robot_id)) is not None:
-                self._answered = max(self._answered, tick[0])
-                if tick[1]:  # a bare clock: no state in it
-                    continue
+        for plain, now in self.wire.arrived(self._now, not self.realtime):
             msg = self.rx.take(plain, now)
             if msg is None:
                 continue
@@ -241,26 +181,15 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
 
     # -- Backend ----------------------------------------------------------------
 
-    def _open_session(self) -> None:
-        """The handshake with the bridge, with this robot's key: every datagram from now on is in the session."""
-        where = f"udp://{self.addr[0]}:{self.addr[1]}"
-        try:
-            self.link = handshake(self.sock, self.addr, self.key, self.config.robot_id, self._next_seq)
-        except LinkRefusedError as exc:
-            raise LinkKeyError(where, str(self.key.path), str(exc)) from None
-        except TimeoutError:
-            raise LinkLostError(f"the bridge at {where} does not answer a handshake (is `rehabkit bridge` running "
-                                "there, for this robot and robot_id, with its --key?)") from None
-        if self._note is not None:
-            self._note(0.0, f"link: authenticated session {self.link.id:08x} with the bridge at {where}, key "
-                            f"{self.key.id}")
-
     def reset(self, q0: np.ndarray) -> None:
         if self.frames is not None:
             self.frames.wait_ready()  # started with the backend; up before the loop
-        if self.key is not None and self.link is PLAIN:
-            self._open_session()
-        self._refused = None
+        if self.key is not None and self.wire.link is PLAIN:
+            self.wire.open_session()
+            if self._note is not None:
+                self._note(0.0, f"link: authenticated session {self.wire.link.id:08x} with the bridge at "
+                                f"{self.wire.where}, key {self.key.id}")
+        self.wire.refused = None
         limit = time.monotonic() + 5.0
         while time.monotonic() < limit:  # the bridge may still be starting: ask until it answers from q0
             self._send(np.asarray(q0, float), CMD_RESET, tick=not self.realtime)
@@ -270,8 +199,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                 self._receive()
             else:
                 self._tick_lockstep(0.2, sent=True)
-            if self._refused is not None:
-                raise LinkKeyError(f"udp://{self.addr[0]}:{self.addr[1]}", None, self._refused)
+            if self.wire.refused is not None:
+                raise LinkKeyError(self.wire.where, None, self.wire.refused)
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
                 raise EStopLatchedError(self._latched_message(), f"{self.robot_name}-{self.config.robot_id}",
                                         f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
@@ -347,7 +276,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             wait_until(self.deadline)
             return time.monotonic() - self.deadline
         if not self._tick_lockstep(sent=sent):
-            raise LinkLostError(f"no valid state from the bridge: it did not answer tick {self.clock - 1} of the "
+            raise LinkLostError(f"no valid state from the bridge: it did not answer tick {self.wire.clock - 1} of the "
                                 f"lock-step clock within {LOCKSTEP_REPLY_S:g} s of wall time")
         return 0.0
 
@@ -372,10 +301,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
 
     def provenance(self) -> dict[str, str]:
         """The bridge this run drove and the session's key id (the safety log's run record)."""
-        where = {"bridge": f"udp://{self.addr[0]}:{self.addr[1]}"}
-        if self.link is PLAIN:
-            return {**where, "session": "none: a link without a key (loopback)"}
-        return {**where, "session": f"{self.link.id:08x}", "key_id": self.key.id}
+        return self.wire.provenance()
 
     @property
     def holding(self) -> bool:
@@ -392,7 +318,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         try:
             stop_bridge(self.process)  # the bridge first: nothing below may leave it running
         finally:
-            self.sock.close()
+            self.wire.close()
             if self.frames is not None:
                 self.frames.close()
 

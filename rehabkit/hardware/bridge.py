@@ -38,11 +38,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from rehabkit.core.safety.estop import EStopLatch
-from rehabkit.hardware.bridge_link import BridgeLink
-from rehabkit.hardware.clock import wait_until
 from rehabkit.hardware.keypad import Keypad, handle
-from rehabkit.hardware.plant import Plant
-from rehabkit.hardware.protocol import (
+from rehabkit.hardware.link.bridge_end import BridgeLink
+from rehabkit.hardware.link.clock import wait_until
+from rehabkit.hardware.link.protocol import (
     CLEAR,
     CLOCK,
     CMD_BRAKE,
@@ -62,6 +61,7 @@ from rehabkit.hardware.protocol import (
     clear_name,
     link_tick,
 )
+from rehabkit.hardware.plant import Plant
 from rehabkit.hardware.security.keys import LinkKey
 
 HOLD_KP, HOLD_KD = 60.0, 6.0

@@ -7,7 +7,7 @@ import numpy as np
 
 from rehabkit.core.results.metric import Metric
 from rehabkit.core.safety.layer import SafetyEvent
-from rehabkit.hardware.protocol import STALE
+from rehabkit.hardware.link.protocol import STALE
 
 METRICS = (
     Metric("link_ticks", "count", clock="wall", description="ticks the loop ran over the link"),

@@ -21,7 +21,7 @@ import secrets
 import time
 from collections import OrderedDict
 
-from rehabkit.hardware.protocol import HEADER, MAGIC, SEQ, SESSION_AT, VERSION, PlainLink, pack_bytes
+from rehabkit.hardware.link.protocol import HEADER, MAGIC, SEQ, SESSION_AT, VERSION, PlainLink, pack_bytes
 from rehabkit.hardware.security.keys import LinkKey
 from rehabkit.hardware.security.session import KEY_ID, MAC, NONCE, Session, proof, session_for
 
@@ -219,7 +219,7 @@ def handshake(sock, addr: tuple, key: LinkKey, robot: int, next_seq, timeout: fl
         LinkRefusedError: the bridge refused (no key, another key), or could not prove it holds this key.
         TimeoutError: no answer within ``timeout`` (wall time).
     """
-    from rehabkit.hardware.clock import wait_readable
+    from rehabkit.hardware.link.clock import wait_readable
 
     shake = HostHandshake(key, robot)
     until = time.monotonic() + timeout

@@ -18,7 +18,7 @@ from cryptography.hazmat.primitives import hashes
 from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
 from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
-from rehabkit.hardware.protocol import HEADER, SEQ, SEQ_AT, SESSION_AT, VERSION
+from rehabkit.hardware.link.protocol import HEADER, SEQ, SEQ_AT, SESSION_AT, VERSION
 from rehabkit.hardware.security.keys import LinkKey
 
 NONCE, MAC, KEY_ID = 16, 32, 8  # a handshake nonce, an HMAC-SHA256, a key id [bytes]

@@ -14,8 +14,8 @@ import sys
 import time
 from collections import Counter
 
-from rehabkit.hardware.clock import wait_readable
-from rehabkit.hardware.protocol import CMD_RESET, COMMAND, Receiver, encode
+from rehabkit.hardware.link.clock import wait_readable
+from rehabkit.hardware.link.protocol import CMD_RESET, COMMAND, Receiver, encode
 from rehabkit.hardware.security.handshake import HANDSHAKE, BridgeGate, peek_kind
 from rehabkit.hardware.security.keys import LinkKey
 

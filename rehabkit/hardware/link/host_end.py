@@ -1,0 +1,122 @@
+"""The host's end of the robot link: its socket, the bridge's address, the session (with the robot's key), one
+sequence count for all it sends, and the lock-step clock's ticks, sent again when they go unanswered."""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from rehabkit.hardware.config import LinkKeyError, LinkLostError
+from rehabkit.hardware.link.clock import wait_readable
+from rehabkit.hardware.link.protocol import CLOCK, PLAIN, TICK, Receiver, encode, link_tick
+from rehabkit.hardware.security.handshake import HANDSHAKE, LinkRefusedError, handshake, peek_kind, refusal
+from rehabkit.hardware.security.keys import LinkKey
+
+LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
+RESEND_S = 0.05  # lock-step: a tick not answered within this (wall time) is sent again (it or its answer was lost)
+
+
+class HostLink:
+    """Datagrams to and from the bridge at ``host``:``port`` for robot ``robot_id``; with ``key``, in an authenticated
+    session (:meth:`open_session`) and from the bridge's address only. ``rx`` counts what is dropped."""
+
+    def __init__(self, host: str, port: int, robot_id: int, key: LinkKey | None, rx: Receiver, timestep: float):
+        self.addr = (socket.gethostbyname(host), port)  # (as datagrams from it say where they came from)
+        self.robot_id, self.key, self.rx, self.timestep = robot_id, key, rx, timestep
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.link = PLAIN  # the session once the handshake is done
+        self.seq = 0
+        self.clock, self.answered = 0, -1.0  # lock-step: ticks sent, the newest tick's end the bridge answered
+        self.refused: str | None = None  # the bridge said it needs a key this host does not have
+        self._last: tuple | None = None  # lock-step: what carried the newest tick, to send again if lost
+
+    @property
+    def where(self) -> str:
+        return f"udp://{self.addr[0]}:{self.addr[1]}"
+
+    def next_seq(self) -> int:
+        self.seq += 1  # (one count for everything this end sends: a session's nonces never repeat)
+        return self.seq
+
+    def open_session(self) -> None:
+        """The handshake with the bridge, with the robot's key: every datagram from now on is in the session."""
+        try:
+            self.link = handshake(self.sock, self.addr, self.key, self.robot_id, self.next_seq)
+        except LinkRefusedError as exc:
+            raise LinkKeyError(self.where, str(self.key.path), str(exc)) from None
+        except TimeoutError:
+            raise LinkLostError(f"the bridge at {self.where} does not answer a handshake (is `rehabkit bridge` running "
+                                "there, for this robot and robot_id, with its --key?)") from None
+
+    def send(self, kind: int, values: np.ndarray, sent_at: float, status: int = 0) -> None:
+        """A datagram to the bridge, sealed in the session if there is one (kept, if it carries a tick)."""
+        what = (kind, values, sent_at, status)
+        if kind == CLOCK or status & TICK:
+            self._last = what
+        self.sock.sendto(encode(kind, self.robot_id, self.next_seq(), values, sent_at=sent_at, status=status,
+                                link=self.link), self.addr)
+
+    def tick_lockstep(self, receive: Callable[[], None], timeout: float = LOCKSTEP_REPLY_S, sent: bool = False) -> bool:
+        """Lock-step: tell the bridge to tick at the link's time (``sent``: a command carrying the tick has gone),
+        wait (in wall time) until it says it has, ``receive``-ing what came meanwhile, and ask again each
+        ``RESEND_S`` without an answer (a datagram lost to a full socket buffer); the clock advances one tick.
+        False if it did not answer in ``timeout``."""
+        t = self.clock * self.timestep
+        if not sent:
+            self.send(CLOCK, np.zeros(0), t)
+        self.clock += 1
+        done = t + 0.5 * self.timestep  # the bridge answers with the time its tick ends, t + its timestep
+        until = time.monotonic() + timeout
+        while self.answered < done:
+            now = time.monotonic()
+            if now >= until:
+                return False
+            if not wait_readable(self.sock, min(until, now + RESEND_S) - now):
+                kind, values, sent_at, status = self._last  # the same tick again: the bridge ticks once, answers again
+                self.sock.sendto(encode(kind, self.robot_id, self.next_seq(), values, sent_at=sent_at, status=status,
+                                        link=self.link), self.addr)
+                continue
+            receive()
+        return True
+
+    def arrived(self, now: Callable[[], float], lockstep: bool) -> list[tuple[bytes, float]]:
+        """What came, opened (with the time each was taken in): a refusal noted (:attr:`refused`), what fails
+        counted by reason, the lock-step clock's answers taken (a bare clock carries no state: not returned)."""
+        out = []
+        while True:
+            try:
+                data, came_from = self.sock.recvfrom(65536)
+            except (BlockingIOError, ConnectionRefusedError):
+                return out
+            t = now()
+            if peek_kind(data) in HANDSHAKE:  # outside a handshake only a refusal matters: a bridge needing a key
+                if (why := refusal(data, self.robot_id, self.key)) is not None:
+                    self.refused = why
+                continue
+            plain, why = self.link.open(data)
+            if plain is not None and self.key is not None and came_from != self.addr:
+                plain, why = None, "other-address"  # (authentic but raced from elsewhere: the session is the bridge's)
+            if plain is None:
+                self.rx.dropped[why] += 1
+                continue
+            if lockstep and (tick := link_tick(plain, self.robot_id)) is not None:
+                self.answered = max(self.answered, tick[0])
+                if tick[1]:
+                    continue
+            out.append((plain, t))
+
+    def provenance(self) -> dict[str, str]:
+        """The bridge and the session's key id (the safety log's run record)."""
+        if self.link is PLAIN:
+            return {"bridge": self.where, "session": "none: a link without a key (loopback)"}
+        return {"bridge": self.where, "session": f"{self.link.id:08x}", "key_id": self.key.id}
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+
