@@ -6,7 +6,8 @@
 
 It sits on the path between host and bridge (the host is pointed at the port it prints, ``attacker: PORT``) and
 forwards every datagram unchanged both ways, keeping a copy: what a machine on the lab's network can capture.
-Once the run is under way (``--after`` host datagrams relayed) it attacks from a socket of its own, in turn, each
+Once the run is under way (``--after`` host datagrams relayed in the host's ``--session``-th session; the sessions
+before it are only captured, earlier sessions to replay) it attacks from a socket of its own, in turn, each
 attack ``--count`` datagrams (the flood: ``--flood-s`` seconds):
 
   forged     well-formed, CRC-valid datagrams without the key: torque commands, resets, CLEARs with a name,
@@ -97,6 +98,7 @@ class Attacker:
         self.challenges: list[bytes] = []
         self.in_flight = 0  # datagrams still to tamper with in flight
         self.relayed = 0
+        self.hellos, self.since_hello = 0, 0  # the host's handshakes relayed, its datagrams since the newest
 
     def forward(self, data: bytes) -> bytes:
         """What the relay passes on: ``data``, or (while tampering in flight, one in ten) with a bit flipped."""
@@ -127,7 +129,7 @@ class Attacker:
         a, n, j, rid = self.args, self.args.count, self.args.joints, self.args.robot_id
         if n == 0:  # only on the path, capturing (an earlier session for the next run to replay)
             return
-        while len([1 for way, _ in self.capture if way == 0]) < a.after or self.host is None:
+        while self.hellos < a.session or self.since_hello < a.after or self.host is None:
             time.sleep(0.01)
         rng, attacks = self.rng, set(a.attacks.split(","))
         for i in range(n if "forged" in attacks else 0):  # forged, without the key
@@ -196,6 +198,8 @@ def main() -> None:
     p.add_argument("--count", type=int, default=200)
     p.add_argument("--flood-s", type=float, default=1.0)
     p.add_argument("--after", type=int, default=300, help="host datagrams relayed before the attacks begin")
+    p.add_argument("--session", type=int, default=1, help="in the host's session this one (sessions before it are "
+                   "captured: earlier sessions to replay)")
     p.add_argument("--earlier", default=None)
     p.add_argument("--save", default=None)
     p.add_argument("--report", default=None)
@@ -220,6 +224,8 @@ def main() -> None:
                 attacker.host = addr
                 relay.sendto(attacker.forward(data), attacker.bridge)
                 attacker.capture.append((0, data))
+                attacker.hellos, attacker.since_hello = (attacker.hellos + 1, 0) if peek_kind(data) == HELLO else \
+                    (attacker.hellos, attacker.since_hello + 1)
     finally:
         attacker.finish()
 

@@ -5,7 +5,8 @@ import socket
 import numpy as np
 import pytest
 
-from rehabkit.hardware.bridge import Bridge, BridgeLimits
+from rehabkit.hardware.bridge import Bridge
+from rehabkit.hardware.bridge_limits import BridgeLimits
 from rehabkit.hardware.link.protocol import (
     CMD_COMPLIANT,
     CMD_RESET,

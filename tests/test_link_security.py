@@ -19,6 +19,7 @@ from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake, peek
 from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key, new_key
 from rehabkit.hardware.security.session import ReplayWindow
 from tests.conftest import ROOT, SCENARIOS
+from tests.test_cli import cli
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 HOST, BRIDGE = ("127.0.0.1", 40001), ("127.0.0.1", 40002)
@@ -166,28 +167,25 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
     captured datagram, and in flight), tries other keys and floods the bridge for a second; the robot moves as in the
     unattacked run, sample for sample, with no safety event; the bridge let in datagrams from the host's address
     alone, and every drop is counted by reason at both ends. (The full figures: benchmarks/link_attacks.py.)"""
-    runs = []
-    for count in (0, 60):  # on the path both times; the first only captures (the earlier session the second replays)
-        bridge, port = _bridge(key, tmp_path / f"bridge{count}.json")
+    bridge, port = _bridge(key, tmp_path / "bridge.json")  # one bridge, two sessions (each reset from scratch)
+    try:
+        attacker, port = _start([sys.executable, str(ROOT / "tests" / "link_attacker.py"), str(port), "--joints", "6",
+                                 "--session", "2", "--count", "60", "--flood-s", "1",
+                                 "--report", str(tmp_path / "attack.json")], "attacker:")
         try:
-            attacker, port = _start([sys.executable, str(ROOT / "tests" / "link_attacker.py"), str(port),
-                                     "--joints", "6", "--count", str(count), "--flood-s", "1",
-                                     "--earlier", str(tmp_path / "capture"), "--save", str(tmp_path / "capture"),
-                                     "--report", str(tmp_path / f"attack{count}.json")], "attacker:")
-            try:
-                runs.append(_over(port, key))
-            finally:
-                _stop(attacker, signal.SIGTERM)
+            runs = [_over(port, key) for _ in range(2)]  # the first only captured: the earlier session replayed
         finally:
-            _stop(bridge)
+            _stop(attacker, signal.SIGTERM)
+    finally:
+        _stop(bridge)
     clean, attacked = runs
     assert np.array_equal(attacked.trace.q, clean.trace.q) and np.array_equal(attacked.trace.tau, clean.trace.tau)
     assert attacked.summary["safety"]["events"] == [] and attacked.metrics["link_ticks"] == 8500
-    report = json.loads((tmp_path / "attack60.json").read_text())
-    assert "done" in report and report["flood"]["sent"] > 10_000 and report["replayed"]["sent"] == 120
-    stats = json.loads((tmp_path / "bridge60.json").read_text())
+    report = json.loads((tmp_path / "attack.json").read_text())
+    assert "done" in report and report["flood"]["sent"] > 10_000 and report["replayed"]["sent"] == 60
+    stats = json.loads((tmp_path / "bridge.json").read_text())
     (host_at,) = stats["opened_from"]  # one address let in: the host's (through the relay)
-    assert stats["sessions"][0]["from"] == host_at and stats["sessions"][0]["key_id"] == key.id
+    assert [(s["from"], s["key_id"]) for s in stats["sessions"]] == [(host_at, key.id)] * 2
     dropped = stats["dropped"]
     for reason in ("unauthenticated", "replayed", "other-session", "handshake-other-key", "handshake-stale-proof"):
         assert dropped[reason] > 0, dropped
@@ -197,29 +195,10 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
     assert m["states_dropped_authentication"] > 0  # (tampered in flight: the host asked again)
 
 
-def test_a_bridge_beyond_loopback_needs_a_key_and_a_host_with_the_wrong_key_is_told_which(key, tmp_path):
-    cli = [sys.executable, "-m", "rehabkit.cli"]
-    out = subprocess.run([*cli, "bridge", "hit", "--listen", "0.0.0.0:0"], capture_output=True, text=True, cwd=ROOT)
+def test_a_bridge_beyond_loopback_needs_a_key():
+    out = cli("bridge", "hit", "--listen", "0.0.0.0:0")
     assert out.returncode == 2 and "beyond this machine's loopback anyone on the network could drive the robot" in \
         out.stderr and "--key FILE" in out.stderr
-    other = new_key("hit-1", tmp_path / "other.key")
-    bridge, port = _bridge(key, tmp_path / "stats.json")
-    try:
-        scenario = tmp_path / "lab.yaml"
-        scenario.write_text(f"extends: {HIT}\nbackend: {{type: hardware, clock: lockstep, spawn_bridge: false, "
-                            f"port: {port}, key_file: other.key}}\n")
-        out = subprocess.run([*cli, "run", str(scenario), "--out", str(tmp_path / "run")], capture_output=True,
-                             text=True, cwd=ROOT)
-        assert out.returncode == 2 and not (tmp_path / "run" / "summary.json").exists()
-        assert f"the bridge at udp://127.0.0.1:{port} refuses this host's session: the bridge holds another key (its " \
-               f"key id {key.id}, this key's {other.id})" in out.stderr and str(other.path) in out.stderr
-        scenario.write_text(scenario.read_text().replace(", key_file: other.key", ""))
-        out = subprocess.run([*cli, "run", str(scenario)], capture_output=True, text=True, cwd=ROOT)
-        assert out.returncode == 2 and "the bridge needs a key (it was started with --key)" in out.stderr \
-            and "set backend.key_file" in out.stderr
-    finally:
-        _stop(bridge)
-    assert json.loads((tmp_path / "stats.json").read_text())["dropped"]["unauthenticated"] > 0
 
 
 def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_name(key, tmp_path):
@@ -242,10 +221,11 @@ def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_n
     assert os.stat(latch.path).st_size > 0
 
 
-def test_the_readmes_lab_network_commands_run_as_written(tmp_path):
+def test_the_readmes_lab_network_commands_run_as_written(tmp_path, monkeypatch):
     """The README's "On a lab network" block, run as written at the robot and the host — with this machine's loopback
     standing in for the robot computer's address and the bridge's port its own (7000 may be taken), on the lock-step
-    clock (the real-time link is tests/test_hardware_link.py's, authenticated too) — then the key rotated."""
+    clock (the real-time link is tests/test_hardware_link.py's, authenticated too) — then a host without the key
+    and one with the key rotated are refused, each told why (exit 2, the bridge, the key ids, the key file)."""
     import re
     import shlex
 
@@ -255,31 +235,38 @@ def test_the_readmes_lab_network_commands_run_as_written(tmp_path):
     scenario = re.search(r"```yaml\n(.*?)```", section, re.S)[1]
     keys_new, bridge_cmd, run_cmd, clear_cmd = commands
     assert run_cmd == "rehabkit run lab_hit.yaml"
-    cli = [sys.executable, "-m", "rehabkit.cli"]
+    monkeypatch.setenv("REHABKIT_STATE", str(tmp_path / "state"))
 
-    def run(command: str, **kw):
-        return subprocess.run([*cli, *shlex.split(command)[1:]], capture_output=True, text=True, cwd=tmp_path,
-                              env={**os.environ, "REHABKIT_STATE": str(tmp_path / "state")}, **kw)
+    def run(command: str):
+        return cli(*shlex.split(command)[1:], cwd=tmp_path)
 
     made = run(keys_new)
     assert made.returncode == 0 and stat.S_IMODE((tmp_path / "keys" / "hit-1.key").stat().st_mode) == 0o600
     key = load_key(tmp_path / "keys" / "hit-1.key")
     assert key.id in made.stdout and key.secret.hex() not in made.stdout
-    bridge, port = _start([*cli, *shlex.split(bridge_cmd.replace(":7000", ":0"))[1:], "--lockstep"], "bridge:",
-                          cwd=tmp_path)
+    bridge, port = _start([sys.executable, "-m", "rehabkit.cli", *shlex.split(bridge_cmd.replace(":7000", ":0"))[1:],
+                           "--lockstep", "--stats", str(tmp_path / "stats.json")], "bridge:", cwd=tmp_path)
     try:
-        (tmp_path / "lab_hit.yaml").write_text(
-            scenario.replace("scenarios/", f"{ROOT}/scenarios/").replace("192.168.1.20", "127.0.0.1")
-            .replace("port: 7000", f"port: {port}").replace("type: hardware,", "type: hardware, clock: lockstep,"))
+        lab = scenario.replace("scenarios/", f"{ROOT}/scenarios/").replace("192.168.1.20", "127.0.0.1") \
+            .replace("port: 7000", f"port: {port}").replace("type: hardware,", "type: hardware, clock: lockstep,")
+        (tmp_path / "lab_hit.yaml").write_text(lab)
         done = run(run_cmd)
         assert done.returncode == 0, done.stderr
         notes = json.loads((tmp_path / "out" / "lab_hit" / "summary.json").read_text())["notes"]
         assert notes[0]["text"].endswith(f"key {key.id}")
         cleared = run(clear_cmd.replace("192.168.1.20:7000", f"127.0.0.1:{port}"))
         assert cleared.returncode == 0 and "cleared at the bridge" in cleared.stdout, cleared.stderr
+        (tmp_path / "keyless.yaml").write_text(lab.replace(", key_file: keys/hit-1.key", ""))
+        keyless = run("rehabkit run keyless.yaml --out keyless")
+        assert keyless.returncode == 2 and f"the bridge at udp://127.0.0.1:{port} refuses this host's session: the " \
+            "bridge needs a key (it was started with --key)" in keyless.stderr and "set backend.key_file" in \
+            keyless.stderr and not (tmp_path / "keyless" / "summary.json").exists()
         rotated = run("rehabkit keys new hit-1 --out keys/hit-1.key --replace")
-        assert rotated.returncode == 0 and load_key(tmp_path / "keys" / "hit-1.key").id != key.id
-        refused = run(run_cmd)  # the bridge still holds the old key: the host is told, with both ids
-        assert refused.returncode == 2 and f"its key id {key.id}" in refused.stderr
+        new = load_key(tmp_path / "keys" / "hit-1.key")
+        assert rotated.returncode == 0 and new.id != key.id
+        refused = run(run_cmd)  # the bridge still holds the old key: the host is told, with both ids and its file
+        assert refused.returncode == 2 and f"the bridge holds another key (its key id {key.id}, this key's {new.id})" \
+            in refused.stderr and str(tmp_path / "keys" / "hit-1.key") in refused.stderr
     finally:
         _stop(bridge)
+    assert json.loads((tmp_path / "stats.json").read_text())["dropped"]["unauthenticated"] > 0

@@ -21,7 +21,8 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     from rehabkit.core.plugins.registry import default_registry
     from rehabkit.core.safety.estop import EStopLatch
     from rehabkit.core.scenario.loads import Load
-    from rehabkit.hardware.bridge import Bridge, BridgeLimits
+    from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.bridge_limits import BridgeLimits
     from rehabkit.hardware.plant import MujocoPlant
 
     where = _listen(args)

@@ -33,11 +33,11 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from rehabkit.core.safety.estop import EStopLatch
+from rehabkit.hardware.bridge_limits import BridgeLimits
 from rehabkit.hardware.keypad import Keypad, handle
 from rehabkit.hardware.link.bridge_end import BridgeLink
 from rehabkit.hardware.link.clock import wait_until
@@ -49,8 +49,10 @@ from rehabkit.hardware.link.protocol import (
     CMD_ESTOP,
     CMD_LATCH,
     CMD_RESET,
+    COMMAND,
     ENABLED,
     ESTOPPED,
+    HEADER,
     HOLDING,
     LIMIT,
     RAMP_IN,
@@ -67,33 +69,10 @@ from rehabkit.hardware.security.keys import LinkKey
 HOLD_KP, HOLD_KD = 60.0, 6.0
 
 
-@dataclass
-class BridgeLimits:
-    """Where the bridge stops the robot on its own: the run's joint limits widened by a margin, so that the
-    host's safety layer (0.5° beyond the range by default) acts first and this only when it did not."""
-
-    lower: np.ndarray
-    upper: np.ndarray
-    velocity: np.ndarray
-    margin: float = math.radians(2.0)  # beyond the range [rad, or m for a sliding joint]
-    speed_factor: float = 1.25  # beyond the speed limit
-
-    def __post_init__(self) -> None:
-        self._low, self._high = self.lower - self.margin, self.upper + self.margin
-        self._fast = self.speed_factor * self.velocity
-
-    def breach(self, q: np.ndarray, qd: np.ndarray) -> str | None:
-        """Why the state is beyond the limits, or None."""
-        out = (q < self._low) | (q > self._high)
-        fast = np.abs(qd) > self._fast
-        if not (out | fast).any():  # every tick: one test
-            return None
-        if out.any():
-            k = int(np.argmax(out))
-            side = "lower" if q[k] < self.lower[k] else "upper"
-            return f"joint {k} beyond its {side} limit: {q[k]:.4f} (limit {getattr(self, side)[k]:.4f})"
-        k = int(np.argmax(fast))
-        return f"joint {k} too fast: {qd[k]:.3f} (limit {self.velocity[k]:.3f})"
+def _resets(plain: bytes) -> bool:
+    """An opened datagram is a host's reset (a COMMAND with ``CMD_RESET``)."""
+    fields = HEADER.unpack_from(plain)
+    return fields[2] == COMMAND and bool(fields[9] & CMD_RESET)
 
 
 class Bridge:
@@ -118,6 +97,7 @@ class Bridge:
         self.last_valid = -np.inf
         self.echo = 0.0
         self._last_tick, self._answer = -math.inf, None  # lock-step: the newest tick done and the answer sent
+        self.repeated_ticks = 0  # lock-step ticks the host sent again (answered again, not done again)
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
@@ -246,7 +226,7 @@ class Bridge:
 
     def link_stats(self) -> dict:
         """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""
-        return self.link.stats()
+        return {**self.link.stats(), "repeated_ticks": self.repeated_ticks}
 
     def serve(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given
@@ -299,9 +279,11 @@ class Bridge:
                 now = tick[0]
                 if duration is not None and now >= duration:
                     return
-                if now <= self._last_tick:  # the host asks again (its tick or our answer was lost): answer again
-                    self._receive(now, inbox)
-                    inbox = []
+                if now < self._last_tick and any(_resets(p) for p, _ in inbox):  # a new session's clock, afresh
+                    self._last_tick = -math.inf
+                if now <= self._last_tick:  # the host asks again (its tick or our answer was lost): answer again,
+                    inbox = []  # the tick done once (its command, the same again, not applied twice)
+                    self.repeated_ticks += 1
                     if self._answer is not None:
                         self.link.send(self._answer, addr)
                     continue

@@ -13,11 +13,6 @@ from __future__ import annotations
 import hmac
 import struct
 
-from cryptography.exceptions import InvalidTag
-from cryptography.hazmat.primitives import hashes
-from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
-from cryptography.hazmat.primitives.kdf.hkdf import HKDF
-
 from rehabkit.hardware.link.protocol import HEADER, SEQ, SEQ_AT, SESSION_AT, VERSION
 from rehabkit.hardware.security.keys import LinkKey
 
@@ -52,8 +47,12 @@ class Session:
     """One authenticated session's end: seals what it sends, opens what it receives (see the module's doc)."""
 
     def __init__(self, sid: int, key_id: str, send_key: bytes, receive_key: bytes):
+        from cryptography.exceptions import InvalidTag  # (only a keyed link pays for importing it)
+        from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
+
         self.id, self.key_id = sid, key_id
         self._seal, self._open = ChaCha20Poly1305(send_key), ChaCha20Poly1305(receive_key)
+        self._invalid = InvalidTag
         self.window = ReplayWindow()
         self.last_sent = 0
         self.opened = 0
@@ -81,7 +80,7 @@ class Session:
         head = data[:HEADER.size]
         try:
             body = self._open.decrypt(_nonce(seq), data[HEADER.size:], head)
-        except InvalidTag:
+        except self._invalid:
             return None, "authentication"
         self.window.mark(seq)
         self.opened += 1
@@ -98,6 +97,9 @@ def proof(key: LinkKey, who: bytes, robot: int, nh: bytes, nb: bytes) -> bytes:
 
 def session_for(key: LinkKey, robot: int, nh: bytes, nb: bytes, host: bool) -> Session:
     """The session both ends derive from the key and both nonces (``host``: the host's end of it)."""
+    from cryptography.hazmat.primitives import hashes
+    from cryptography.hazmat.primitives.kdf.hkdf import HKDF
+
     info = b"rehabkit link v%d session" % VERSION + struct.pack("<I", robot) + bytes.fromhex(key.id)
     keys = HKDF(algorithm=hashes.SHA256(), length=64, salt=nh + nb, info=info).derive(key.secret)
     sid = int.from_bytes(hmac.digest(key.secret, b"session id" + nh + nb, "sha256")[:4], "little") | 1
