@@ -270,3 +270,23 @@ def test_the_readmes_lab_network_commands_run_as_written(tmp_path, monkeypatch):
     finally:
         _stop(bridge)
     assert json.loads((tmp_path / "stats.json").read_text())["dropped"]["unauthenticated"] > 0
+
+
+def test_a_urdf_robot_runs_over_an_authenticated_link_and_validate_checks_its_key_file(tmp_path, monkeypatch):
+    """A robot that is not built in (the README's URDF arm, its file beside its scenario) over the link with a key
+    (the spawned bridge finds the URDF where the host does); a missing or open key file is refused by ``validate``,
+    at the scenario's line, before anything runs."""
+    scenario = tmp_path / "lab_arm4.yaml"
+    scenario.write_text(f"extends: {ROOT}/examples/robots/urdf_arm4.yaml\n"
+                        "backend: {type: hardware, clock: lockstep, key_file: keys/arm4.key}\n")
+    missing = cli("validate", scenario)
+    assert missing.returncode == 2 and f"{scenario}:2:44: backend.key_file: backend 'hardware': no such file; " \
+        "make one with `rehabkit keys new ROBOT-ID --out FILE`" in missing.stderr
+    key = new_key("arm4-1", tmp_path / "keys" / "arm4.key")
+    key.path.chmod(0o640)
+    assert f"readable by others (mode 640); chmod 600 {key.path}" in cli("validate", scenario).stderr
+    key.path.chmod(0o600)
+    assert cli("validate", scenario).returncode == 0
+    run = run_scenario(scenario)
+    assert run.passed and run.summary["notes"][0]["text"].endswith(f"key {key.id}")
+    assert run.metrics["states_dropped"] == 0 and run.metrics["safety_events"] == 0

@@ -32,7 +32,13 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     host, port, key = where
     registry = default_registry()
     info = registry.get("robot", args.robot)
-    robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), None)
+    from pathlib import Path
+
+    from rehabkit.core.kinds.context import Context
+
+    # a robot's files (a URDF, meshes) relative to where the bridge runs (a host spawning it: the scenario's folder)
+    here = Context(Path.cwd(), np.random.default_rng(args.seed), 1.0 / args.rate)
+    robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), here)
     if key is not None:
         from rehabkit.hardware.security.keys import KeyFileError, check_robot
 

@@ -82,13 +82,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         robot = context.robot
         self.n = robot.model.dof
         self.robot_name = robot.model.name  # (its e-stop latch at the bridge: <name>-<robot id>)
-        self.key = None
-        if config.key_file is not None:
-            try:
-                self.key = load_key(context.resolve(config.key_file))
-                check_robot(self.key, f"{self.robot_name}-{config.robot_id}")
-            except KeyFileError as exc:
-                raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
+        self.key = self._key(config, context)
         self._note = context.note
         self.brakes = robot.model.brakes is not None
         self._flags = 0  # sent with every command (the brakes, once applied)
@@ -126,6 +120,23 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         self._started = False
         self._estop_sent = False
         self._fault: str | None = None
+
+    @classmethod
+    def _key(cls, config: HardwareConfig, context: Context):
+        """The robot's link key, if the scenario names one: refused at ``key_file`` if unusable or another robot's."""
+        if config.key_file is None:
+            return None
+        try:
+            key = load_key(context.resolve(config.key_file))
+            check_robot(key, f"{context.robot.model.name}-{config.robot_id}")
+        except KeyFileError as exc:
+            raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
+        return key
+
+    @classmethod
+    def check(cls, config: HardwareConfig, context: Context) -> None:
+        """``validate``: the key file (there, owner-only, this robot's)."""
+        cls._key(config, context)
 
     # -- link ------------------------------------------------------------------
 

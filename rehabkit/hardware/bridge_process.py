@@ -35,7 +35,8 @@ def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
         cmd += ["--key", str(context.resolve(config.key_file))]
     # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
     log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    # in the scenario's folder: the robot's files (a URDF beside the scenario) resolve there as on the host
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True, cwd=context.scenario_dir)
     line = proc.stdout.readline()  # "bridge: <robot> on udp://host:port"
     if not line.startswith("bridge:"):
         proc.kill()

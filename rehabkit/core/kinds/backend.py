@@ -147,6 +147,11 @@ class Backend(ABC):
         commands); default none."""
         return []
 
+    @classmethod  # noqa: B027 (optional: most backends have nothing to check)
+    def check(cls, config: object, context: object) -> None:
+        """Refuse, before anything runs (``rehabkit validate``), the settings known wrong without building the
+        backend — a file it needs, say — as building it would: a ``SettingError`` names the setting."""
+
     def provenance(self) -> dict[str, str]:
         """Who the commands went to and how, for the safety log's run record (a robot link: its address, whether
         its session was authenticated and under which key id; never a secret); default nothing to add."""

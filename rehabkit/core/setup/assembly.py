@@ -117,11 +117,15 @@ class Assembly:
         """The validated scenario."""
         return self.loaded.model
 
-    def make(self, kind: str, config, path: tuple[str, ...]) -> Any:
-        """Build plugin ``config.type`` of ``kind`` from the section at ``path``; whatever it raises becomes a
-        :class:`PluginSetupError` located in the scenario file (a ``SettingError`` at its setting)."""
+    def make(self, kind: str, config, path: tuple[str, ...], check_only: bool = False) -> Any:
+        """Build plugin ``config.type`` of ``kind`` from the section at ``path`` (``check_only``: a backend's
+        :meth:`~rehabkit.core.kinds.backend.Backend.check` instead, for ``validate``); whatever it raises becomes
+        a :class:`PluginSetupError` located in the scenario file (a ``SettingError`` at its setting)."""
         info = self.registry.get(kind, config.type)
         try:
+            if check_only:
+                backend = isinstance(info.factory, type) and issubclass(info.factory, Backend)
+                return info.factory.check(config, self.context) if backend else None
             return info.factory(config, self.context)
         except (ValueError, PlanningError) as exc:
             raise PluginSetupError.refused(self.loaded.source, path, kind, config, exc) from exc
@@ -213,6 +217,8 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         a.backend = a.make("backend", sc.backend, ("backend",))
         if isinstance(a.backend, CompliantGaps):  # (its gaps in the commands bridged yielding, in a yield)
             a.safety.on_yield = a.backend.comply
+    else:
+        a.make("backend", sc.backend, ("backend",), check_only=True)
     check_expectations(a)
     a.schedule = _schedule(a)
     return a
