@@ -16,9 +16,11 @@ attack ``--count`` datagrams (the flood: ``--flood-s`` seconds):
   tampered   captured datagrams with one bit flipped
   wrong-key  HELLOs under another key id, PROOFs with a wrong MAC to the bridge's own challenges, this session's
              and an earlier session's PROOF and HELLO again
-  flood      as fast as one process can send, to the bridge's port: random bytes, replays, HELLOs
+  flood      as fast as one process can send, to the bridge's port: random bytes, replays, HELLOs (from a
+             process of its own, while the others go on)
 
-On SIGTERM it writes the report (datagrams sent and answers received per attack) and the capture (``--save``).
+It says ``attacker: done`` when through; on SIGTERM it writes the report (datagrams sent and answers received
+per attack) and the capture (``--save``).
 """
 
 from __future__ import annotations
@@ -67,7 +69,7 @@ def flip(data: bytes, rng: np.random.Generator) -> bytes:
     return bytes(flipped)
 
 
-def flood(bridge: tuple, seconds: float, samples: list[bytes], hello: bytes, seed: int, sent) -> None:
+def flood_bridge(bridge: tuple, seconds: float, samples: list[bytes], hello: bytes, seed: int, sent) -> None:
     """As fast as it can for ``seconds``: random bytes, replays, HELLOs (a process of its own)."""
     rng = np.random.default_rng(seed)
     junk = [bytes(rng.integers(0, 256, int(rng.integers(1, 200)), dtype=np.uint8)) for _ in range(256)]
@@ -132,6 +134,15 @@ class Attacker:
         while self.hellos < a.session or self.since_hello < a.after or self.host is None:
             time.sleep(0.01)
         rng, attacks = self.rng, set(a.attacks.split(","))
+        flood = None
+        if a.flood_s > 0 and "flood" in attacks:  # from a process of its own, while the others go on
+            hellos = [d for w, d in self.capture if w == 0 and peek_kind(d) == HELLO]
+            sent = multiprocessing.get_context("fork").Value("q", 0)
+            samples = [d for _, d in self.capture[-256:]]
+            flood = multiprocessing.get_context("fork").Process(
+                target=flood_bridge, args=(self.bridge, a.flood_s, samples, hellos[0] if hellos else b"", a.seed, sent))
+            start = time.time()
+            flood.start()
         for i in range(n if "forged" in attacks else 0):  # forged, without the key
             seq = 10**6 + i
             self.send("forged", encode(COMMAND, rid, seq, rng.uniform(-50, 50, j)), self.bridge)
@@ -169,16 +180,11 @@ class Attacker:
             for proof in proofs:
                 self.send("wrong-key", proof, self.bridge)
             time.sleep(0.001)  # (the bridge answers 20 a second outside a session: some get a challenge)
-        if a.flood_s > 0 and "flood" in attacks:
-            sent = multiprocessing.get_context("fork").Value("q", 0)
-            samples = [d for _, d in self.capture[-256:]]
-            p = multiprocessing.get_context("fork").Process(
-                target=flood, args=(self.bridge, a.flood_s, samples, hellos[0] if hellos else b"", a.seed, sent))
-            start = time.time()
-            p.start()
-            p.join()
+        if flood is not None:
+            flood.join()
             self.report["flood"] = {"sent": int(sent.value), "seconds": a.flood_s, "from": start, "to": time.time()}
         self.report["done"] = {"at": time.time()}
+        print("attacker: done", flush=True)
 
     def finish(self) -> None:
         if self.args.save:

@@ -3,6 +3,7 @@ attacked from a second process while it runs (tests/link_attacker.py): nothing f
 
 import json
 import os
+import select
 import signal
 import stat
 import subprocess
@@ -174,6 +175,7 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
                                  "--report", str(tmp_path / "attack.json")], "attacker:")
         try:
             runs = [_over(port, key) for _ in range(2)]  # the first only captured: the earlier session replayed
+            assert select.select([attacker.stdout], [], [], 30)[0] and attacker.stdout.readline() == "attacker: done\n"
         finally:
             _stop(attacker, signal.SIGTERM)
     finally:
