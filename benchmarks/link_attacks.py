@@ -110,7 +110,8 @@ def main() -> None:
             base_host = {k.removeprefix("states_dropped_"): v for k, v in base_run.metrics.items()
                          if k.startswith("states_dropped_")}
             flood = report.get("flood")
-            during = max(0.0, min(flood["to"], span[1]) - max(flood["from"], span[0])) if flood else 0.0
+            ends = min(flood["to"], flood["from"] + flood["seconds"], span[1]) if flood else 0.0
+            during = max(0.0, ends - max(flood["from"], span[0])) if flood else 0.0
             overlap = f" (flood {flood['sent']} in {flood['seconds']:g} s, {during:.1f} s of it during the run)" \
                 if flood else ""
             extra = ""

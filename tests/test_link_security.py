@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rehabkit.api import run_scenario
-from rehabkit.hardware.link.protocol import COMMAND, HEADER, STATE, Receiver, encode
+from rehabkit.hardware.link.protocol import COMMAND, ESTOPPED, HEADER, STATE, Receiver, encode
 from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake, peek_kind
 from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key, new_key
 from rehabkit.hardware.security.session import ReplayWindow
@@ -216,6 +216,9 @@ def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_n
             clear_over_link("127.0.0.1", port, 1, "mallory", timeout=0.5)
         assert latch.latched() is not None
         clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(key.path))
+        # its session's host gone (the bridge's states to it refused by the OS), the bridge serves the next one
+        assert not clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(key.path)) & ESTOPPED
+        assert bridge.poll() is None
     finally:
         _stop(bridge)
     record = json.loads(latch.path.read_text())

@@ -9,6 +9,7 @@ and at most ``OPEN_PER_TICK`` from the open socket a tick.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import sys
 import time
@@ -57,6 +58,8 @@ class BridgeLink:
                     data, addr = sock.recvfrom(65536)
                 except BlockingIOError:
                     break
+                except ConnectionRefusedError:  # (the session's host is gone: its socket says so, once)
+                    continue
                 most = None if most is None else most - 1
                 if (plain := self.open(data, addr)) is not None:
                     out.append((plain, addr))
@@ -70,7 +73,7 @@ class BridgeLink:
         for sock in socks:
             try:
                 return sock.recvfrom(65536)
-            except BlockingIOError:
+            except (BlockingIOError, ConnectionRefusedError):
                 continue
         return None
 
@@ -122,7 +125,8 @@ class BridgeLink:
         data = encode(kind, self.robot_id, self.gate.next_seq(), values, sent, echo=echo, status=status, held=held,
                       measured=measured, instruments=instruments, link=self.gate)
         if self.session_sock is not None and addr == self.gate.peer:
-            self.session_sock.send(data)
+            with contextlib.suppress(ConnectionRefusedError):  # the host is gone (the watchdog holds the robot)
+                self.session_sock.send(data)
         else:
             self.sock.sendto(data, addr)
 
