@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import base64
 import hashlib
-import os
 import re
 import secrets
 import stat
-import tempfile
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
+
+from rehabkit.core.io import atomic_write_text
 
 KEY_BYTES = 32
 _ROBOT_RE = re.compile(r"^[a-z0-9][a-z0-9_.-]*-[0-9]+$")
@@ -75,17 +75,7 @@ def new_key(robot: str, out: str | Path, replace: bool = False) -> LinkKey:
     key = LinkKey(robot, secrets.token_bytes(KEY_BYTES), out)
     text = (f"{HEADLINE}\nrobot: {robot}\nid: {key.id}\ncreated: {datetime.now(UTC).isoformat(timespec='seconds')}\n"
             f"secret: {base64.urlsafe_b64encode(key.secret).decode()}\n")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")  # (created 0600)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write_text(out, text, private=True)
     return key
 
 
