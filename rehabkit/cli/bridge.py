@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 
 from rehabkit.cli.exits import EXIT_INVALID, EXIT_OK
@@ -25,11 +26,6 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     from rehabkit.hardware.bridge_limits import BridgeLimits
     from rehabkit.hardware.plant import MujocoPlant
 
-    where = _listen(args)
-    if isinstance(where, str):
-        _err(f"error: {where}")
-        return EXIT_INVALID
-    host, port, key = where
     registry = default_registry()
     info = registry.get("robot", args.robot)
     from pathlib import Path
@@ -39,6 +35,11 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     # a robot's files (a URDF, meshes) relative to where the bridge runs (a host spawning it: the scenario's folder)
     here = Context(Path.cwd(), np.random.default_rng(args.seed), 1.0 / args.rate)
     robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), here)
+    where = _listen(args, f"{robot.model.name}-{args.robot_id}")
+    if isinstance(where, str):
+        _err(f"error: {where}")
+        return EXIT_INVALID
+    host, port, key = where
     if key is not None:
         from rehabkit.hardware.security.keys import KeyFileError, check_robot
 
@@ -88,6 +89,10 @@ def cmd_bridge(args: argparse.Namespace) -> int:
         print(f"bridge: authenticated sessions only, {key}", file=sys.stderr, flush=True)
     from threadpoolctl import threadpool_limits
 
+    # stopped by SIGINT or SIGTERM alike, its --stats written either way (a bridge started with & in a script has
+    # SIGINT ignored unless it says otherwise)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
             (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
@@ -99,8 +104,13 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _listen(args: argparse.Namespace) -> tuple[str, int, object] | str:
-    """Where the bridge listens and its key, or why it must not start: beyond loopback only with a key."""
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def _listen(args: argparse.Namespace, name: str) -> tuple[str, int, object] | str:
+    """Where the bridge for robot ``name`` (``hit-1``) listens and its key, or why it must not start: beyond loopback
+    only with a key."""
     import ipaddress
 
     from rehabkit.hardware.security.keys import KeyFileError, load_key
@@ -123,7 +133,7 @@ def _listen(args: argparse.Namespace) -> tuple[str, int, object] | str:
         loopback = host == "localhost"
     if not loopback and key is None:
         return (f"--listen {args.listen}: beyond this machine's loopback anyone on the network could drive the robot; "
-                f"give the bridge the robot's key (`rehabkit keys new {args.robot}-{args.robot_id}`, then --key FILE, "
+                f"give the bridge the robot's key (`rehabkit keys new {name}`, then --key FILE, "
                 "the same file as the host's backend.key_file)")
     return host, port, key
 
@@ -137,9 +147,12 @@ def add_parser(sub) -> None:
                    "authenticated sessions only")
     b.add_argument("--stats", metavar="FILE", help="at exit, write what the link accepted and dropped (by reason) and "
                    "its sessions (key ids) as JSON")
-    b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section)")
+    b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section; "
+                   "its files relative to the folder the bridge runs in)")
     b.add_argument("--rate", type=float, default=1000.0, help="plant and link rate [Hz]")
-    b.add_argument("--robot-id", type=int, default=1)
+    b.add_argument("--robot-id", type=int, default=1, help="the robot's id on the link (the scenario's "
+                   "backend.robot_id); with the robot model's name it names the robot's key and e-stop latch: "
+                   "ROBOT-ID, e.g. hit-1")
     b.add_argument("--watchdog-ms", type=float, default=None,
                    help="hold the robot without valid commands this long (default: the host backend's, 50 ms)")
     b.add_argument("--stale-ms", type=float, default=None,

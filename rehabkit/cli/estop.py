@@ -72,6 +72,10 @@ def cmd_estop(args: argparse.Namespace) -> int:
         from rehabkit.hardware.security.keys import KeyFileError
 
         try:
+            if args.key:  # (a key is one robot's: NAME must be that robot)
+                from rehabkit.hardware.security.keys import check_robot, load_key
+
+                check_robot(load_key(args.key), args.name)
             clear_over_link(host or "127.0.0.1", int(port), int(rid), args.by, args.key)
         except (KeyFileError, LinkRefusedError, PermissionError) as exc:
             print(f"error: {exc}", file=sys.stderr)

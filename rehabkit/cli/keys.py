@@ -30,8 +30,8 @@ def cmd_keys(args: argparse.Namespace) -> int:
 def add_parser(sub) -> None:
     k = sub.add_parser("keys", help="make a robot's link key (the same file at the host and at the bridge)")
     k.add_argument("action", choices=["new", "show"], help="new ROBOT-ID: a fresh key; show FILE: its robot and id")
-    k.add_argument("robot", metavar="ROBOT-ID|FILE", help="new: the robot as its e-stop latch is named (hit-1); "
-                   "show: the key file")
+    k.add_argument("robot", metavar="ROBOT-ID|FILE", help="new: the robot as its e-stop latch is named: its model's "
+                   "name and its robot_id (hit-1; a URDF's <robot name>, an MJCF's model); show: the key file")
     k.add_argument("--out", metavar="FILE", help="where to write it (default: $REHABKIT_STATE/keys/ROBOT-ID.key)")
     k.add_argument("--replace", action="store_true", help="write over an existing key file (rotating the key)")
     k.set_defaults(func=cmd_keys)

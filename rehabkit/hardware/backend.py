@@ -306,7 +306,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         name = f"{self.robot_name}-{self.config.robot_id}"
         how = (f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this "
                "machine)" if self.process is not None else f"`rehabkit estop clear {name} --by NAME --bridge "
-               f"{self.addr[0]}:{self.addr[1]}` while it runs, or the bridge's keypad")
+               f"{self.addr[0]}:{self.addr[1]}{f' --key {self.key.path}' if self.key else ''}` while it runs, or "
+               "the bridge's keypad")
         return (f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it "
                 f"with {how}")
 
