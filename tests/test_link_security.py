@@ -212,7 +212,7 @@ def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_n
     latch = EStopLatch.for_robot("hit", 1, tmp_path / "hit-1.json")
     latch.press("e-stop at the robot", "robot")
     bridge, port = _start([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--key", str(key.path),
-                           "--latch-file", str(latch.path)], "bridge:")
+                           "--latch-file", str(latch.path), "--stats", str(tmp_path / "stats.json")], "bridge:")
     try:
         with pytest.raises(PermissionError, match="needs a key"):  # a clear without the key: refused, and said
             clear_over_link("127.0.0.1", port, 1, "mallory", timeout=0.5)
@@ -225,6 +225,9 @@ def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_n
         _stop(bridge)
     record = json.loads(latch.path.read_text())
     assert not record["latched"] and record["cleared_by"] == "Dr. Ana Ruiz" and record["key_id"] == key.id
+    clears = json.loads((tmp_path / "stats.json").read_text())["estop_clears"]  # the bridge's own record of them
+    assert [(c["by"], c["latched"], c["key_id"]) for c in clears] == [("Dr. Ana Ruiz", True, key.id)] + \
+        [("Dr. Ana Ruiz", False, key.id)] * (len(clears) - 1)
     assert os.stat(latch.path).st_size > 0
 
 

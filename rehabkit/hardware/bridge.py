@@ -1,27 +1,24 @@
 """The robot-side bridge: the program next to a robot's drives, serving the host over UDP.
 
-Each tick (the plant's rate, 1 kHz by default) it applies the newest valid command, steps
-the plant, and sends the state back with the echo of the command it used. Commands pass
-the protocol's checks (``protocol.Receiver``) and are clipped to the effort limits.
+Each tick (the plant's rate, 1 kHz by default) it applies the newest valid command, steps the plant, and sends the
+state back with the echo of the command it used. Commands pass the protocol's checks (``protocol.Receiver``) and are
+clipped to the effort limits.
 
-A torque is only right for the state it was computed at, so the bridge never applies one
-open-loop for long: after ``stale_s`` of its own ticks without a newer command (a host
-stall, lost packets) it holds the posture it is at (PD to it plus gravity; status bit
-``STALE``) until the next command, which resumes torque control at once. Ticks, not wall
-time, count here, so a bridge catching up after a stall of its own holds too. If no valid
-command arrives for ``watchdog_s`` while running, or an e-stop command comes, the hold is
-latched (status ``HOLDING``) and only a reset from the host re-enables the robot. An e-stop
-(a host's, or the button at the robot: :meth:`Bridge.press_estop`, or the bridge's keypad: ``e``) is
-latched further, in the bridge's latch file (:mod:`rehabkit.core.safety.estop`): across sessions and
-restarts, resets are refused (status ``ESTOPPED``) until a person clears it (a ``CLEAR`` with their name from
-``rehabkit estop clear --bridge``: in an authenticated session when the bridge has a key; the keypad's ``c``; or the
-latch file cleared while the bridge is down);
-the session after that tells the host to ramp in (status ``RAMP_IN``). Given the
-run's joint limits, the bridge is also a backstop to the host's safety layer: a joint beyond
-its range or speed by more than a margin (wider than the host's, which acts first) latches
-the hold too (status ``LIMIT``), whatever the host is doing. Real drives plug in as another
-:class:`~rehabkit.hardware.plant.Plant`; :class:`~rehabkit.hardware.plant.MujocoPlant` is the robot's MuJoCo
-model as the plant, for tests and hardware-in-the-loop rehearsal.
+A torque is only right for the state it was computed at, so the bridge never applies one open-loop for long: after
+``stale_s`` of its own ticks without a newer command (a host stall, lost packets) it holds the posture it is at (PD
+to it plus gravity; status bit ``STALE``) until the next command, which resumes torque control at once. Ticks, not
+wall time, count here, so a bridge catching up after a stall of its own holds too. If no valid command arrives for
+``watchdog_s`` while running, or an e-stop command comes, the hold is latched (status ``HOLDING``) and only a reset
+from the host re-enables the robot. An e-stop (a host's, or the button at the robot: :meth:`Bridge.press_estop`, or
+the bridge's keypad: ``e``) is latched further, in the bridge's latch file (:mod:`rehabkit.core.safety.estop`):
+across sessions and restarts, resets are refused (status ``ESTOPPED``) until a person clears it (a ``CLEAR`` with
+their name from ``rehabkit estop clear --bridge``: in an authenticated session when the bridge has a key; the
+keypad's ``c``; or the latch file cleared while the bridge is down); the session after that tells the host to ramp
+in (status ``RAMP_IN``). Given the run's joint limits, the bridge is also a backstop to the host's safety layer: a
+joint beyond its range or speed by more than a margin (wider than the host's, which acts first) latches the hold too
+(status ``LIMIT``), whatever the host is doing. Real drives plug in as another
+:class:`~rehabkit.hardware.plant.Plant`; :class:`~rehabkit.hardware.plant.MujocoPlant` is the robot's MuJoCo model
+as the plant, for tests and hardware-in-the-loop rehearsal.
 
 Given the robot's key (``key``), the bridge serves authenticated sessions only (:mod:`rehabkit.hardware.security`):
 a datagram that is not authentic, or was seen before, is counted by reason and never applied, never resets, never
@@ -32,6 +29,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 
 import numpy as np
@@ -98,6 +96,7 @@ class Bridge:
         self.echo = 0.0
         self._last_tick, self._answer = -math.inf, None  # lock-step: the newest tick done and the answer sent
         self.repeated_ticks = 0  # lock-step ticks the host sent again (answered again, not done again)
+        self.clears: list[dict] = []  # each e-stop clear: when, by whom, how (the link, its key id)
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
@@ -131,6 +130,10 @@ class Bridge:
         the host's next reset, which then ramps in."""
         if self.latch is not None:
             self.latch.clear(by, **how)
+        if self.status & ESTOPPED or self.latch is not None:  # (the bridge's own record of who cleared it, how)
+            self.clears.append({"at": time.time(), "by": by, "latched": bool(self.status & ESTOPPED), **how})
+            print(f"bridge: e-stop cleared by {by} ({', '.join(f'{k} {v}' for k, v in how.items()) or 'here'})",
+                  file=sys.stderr, flush=True)
         if self.status & ESTOPPED:
             self.status = (self.status & ~ESTOPPED) | HOLDING
             self.status &= ~ENABLED
@@ -226,7 +229,7 @@ class Bridge:
 
     def link_stats(self) -> dict:
         """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""
-        return {**self.link.stats(), "repeated_ticks": self.repeated_ticks}
+        return {**self.link.stats(), "repeated_ticks": self.repeated_ticks, "estop_clears": self.clears}
 
     def serve(self, duration: float | None = None, parent: int | None = None) -> None:
         """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given
