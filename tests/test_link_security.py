@@ -171,7 +171,7 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
     bridge, port = _bridge(key, tmp_path / "bridge.json")  # one bridge, two sessions (each reset from scratch)
     try:
         attacker, port = _start([sys.executable, str(ROOT / "tests" / "link_attacker.py"), str(port), "--joints", "6",
-                                 "--session", "2", "--count", "60", "--flood-s", "1",
+                                 "--session", "2", "--count", "60", "--flood-s", "0.5",
                                  "--report", str(tmp_path / "attack.json")], "attacker:")
         try:
             runs = [_over(port, key) for _ in range(2)]  # the first only captured: the earlier session replayed

@@ -1,24 +1,21 @@
 """Hardware backend: the scenario's robot over the UDP link to a robot-side bridge, in soft real time.
 
-Each control tick the newest torque command goes out (after the safety layer), the loop
-sleeps to its deadline, and the newest valid state that came back is taken. Deadline
-misses (a tick that starts late), tick lateness (jitter) and round-trip latency (from the
-echo of each command in the bridge's state) are counted for ``summary.json``, and so are the
-bridge's holds through gaps in the commands (``bridge_stale_ms``; see the bridge), each a
-``stale-command`` safety intervention. A stall of this host longer than that hold pauses the
-task's timeline (the missed ticks are skipped and counted, ``ticks_skipped_s``) rather than
-catching up: the bridge has held the robot meanwhile, and a burst of late commands would drive
-it toward a reference that ran ahead. If no valid
-state arrives for ``state_timeout_s`` the link is lost: the run stops with that reason
-(:class:`LinkLostError`), the logs complete. With ``spawn_bridge`` the backend starts
-``rehabkit bridge`` itself, driving the robot's MuJoCo model as the plant: the same
-scenario runs against the link with only ``backend:`` changed.
+Each control tick the newest torque command goes out (after the safety layer), the loop sleeps to its deadline, and
+the newest valid state that came back is taken. Deadline misses (a tick that starts late), tick lateness (jitter)
+and round-trip latency (from the echo of each command in the bridge's state) are counted for ``summary.json``, and
+so are the bridge's holds through gaps in the commands (``bridge_stale_ms``; see the bridge), each a ``stale-
+command`` safety intervention. A stall of this host longer than that hold pauses the task's timeline (the missed
+ticks are skipped and counted, ``ticks_skipped_s``) rather than catching up: the bridge has held the robot
+meanwhile, and a burst of late commands would drive it toward a reference that ran ahead. If no valid state arrives
+for ``state_timeout_s`` the link is lost: the run stops with that reason (:class:`LinkLostError`), the logs
+complete. With ``spawn_bridge`` the backend starts ``rehabkit bridge`` itself, driving the robot's MuJoCo model as
+the plant: the same scenario runs against the link with only ``backend:`` changed.
 
 The scenario's scene is mirrored on the host, posed from the measured joints
-(:class:`~rehabkit.hardware.mirrored_scene.SceneMirror`): the log draws the whole robot,
-the scripted world objects live there, and a simulated camera looks at it — from a sensor
-thread, since the backend is ``realtime`` and a frame takes longer than a tick, with the
-pixels rendered in a process of their own (:mod:`~rehabkit.hardware.frame_server`).
+(:class:`~rehabkit.hardware.mirrored_scene.SceneMirror`): the log draws the whole robot, the scripted world objects
+live there, and a simulated camera looks at it — from a sensor thread, since the backend is ``realtime`` and a frame
+takes longer than a tick, with the pixels rendered in a process of their own
+(:mod:`~rehabkit.hardware.frame_server`).
 """
 
 from __future__ import annotations
@@ -36,8 +33,8 @@ from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.safety.layer import SafetyEvent
-from rehabkit.core.setup.limits import first_breach
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
+from rehabkit.hardware.bridge_says import hold_reason, latched_message
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
@@ -51,12 +48,10 @@ from rehabkit.hardware.link.protocol import (
     COMMAND,
     ESTOPPED,
     HOLDING,
-    LIMIT,
     PLAIN,
     RAMP_IN,
     STATE,
     TICK,
-    WATCHDOG,
     Receiver,
 )
 from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
@@ -167,20 +162,10 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
-                    why = ((f"its watchdog saw no valid command for {self.config.bridge_watchdog_ms:g} ms"
-                            if self.config.spawn_bridge else "its watchdog saw no valid command within its "
-                            "--watchdog-ms (a bridge started by hand sets its own)")
-                           if msg.status & WATCHDOG else "an e-stop at the robot" if msg.status & ESTOPPED else
-                           self._beyond() if msg.status & LIMIT else "status holding")
-                    why += "; it stays latched until a reset: the next run sends one"
-                    self._fault = f"the bridge holds the robot ({why}) at t={self.held_at:.3f}s"
+                    self._fault = f"the bridge holds the robot ({hold_reason(self, msg.status)}) at " \
+                                  f"t={self.held_at:.3f}s"
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
-
-    def _beyond(self) -> str:
-        """What the bridge's own limit check saw, from the state it held at (its margin is wider than the host's)."""
-        breach = first_breach(self.limits, self.joint_names, self.q, self.qd, tol=0.0, revolute=self.revolute)
-        return f"its own limit check: {breach.describe()}" if breach else "its own limit check"
 
     def read_instrument(self, name: str) -> np.ndarray:
         """An instrument's reading in the newest state (read by the robot side at the tick that state closes)."""
@@ -213,7 +198,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             if self.wire.refused is not None:
                 raise LinkKeyError(self.wire.where, None, self.wire.refused)
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
-                raise EStopLatchedError(self._latched_message(), f"{self.robot_name}-{self.config.robot_id}",
+                raise EStopLatchedError(latched_message(self), f"{self.robot_name}-{self.config.robot_id}",
                                         f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
             if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
@@ -300,16 +285,6 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         """Latch the e-stop at the robot; this session's stop is the safety layer's, in its category."""
         self._send(self.tau, CMD_LATCH)
         return True
-
-    def _latched_message(self) -> str:
-        where = f"udp://{self.addr[0]}:{self.addr[1]}"
-        name = f"{self.robot_name}-{self.config.robot_id}"
-        how = (f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this "
-               "machine)" if self.process is not None else f"`rehabkit estop clear {name} --by NAME --bridge "
-               f"{self.addr[0]}:{self.addr[1]}{f' --key {self.key.path}' if self.key else ''}` while it runs, or "
-               "the bridge's keypad")
-        return (f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it "
-                f"with {how}")
 
     def provenance(self) -> dict[str, str]:
         """The bridge this run drove and the session's key id (the safety log's run record)."""

@@ -1,0 +1,35 @@
+"""What the bridge's status tells the host's people: why it holds the robot on its own, and how to clear its latched
+e-stop (in the words of the run's refusal and its stop)."""
+
+from __future__ import annotations
+
+from rehabkit.core.setup.limits import first_breach
+from rehabkit.hardware.link.protocol import ESTOPPED, LIMIT, WATCHDOG
+
+
+def hold_reason(link, status: int) -> str:
+    """Why the bridge behind the hardware backend ``link`` holds the robot, from the status bits it sent."""
+    if status & WATCHDOG:
+        why = f"its watchdog saw no valid command for {link.config.bridge_watchdog_ms:g} ms" \
+            if link.config.spawn_bridge else "its watchdog saw no valid command within its --watchdog-ms (a bridge " \
+            "started by hand sets its own)"
+    elif status & ESTOPPED:
+        why = "an e-stop at the robot"
+    elif status & LIMIT:  # what its own limit check saw, from the state it held at (a margin wider than the host's)
+        breach = first_breach(link.limits, link.joint_names, link.q, link.qd, tol=0.0, revolute=link.revolute)
+        why = f"its own limit check: {breach.describe()}" if breach else "its own limit check"
+    else:
+        why = "status holding"
+    return why + "; it stays latched until a reset: the next run sends one"
+
+
+def latched_message(link) -> str:
+    """Why no session starts at a latched robot, and the command that clears it (with the link's key, if keyed)."""
+    where = f"udp://{link.addr[0]}:{link.addr[1]}"
+    name = f"{link.robot_name}-{link.config.robot_id}"
+    key = f" --key {link.key.path}" if link.key else ""
+    how = (f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this machine)"
+           if link.process is not None else f"`rehabkit estop clear {name} --by NAME --bridge "
+           f"{link.addr[0]}:{link.addr[1]}{key}` while it runs, or the bridge's keypad")
+    return f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it " \
+           f"with {how}"
