@@ -71,7 +71,7 @@ LIMIT = 32
 RAMP_IN = 64
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
-CMD_CLEAR = 8  # (v6 and before: clear a latched e-stop; now a CLEAR datagram with the person's name)
+# (8 was v6's e-stop clear: now a CLEAR datagram, with the person's name)
 CMD_BRAKE = 32  # apply the holding brakes (the host's safety stop has turned the torque off)
 CMD_LATCH = 16  # latch the e-stop for the sessions to come; this session's stop is the host's (its stop category)
 # the host's torques are a compliant reaction (its safety layer yields to the person): a gap in the commands is
