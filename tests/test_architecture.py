@@ -91,3 +91,14 @@ def test_each_folder_of_the_package_is_one_stage_of_a_dozen_modules_at_most():
     core = package / "core"
     assert stages <= {d.name for d in core.iterdir() if d.is_dir()}
     assert sorted(p.name for p in core.glob("*.py")) == ["__init__.py", "io.py", "version.py"]
+
+
+def test_every_package_is_in_the_distribution():
+    """A package missing from pyproject's list works in an editable install and is gone from a wheel."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "rehabkit").rglob("__init__.py")}
+    found |= {".".join(("rehabkit_plugins", *p.parent.relative_to(ROOT / "plugins").parts))
+              for p in (ROOT / "plugins").rglob("__init__.py")}
+    assert found - listed == set()

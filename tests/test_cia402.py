@@ -1,5 +1,7 @@
 """The CiA 402 drive state machine against the profile's transition table (IEC 61800-7-201, figure "state machine")."""
 
+from pathlib import Path
+
 import pytest
 
 from rehabkit.canopen.cia402 import (
@@ -106,3 +108,48 @@ def test_every_statusword_names_one_state():
         assert State.of(value) is state
     with pytest.raises(ValueError, match="names no CiA 402 state"):
         State.of(0x0B)
+
+
+EDS = Path(__file__).resolve().parents[1] / "rehabkit" / "canopen" / "eds" / "cia402_servo.eds"
+# what a master maps and sets on each drive: (index, subindex, PDO-mappable)
+NEEDED = [(0x6040, 0, True), (0x6041, 0, True), (0x6060, 0, True), (0x6061, 0, True), (0x6064, 0, True),
+          (0x606C, 0, True), (0x6071, 0, True), (0x6077, 0, True), (0x607A, 0, True), (0x60FF, 0, True),
+          (0x607D, 1, False), (0x607D, 2, False), (0x6080, 0, False), (0x6072, 0, False), (0x6085, 0, False),
+          (0x605A, 0, False), (0x60C2, 1, False), (0x60C2, 2, False), (0x6076, 0, False), (0x603F, 0, True),
+          (0x1017, 0, False), (0x1016, 1, False), (0x1400, 1, False), (0x1600, 1, False), (0x1800, 1, False),
+          (0x1A00, 8, False)]
+
+
+def test_the_generic_servo_drives_eds_holds_what_a_master_maps_and_sets_as_canopen_reads_it():
+    import canopen
+
+    od = canopen.import_od(str(EDS), node_id=5)
+    assert od[0x1000].default == 0x00020192  # CiA 402, a servo drive
+    assert od[0x6502].default & 0x380 == 0x380  # cyclic synchronous position, velocity and torque
+    for index, sub, mappable in NEEDED:
+        entry = od[index] if not sub else od[index][sub]
+        assert not mappable or entry.pdo_mappable, (hex(index), sub)
+    assert (od[0x1400][1].default, od[0x1800][1].default, od[0x1014].default) == (0x205, 0x185, 0x85)  # node 5's
+
+
+def test_a_drive_on_a_virtual_bus_answers_a_masters_sdo_as_its_eds_says():
+    import canopen
+
+    channel = "rehabkit-cia402-test"
+    drive_net, master_net = canopen.Network(), canopen.Network()
+    drive_net.connect(interface="virtual", channel=channel, receive_own_messages=False)
+    master_net.connect(interface="virtual", channel=channel, receive_own_messages=False)
+    try:
+        drive = canopen.LocalNode(3, str(EDS))
+        drive_net.add_node(drive)
+        machine = Drive402()
+        drive.sdo[0x6041].raw = machine.statusword
+        remote = canopen.RemoteNode(3, str(EDS))
+        master_net.add_node(remote)
+        assert remote.sdo[0x1000].raw == 0x00020192
+        assert State.of(remote.sdo[0x6041].raw) is S.SWITCH_ON_DISABLED
+        remote.sdo[0x6072].raw = 800  # a run's torque limit [per mille of rated], downloaded
+        assert drive.sdo[0x6072].raw == 800
+    finally:
+        drive_net.disconnect()
+        master_net.disconnect()
