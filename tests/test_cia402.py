@@ -132,24 +132,88 @@ def test_the_generic_servo_drives_eds_holds_what_a_master_maps_and_sets_as_canop
     assert (od[0x1400][1].default, od[0x1800][1].default, od[0x1014].default) == (0x205, 0x185, 0x85)  # node 5's
 
 
-def test_a_drive_on_a_virtual_bus_answers_a_masters_sdo_as_its_eds_says():
+@pytest.fixture(scope="module")
+def bus():
+    """Two CANopen networks on one python-can virtual bus: the drives' side and the master's (disconnecting one
+    waits out its notifier's second: once for the module)."""
     import canopen
 
-    channel = "rehabkit-cia402-test"
     drive_net, master_net = canopen.Network(), canopen.Network()
-    drive_net.connect(interface="virtual", channel=channel, receive_own_messages=False)
-    master_net.connect(interface="virtual", channel=channel, receive_own_messages=False)
-    try:
-        drive = canopen.LocalNode(3, str(EDS))
-        drive_net.add_node(drive)
-        machine = Drive402()
-        drive.sdo[0x6041].raw = machine.statusword
-        remote = canopen.RemoteNode(3, str(EDS))
-        master_net.add_node(remote)
-        assert remote.sdo[0x1000].raw == 0x00020192
-        assert State.of(remote.sdo[0x6041].raw) is S.SWITCH_ON_DISABLED
-        remote.sdo[0x6072].raw = 800  # a run's torque limit [per mille of rated], downloaded
-        assert drive.sdo[0x6072].raw == 800
-    finally:
-        drive_net.disconnect()
-        master_net.disconnect()
+    for net in (drive_net, master_net):
+        net.connect(interface="virtual", channel="rehabkit-cia402-test", receive_own_messages=False)
+    yield drive_net, master_net
+    drive_net.disconnect()
+    master_net.disconnect()
+
+
+def test_a_drive_on_a_virtual_bus_answers_a_masters_sdo_as_its_eds_says(bus):
+    import canopen
+
+    drive_net, master_net = bus
+    drive = canopen.LocalNode(3, str(EDS))
+    drive_net.add_node(drive)
+    machine = Drive402()
+    drive.sdo[0x6041].raw = machine.statusword
+    remote = canopen.RemoteNode(3, str(EDS))
+    master_net.add_node(remote)
+    assert remote.sdo[0x1000].raw == 0x00020192
+    assert State.of(remote.sdo[0x6041].raw) is S.SWITCH_ON_DISABLED
+    remote.sdo[0x6072].raw = 800  # a run's torque limit [per mille of rated], downloaded
+    assert drive.sdo[0x6072].raw == 800
+
+
+class _Joint:
+    """A joint that records the torques it is given (the plant comes with the backend)."""
+
+    def __init__(self):
+        self.q, self.qd, self.applied = 0.5, -0.25, []
+
+    def apply(self, torque):
+        self.applied.append(torque)
+
+    def read(self):
+        return self.q, self.qd, self.applied[-1] if self.applied else 0.0
+
+
+def test_a_simulated_drive_follows_the_masters_pdos_on_sync_and_drives_its_joint_only_when_enabled(bus):
+    """The master maps the PDOs by SDO as a CANopen master does, starts the node, and walks the drive to OPERATION
+    ENABLED with controlwords in an RPDO, one SYNC each; the TPDO answers with the statusword and the joint's state in
+    the drive's units; a fault's EMCY reaches the master and the torque goes off."""
+    import canopen
+
+    from rehabkit.canopen.sim_drive import DriveUnits, SimulatedDrive
+
+    drive_net, master_net = bus
+    joint = _Joint()
+    drive = SimulatedDrive(drive_net, 4, joint, DriveUnits(counts_per_rad=1000.0, rated_torque_nm=20.0))
+    remote = canopen.RemoteNode(4, str(EDS))
+    master_net.add_node(remote)
+    remote.tpdo.read()
+    remote.rpdo.read()
+    tx, tx2, rx = remote.tpdo[1], remote.tpdo[2], remote.rpdo[1]
+    for pdo, indices in ((tx, (0x6041, 0x6064)), (tx2, (0x606C, 0x6077)), (rx, (0x6040, 0x6071))):
+        pdo.clear()  # (at most 64 bits a PDO)
+        for index in indices:
+            pdo.add_variable(index)
+    for pdo in (tx, tx2, rx):
+        pdo.trans_type, pdo.enabled = 1, True  # synchronous, every SYNC
+    remote.tpdo.save()
+    remote.rpdo.save()
+    remote.nmt.state = "OPERATIONAL"
+    states = []
+    for cw in (SHUTDOWN, SWITCH_ON_CMD, ENABLE_OPERATION_CMD):
+        rx["Controlword"].raw, rx["Target torque"].raw = cw, 250  # 25 % of the rated torque
+        rx.transmit()
+        master_net.sync.transmit()
+        assert tx2.wait_for_reception(2.0) is not None  # (the drive sends its TPDOs in order: the last one in, all)
+        states.append(State.of(tx["Statusword"].raw))
+    assert states == [S.READY_TO_SWITCH_ON, S.SWITCHED_ON, S.OPERATION_ENABLED]
+    assert joint.applied == [0.0, 0.0, 5.0]  # 250 ‰ of 20 N·m, once the power stage is on
+    assert (tx["Position actual value"].raw, tx2["Velocity actual value"].raw) == (500, -250)
+    assert tx2["Torque actual value"].raw == 250  # what the joint applies, back in ‰ of the rated torque
+    drive.fault(0x7305)  # incremental sensor 1 fault
+    master_net.sync.transmit()
+    assert tx2.wait_for_reception(2.0) is not None
+    assert [e.code for e in remote.emcy.active] == [0x7305]  # the master's EMCY consumer has it
+    assert State.of(tx["Statusword"].raw) is S.FAULT_REACTION_ACTIVE and remote.sdo[0x603F].raw == 0x7305
+    assert drive.syncs == 4
