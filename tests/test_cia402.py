@@ -217,3 +217,43 @@ def test_a_simulated_drive_follows_the_masters_pdos_on_sync_and_drives_its_joint
     assert [e.code for e in remote.emcy.active] == [0x7305]  # the master's EMCY consumer has it
     assert State.of(tx["Statusword"].raw) is S.FAULT_REACTION_ACTIVE and remote.sdo[0x603F].raw == 0x7305
     assert drive.syncs == 4
+
+
+def test_a_simulated_drive_faults_when_the_masters_heartbeat_it_watches_goes_silent(bus):
+    """The master tells the drive to watch its heartbeat (0x1016: node 0x7F, 10 ms) and sets a 2 ms cycle (0x1006);
+    while it beats each cycle nothing happens; silent, the drive faults on its own once more than 10 ms of its clock
+    have passed since the last beat (at the 5th SYNC without one: 12 ms), with the heartbeat error's EMCY."""
+    import canopen
+
+    from rehabkit.canopen.sim_drive import HEARTBEAT_LOST, SimulatedDrive
+
+    drive_net, master_net = bus
+    drive = SimulatedDrive(drive_net, 6, _Joint())
+    remote = canopen.RemoteNode(6, str(EDS))
+    master_net.add_node(remote)
+    remote.sdo[0x1006].raw = 2000  # [µs]
+    remote.sdo[0x1016][1].raw = 0x7F << 16 | 10
+    remote.nmt.state = "OPERATIONAL"
+    for _ in range(20):  # beating: the master's heartbeat (NMT state operational) every cycle
+        master_net.send_message(0x77F, bytes([0x05]))
+        master_net.sync.transmit()
+    wait_for(lambda: drive.syncs == 20)
+    assert drive.machine.fault_code == 0
+    silent = 0
+    while drive.machine.fault_code == 0 and silent < 50:
+        master_net.sync.transmit()
+        silent += 1
+        wait_for(lambda n=20 + silent: drive.syncs == n)
+    assert drive.machine.fault_code == HEARTBEAT_LOST and silent == 5
+    wait_for(lambda: any(e.code == HEARTBEAT_LOST for e in remote.emcy.active))
+
+
+def wait_for(condition, timeout: float = 2.0) -> None:
+    """Until ``condition()`` holds: the virtual bus delivers on the receivers' threads (a bounded wait on an event
+    that comes, not a sleep standing in for one)."""
+    import time
+
+    until = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < until, "not within 2 s"
+        time.sleep(0.001)

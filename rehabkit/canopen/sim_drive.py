@@ -6,7 +6,10 @@ moved by the controlword the master maps into an RPDO, and, on each SYNC while O
 joint driven (cyclic synchronous torque: the target torque in per mille of the rated torque 0x6076, applied only
 while the power stage is on), and the TPDOs sent with the joint's state in the drive's units. The PDO maps are the
 master's: written by SDO into the drive's dictionary and read back from it at the first SYNC after they change.
-A fault (:meth:`SimulatedDrive.fault`) sends its EMCY and takes the state machine through its reaction.
+A fault (:meth:`SimulatedDrive.fault`) sends its EMCY and takes the state machine through its reaction; so does a
+master's heartbeat the drive is told to watch (0x1016) going silent for longer than its consumer time, on the drive's
+own clock: the SYNCs it has seen times the communication cycle period (0x1006), so a lock-step bus decides it the same
+way every run. Its own heartbeat (0x1017) is canopen's NMT slave's.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from rehabkit.canopen.cia402 import Drive402
 
 EDS = Path(__file__).resolve().parent / "eds" / "cia402_servo.eds"
 SYNC_ID = 0x80
+HEARTBEAT_LOST = 0x8130  # CiA 301/402 error code: life guard error or heartbeat error
 
 
 class Joint(Protocol):
@@ -57,13 +61,30 @@ class SimulatedDrive:
         network.subscribe(SYNC_ID, self._on_sync)
         network.subscribe(0x000, self._on_nmt)
         self.syncs = 0
+        self._heard: dict[int, int] = {}  # a watched node → when its heartbeat came last [µs, the drive's clock]
+        self._watch: dict[int, int] = {}  # a watched node → its consumer time [µs]
+        self._network = network
         self._publish()
+
+    @property
+    def clock(self) -> int:
+        """The drive's time [µs, exact]: SYNCs seen times the communication cycle period."""
+        return self.syncs * self.node.sdo[0x1006].raw
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
         if 0x1400 <= index <= 0x1BFF:  # the master (re)configures a PDO: its maps read again, once it is written
             self._maps_changed = True
         elif index == 0x605A:
             self.machine.quick_stop_option = od.decode_raw(data)
+        elif index == 0x1016 and subindex > 0:  # watch a node's heartbeat: (node id << 16) | consumer time [ms]
+            value = od.decode_raw(data)
+            node, ms = value >> 16 & 0x7F, value & 0xFFFF
+            if node and ms:
+                self._watch[node], self._heard[node] = ms * 1000, self.clock
+                self._network.subscribe(0x700 + node, self._on_heartbeat)
+
+    def _on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
+        self._heard[can_id - 0x700] = self.clock
 
     def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
         # the PDO maps the master wrote take effect as the node enters OPERATIONAL (NMT start: command 1, for this
@@ -83,6 +104,9 @@ class SimulatedDrive:
         if self._maps_changed:  # (a map changed while OPERATIONAL: taken at the next cycle)
             self._take_maps()
         self.syncs += 1
+        for node, limit in self._watch.items():
+            if self.clock - self._heard[node] > limit and self.machine.fault_code != HEARTBEAT_LOST:
+                self.fault(HEARTBEAT_LOST)  # (the master's heartbeat silent: the drive stops on its own)
         for pdo in self.node.rpdo.map.values():
             if pdo.enabled and pdo.is_received:
                 for var in pdo:  # (into the dictionary, as a drive's own are)
