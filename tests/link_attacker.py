@@ -96,15 +96,13 @@ class Attacker:
         self.report: dict[str, dict[str, int]] = {}
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # the attacker's own (not the relay's)
         self.sock.setblocking(False)
-        self.answers: dict[int, int] = {}
         self.challenges: list[bytes] = []
         self.in_flight = 0  # datagrams still to tamper with in flight
-        self.relayed = 0
         self.hellos, self.since_hello = 0, 0  # the host's handshakes relayed, its datagrams since the newest
+        self.relayed = threading.Condition()  # the relay's thread says so each time it has passed one on
 
     def forward(self, data: bytes) -> bytes:
         """What the relay passes on: ``data``, or (while tampering in flight, one in ten) with a bit flipped."""
-        self.relayed += 1
         if self.in_flight > 0 and self.rng.random() < 0.1:
             self.in_flight -= 1
             self.report.setdefault("tampered in flight", {"sent": 0})["sent"] += 1
@@ -131,8 +129,9 @@ class Attacker:
         a, n, j, rid = self.args, self.args.count, self.args.joints, self.args.robot_id
         if n == 0:  # only on the path, capturing (an earlier session for the next run to replay)
             return
-        while self.hellos < a.session or self.since_hello < a.after or self.host is None:
-            time.sleep(0.01)
+        with self.relayed:
+            self.relayed.wait_for(lambda: self.hellos >= a.session and self.since_hello >= a.after
+                                  and self.host is not None)
         rng, attacks = self.rng, set(a.attacks.split(","))
         flood = None
         if a.flood_s > 0 and "flood" in attacks:  # from a process of its own, while the others go on
@@ -163,8 +162,8 @@ class Attacker:
             self.send("tampered", flip(data, rng), self.bridge if way == 0 else self.host)
         # and in flight: the relay flips a bit in one in ten it forwards, instead of forwarding it
         self.in_flight = min(n // 4, 100) if "tampered" in attacks else 0
-        while self.in_flight > 0:
-            time.sleep(0.01)
+        with self.relayed:
+            self.relayed.wait_for(lambda: self.in_flight == 0)
         hellos = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == HELLO]
         proofs = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == PROOF]
         for i in range(n if "wrong-key" in attacks else 0):  # wrong key
@@ -232,6 +231,8 @@ def main() -> None:
                 attacker.capture.append((0, data))
                 attacker.hellos, attacker.since_hello = (attacker.hellos + 1, 0) if peek_kind(data) == HELLO else \
                     (attacker.hellos, attacker.since_hello + 1)
+            with attacker.relayed:
+                attacker.relayed.notify_all()
     finally:
         attacker.finish()
 

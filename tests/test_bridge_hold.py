@@ -88,7 +88,7 @@ def bridges(hit):
     yield make
     for host in made:
         host.sock.close()
-        host.bridge.sock.close()
+        host.bridge.link.close()
 
 
 def test_a_gap_in_the_commands_is_held_through_not_pushed_through(bridges):
@@ -145,7 +145,7 @@ def test_the_watchdog_still_latches_a_hold_after_a_long_silence(hit):
         assert host.state[3] & HOLDING and np.allclose(bridge.hold_q, q_stale)
     finally:
         host.sock.close()
-        bridge.sock.close()
+        bridge.link.close()
 
 
 def test_the_bridge_stops_a_joint_beyond_its_limits_whatever_the_host_sends(hit):
@@ -174,7 +174,7 @@ def test_the_bridge_stops_a_joint_beyond_its_limits_whatever_the_host_sends(hit)
         assert abs(host.state[1][5]) < 0.05 and host.state[3] & HOLDING
     finally:
         host.sock.close()
-        bridge.sock.close()
+        bridge.link.close()
 
 
 def test_a_latched_bridge_is_reset_by_the_next_host_session(hit):
@@ -201,7 +201,7 @@ def test_a_latched_bridge_is_reset_by_the_next_host_session(hit):
             second.sock.close()
     finally:
         first.sock.close()
-        bridge.sock.close()
+        bridge.link.close()
 
 
 def test_a_bridge_started_by_hand_has_the_hosts_watchdog_defaults():

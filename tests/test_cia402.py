@@ -233,27 +233,26 @@ def test_a_simulated_drive_faults_when_the_masters_heartbeat_it_watches_goes_sil
     master_net.add_node(remote)
     remote.sdo[0x1006].raw = 2000  # [µs]
     remote.sdo[0x1016][1].raw = 0x7F << 16 | 10
+    tx = remote.tpdo[1]  # the statusword every SYNC: the master knows the drive has taken each cycle in
+    tx.read()
+    tx.clear()
+    tx.add_variable(0x6041)
+    tx.trans_type, tx.enabled = 1, True
+    tx.save()
     remote.nmt.state = "OPERATIONAL"
-    for _ in range(20):  # beating: the master's heartbeat (NMT state operational) every cycle
-        master_net.send_message(0x77F, bytes([0x05]))
+
+    def cycle(beat: bool) -> None:
+        if beat:  # the master's heartbeat (NMT state operational)
+            master_net.send_message(0x77F, bytes([0x05]))
         master_net.sync.transmit()
-    wait_for(lambda: drive.syncs == 20)
-    assert drive.machine.fault_code == 0
+        assert tx.wait_for_reception(2.0) is not None
+
+    for _ in range(20):  # beating every cycle
+        cycle(beat=True)
+    assert drive.syncs == 20 and drive.machine.fault_code == 0
     silent = 0
     while drive.machine.fault_code == 0 and silent < 50:
-        master_net.sync.transmit()
+        cycle(beat=False)
         silent += 1
-        wait_for(lambda n=20 + silent: drive.syncs == n)
     assert drive.machine.fault_code == HEARTBEAT_LOST and silent == 5
-    wait_for(lambda: any(e.code == HEARTBEAT_LOST for e in remote.emcy.active))
-
-
-def wait_for(condition, timeout: float = 2.0) -> None:
-    """Until ``condition()`` holds: the virtual bus delivers on the receivers' threads (a bounded wait on an event
-    that comes, not a sleep standing in for one)."""
-    import time
-
-    until = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < until, "not within 2 s"
-        time.sleep(0.001)
+    assert any(e.code == HEARTBEAT_LOST for e in remote.emcy.active)  # (sent before the cycle's TPDO)

@@ -87,7 +87,7 @@ class Bridge:
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
         self.held_ticks = 0  # since the reset, sent with each state
         self.link = BridgeLink(robot_id, plant.joints, host, port, key)
-        self.sock, self.port, self.rx = self.link.sock, self.link.port, self.link.rx
+        self.port, self.rx = self.link.port, self.link.rx
         self.peer = None
         self.tau = np.zeros(plant.joints)
         self.status = 0

@@ -57,6 +57,10 @@ class HostLink:
         what = (kind, values, sent_at, status)
         if kind == CLOCK or status & TICK:
             self._last = what
+        self._transmit(what)
+
+    def _transmit(self, what: tuple) -> None:
+        kind, values, sent_at, status = what
         self.sock.sendto(encode(kind, self.robot_id, self.next_seq(), values, sent_at=sent_at, status=status,
                                 link=self.link), self.addr)
 
@@ -76,9 +80,7 @@ class HostLink:
             if now >= until:
                 return False
             if not wait_readable(self.sock, min(until, now + RESEND_S) - now):
-                kind, values, sent_at, status = self._last  # the same tick again: the bridge ticks once, answers again
-                self.sock.sendto(encode(kind, self.robot_id, self.next_seq(), values, sent_at=sent_at, status=status,
-                                        link=self.link), self.addr)
+                self._transmit(self._last)  # the same tick again: the bridge ticks once, answers again
                 continue
             receive()
         return True
@@ -117,6 +119,3 @@ class HostLink:
 
     def close(self) -> None:
         self.sock.close()
-
-
-

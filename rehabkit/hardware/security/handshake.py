@@ -21,7 +21,8 @@ import secrets
 import time
 from collections import OrderedDict
 
-from rehabkit.hardware.link.protocol import HEADER, MAGIC, SEQ, SESSION_AT, VERSION, PlainLink, pack_bytes
+from rehabkit.hardware.link.clock import wait_readable
+from rehabkit.hardware.link.protocol import HEADER, MAGIC, PLAIN, SEQ, SESSION_AT, VERSION, pack_bytes
 from rehabkit.hardware.security.keys import LinkKey
 from rehabkit.hardware.security.session import KEY_ID, MAC, NONCE, Session, proof, session_for
 
@@ -61,9 +62,7 @@ class BridgeGate:
         self.key, self.robot = key, robot
         self.session: Session | None = None
         self.peer: tuple | None = None  # the address that proved the session
-        self.sessions = 0  # proven so far
         self._pending: OrderedDict[bytes, tuple[bytes, float]] = OrderedDict()  # Nb → (Nh, issued at)
-        self._plain = PlainLink()
         self.seq = 0
         self._budget, self._refilled = ANSWERS_PER_S, 0.0
 
@@ -71,7 +70,7 @@ class BridgeGate:
         """A handshake datagram from ``addr`` (after :func:`peek_kind`): the reply to send back (or None) and, if it
         was refused, why (counted by the caller); a proven PROOF opens a new session (:attr:`session`) with it."""
         now = time.monotonic() if now is None else now
-        plain, why = self._plain.open(data)
+        plain, why = PLAIN.open(data)
         got = handshake_body(plain, self.robot) if plain is not None else None
         if got is None:
             return None, why or "handshake"
@@ -101,7 +100,6 @@ class BridgeGate:
         del self._pending[nb]  # (one proof per nonce: a replayed PROOF finds none)
         self.session = session_for(self.key, self.robot, nh, nb, host=False)
         self.peer = addr  # the session is the proven host's, at its address only
-        self.sessions += 1
         self.seq = 0
         return self.seal(pack_bytes(WELCOME, self.robot, self.next_seq(), b"", self.session.id)), ""
 
@@ -110,13 +108,13 @@ class BridgeGate:
         return self.seq
 
     def seal(self, plain: bytes) -> bytes:
-        return (self.session or self._plain).seal(plain)
+        return (self.session or PLAIN).seal(plain)
 
     def open(self, data: bytes, addr: tuple) -> tuple[bytes | None, str]:
         """Header and body of a datagram from ``addr`` this bridge may read: in the session, from the host that
         proved it, when it has a key; else intact."""
         if self.key is None:
-            return self._plain.open(data)
+            return PLAIN.open(data)
         if self.session is None:
             if len(data) < HEADER.size:
                 return None, "length"
@@ -146,13 +144,11 @@ class BridgeGate:
         return True
 
     def _refuse(self, why: int) -> bytes:
-        self.seq += 1
         mine = bytes.fromhex(self.key.id) if self.key is not None else bytes(KEY_ID)
-        return self._plain.seal(pack_bytes(REFUSED, self.robot, self.seq, bytes([why]) + mine))
+        return self._send(REFUSED, bytes([why]) + mine)
 
     def _send(self, kind: int, body: bytes) -> bytes:
-        self.seq += 1
-        return self._plain.seal(pack_bytes(kind, self.robot, self.seq, body))
+        return PLAIN.seal(pack_bytes(kind, self.robot, self.next_seq(), body))
 
 
 class HostHandshake:
@@ -170,10 +166,9 @@ class HostHandshake:
 
     def next(self, seq: int) -> bytes:
         """The datagram to send now: the HELLO, or the PROOF once a challenge was proven."""
-        plain = PlainLink()
         if self.pending is None:
-            return plain.seal(pack_bytes(HELLO, self.robot, seq, bytes.fromhex(self.key.id) + self.nh))
-        return plain.seal(pack_bytes(PROOF, self.robot, seq, self.proof))
+            return PLAIN.seal(pack_bytes(HELLO, self.robot, seq, bytes.fromhex(self.key.id) + self.nh))
+        return PLAIN.seal(pack_bytes(PROOF, self.robot, seq, self.proof))
 
     def take(self, data: bytes) -> Session | None:
         """A datagram from the bridge during the handshake: the session if it is the welcome."""
@@ -182,7 +177,7 @@ class HostHandshake:
             if plain is not None and HEADER.unpack_from(plain)[2] == WELCOME:
                 return self.pending
             return None
-        plain, _ = PlainLink().open(data)
+        plain, _ = PLAIN.open(data)
         got = handshake_body(plain, self.robot) if plain is not None else None
         if got is None:
             return None
@@ -201,7 +196,7 @@ class HostHandshake:
 
 def refusal(data: bytes, robot: int, key: LinkKey | None) -> str | None:
     """Why the bridge refused a session, in words, if ``data`` is its REFUSED (``key``: this end's, if any)."""
-    plain, _ = PlainLink().open(data)
+    plain, _ = PLAIN.open(data)
     got = handshake_body(plain, robot) if plain is not None else None
     if got is None or got[0] != REFUSED:
         return None
@@ -219,8 +214,6 @@ def handshake(sock, addr: tuple, key: LinkKey, robot: int, next_seq, timeout: fl
         LinkRefusedError: the bridge refused (no key, another key), or could not prove it holds this key.
         TimeoutError: no answer within ``timeout`` (wall time).
     """
-    from rehabkit.hardware.link.clock import wait_readable
-
     shake = HostHandshake(key, robot)
     until = time.monotonic() + timeout
     while time.monotonic() < until:

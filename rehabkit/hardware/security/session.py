@@ -55,7 +55,6 @@ class Session:
         self._invalid = InvalidTag
         self.window = ReplayWindow()
         self.last_sent = 0
-        self.opened = 0
 
     def seal(self, plain: bytes) -> bytes:
         """Header and body (the header naming this session) → the datagram: body encrypted, both authenticated."""
@@ -83,7 +82,6 @@ class Session:
         except self._invalid:
             return None, "authentication"
         self.window.mark(seq)
-        self.opened += 1
         return head + body, ""
 
 
