@@ -178,7 +178,7 @@ class _Joint:
 def test_a_simulated_drive_follows_the_masters_pdos_on_sync_and_drives_its_joint_only_when_enabled(bus):
     """The master maps the PDOs by SDO as a CANopen master does, starts the node, and walks the drive to OPERATION
     ENABLED with controlwords in an RPDO, one SYNC each; the TPDO answers with the statusword and the joint's state in
-    the drive's units; a fault's EMCY reaches the master and the torque goes off."""
+    the drive's units (and to an SDO read as they stand); a fault's EMCY reaches the master and the torque goes off."""
     import canopen
 
     from rehabkit.canopen.sim_drive import DriveUnits, SimulatedDrive
@@ -215,7 +215,9 @@ def test_a_simulated_drive_follows_the_masters_pdos_on_sync_and_drives_its_joint
     master_net.sync.transmit()
     assert tx2.wait_for_reception(2.0) is not None
     assert [e.code for e in remote.emcy.active] == [0x7305]  # the master's EMCY consumer has it
-    assert State.of(tx["Statusword"].raw) is S.FAULT_REACTION_ACTIVE and remote.sdo[0x603F].raw == 0x7305
+    # no quick stop deceleration set (0x6085 = 0): the reaction has no ramp, the torque goes off at once
+    assert State.of(tx["Statusword"].raw) is S.FAULT and remote.sdo[0x603F].raw == 0x7305
+    assert joint.applied[-1] == 0.0
     assert drive.syncs == 4
 
 

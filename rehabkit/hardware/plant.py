@@ -122,3 +122,10 @@ class MujocoPlant(Plant):
 
     def gravity(self, q):
         return self.robot.gravity_torque(q)
+
+    def joint_inertia(self) -> np.ndarray:
+        """Each joint's own inertia where the plant is now (the mass matrix's diagonal with the rotors' armature)
+        [kg·m², or kg for a sliding joint]: what a drive's auto-tuning finds."""
+        full = np.zeros((self.model.nv, self.model.nv))
+        mujoco.mj_fullM(self.model, self.data, full)
+        return full[self._v, self._v] + self.model.dof_armature[self._v]

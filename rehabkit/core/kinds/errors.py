@@ -8,11 +8,12 @@ class SettingError(ValueError):
     """A plugin refuses one of its settings when it is built: ``setting`` names it (a dotted path inside the
     plugin's section, as a string or a tuple: ``"kp"``, ``("voluntary", "strength_nm")``), ``problem`` says what is
     wrong with it, in the plugin's words. The run's setup reports it at that setting's line in the scenario file;
-    any other ``ValueError`` a plugin raises is reported at the plugin's ``type``."""
+    any other ``ValueError`` a plugin raises is reported at the plugin's ``type``. With ``root`` the setting is the
+    scenario's, from its top (``("rates", "control_hz")``): one the plugin's settings cannot live with."""
 
-    def __init__(self, setting: str | tuple[str | int, ...], problem: str):
+    def __init__(self, setting: str | tuple[str | int, ...], problem: str, root: bool = False):
         self.setting = tuple(setting.split(".")) if isinstance(setting, str) else tuple(setting)
-        self.problem = problem
+        self.problem, self.root = problem, root
         super().__init__(f"{'.'.join(map(str, self.setting))}: {problem}")
 
 

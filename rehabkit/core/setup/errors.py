@@ -43,6 +43,8 @@ class PluginSetupError(ScenarioError, SetupError):
         """Plugin ``config.type`` of ``kind`` (its section at ``path``) refused with ``exc``: named once, located
         at the setting a :class:`SettingError` names."""
         setting = exc.setting if isinstance(exc, (SettingError, PlanningError)) else ()
+        if isinstance(exc, SettingError) and exc.root:  # (a scenario setting the plugin cannot live with)
+            path = ()
         text = str(exc).removeprefix(f"{config.type}: ")  # plugins often name themselves
         if isinstance(exc, SettingError) and (*path, *setting) in source.key_marks:
             text = exc.problem  # (located at the setting, which the diagnostic names)

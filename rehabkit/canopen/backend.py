@@ -1,0 +1,260 @@
+"""The canopen backend: the scenario's robot on CiA 402 servo drives on a CAN bus, the host as CANopen master.
+
+At the first reset each drive is set up by SDO (the cycle, heartbeats both ways, cyclic synchronous torque, the run's
+limits downloaded: position, speed, torque, quick stop deceleration and — from the e-stop's stop category — option
+code; the PDO maps) and started; then the 402 state machine is walked to OPERATION ENABLED. Each control step is one
+cycle: the safety layer's torques in the RPDOs, SYNC, the TPDOs in. A drive's EMCY, a drive leaving OPERATION
+ENABLED, a lost heartbeat, missing TPDOs, a bus that fails: each stops the run with its reason and code
+(:class:`~rehabkit.canopen.config.DriveFaultError`), the other drives stopped by the safety layer in its category and
+the torque taken off by the drives when that stop ends (disable voltage). The e-stop latch is this host's (it is the
+drives' master): a run does not start while it is latched, and a drive's FAULT is reset only in the first run after a
+person has cleared it (``rehabkit estop clear``).
+
+With no ``bus`` named, simulated drives (:mod:`~rehabkit.canopen.drive_rig`) on the robot's MuJoCo model start with
+the run: in real time on a virtual bus of this process, or in lock-step (the plant advancing one cycle per SYNC,
+every frame delivered as it is sent). The scene is mirrored on the host from the measured joints, as over the
+hardware link.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from rehabkit.canopen.bus_check import check_bus
+from rehabkit.canopen.can_bus import CanBus
+from rehabkit.canopen.config import CanopenConfig, DriveFaultError
+from rehabkit.canopen.drive_rig import DriveRig
+from rehabkit.canopen.master import DriveLimits, DriveMaster
+from rehabkit.canopen.sim_drive import EDS, DriveUnits
+from rehabkit.core.kinds.backend import EStopLatchedError
+from rehabkit.core.kinds.interfaces import Backend, Context
+from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.results.metric import Metric
+from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
+from rehabkit.core.safety.stopping import joint_inertia
+from rehabkit.hardware.bridge_limits import BridgeLimits
+from rehabkit.hardware.frame_server import FrameServer
+from rehabkit.hardware.link.clock import wait_until
+from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
+
+METRICS = (
+    Metric("can_cycles", "count", clock="wall", description="SYNC cycles the loop ran on the bus"),
+    Metric("can_late_cycles", "count", clock="wall", description="cycles whose SYNC left after the next was due"),
+    Metric("can_missed_tpdos", "count", clock="wall", description="drive cycles whose TPDOs did not come in time"),
+    Metric("can_latency_*", "ms", "wall", description="SYNC to a cycle's last TPDO, wall clock"),
+    Metric("can_emcy", "count", description="EMCY messages from the drives"),
+    Metric("can_bus_load", description="share of the bitrate the cyclic traffic takes (worst-case bit stuffing)"),
+    Metric("can_frames_traced", "count", clock="wall", description="frames written to the CAN trace"),
+)
+STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
+
+
+class CanopenBackend(MirroredScene, Backend):
+    """The robot's joints on CiA 402 drives over CANopen (see the module's doc)."""
+
+    metrics = METRICS
+    real_person = True
+
+    def __init__(self, config: CanopenConfig, context: Context):
+        specs, self.load = check_bus(config, context)
+        robot = context.robot
+        self.config, self.robot = config, robot
+        self.timestep, self.period = config.timestep, context.control_dt
+        self.realtime = config.clock == "realtime"
+        self.simulated = config.bus is None
+        self.n = robot.model.dof
+        self.names = robot.model.joint_names
+        effort = robot.model.limits.effort
+        self.units = [DriveUnits(s.counts_per_rad(), (s.rated_torque_nm or effort[i] / s.gear_ratio) * s.gear_ratio,
+                                 s.direction) for i, s in enumerate(specs)]
+        self.latch = EStopLatch.for_robot(robot.model.name, config.robot_id)
+        self.safety_config = context.safety
+        self.mirror = SceneMirror(robot.model, context.world)
+        self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
+        self.measured = np.zeros(self.mirror.measured_count)
+        self.q, self.qd, self.tau = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
+        self._posed = False
+        self.cycles, self.late = 0, 0
+        self.latency: list[float] = []
+        self.t0 = self.deadline = 0.0
+        self._configured = self._started = False
+        self._fault: DriveFaultError | None = None
+        self._injections = sorted(config.inject, key=lambda f: f.at_s)
+        trace = None
+        if config.trace is not None and context.out_dir is not None:
+            trace = context.out_dir / f"can.{config.trace}"
+        bus = config.bus
+        self.bus = CanBus(bus.interface if bus else None, bus.channel if bus else None, config.bitrate,
+                          simulated=self.simulated, lockstep=not self.realtime, trace=trace, clock=self._now)
+        try:
+            self.rig = None
+            if self.simulated:
+                from rehabkit.hardware.plant import MujocoPlant  # (only a run with simulated drives loads MuJoCo here)
+
+                plant = MujocoPlant(robot, config.timestep, context.instruments,
+                                    context.world.loads if context.world else (), context.seed or 0)
+                self.rig = DriveRig(self.bus.drives, plant, [s.node_id for s in specs], self.units,
+                                    clocked=not self.realtime)
+            nodes = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(EDS)) for s in specs]
+            self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now)
+        except BaseException:
+            self.bus.close(keep_trace=False)
+            raise
+
+    @classmethod
+    def check(cls, config: CanopenConfig, context: Context) -> None:
+        """``validate``: the drives against the robot, their EDS files, the bus load at the control rate."""
+        check_bus(config, context)
+
+    def _now(self) -> float:
+        if self.realtime:
+            return time.monotonic() - self.t0
+        return self.master.cycles * self.period if hasattr(self, "master") else 0.0
+
+    def _limits(self, q0: np.ndarray) -> DriveLimits:
+        """The drives' own limits: the run's range and speed a margin wider than the safety layer's (a backstop,
+        as the bridge's), its torques, the stop's deceleration and category."""
+        lim = self.robot.model.limits
+        wide = BridgeLimits(lim.lower, lim.upper, lim.velocity)
+        sc = self.safety_config
+        if sc is not None and sc.stop_decel_deg_s2 is not None:
+            decel = np.full(self.n, math.radians(sc.stop_decel_deg_s2))
+        else:  # as the safety layer's default: half what each drive can give its joint here
+            inertia = joint_inertia(self.robot, q0)
+            decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
+        categories = sc.stop_category if sc is not None else {}
+        category = categories.get("e-stop", categories.get("default", 2))
+        return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category])
+
+    # -- Backend -----------------------------------------------------------------------------------------------
+
+    def reset(self, q0: np.ndarray) -> None:
+        if self.frames is not None:
+            self.frames.wait_ready()
+        where = f"the drives on {self.provenance()['bus']}"
+        if self.latch.latched() is not None:
+            raise EStopLatchedError(self.latch.refusal(where), self.latch.name, where)
+        cleared = self.latch.take_ramp_in()
+        self.ramp_in_after_clear = RAMP_IN_AFTER_CLEAR_S if cleared else 0.0
+        q0 = np.asarray(q0, float)
+        self.t0 = time.monotonic()
+        if not self._configured:
+            self.master.configure(self.period, self._limits(q0))
+            self._configured = True
+        if self.simulated:  # (placed before the drives are enabled, within their limits, and again once they are:
+            self.master.place(q0)  # with the power stages off the arm sagged meanwhile)
+        self.master.enable(fault_reset=cleared)
+        if self.simulated:
+            self.master.place(q0)
+        self.tau = self.robot.gravity_torque(q0)  # (held until the controller's first torque)
+        self._cycle()
+        if not self.simulated and np.abs(self.master.q - q0).max() > math.radians(1.0):
+            raise DriveFaultError(f"the robot is not at the start posture (off by "
+                                  f"{np.degrees(np.abs(self.master.q - q0).max()):.1f}°): bring it there first",
+                                  observable=False)
+        self.q, self.qd = self.master.q.copy(), self.master.qd.copy()
+        self._started, self._fault = False, None
+
+    def _cycle(self) -> None:
+        latency = self.master.cycle(self.tau, 0.8 * self.period if self.realtime else 0.0)
+        self.latency.append(latency)
+
+    def state(self) -> tuple[float, np.ndarray, np.ndarray]:
+        return self.cycles * self.period, self.q, self.qd
+
+    def command(self, tau: np.ndarray) -> None:
+        self.tau = np.array(tau, float)
+
+    def step(self, n: int = 1) -> None:
+        """One cycle (``n`` plant steps of the simulated drives: the control period)."""
+        if not self._started:
+            self._started = True
+            self.deadline = time.monotonic()
+        if self.realtime:
+            wait_until(self.deadline)
+            if time.monotonic() - self.deadline > self.period:
+                self.late += 1
+            self.deadline += self.period
+        if self._injections and self.cycles * self.period >= self._injections[0].at_s - 1e-9:
+            self._inject(self._injections.pop(0))
+        self._cycle()
+        self.cycles += 1
+        self.q, self.qd, self._posed = self.master.q.copy(), self.master.qd.copy(), False
+        fault = self.master.fault()
+        if fault is not None and self._fault is None:
+            self._fault = fault
+            if self._stop_category() == 0:
+                self.master.torque_off()
+            raise fault
+
+    def _inject(self, fault) -> None:
+        """A fault of the simulated drives' (``backend.inject``), as the run reaches its time."""
+        if fault.fault == "host-heartbeat":
+            self.master.beating = False
+            return
+        node = fault.node or self.rig.drives[0].node.id
+        drive = next(d for d in self.rig.drives if d.node.id == node)
+        if fault.fault == "drive":
+            drive.fault(fault.code)
+        elif fault.fault == "drive-silent":
+            drive.silent = True
+        else:
+            drive.heartless = True
+
+    def _stop_category(self) -> int:
+        sc = self.safety_config
+        categories = sc.stop_category if sc is not None else {}
+        return categories.get("backend", categories.get("default", 2))
+
+    def engage_brakes(self) -> bool:
+        """The safety layer's torque has gone off: the drives' power stages too (disable voltage); the robot's brakes
+        where it has them."""
+        self.master.torque_off()
+        return self.rig.plant.brake() if self.rig is not None else self.robot.model.brakes is not None
+
+    def latch_estop(self, reason: str) -> bool:
+        """Latch the e-stop here, at the drives' master: no run starts until a person clears it."""
+        self.latch.press(reason, by="rehabkit (canopen master)")
+        return True
+
+    def provenance(self) -> dict[str, str]:
+        bus = self.config.bus
+        return {"bus": f"{bus.interface}:{bus.channel}" if bus else "simulated CiA 402 drives (virtual CAN bus)",
+                "drives": ", ".join(str(r.id) for r in self.master.remotes)}
+
+    def run_metrics(self) -> dict[str, float]:
+        lat = np.array([x for x in self.latency if not math.isnan(x)]) * 1e3
+        out = {"can_cycles": float(self.cycles), "can_late_cycles": float(self.late),
+               "can_missed_tpdos": float(self.master.missed_total), "can_emcy": float(len(self.master.emcys)),
+               "can_bus_load": self.load.load, "can_frames_traced": float(self.bus.frames)}
+        if len(lat) and self.realtime:
+            out.update({"can_latency_median_ms": float(np.median(lat)),
+                        "can_latency_p99_ms": float(np.percentile(lat, 99))})
+        return out
+
+    def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        if not self.realtime:
+            return {}
+        lat = np.array(self.latency[1:]) * 1e3
+        return {"can_latency_ms": (np.arange(len(lat)) * self.period, lat)}
+
+    def notes(self) -> list[str]:
+        """The drives' states and EMCYs, decoded, for the summary."""
+        from rehabkit.canopen.emcy_codes import describe
+
+        return [f"drive {node} EMCY at t={t:.3f}s: {describe(code)}" for t, node, code in self.master.emcys]
+
+    def close(self) -> None:
+        try:
+            self.bus.close()
+        finally:
+            if self.frames is not None:
+                self.frames.close()
+
+
+@hookimpl
+def rehabkit_register_backends(registry) -> None:
+    registry.add("canopen", config=CanopenConfig, factory=CanopenBackend)

@@ -1,0 +1,108 @@
+"""What ``validate`` knows of a CANopen bus before anything runs: one drive per joint, node ids unique and in range,
+each EDS there and holding the objects the backend maps and sets, cyclic synchronous torque supported, and the
+cyclic traffic within the bitrate at the control rate (refused with the arithmetic and the highest rate that fits)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from rehabkit.canopen.config import CanopenConfig, DriveSpec
+from rehabkit.canopen.pdo_layout import RPDO1, TORQUE_ACTUAL, TPDO1, TPDO2, BusLoad, bus_load
+from rehabkit.core.kinds.errors import SettingError
+from rehabkit.core.kinds.interfaces import Context
+
+# what the backend writes by SDO besides the PDOs' objects: (index, subindex)
+SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x605A, 0), (0x6060, 0), (0x6072, 0), (0x607D, 1), (0x607D, 2),
+       (0x6080, 0), (0x6085, 0), (0x60C2, 1), (0x60C2, 2), (0x1400, 1), (0x1600, 1), (0x1800, 1), (0x1A00, 1),
+       (0x1801, 1), (0x1A01, 1))
+CST_SUPPORTED = 0x200  # 0x6502 bit 9
+
+
+def drive_specs(config: CanopenConfig, dof: int) -> list[DriveSpec]:
+    """The drives as written, or node ids 1..dof on the generic servo."""
+    return list(config.drives) if config.drives is not None else [DriveSpec(node_id=i + 1) for i in range(dof)]
+
+
+@lru_cache(maxsize=16)
+def _objects(path: str) -> tuple[frozenset, int | None]:
+    """The (index, subindex) pairs an EDS holds, and its supported drive modes (0x6502) if given."""
+    import canopen
+
+    od = canopen.import_od(path)
+    have = set()
+    for index in od.indices:
+        obj = od[index]
+        if hasattr(obj, "subindices"):
+            have.update((index, sub) for sub in obj.subindices)
+        else:
+            have.add((index, 0))
+    modes = od[0x6502].default if 0x6502 in od else None
+    return frozenset(have), modes
+
+
+def _check_eds(config: CanopenConfig, spec: DriveSpec, i: int, context: Context) -> None:
+    if spec.eds is None:
+        return
+    path = context.resolve(spec.eds)
+    where = ("drives", i, "eds")
+    if not path.is_file():
+        raise SettingError(where, f"no such file: {path}")
+    try:
+        have, modes = _objects(str(path))
+    except Exception as exc:  # noqa: BLE001 (canopen's parser: whatever it refuses, said at the file's setting)
+        raise SettingError(where, f"canopen cannot read {path.name} as an EDS/DCF: {exc}") from None
+    needed = [*((x, s) for x, s, _ in (*RPDO1, *TPDO1, *TPDO2)), *SET]
+    if config.torque_actual:
+        needed.append(TORQUE_ACTUAL[:2])
+    missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in needed if (x, s) not in have]
+    if missing:
+        raise SettingError(where, f"{path.name} lacks objects the backend maps or sets: {', '.join(missing)} (is it "
+                           "a CiA 402 drive's EDS with two RPDOs and two TPDOs?)")
+    if modes is not None and not modes & CST_SUPPORTED:
+        raise SettingError(("drives", i, "mode"), f"{path.name} says the drive does not support cyclic synchronous "
+                           f"torque (0x6502 = 0x{modes:08X}, bit 9 clear)")
+
+
+def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec], BusLoad]:
+    """The drives for the run's robot, and the bus load; a :class:`SettingError` at the setting that is wrong."""
+    robot = context.robot.model
+    specs = drive_specs(config, robot.dof)
+    if len(specs) != robot.dof:
+        raise SettingError("drives", f"{len(specs)} drives for the {robot.dof} joints of robot '{robot.name}' "
+                           f"({', '.join(robot.joint_names)}): one drive per joint, in that order")
+    seen: dict[int, int] = {}
+    for i, s in enumerate(specs):
+        if s.node_id in seen:
+            raise SettingError(("drives", i, "node_id"), f"node id {s.node_id} is drive {seen[s.node_id]}'s too: each "
+                               "node on a bus has its own")
+        if s.node_id == config.master_node_id:
+            raise SettingError(("drives", i, "node_id"), f"node id {s.node_id} is the host's (master_node_id)")
+        seen[s.node_id] = i
+        _check_eds(config, s, i, context)
+    if config.clock == "lockstep" and config.bus is not None:
+        raise SettingError("clock", "lockstep runs the simulated drives only (a real bus runs in real time): remove "
+                           "`bus` or set clock: realtime")
+    nodes = {s.node_id for s in specs}
+    for i, f in enumerate(config.inject):
+        if config.bus is not None:
+            raise SettingError(("inject", i), "faults are injected into simulated drives only: remove `bus`")
+        if f.node is not None and f.node not in nodes:
+            raise SettingError(("inject", i, "node"), f"no drive has node id {f.node} (the drives: "
+                               f"{', '.join(map(str, sorted(nodes)))})")
+    rate = 1.0 / context.control_dt
+    load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms)
+    if load.load > 1.0:
+        raise SettingError(("rates", "control_hz"), f"the CAN bus cannot carry {len(specs)} drives at {rate:g} Hz: "
+                           f"{load.describe()}; the highest control rate that fits is "
+                           f"{load.highest_rate_hz():.0f} Hz (e.g. rates.control_hz: "
+                           f"{_fitting(load)}), or fewer drives per bus", root=True)
+    return specs, load
+
+
+def _fitting(load: BusLoad) -> str:
+    """A control rate that fits and divides 1 kHz into whole milliseconds' multiples, as drives' cycles do."""
+    top = load.highest_rate_hz()
+    for hz in (1000, 500, 250, 200, 125, 100, 50):
+        if hz <= top:
+            return f"{hz}"
+    return f"{top:.0f}"

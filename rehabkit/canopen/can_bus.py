@@ -1,0 +1,122 @@
+"""The host's CAN bus: its CANopen network, the simulated drives' network beside it when the run starts them, and
+the trace of every frame.
+
+In real time each network reads its bus in canopen's usual way (a python-can ``Notifier`` thread). On a lock-step
+bus nothing runs by itself: every frame the host sends is delivered at once — to the drives' network, then the
+trace, then the host's own network — in this thread, in the order sent; so an SDO's answer is there when canopen's
+client looks for it and a cycle's TPDOs are in when its SYNC has been sent. Deterministic, and as fast as both
+sides compute.
+
+The trace is a third python-can bus on the same channel, each frame written by python-can's own writer for the file's
+kind (``.asc``, ``.blf``, candump ``.log``): into a temporary name, renamed when the bus closes (never half a file).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import can
+import canopen
+
+_CHANNELS = itertools.count()
+
+
+class _PumpedNetwork(canopen.Network):
+    """A network whose every frame sent is delivered before ``send_message`` returns (``pump``)."""
+
+    pump: Callable[[], None] | None = None
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        super().send_message(can_id, data, remote)
+        if self.pump is not None:
+            self.pump()
+
+
+def _drain(bus: can.BusABC, network: canopen.Network) -> None:
+    while (msg := bus.recv(0.0)) is not None:
+        network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+
+
+class CanBus:
+    """The host's ``network`` on ``interface``/``channel`` (None: a virtual channel of its own), with a ``drives``
+    network on it when simulated drives run in this process; ``trace``: the file every frame goes into;
+    ``lockstep``: frames delivered as sent, timestamps from ``clock``."""
+
+    def __init__(self, interface: str | None = None, channel: str | None = None, bitrate: int = 1_000_000,
+                 simulated: bool = False, lockstep: bool = False, trace: Path | None = None,
+                 clock: Callable[[], float] | None = None):
+        if interface is None:
+            interface, channel = "virtual", f"rehabkit-{os.getpid()}-{next(_CHANNELS)}"
+        kw = {"interface": interface, "channel": channel, "receive_own_messages": False}
+        if interface not in ("virtual", "udp_multicast"):
+            kw["bitrate"] = bitrate
+        self.lockstep, self.clock = lockstep, clock
+        self.network: canopen.Network = _PumpedNetwork() if lockstep else canopen.Network()
+        self.drives: canopen.Network | None = None
+        self._buses: list[can.BusABC] = []
+        self._notifiers: list[can.Notifier] = []
+        self.frames = 0
+        self.trace, self._part, self._writer, self._tap = trace, None, None, None
+        try:
+            if simulated:
+                self.drives = canopen.Network(self._open(kw))
+            if trace is not None:
+                self._part = trace.with_name(f".{trace.stem}.part{trace.suffix}")  # (the suffix picks the writer)
+                self._writer = can.Logger(self._part)
+                self._tap = self._open(kw)
+            self.network.bus = self._open(kw)
+            if lockstep:
+                self.network.pump = self.pump
+            else:
+                for net in (self.drives, self.network):
+                    if net is not None:
+                        self._notifiers.append(can.Notifier(net.bus, net.listeners, 0.1))
+                if self._tap is not None:
+                    self._notifiers.append(can.Notifier(self._tap, [self._writer, self._count], 0.1))
+        except BaseException:
+            self.close(keep_trace=False)
+            raise
+
+    def _open(self, kw: dict) -> can.BusABC:
+        bus = can.Bus(**kw)
+        self._buses.append(bus)
+        return bus
+
+    def _count(self, msg: can.Message) -> None:
+        self.frames += 1
+
+    def pump(self) -> None:
+        """Deliver every frame sent so far (lock-step): the drives', the trace's, the host's."""
+        if self.drives is not None:
+            _drain(self.drives.bus, self.drives)
+        if self._tap is not None:
+            while (msg := self._tap.recv(0.0)) is not None:
+                if self.clock is not None:
+                    msg.timestamp = self.clock()
+                self._writer.on_message_received(msg)
+                self.frames += 1
+        _drain(self.network.bus, self.network)
+
+    def close(self, keep_trace: bool = True) -> None:
+        """Stop reading, close the buses; the trace renamed into place (or removed)."""
+        for notifier in self._notifiers:
+            notifier.stop(0.5)
+        self._notifiers = []
+        if self.lockstep and self._buses:
+            with contextlib.suppress(Exception):  # (closing after a failure: the trace keeps what it has)
+                self.pump()  # (the last frames sent, into the trace)
+        for bus in self._buses:
+            bus.shutdown()
+        self._buses = []
+        self.network.bus = None
+        if self._writer is not None:
+            self._writer.stop()
+            self._writer = None
+            if keep_trace:
+                os.replace(self._part, self.trace)
+            else:
+                self._part.unlink(missing_ok=True)

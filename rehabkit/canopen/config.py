@@ -1,0 +1,89 @@
+"""The canopen backend's settings (the ``backend:`` section of a scenario run on CiA 402 drives) and its faults."""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from pydantic import Field
+
+from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
+from rehabkit.models.strict import FilePath
+
+
+class DriveFaultError(BackendFaultError):
+    """A drive, or the bus, can no longer drive its joint: ``node`` (its node id, None for the bus), ``joint`` (its
+    joint's name, or None), ``code`` (the CiA 301/402 error code, 0 where none applies), ``what`` (in words).
+    ``observable``: the other drives still report their state, so the run watches its safety stop bring them to
+    rest (not so when the whole bus is silent)."""
+
+    def __init__(self, what: str, node: int | None = None, joint: str | None = None, code: int = 0,
+                 observable: bool = True):
+        self.what, self.node, self.joint, self.code = what, node, joint, code
+        self.observable = observable  # (a silent bus reports nothing more to watch)
+        where = f"drive {node} ({joint})" if node is not None else "the CAN bus"
+        super().__init__(f"{where}: {what}")
+
+
+class Bus(StrictModel):
+    """A CAN interface as python-can opens it (``can.Bus(interface=..., channel=..., bitrate=...)``)."""
+
+    interface: str = Field(description="python-can interface: socketcan, pcan, kvaser, ixxat, udp_multicast, virtual")
+    channel: str = Field(description="its channel: can0, PCAN_USBBUS1, 0, 239.74.163.2, ...")
+
+
+class DriveSpec(StrictModel):
+    """One joint's drive: where it is on the bus, what it is, and its units against the joint's."""
+
+    node_id: int = Field(ge=1, le=127, description="CANopen node id (1-127)")
+    eds: FilePath | None = Field(None, description="the drive's EDS or DCF file (default: rehabkit's generic CiA "
+                                 "402 servo, the simulated drives' own)")
+    mode: Literal["cst"] = Field("cst", description="operating mode: cst, cyclic synchronous torque (rehabkit's "
+                                 "controllers command joint torques)")
+    gear_ratio: float = Field(1.0, gt=0, description="motor turns per joint turn")
+    encoder_counts: int = Field(131072, gt=0, description="encoder counts per motor turn (the position unit)")
+    rated_torque_nm: float | None = Field(None, gt=0, description="the motor's rated torque (0x6076) its per-mille "
+                                          "torques refer to [N·m] (default: the joint's effort limit / gear_ratio)")
+    direction: Literal[1, -1] = Field(1, description="-1 where the drive's positive sense is the joint's negative")
+
+    def counts_per_rad(self) -> float:
+        return self.encoder_counts * self.gear_ratio / (2 * math.pi)
+
+
+class Injection(StrictModel):
+    """A fault injected into the simulated drives for a safety-skill test or the fault table (never on a real bus)."""
+
+    at_s: float = Field(gt=0, description="when [s of the run]")
+    fault: Literal["drive", "drive-silent", "drive-heartbeat", "host-heartbeat"] = Field(
+        description="drive: the drive detects a fault (its EMCY, its reaction); drive-silent: the drive stops "
+        "answering (no TPDO, no heartbeat); drive-heartbeat: its heartbeat stops, its PDOs go on; host-heartbeat: "
+        "the host's heartbeat stops reaching the drives")
+    node: int | None = Field(None, ge=1, le=127, description="the drive (default: the first)")
+    code: int = Field(0x2310, ge=0, le=0xFFFF, description="the error code of a drive fault (default: over-current)")
+
+
+class CanopenConfig(StrictModel):
+    """The drives on the CAN bus, the loop's clock and the bus's watchdogs."""
+
+    bus: Bus | None = Field(None, description="the CAN interface of the robot's drives (none: simulated CiA 402 "
+                            "drives on the robot's MuJoCo model, started with the run)")
+    bitrate: int = Field(1_000_000, gt=0, le=1_000_000, description="the bus's bitrate [bit/s]")
+    drives: list[DriveSpec] | None = Field(None, description="one per joint, in the robot's joint order (default: "
+                                           "node ids 1, 2, ... on the generic servo's EDS)")
+    clock: Literal["realtime", "lockstep"] = Field(
+        "realtime", description="realtime: SYNC on the wall clock, as a robot's bus runs; lockstep: the simulated "
+        "drives' plant advances one cycle per SYNC, in this process (deterministic, faster than real time)")
+    timestep: float = Field(0.001, ge=0.0002, le=0.01, description="the simulated drives' plant step [s] (the "
+                            "cycle is rates.control_hz's period)")
+    robot_id: int = Field(1, ge=0, description="this robot among its kind (its e-stop latch: <robot>-<robot_id>)")
+    master_node_id: int = Field(127, ge=1, le=127, description="the host's node id (its heartbeat's)")
+    heartbeat_ms: int = Field(20, ge=1, le=65535, description="heartbeat period of the drives and the host [ms]")
+    heartbeat_timeout_ms: int = Field(60, ge=1, le=65535, description="a heartbeat silent this long is lost: the "
+                                      "drives fault on the host's, the host stops on a drive's [ms]")
+    missed_cycles: int = Field(3, ge=1, description="cycles in a row without a drive's TPDOs before the run stops")
+    torque_actual: bool = Field(False, description="map each drive's actual torque (0x6077) too (2 bytes a cycle "
+                                "more each: see the bus load)")
+    inject: list[Injection] = Field([], description="faults injected into the simulated drives (tests)")
+    trace: Literal["asc", "blf", "log"] | None = Field(
+        "asc", description="every frame into can.<trace> beside the run's log, by python-can's own writer (asc: "
+        "Vector ASCII, blf: Vector binary, log: candump); none: no trace")

@@ -1,0 +1,239 @@
+"""The host as CANopen master of a robot's CiA 402 drives: their set-up by SDO, the walk to OPERATION ENABLED, and
+each cycle's RPDOs, SYNC and TPDOs, watched for what drives and buses do when things go wrong.
+
+canopen (the library) does the protocol: SDO client, PDO maps written by SDO, NMT, SYNC, EMCY consumer. The 402
+state machine is walked here, one controlword per cycle in the cyclic RPDO, reading the state back from the
+statusword in the cyclic TPDO: canopen's ``BaseNode402`` waits on the wall clock for each state, which a lock-step
+bus, where nothing moves between cycles, cannot give it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import can
+import canopen
+import numpy as np
+
+from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
+from rehabkit.canopen.config import CanopenConfig, DriveFaultError
+from rehabkit.canopen.emcy_codes import describe
+from rehabkit.canopen.pdo_codec import PdoCodec
+from rehabkit.canopen.pdo_layout import RPDO1, TPDO1, tpdo2
+from rehabkit.canopen.sim_drive import DriveUnits
+
+CST = 10  # modes of operation (0x6060): cyclic synchronous torque
+DISABLE_VOLTAGE_CW = 0x00
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """What each drive is told it may do, in SI units at its joint (downloaded into 0x607D, 0x6080, 0x6072, 0x6085)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    speed: np.ndarray
+    torque: np.ndarray
+    decel: np.ndarray
+    quick_stop_option: int
+
+
+def interpolation_period(period_s: float) -> tuple[int, int]:
+    """0x60C2: the cycle as value × 10^index s (value 0-255, index -3 to -6)."""
+    for index in range(-3, -7, -1):
+        value = period_s / 10.0**index
+        if abs(value - round(value)) < 1e-6 and round(value) <= 255:
+            return round(value), index
+    raise ValueError(f"a cycle of {period_s:g} s is no whole number of microseconds up to 255")
+
+
+class DriveMaster:
+    """Drives ``nodes`` (node ids, each with its EDS and units) of joints ``names`` on ``network``; ``now()`` is the
+    master's clock [s] (a lock-step bus: its cycles)."""
+
+    def __init__(self, network: canopen.Network, nodes: Sequence[tuple[int, str]], units: Sequence[DriveUnits],
+                 names: Sequence[str], config: CanopenConfig, now: Callable[[], float]):
+        self.network, self.config, self.now, self.names = network, config, now, list(names)
+        self.units = list(units)
+        self.remotes = [canopen.RemoteNode(node, eds) for node, eds in nodes]
+        for r in self.remotes:
+            network.add_node(r)
+        n = len(self.remotes)
+        self.status = np.zeros(n, int)
+        self.counts = np.zeros((3, n))  # position, velocity, torque actual (drive units) of the newest TPDOs
+        self.q, self.qd, self.applied = np.zeros(n), np.zeros(n), np.zeros(n)
+        self._scale = np.array([u.counts_per_rad * u.direction for u in units])
+        self._per_mille = np.array([1e3 * u.direction / u.rated_torque_nm for u in units])
+        self._got = np.zeros(n, bool)
+        self.missed = np.zeros(n, int)  # cycles in a row each drive's TPDOs did not come
+        self.missed_total = 0
+        self._arrived = threading.Event()
+        self.emcys: list[tuple[float, int, int]] = []  # (time, node, code) of each EMCY, in order
+        self._emcy_new: list[tuple[int, int]] = []
+        self.heard = np.zeros(n)  # when each drive's heartbeat came last [s, master clock]
+        self.enabled = False
+        self.beating = True  # (False: an injected fault, the host's heartbeat stops)
+        self.cycles = 0
+        self._next_beat = 0.0
+        self.controlword = np.full(n, SHUTDOWN, int)
+        self._rpdo: list[PdoCodec | None] = [None] * n
+        self._tpdo: dict[int, tuple[int, int, object]] = {}  # COB-ID → (drive, TPDO number, its layout)
+        self.states: list[str] = [State.NOT_READY_TO_SWITCH_ON.name] * n
+
+    # -- set-up ---------------------------------------------------------------------------------------------
+
+    def configure(self, period_s: float, limits: DriveLimits) -> None:
+        """By SDO, in pre-operational: the cycle, heartbeats, CST, each drive's limits and PDO maps; then NMT start."""
+        cfg = self.config
+        value, index = interpolation_period(period_s)
+        for i, r in enumerate(self.remotes):
+            r.nmt.state = "PRE-OPERATIONAL"
+            sd, u = r.sdo, self.units[i]
+            sd[0x1006].raw = round(period_s * 1e6)
+            sd[0x1017].raw = cfg.heartbeat_ms
+            sd[0x1016][1].raw = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
+            sd[0x6060].raw = CST
+            sd[0x60C2][1].raw, sd[0x60C2][2].raw = value, index
+            lo, hi = sorted((limits.lower[i] * self._scale[i], limits.upper[i] * self._scale[i]))
+            sd[0x607D][1].raw, sd[0x607D][2].raw = math.floor(lo), math.ceil(hi)
+            sd[0x6080].raw = math.ceil(limits.speed[i] * u.counts_per_rad)
+            sd[0x6072].raw = min(65535, math.ceil(limits.torque[i] / u.rated_torque_nm * 1e3))
+            sd[0x6085].raw = math.ceil(limits.decel[i] * u.counts_per_rad)
+            sd[0x605A].raw = limits.quick_stop_option
+            self._map(r, i)
+            r.emcy.add_callback(lambda err, node=r.id: self._emcy_new.append((node, err.code)))
+            self.network.subscribe(0x700 + r.id, self._on_heartbeat)
+        for r in self.remotes:
+            r.nmt.state = "OPERATIONAL"
+        self.heard[:] = self.now()
+
+    def _map(self, r: canopen.RemoteNode, i: int) -> None:
+        r.rpdo.read()
+        r.tpdo.read()
+        layout = ((r.rpdo, 1, RPDO1), (r.tpdo, 1, TPDO1), (r.tpdo, 2, tpdo2(self.config.torque_actual)))
+        for pdos in (r.rpdo, r.tpdo):
+            for pdo in pdos.map.values():
+                pdo.enabled = False
+        for pdos, number, entries in layout:
+            pdo = pdos[number]
+            pdo.clear()
+            for index, sub, _ in entries:
+                pdo.add_variable(index, sub)
+            pdo.trans_type, pdo.enabled = 1, True  # synchronous: taken / sampled at every SYNC
+        r.rpdo.save()
+        r.tpdo.save()
+        for pdo in r.tpdo.map.values():  # (its frames are read here, in one unpack: canopen's decoding unsubscribed)
+            self.network.unsubscribe(pdo.cob_id, pdo.on_message)
+        self._rpdo[i] = PdoCodec.of(r.rpdo[1])
+        t1, t2 = PdoCodec.of(r.tpdo[1]), PdoCodec.of(r.tpdo[2])
+        self._tpdo[t1.cob_id] = (i, 1, t1.layout)
+        self._tpdo[t2.cob_id] = (i, 2, t2.layout)
+        self.network.subscribe(t1.cob_id, self._on_tpdo)
+        self.network.subscribe(t2.cob_id, self._on_tpdo)
+
+    def _on_tpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
+        i, number, layout = self._tpdo[can_id]
+        values = layout.unpack_from(data)
+        if number == 1:
+            self.status[i], self.counts[0, i] = values
+            return
+        self.counts[1, i] = values[0]  # (the last of a drive's cycle)
+        if len(values) > 1:
+            self.counts[2, i] = values[1]
+        self._got[i] = True
+        if self._got.all():
+            self._arrived.set()
+
+    def _on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
+        self.heard[[r.id for r in self.remotes].index(can_id - 0x700)] = self.now()
+
+    def place(self, q0: np.ndarray) -> None:
+        """Simulated drives only: their plant reset to ``q0`` (the simulation's own objects 0x2000, 0x2001)."""
+        for r, scale, q in zip(self.remotes, self._scale, q0, strict=True):
+            r.sdo[0x2000].raw = round(q * scale)
+        self.remotes[0].sdo[0x2001].raw = 1
+
+    # -- cycles ---------------------------------------------------------------------------------------------
+
+    def enable(self, fault_reset: bool = False) -> None:
+        """The 402 walk to OPERATION ENABLED, one controlword a cycle, zero torque (a fault reset first only when a
+        person has cleared the latch: ``fault_reset``)."""
+        zero = np.zeros(len(self.remotes))
+        if fault_reset:
+            self.controlword[:] = FAULT_RESET
+            self.cycle(zero)
+        for word in (SHUTDOWN, SWITCH_ON_CMD, ENABLE_OPERATION_CMD, ENABLE_OPERATION_CMD):
+            self.controlword[:] = word
+            self.cycle(zero)
+        for i, s in enumerate(self.states):
+            if s != State.OPERATION_ENABLED.name:
+                code = self.remotes[i].sdo[0x603F].raw
+                raise DriveFaultError(f"did not reach OPERATION ENABLED: {s}" + (
+                    f" ({describe(code)}); a drive's fault is reset only once a person has cleared the robot's "
+                    "e-stop latch" if s == State.FAULT.name else ""), self.remotes[i].id, self.names[i], code)
+        self.enabled = True
+
+    def cycle(self, tau: np.ndarray, wait_s: float = 0.0) -> float:
+        """RPDOs with ``tau`` [N·m], the heartbeat when due, SYNC, the TPDOs in (real time: up to ``wait_s``); the
+        joint state read. Returns the wall time from SYNC to the last TPDO [s] (nan if one did not come)."""
+        targets = np.clip(np.rint(tau * self._per_mille), -32768, 32767)
+        self._got[:] = False
+        self._arrived.clear()
+        try:
+            for codec, cw, target in zip(self._rpdo, self.controlword, targets, strict=True):
+                self.network.send_message(codec.cob_id, codec.layout.pack(int(cw), int(target)))
+            if self.now() >= self._next_beat and self.beating:
+                self._next_beat += self.config.heartbeat_ms * 1e-3
+                self.network.send_message(0x700 + self.config.master_node_id, b"\x05")
+            sent = time.perf_counter()
+            self.network.sync.transmit()
+        except can.CanError as exc:
+            raise DriveFaultError(f"sending failed, the bus is down ({exc})", observable=False) from exc
+        arrived = self._got.all() or self._arrived.wait(wait_s)
+        latency = time.perf_counter() - sent if arrived else math.nan
+        self.cycles += 1
+        got = self._got.copy()
+        self.missed[got] = 0
+        self.missed[~got] += 1
+        self.missed_total += int((~got).sum())
+        self.q[got] = self.counts[0, got] / self._scale[got]
+        self.qd[got] = self.counts[1, got] / self._scale[got]
+        self.applied[got] = self.counts[2, got] / self._per_mille[got]
+        self.states = [State.of(int(s)).name for s in self.status]
+        return latency
+
+    def fault(self) -> DriveFaultError | None:
+        """What went wrong since the last cycle, if anything (the first thing: one stop, one reason)."""
+        now = self.now()
+        while self._emcy_new:
+            node, code = self._emcy_new.pop(0)
+            self.emcys.append((now, node, code))
+            if code:  # (0: the error reset)
+                i = [r.id for r in self.remotes].index(node)
+                return DriveFaultError(f"EMCY: {describe(code)}", node, self.names[i], code)
+        late = np.flatnonzero(self.missed >= self.config.missed_cycles)
+        if len(late) == len(self.remotes):
+            return DriveFaultError(f"no TPDO from any drive for {self.config.missed_cycles} cycles: the bus is "
+                                   "silent", observable=False)
+        if len(late):
+            i = int(late[0])
+            return DriveFaultError(f"no TPDO for {self.missed[i]} cycles", self.remotes[i].id, self.names[i])
+        silent = np.flatnonzero(now - self.heard > self.config.heartbeat_timeout_ms * 1e-3)
+        if len(silent):
+            i = int(silent[0])
+            return DriveFaultError(f"its heartbeat is lost (silent {1e3 * (now - self.heard[i]):.0f} ms > "
+                                   f"{self.config.heartbeat_timeout_ms} ms: {describe(0x8130)})", self.remotes[i].id,
+                                   self.names[i], 0x8130)
+        if self.enabled:
+            for i, s in enumerate(self.states):
+                if s != State.OPERATION_ENABLED.name and self.controlword[i] == ENABLE_OPERATION_CMD:
+                    return DriveFaultError(f"left OPERATION ENABLED: now {s}", self.remotes[i].id, self.names[i])
+        return None
+
+    def torque_off(self) -> None:
+        """From the next cycle on every drive's power stage off (disable voltage)."""
+        self.controlword[:] = DISABLE_VOLTAGE_CW

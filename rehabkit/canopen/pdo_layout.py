@@ -1,0 +1,71 @@
+"""What goes over the bus each cycle, and whether it fits: the PDO maps the canopen backend writes into every drive,
+and the bus arithmetic of them at the control rate.
+
+Per drive and cycle (cyclic synchronous torque): one RPDO from the host (controlword, target torque) and two TPDOs
+back (statusword with the actual position; the actual velocity, with the actual torque if asked for); per cycle one
+SYNC; each drive's and the host's heartbeats besides. A CAN 2.0A data frame of ``n`` bytes is ``47 + 8n`` bits,
+plus stuff bits: at worst one every four bits of the ``34 + 8n`` the rule covers (Davis et al., "Controller Area
+Network (CAN) schedulability analysis", Real-Time Systems 35, 2007): 55 bits for a SYNC, 135 for 8 bytes, 0.135 ms at
+1 Mbit/s. The bus load is counted with that worst case: a map that only fits on luck is refused.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# (index, subindex, bits) of each PDO's entries, in order
+RPDO1 = ((0x6040, 0, 16), (0x6071, 0, 16))  # controlword, target torque [‰ of rated]
+TPDO1 = ((0x6041, 0, 16), (0x6064, 0, 32))  # statusword, position actual value [counts]
+TPDO2 = ((0x606C, 0, 32),)  # velocity actual value [counts/s]
+TORQUE_ACTUAL = (0x6077, 0, 16)  # [‰ of rated], in TPDO2 when asked for
+SYNC_BYTES, HEARTBEAT_BYTES = 0, 1
+
+
+def frame_bits(data_bytes: int) -> int:
+    """A standard (11-bit id) data frame's length on the wire with worst-case bit stuffing [bits]."""
+    covered = 34 + 8 * data_bytes
+    return 47 + 8 * data_bytes + (covered - 1) // 4
+
+
+def tpdo2(torque_actual: bool) -> tuple[tuple[int, int, int], ...]:
+    return (*TPDO2, TORQUE_ACTUAL) if torque_actual else TPDO2
+
+
+def pdo_bytes(entries: tuple[tuple[int, int, int], ...]) -> int:
+    return sum(bits for _, _, bits in entries) // 8
+
+
+@dataclass(frozen=True)
+class BusLoad:
+    """The bus's share taken by the run's cyclic traffic: ``bits_per_cycle`` (SYNC and the PDOs), heartbeats
+    [bits/s], at ``rate_hz`` on ``bitrate``."""
+
+    drives: int
+    rate_hz: float
+    bitrate: int
+    bits_per_cycle: int
+    heartbeat_bits_s: float
+
+    @property
+    def load(self) -> float:
+        """The share of the bitrate used (1.0: the bus is full)."""
+        return (self.bits_per_cycle * self.rate_hz + self.heartbeat_bits_s) / self.bitrate
+
+    def highest_rate_hz(self, limit: float = 1.0) -> float:
+        """The highest control rate at which the load stays within ``limit``."""
+        return (limit * self.bitrate - self.heartbeat_bits_s) / self.bits_per_cycle
+
+    def describe(self) -> str:
+        """The arithmetic, as a person checks it."""
+        return (f"{self.drives} drives × (RPDO + 2 TPDOs) + SYNC = {self.bits_per_cycle} bits a cycle (worst-case "
+                f"bit stuffing) × {self.rate_hz:g} Hz + heartbeats {self.heartbeat_bits_s:.0f} bit/s = "
+                f"{self.load:.0%} of {self.bitrate / 1e3:g} kbit/s")
+
+
+def bus_load(drives: int, rate_hz: float, bitrate: int, torque_actual: bool = False,
+             heartbeat_ms: float = 100.0) -> BusLoad:
+    """The bus load of ``drives`` drives mapped as :mod:`this module <rehabkit.canopen.pdo_layout>` maps them."""
+    per_drive = sum(frame_bits(pdo_bytes(p)) for p in (RPDO1, TPDO1, tpdo2(torque_actual)))
+    per_cycle = drives * per_drive + frame_bits(SYNC_BYTES)
+    beats = (drives + 1) * frame_bits(HEARTBEAT_BYTES) * 1e3 / heartbeat_ms
+    return BusLoad(drives, rate_hz, bitrate, per_cycle, beats)

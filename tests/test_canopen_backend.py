@@ -1,0 +1,106 @@
+"""The canopen backend on simulated CiA 402 drives: the same scenario as in simulation with only ``backend:`` changed
+(and the rate the bus can carry), its CAN trace read back by python-can, the bus arithmetic refused at validate, the
+faults drives produce each stopping the run with its reason."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+import yaml
+
+from rehabkit.api import run_scenario
+from rehabkit.canopen.pdo_layout import bus_load, frame_bits
+
+ROOT = Path(__file__).resolve().parents[1]
+HIT = ROOT / "scenarios" / "hit_roundtrip.yaml"
+CANOPEN = {"backend": {"type": "canopen", "clock": "lockstep"}, "rates": {"control_hz": 500}}
+
+
+def test_the_bus_arithmetic_counts_worst_case_frames():
+    assert (frame_bits(0), frame_bits(4), frame_bits(6), frame_bits(8)) == (55, 95, 115, 135)  # Davis et al. 2007
+    six = bus_load(6, 1000, 1_000_000, heartbeat_ms=1e9)
+    assert six.bits_per_cycle == 6 * (95 + 115 + 95) + 55 and six.load > 1.8
+    assert 500 < six.highest_rate_hz() < 531  # 6 axes fit at 500 Hz, not at 1 kHz
+    assert bus_load(3, 1000, 1_000_000, heartbeat_ms=1e9).load < 1.0 < bus_load(4, 1000, 1_000_000).load
+
+
+def test_validate_refuses_six_drives_at_1khz_at_the_control_rate_with_the_arithmetic():
+    out = subprocess.run([sys.executable, "-m", "rehabkit.cli", "validate", "scenarios/hit_roundtrip.yaml", "--set",
+                          "backend.type=canopen"],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 2, out.stdout + out.stderr
+    line = next(x for x in out.stderr.splitlines() if "rates.control_hz" in x)
+    assert line.startswith("scenarios/hit_roundtrip.yaml:37:9: rates.control_hz: backend 'canopen': the CAN bus "
+                           "cannot carry 6 drives at 1000 Hz")
+    assert "1885 bits a cycle" in line and "191% of 1000 kbit/s" in line
+    assert "the highest control rate that fits is 518 Hz (e.g. rates.control_hz: 500)" in line
+
+
+@pytest.mark.parametrize("backend, where, says", [
+    ({"drives": [{"node_id": k} for k in (1, 2, 3, 3, 5, 6)]}, "backend.drives.3.node_id", "node id 3 is drive 2's"),
+    ({"drives": [{"node_id": k} for k in (1, 2, 3)]}, "backend.drives", "3 drives for the 6 joints"),
+    ({"drives": [{"node_id": 1, "eds": "nowhere.eds"}] + [{"node_id": k} for k in range(2, 7)]},
+     "backend.drives.0.eds", "no such file"),
+    ({"bus": {"interface": "socketcan", "channel": "can0"}}, "backend.clock", "lockstep runs the simulated drives"),
+    ({"inject": [{"at_s": 1.0, "fault": "drive", "node": 9}]}, "backend.inject.0.node", "no drive has node id 9"),
+])
+def test_validate_refuses_a_bus_that_cannot_be_at_its_setting(tmp_path, backend, where, says):
+    """As ``rehabkit validate`` checks a scenario (its setup but the backend, whose ``check`` it calls)."""
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.core.scenario.loader import load_scenario
+    from rehabkit.core.setup.assembly import assemble
+
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(yaml.safe_dump({"extends": str(HIT), "rates": {"control_hz": 500},
+                                        "backend": {"type": "canopen", "clock": "lockstep", **backend}}))
+    with pytest.raises(ScenarioError) as err:
+        assemble(load_scenario(scenario), default_registry(), default_extensions(), upto="plugins")
+    diag = err.value.diagnostics[0]
+    assert diag.path == where and says in diag.message
+
+
+def test_hit_round_trip_on_six_simulated_drives_tracks_like_the_simulation(tmp_path):
+    """Six drives in cyclic synchronous torque at 500 Hz on a lock-step bus: the drives latch each cycle's torque at
+    the SYNC (one cycle later than the simulation applies it), the positions come back in encoder counts; the run
+    meets its expectations and stays within 0.2° of MuJoCo's at the same rate, every frame in the trace."""
+    sim = run_scenario(HIT, {"rates": {"control_hz": 500}})
+    hw = run_scenario(HIT, CANOPEN, out_dir=tmp_path)
+    m = hw.metrics
+    assert hw.passed, [e for e in hw.summary["expectations"] if not e["passed"]]
+    assert m["safety_events"] == 0 and m["can_cycles"] == 4250 and m["can_missed_tpdos"] == 0 and m["can_emcy"] == 0
+    assert np.degrees(np.abs(sim.trace.q - hw.trace.q)).max() < 0.2
+    assert 0.9 < m["can_bus_load"] < 1.0
+    frames = list(can.LogReader(tmp_path / "can.asc"))
+    assert len(frames) == m["can_frames_traced"] and not list(tmp_path.glob(".can*"))
+    ids = np.array([f.arbitration_id for f in frames])
+    syncs = int((ids == 0x80).sum())
+    assert syncs == 4250 + 5  # the run's cycles, the 402 walk's four and the first state's
+    for node in range(1, 7):  # each drive: an RPDO and two TPDOs a cycle (from NMT start on), its heartbeats
+        assert (ids == 0x200 + node).sum() == syncs and (ids == 0x180 + node).sum() == (ids == 0x280 + node).sum()
+        assert (ids == 0x180 + node).sum() == syncs
+        assert 8.5 / 0.02 <= (ids == 0x700 + node).sum() <= 8.5 / 0.02 + 2
+    sdo = frames[np.flatnonzero(ids == 0x601)[0]]
+    assert sdo.dlc == 8 and not sdo.is_extended_id
+
+
+FAULTS = [
+    ({"fault": "drive", "node": 2, "code": 0x2310}, 2, "drive 2 (shoulder_2): EMCY: 0x2310 continuous over-current"),
+    ({"fault": "drive-silent", "node": 3}, 3, "drive 3 (elbow_1): no TPDO for 3 cycles"),
+    ({"fault": "drive-heartbeat", "node": 4}, 4, "drive 4 (elbow_2): its heartbeat is lost (silent 62 ms > 60 ms"),
+    ({"fault": "host-heartbeat"}, 1, "drive 1 (shoulder_1): EMCY: 0x8130 life guard error or heartbeat error"),
+]
+
+
+@pytest.mark.parametrize("fault, node, says", FAULTS, ids=[f[0]["fault"] for f in FAULTS])
+def test_each_fault_a_drive_produces_stops_the_run_with_its_reason(fault, node, says):
+    over = {**CANOPEN, "duration": 3.0, "backend": {**CANOPEN["backend"], "inject": [{"at_s": 2.0, **fault}]}}
+    r = run_scenario(HIT, over)
+    (event,) = r.summary["safety"]["events"]
+    assert event["rule"] == "backend" and says in event["message"]
+    # within the heartbeat's timeout (60 ms) and a cycle of the drives' own answer
+    assert 2.0 <= event["t"] <= 2.0 + 0.060 + 0.004
