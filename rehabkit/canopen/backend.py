@@ -146,11 +146,11 @@ class CanopenBackend(MirroredScene, Backend):
             self._configured = True
         if self.simulated:  # (placed before the drives are enabled, within their limits, and again once they are:
             self.master.place(q0)  # with the power stages off the arm sagged meanwhile)
-        self.master.enable(fault_reset=cleared)
+        self.deadline = time.monotonic()
+        self.master.enable(self._paced, fault_reset=cleared)
         if self.simulated:
             self.master.place(q0)
-        self.tau = self.robot.gravity_torque(q0)  # (held until the controller's first torque)
-        self._cycle()
+        self._paced(self.robot.gravity_torque(q0))  # (held until the controller's first torque)
         if not self.simulated and np.abs(self.master.q - q0).max() > math.radians(1.0):
             raise DriveFaultError(f"the robot is not at the start posture (off by "
                                   f"{np.degrees(np.abs(self.master.q - q0).max()):.1f}°): bring it there first",
@@ -161,6 +161,14 @@ class CanopenBackend(MirroredScene, Backend):
     def _cycle(self) -> None:
         latency = self.master.cycle(self.tau, 0.8 * self.period if self.realtime else 0.0)
         self.latency.append(latency)
+
+    def _paced(self, tau: np.ndarray) -> None:
+        """One cycle of the set-up, on the bus's clock (real time: at its deadline)."""
+        if self.realtime:
+            wait_until(self.deadline)
+            self.deadline += self.period
+        self.tau = tau
+        self._cycle()
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         return self.cycles * self.period, self.q, self.qd

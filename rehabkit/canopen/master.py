@@ -159,16 +159,16 @@ class DriveMaster:
 
     # -- cycles ---------------------------------------------------------------------------------------------
 
-    def enable(self, fault_reset: bool = False) -> None:
-        """The 402 walk to OPERATION ENABLED, one controlword a cycle, zero torque (a fault reset first only when a
-        person has cleared the latch: ``fault_reset``)."""
+    def enable(self, cycle: Callable[[np.ndarray], object], fault_reset: bool = False) -> None:
+        """The 402 walk to OPERATION ENABLED, one controlword a cycle (``cycle``: one, paced as the run paces
+        them), zero torque (a fault reset first only when a person has cleared the latch: ``fault_reset``)."""
         zero = np.zeros(len(self.remotes))
         if fault_reset:
             self.controlword[:] = FAULT_RESET
-            self.cycle(zero)
+            cycle(zero)
         for word in (SHUTDOWN, SWITCH_ON_CMD, ENABLE_OPERATION_CMD, ENABLE_OPERATION_CMD):
             self.controlword[:] = word
-            self.cycle(zero)
+            cycle(zero)
         for i, s in enumerate(self.states):
             if s != State.OPERATION_ENABLED.name:
                 code = self.remotes[i].sdo[0x603F].raw

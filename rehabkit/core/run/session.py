@@ -180,8 +180,11 @@ def open_session(a: Assembly, spawn: bool = False, notes: list[dict] | None = No
     q0 = start_posture(a)
     try:
         a.backend.reset(q0)
-    except BackendFaultError as exc:
-        raise SetupError(f"backend '{a.sc.backend.type}': {exc}") from exc
+    except BaseException as exc:  # no session: what the backend holds (a bridge, a bus, drives) is released
+        a.backend.close()
+        if isinstance(exc, BackendFaultError):
+            raise SetupError(f"backend '{a.sc.backend.type}': {exc}") from exc
+        raise
     if a.backend.ramp_in_after_clear:  # the first session after an e-stop was cleared eases in
         a.safety.require_ramp_in(a.backend.ramp_in_after_clear)
     if isinstance(a.robot, PassiveJoints) and isinstance(a.backend, NamedJoints):
