@@ -104,3 +104,82 @@ def test_each_fault_a_drive_produces_stops_the_run_with_its_reason(fault, node, 
     assert event["rule"] == "backend" and says in event["message"]
     # within the heartbeat's timeout (60 ms) and a cycle of the drives' own answer
     assert 2.0 <= event["t"] <= 2.0 + 0.060 + 0.004
+
+
+def _bench(hit, option: int, decel: float = 3.0):
+    """The HIT on six simulated drives and a master, on a lock-step bus: set up, placed at A, enabled."""
+    from rehabkit.canopen.can_bus import CanBus
+    from rehabkit.canopen.config import CanopenConfig, DriveSpec
+    from rehabkit.canopen.drive_rig import DriveRig
+    from rehabkit.canopen.master import DriveLimits, DriveMaster
+    from rehabkit.canopen.sim_drive import EDS
+    from rehabkit.hardware.plant import MujocoPlant
+
+    clock = [0.0]
+    bus = CanBus(simulated=True, lockstep=True, clock=lambda: clock[0])
+    lim = hit.model.limits
+    units = [DriveSpec(node_id=i + 1).units(e) for i, e in enumerate(lim.effort)]
+    rig = DriveRig(bus.drives, MujocoPlant(hit, 0.001), range(1, 7), units, clocked=True)
+    master = DriveMaster(bus.network, [(k, str(EDS)) for k in range(1, 7)], units, hit.model.joint_names,
+                         CanopenConfig(), lambda: clock[0], [True] * 6)
+    master.configure(0.002, DriveLimits(lim.lower - 0.1, lim.upper + 0.1, lim.velocity * 2, lim.effort,
+                                        np.full(6, decel), option))
+
+    def cycle(tau):
+        master.cycle(tau)
+        clock[0] += 0.002
+
+    q0 = np.radians([0, 90, 90, 30, -90, 90])
+    master.place(q0)
+    master.enable(cycle)
+    return bus, rig, master, cycle, q0
+
+
+@pytest.mark.parametrize("option, after", [(2, "SWITCH_ON_DISABLED"), (6, "QUICK_STOP_ACTIVE")])
+def test_a_quick_stop_brings_the_joints_to_rest_on_the_drives_deceleration(hit, option, after):
+    """The master drives the elbow at ~1 rad/s, then sends quick stop: each drive ramps its speed down at 0x6085
+    (3 rad/s² here) with its own velocity loop, then (option 2) takes the torque off or (option 6) holds."""
+    from rehabkit.canopen.cia402 import QUICK_STOP_CMD
+
+    bus, rig, master, cycle, q0 = _bench(hit, option)
+    try:
+        master.place(q0)
+        for _ in range(150):  # 0.3 s: gravity held, the elbow pushed
+            tau = hit.gravity_torque(master.q)
+            tau[2] += 3.0 * (1.0 - master.qd[2])
+            cycle(tau)
+        v0 = master.qd[2]
+        assert 0.8 < v0 < 1.2
+        master.controlword[:] = QUICK_STOP_CMD
+        speeds = []
+        for _ in range(400):
+            cycle(np.zeros(6))
+            speeds.append(master.qd[2])
+        stopped = int(np.argmax(np.abs(speeds) < 0.01))
+        assert stopped * 0.002 == pytest.approx(v0 / 3.0, abs=0.03)  # v0 / decel
+        assert master.states[2] == after
+    finally:
+        bus.close()
+
+
+def test_a_drives_fault_is_reset_only_when_a_person_has_cleared_the_latch(hit):
+    from rehabkit.canopen.config import DriveFaultError
+
+    bus, rig, master, cycle, q0 = _bench(hit, 2)
+    try:
+        rig.drives[1].fault(0x2310)
+        for _ in range(150):  # its reaction: to rest (within 0.3 s), then the torque off
+            cycle(hit.gravity_torque(master.q))
+            if master.states[1] == "FAULT":
+                break
+        assert master.states[1] == "FAULT"
+        with pytest.raises(DriveFaultError, match="FAULT .0x2310 continuous over-current.; a drive's fault is reset "
+                                                  "only once a person has cleared") as err:
+            master.enable(cycle)  # a new run without the clear
+        assert (err.value.node, err.value.joint, err.value.code) == (2, "shoulder_2", 0x2310)
+        master.place(q0)
+        master.enable(cycle, fault_reset=True)  # the run after a person cleared the latch
+        assert set(master.states) == {"OPERATION_ENABLED"}
+        assert rig.drives[1].machine.transitions[-4:] == [15, 2, 3, 4]  # reset, then the walk up
+    finally:
+        bus.close()

@@ -181,7 +181,8 @@ def test_a_simulated_drive_follows_the_masters_pdos_on_sync_and_drives_its_joint
     the drive's units (and to an SDO read as they stand); a fault's EMCY reaches the master and the torque goes off."""
     import canopen
 
-    from rehabkit.canopen.sim_drive import DriveUnits, SimulatedDrive
+    from rehabkit.canopen.config import DriveUnits
+    from rehabkit.canopen.sim_drive import SimulatedDrive
 
     drive_net, master_net = bus
     joint = _Joint()

@@ -81,15 +81,18 @@ def test_stopping_time_and_distance_per_category_on_hit_at_its_top_planned_speed
     assert not [e for e in c2["interventions"] if e["rule"] == "brakes"]  # held, torque on
 
 
+CANOPEN = {"backend": {"type": "canopen", "clock": "lockstep"}, "rates": {"control_hz": 500}}
+
+
 def _ramp_in(result) -> float | None:
     return next((e["data"]["duration_s"] for e in result.summary["safety"]["interventions"]
                  if e["rule"] == "ramp-in"), None)
 
 
-@pytest.mark.parametrize("where", ["simulation", "link"])
+@pytest.mark.parametrize("where", ["simulation", "link", "canopen"])
 def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, capsys):
-    extra = LINK if where == "link" else {}
-    name = "hit-1" if where == "link" else "sim-hit"
+    extra = {"simulation": {}, "link": LINK, "canopen": CANOPEN}[where]
+    name = "hit-1" if where != "simulation" else "sim-hit"
     first = run_scenario(ESTOP, extra)
     assert first.passed and EStopLatch.named(name).latched() is not None
     with pytest.raises(SetupError, match=rf"latched.*rehabkit estop clear {name} --by NAME"):

@@ -19,7 +19,10 @@ hardware link.
 from __future__ import annotations
 
 import math
+import threading
 import time
+
+import can
 
 import numpy as np
 
@@ -28,13 +31,14 @@ from rehabkit.canopen.can_bus import CanBus
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.drive_rig import DriveRig
 from rehabkit.canopen.master import DriveLimits, DriveMaster
-from rehabkit.canopen.sim_drive import EDS, DriveUnits
+from rehabkit.canopen.sim_drive import EDS
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.results.metric import Metric
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.safety.stopping import joint_inertia
+from rehabkit.hardware.bridge import HOLD_KD, HOLD_KP
 from rehabkit.hardware.bridge_limits import BridgeLimits
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
@@ -64,12 +68,11 @@ class CanopenBackend(MirroredScene, Backend):
         self.config, self.robot = config, robot
         self.timestep, self.period = config.timestep, context.control_dt
         self.realtime = config.clock == "realtime"
-        self.simulated = config.bus is None
+        self.simulated = config.bus is None or config.bus.simulated
         self.n = robot.model.dof
         self.names = robot.model.joint_names
         effort = robot.model.limits.effort
-        self.units = [DriveUnits(s.counts_per_rad(), (s.rated_torque_nm or effort[i] / s.gear_ratio) * s.gear_ratio,
-                                 s.direction) for i, s in enumerate(specs)]
+        self.units = [s.units(effort[i]) for i, s in enumerate(specs)]
         self.latch = EStopLatch.for_robot(robot.model.name, config.robot_id)
         self.safety_config = context.safety
         self.mirror = SceneMirror(robot.model, context.world)
@@ -82,24 +85,28 @@ class CanopenBackend(MirroredScene, Backend):
         self.t0 = self.deadline = 0.0
         self._configured = self._started = False
         self._fault: DriveFaultError | None = None
+        self._holder: threading.Thread | None = None
         self._injections = sorted(config.inject, key=lambda f: f.at_s)
         trace = None
         if config.trace is not None and context.out_dir is not None:
             trace = context.out_dir / f"can.{config.trace}"
         bus = config.bus
         self.bus = CanBus(bus.interface if bus else None, bus.channel if bus else None, config.bitrate,
-                          simulated=self.simulated, lockstep=not self.realtime, trace=trace, clock=self._now)
+                          simulated=config.bus is None, lockstep=not self.realtime, trace=trace, clock=self._now)
         try:
             self.rig = None
-            if self.simulated:
+            if config.bus is None:  # simulated drives of this run's own
                 from rehabkit.hardware.plant import MujocoPlant  # (only a run with simulated drives loads MuJoCo here)
 
                 plant = MujocoPlant(robot, config.timestep, context.instruments,
                                     context.world.loads if context.world else (), context.seed or 0)
                 self.rig = DriveRig(self.bus.drives, plant, [s.node_id for s in specs], self.units,
                                     clocked=not self.realtime)
+                if self.realtime:  # (their own watchdog on the wall clock: a SYNC that stops coming faults them)
+                    self.rig.watch_sync()
             nodes = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(EDS)) for s in specs]
-            self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now)
+            self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now,
+                                      [s.rated_torque_nm is None for s in specs])
         except BaseException:
             self.bus.close(keep_trace=False)
             raise
@@ -157,9 +164,20 @@ class CanopenBackend(MirroredScene, Backend):
                                   observable=False)
         self.q, self.qd = self.master.q.copy(), self.master.qd.copy()
         self._started, self._fault = False, None
+        if self.realtime:  # enabled drives expect their SYNC every cycle: until the loop's first step, hold here
+            self._holding = threading.Event()
+            self._holder = threading.Thread(target=self._hold, args=(q0,), name="canopen-hold", daemon=True)
+            self._holder.start()
 
-    def _cycle(self) -> None:
-        latency = self.master.cycle(self.tau, 0.8 * self.period if self.realtime else 0.0)
+    def _hold(self, q0: np.ndarray) -> None:
+        """Real time, from the reset to the loop's first step (the run's first plan comes between): cycles on the
+        bus's clock holding the start posture as the bridge does (PD to it with gravity compensation)."""
+        m = self.master
+        while not self._holding.is_set():
+            self._paced(HOLD_KP * (q0 - m.q) - HOLD_KD * m.qd + self.robot.gravity_torque(m.q))
+
+    def _cycle(self, tau: np.ndarray) -> None:
+        latency = self.master.cycle(tau, 0.8 * self.period if self.realtime else 0.0)
         self.latency.append(latency)
 
     def _paced(self, tau: np.ndarray) -> None:
@@ -167,8 +185,7 @@ class CanopenBackend(MirroredScene, Backend):
         if self.realtime:
             wait_until(self.deadline)
             self.deadline += self.period
-        self.tau = tau
-        self._cycle()
+        self._cycle(tau)
 
     def state(self) -> tuple[float, np.ndarray, np.ndarray]:
         return self.cycles * self.period, self.q, self.qd
@@ -180,7 +197,12 @@ class CanopenBackend(MirroredScene, Backend):
         """One cycle (``n`` plant steps of the simulated drives: the control period)."""
         if not self._started:
             self._started = True
-            self.deadline = time.monotonic()
+            if self._holder is not None:  # (the hold's cycles end; the loop's take over at the next deadline)
+                self._holding.set()
+                self._holder.join()
+                self._holder = None
+            else:
+                self.deadline = time.monotonic()
         if self.realtime:
             wait_until(self.deadline)
             if time.monotonic() - self.deadline > self.period:
@@ -188,12 +210,13 @@ class CanopenBackend(MirroredScene, Backend):
             self.deadline += self.period
         if self._injections and self.cycles * self.period >= self._injections[0].at_s - 1e-9:
             self._inject(self._injections.pop(0))
-        self._cycle()
+        self._cycle(self.tau)
         self.cycles += 1
         self.q, self.qd, self._posed = self.master.q.copy(), self.master.qd.copy(), False
         fault = self.master.fault()
         if fault is not None and self._fault is None:
-            self._fault = fault
+            self._fault = fault  # latched as an e-stop: the drives' fault is reset only after a person clears it
+            self.latch.press(str(fault), by=f"drive {fault.node}" if fault.node is not None else "the CAN bus")
             if self._stop_category() == 0:
                 self.master.torque_off()
             raise fault
@@ -203,10 +226,19 @@ class CanopenBackend(MirroredScene, Backend):
         if fault.fault == "host-heartbeat":
             self.master.beating = False
             return
+        if fault.fault == "host-stall":  # (real time only: validate refuses it on a lock-step bus)
+            time.sleep(fault.for_s)  # the host stalls: no SYNC meanwhile
+            self.deadline = time.monotonic()
+            return
+        if fault.fault == "bus-off":  # its controller off the bus: every frame it is given fails, as python-can says
+            self.bus.network.bus.send = _bus_off
+            return
         node = fault.node or self.rig.drives[0].node.id
         drive = next(d for d in self.rig.drives if d.node.id == node)
         if fault.fault == "drive":
             drive.fault(fault.code)
+        elif fault.fault == "drive-disabled":
+            drive.machine.disable_locally()
         elif fault.fault == "drive-silent":
             drive.silent = True
         else:
@@ -257,10 +289,19 @@ class CanopenBackend(MirroredScene, Backend):
 
     def close(self) -> None:
         try:
+            if self._holder is not None:
+                self._holding.set()
+                self._holder.join()
+            if self.rig is not None:
+                self.rig.stop_watching()
             self.bus.close()
         finally:
             if self.frames is not None:
                 self.frames.close()
+
+
+def _bus_off(msg, timeout=None) -> None:
+    raise can.CanOperationError("the CAN controller is bus-off (injected)")
 
 
 @hookimpl

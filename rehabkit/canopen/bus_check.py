@@ -86,6 +86,9 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
     for i, f in enumerate(config.inject):
         if config.bus is not None:
             raise SettingError(("inject", i), "faults are injected into simulated drives only: remove `bus`")
+        if f.fault == "host-stall" and config.clock == "lockstep":
+            raise SettingError(("inject", i, "fault"), "a host stall is a gap in the wall clock's SYNCs: on a "
+                               "lock-step bus the drives' clock stops with it (use clock: realtime)")
         if f.node is not None and f.node not in nodes:
             raise SettingError(("inject", i, "node"), f"no drive has node id {f.node} (the drives: "
                                f"{', '.join(map(str, sorted(nodes)))})")

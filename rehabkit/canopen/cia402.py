@@ -143,6 +143,12 @@ class Drive402:
                 self._go(State.OPERATION_ENABLED, 16)
         return self.state
 
+    def disable_locally(self) -> None:
+        """The drive's own enable input opened (no fault): its power stage off, to SWITCH ON DISABLED (as transition
+        9 or 12 would take it there; the master must walk it up again)."""
+        if self.state not in (State.FAULT_REACTION_ACTIVE, State.FAULT, State.SWITCH_ON_DISABLED):
+            self._go(State.SWITCH_ON_DISABLED, 9 if self.state is State.OPERATION_ENABLED else 12)
+
     def fault(self, code: int) -> None:
         """The drive detected a fault (``code``: its 0x603F error code): from any state, its reaction begins."""
         if self.state in (State.FAULT_REACTION_ACTIVE, State.FAULT):

@@ -3,12 +3,25 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal
 
 from pydantic import Field
 
 from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
 from rehabkit.models.strict import FilePath
+
+
+@dataclass(frozen=True)
+class DriveUnits:
+    """A drive's units against its joint's: encoder counts per radian at the joint, the rated torque [N·m at the
+    joint] its per mille values refer to, the direction (+1/-1) of its positive sense at the joint, the gear
+    between (the drive's own rated torque 0x6076 is the motor's: the joint's over the gear ratio)."""
+
+    counts_per_rad: float = 4096 / (2 * math.pi)
+    rated_torque_nm: float = 10.0
+    direction: int = 1
+    gear_ratio: float = 1.0
 
 
 class DriveFaultError(BackendFaultError):
@@ -30,6 +43,8 @@ class Bus(StrictModel):
 
     interface: str = Field(description="python-can interface: socketcan, pcan, kvaser, ixxat, udp_multicast, virtual")
     channel: str = Field(description="its channel: can0, PCAN_USBBUS1, 0, 239.74.163.2, ...")
+    simulated: bool = Field(False, description="the drives on it are `rehabkit drives` simulations: each run "
+                            "places their plant at its start posture (real drives start where the robot is)")
 
 
 class DriveSpec(StrictModel):
@@ -42,22 +57,30 @@ class DriveSpec(StrictModel):
                                  "controllers command joint torques)")
     gear_ratio: float = Field(1.0, gt=0, description="motor turns per joint turn")
     encoder_counts: int = Field(131072, gt=0, description="encoder counts per motor turn (the position unit)")
-    rated_torque_nm: float | None = Field(None, gt=0, description="the motor's rated torque (0x6076) its per-mille "
-                                          "torques refer to [N·m] (default: the joint's effort limit / gear_ratio)")
+    rated_torque_nm: float | None = Field(None, gt=0, description="the motor's rated torque its per-mille torques "
+                                          "refer to [N·m] (default: the drive's own, 0x6076, read at the start)")
     direction: Literal[1, -1] = Field(1, description="-1 where the drive's positive sense is the joint's negative")
 
-    def counts_per_rad(self) -> float:
-        return self.encoder_counts * self.gear_ratio / (2 * math.pi)
+    def units(self, effort_nm: float) -> DriveUnits:
+        """Its units at the joint, the joint's effort limit standing in for an unnamed rated torque (a simulated
+        drive's; the master reads a drive's own, 0x6076, when the scenario names none)."""
+        rated = self.rated_torque_nm or effort_nm / self.gear_ratio
+        return DriveUnits(self.encoder_counts * self.gear_ratio / (2 * math.pi), rated * self.gear_ratio,
+                          self.direction, self.gear_ratio)
 
 
 class Injection(StrictModel):
     """A fault injected into the simulated drives for a safety-skill test or the fault table (never on a real bus)."""
 
     at_s: float = Field(gt=0, description="when [s of the run]")
-    fault: Literal["drive", "drive-silent", "drive-heartbeat", "host-heartbeat"] = Field(
-        description="drive: the drive detects a fault (its EMCY, its reaction); drive-silent: the drive stops "
-        "answering (no TPDO, no heartbeat); drive-heartbeat: its heartbeat stops, its PDOs go on; host-heartbeat: "
-        "the host's heartbeat stops reaching the drives")
+    fault: Literal["drive", "drive-disabled", "drive-silent", "drive-heartbeat", "host-heartbeat", "host-stall",
+                   "bus-off"] = Field(
+        description="drive: the drive detects a fault (its EMCY, its reaction); drive-disabled: it leaves OPERATION "
+        "ENABLED on its own, no fault (its enable input opened); drive-silent: it stops answering (no TPDO, no "
+        "heartbeat); drive-heartbeat: its heartbeat stops, its PDOs go on; host-heartbeat: the host's heartbeat "
+        "stops reaching the drives; host-stall: the host sends nothing for for_s (real time: no SYNC); bus-off: the "
+        "host's CAN interface fails")
+    for_s: float = Field(0.05, gt=0, description="how long a host-stall lasts [s]")
     node: int | None = Field(None, ge=1, le=127, description="the drive (default: the first)")
     code: int = Field(0x2310, ge=0, le=0xFFFF, description="the error code of a drive fault (default: over-current)")
 

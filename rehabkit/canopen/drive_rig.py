@@ -10,15 +10,19 @@ A write of the simulation-only object 0x2001 resets the plant to the start posit
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Sequence
 
 import canopen
 import numpy as np
 
-from rehabkit.canopen.sim_drive import EDS, SYNC_ID, DriveUnits, SimulatedDrive
+from rehabkit.canopen.config import DriveUnits
+from rehabkit.canopen.sim_drive import EDS, SYNC_ID, SimulatedDrive
 from rehabkit.hardware.plant import MujocoPlant
 
-VELOCITY_BANDWIDTH = 100.0  # [rad/s] the drives' velocity loops (quick stops), tuned to each joint's inertia
+SYNC_LOST = 0x8100  # CiA 301: communication error (here: the SYNC stopped coming)
+SYNC_TIMEOUT_CYCLES = 5  # a real-time bus without SYNC this many cycles has lost it
 
 
 class _PlantJoint:
@@ -49,30 +53,33 @@ class DriveRig:
         for d in self.drives:
             d.node.add_write_callback(self._on_write)
         network.subscribe(SYNC_ID, self.on_sync)
-        self.substeps = 1
+        self.substeps, self.period = 1, plant.timestep
         self.cycles = 0
+        self.last_sync: float | None = None  # [s, monotonic] (real time: the SYNC watchdog's)
+        self._watching = threading.Event()
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
         if index == 0x2001:
             q0 = np.array([d.node.sdo[0x2000].raw / (d.units.counts_per_rad * d.units.direction) for d in self.drives])
             self.reset(q0)
         elif index == 0x1006:
-            period = od.decode_raw(data) * 1e-6
-            self.substeps = max(1, round(period / self.plant.timestep))
+            self.period = od.decode_raw(data) * 1e-6
+            self.substeps = max(1, round(self.period / self.plant.timestep))
 
     def reset(self, q0: np.ndarray) -> None:
-        """The plant at rest at ``q0``; each drive's velocity loop tuned to its joint's inertia there."""
+        """The plant at rest at ``q0``; each drive's own loop tuned to its joint's inertia there."""
         self.plant.reset(q0)
         self.tau[:] = 0.0
         self._read()
         for d, m in zip(self.drives, self.plant.joint_inertia(), strict=True):
-            d.velocity_gain = VELOCITY_BANDWIDTH * float(m)
+            d.inertia = float(m)
 
     def _read(self) -> None:
         self.q[:], self.qd[:] = self.plant.read()
 
     def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0) -> None:
         """Every drive samples and latches, then the plant runs one cycle with the latched torques."""
+        self.last_sync = time.monotonic()
         for d in self.drives:
             d.on_sync(can_id, data, timestamp)
         if not any(d.syncs for d in self.drives):  # (no drive operational yet: the plant waits)
@@ -82,3 +89,36 @@ class DriveRig:
             self.plant.advance()
         self._read()
         self.cycles += 1
+
+    def watch_sync(self) -> threading.Thread:
+        """In real time: a thread faulting every drive (0x8100, their EMCYs, their reactions) once the SYNC has not
+        come for ``SYNC_TIMEOUT_CYCLES`` cycles, its reactions then run on the drives' own clock (stopped by
+        :meth:`stop_watching`)."""
+        thread = threading.Thread(target=self._watch, name="sync-watchdog", daemon=True)
+        thread.start()
+        return thread
+
+    def stop_watching(self) -> None:
+        self._watching.set()
+
+    def _watch(self) -> None:
+        while not self._watching.wait(self.period):
+            last = self.last_sync
+            if last is None or time.monotonic() - last <= SYNC_TIMEOUT_CYCLES * self.period:
+                continue
+            for d in self.drives:
+                d.fault(SYNC_LOST)
+            while not self._watching.wait(self.period):  # the reactions, one cycle at a time, without a SYNC
+                if self.last_sync != last:  # (the SYNC came back: the drives take it from there)
+                    break
+                self.coast()
+                last = self.last_sync
+
+    def coast(self) -> None:
+        """A cycle without SYNC (the drives' reactions on their own clock): each drive's reaction, the plant runs."""
+        for d in self.drives:
+            d.react()
+        self.plant.apply(np.clip(self.tau, -self.plant.effort, self.plant.effort))
+        for _ in range(self.substeps):
+            self.plant.advance()
+        self._read()

@@ -13,18 +13,17 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import can
 import canopen
 import numpy as np
 
 from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
-from rehabkit.canopen.config import CanopenConfig, DriveFaultError
+from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
 from rehabkit.canopen.emcy_codes import describe
 from rehabkit.canopen.pdo_codec import PdoCodec
 from rehabkit.canopen.pdo_layout import RPDO1, TPDO1, tpdo2
-from rehabkit.canopen.sim_drive import DriveUnits
 
 CST = 10  # modes of operation (0x6060): cyclic synchronous torque
 DISABLE_VOLTAGE_CW = 0x00
@@ -56,9 +55,11 @@ class DriveMaster:
     master's clock [s] (a lock-step bus: its cycles)."""
 
     def __init__(self, network: canopen.Network, nodes: Sequence[tuple[int, str]], units: Sequence[DriveUnits],
-                 names: Sequence[str], config: CanopenConfig, now: Callable[[], float]):
+                 names: Sequence[str], config: CanopenConfig, now: Callable[[], float],
+                 read_rated: Sequence[bool] = ()):
         self.network, self.config, self.now, self.names = network, config, now, list(names)
         self.units = list(units)
+        self._read_rated = list(read_rated) or [False] * len(self.units)
         self.remotes = [canopen.RemoteNode(node, eds) for node, eds in nodes]
         for r in self.remotes:
             network.add_node(r)
@@ -92,6 +93,10 @@ class DriveMaster:
         value, index = interpolation_period(period_s)
         for i, r in enumerate(self.remotes):
             r.nmt.state = "PRE-OPERATIONAL"
+            if self._read_rated[i]:  # the drive's own rated torque (the motor's [mN·m]), at the joint
+                u = self.units[i]
+                self.units[i] = replace(u, rated_torque_nm=r.sdo[0x6076].raw * 1e-3 * u.gear_ratio)
+                self._per_mille[i] = 1e3 * u.direction / self.units[i].rated_torque_nm
             sd, u = r.sdo, self.units[i]
             sd[0x1006].raw = round(period_s * 1e6)
             sd[0x1017].raw = cfg.heartbeat_ms

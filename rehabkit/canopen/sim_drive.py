@@ -21,13 +21,13 @@ own clock: the SYNCs seen times the communication cycle period (0x1006). On a lo
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
 import canopen
 
 from rehabkit.canopen.cia402 import Drive402, State
+from rehabkit.canopen.config import DriveUnits
 from rehabkit.canopen.pdo_codec import PdoCodec
 
 EDS = Path(__file__).resolve().parent / "eds" / "cia402_servo.eds"
@@ -35,6 +35,7 @@ SYNC_ID = 0x80
 HEARTBEAT_LOST = 0x8130  # CiA 301/402 error code: life guard error or heartbeat error
 OVERSPEED = 0x8400  # velocity speed controller
 POSITION_LIMIT = 0x8612  # reference limit (beyond the software position limits)
+STOP_BANDWIDTH = 40.0  # [rad/s] the drive's own loop in a quick stop or fault reaction (critically damped)
 NMT_BYTE = {"INITIALISING": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE-OPERATIONAL": 0x7F}
 
 
@@ -47,32 +48,22 @@ class Joint(Protocol):
     def read(self) -> tuple[float, float, float]: ...
 
 
-@dataclass(frozen=True)
-class DriveUnits:
-    """The drive's units against the joint's: encoder counts per radian at the joint, the rated torque [N·m at the
-    joint] its per mille values refer to, and the direction (+1/-1) of its positive sense at the joint."""
-
-    counts_per_rad: float = 4096 / (2 * 3.141592653589793)
-    rated_torque_nm: float = 10.0
-    direction: int = 1
-
-
 # the parameters the drive acts on, read when a master writes them: (index, subindex)
 PARAMETERS = ((0x1006, 0), (0x605A, 0), (0x6072, 0), (0x607D, 1), (0x607D, 2), (0x6080, 0), (0x6085, 0))
 LIVE = ((0x6040, 0), (0x6071, 0), (0x6041, 0), (0x603F, 0), (0x6064, 0), (0x606C, 0), (0x6077, 0))
 
 
 class SimulatedDrive:
-    """Drive ``node_id`` on ``network`` moving ``joint`` (see the module's doc). ``velocity_gain`` [N·m per rad/s at
-    the joint]: its velocity loop's, for quick stops and fault reactions. ``own_sync``: it takes each SYNC itself
+    """Drive ``node_id`` on ``network`` moving ``joint`` (see the module's doc). ``inertia`` [kg·m² at the joint]:
+    what its own loop (quick stops, fault reactions) is tuned to. ``own_sync``: it takes each SYNC itself
     (else whoever steps the plant calls :meth:`on_sync`, in order). ``clocked``: heartbeats on the SYNC clock."""
 
     def __init__(self, network: canopen.Network, node_id: int, joint: Joint, units: DriveUnits = DriveUnits(),
-                 eds: Path = EDS, velocity_gain: float = 1.0, own_sync: bool = True, clocked: bool = False):
+                 eds: Path = EDS, inertia: float = 0.01, own_sync: bool = True, clocked: bool = False):
         self.node = canopen.LocalNode(node_id, str(eds))
         network.add_node(self.node)
-        self.joint, self.units, self.velocity_gain, self.clocked = joint, units, velocity_gain, clocked
-        self.node.sdo[0x6076].raw = round(units.rated_torque_nm * 1e3)  # [mN·m], as the profile gives it
+        self.joint, self.units, self.inertia, self.clocked = joint, units, inertia, clocked
+        self.node.sdo[0x6076].raw = round(units.rated_torque_nm / units.gear_ratio * 1e3)  # the motor's [mN·m]
         self.par = {(i, s): self.node.sdo[i].raw if not s else self.node.sdo[i][s].raw for i, s in PARAMETERS}
         self.live = {k: 0 for k in LIVE}
         self.machine = Drive402(quick_stop_option=self.par[0x605A, 0])
@@ -92,7 +83,7 @@ class SimulatedDrive:
         self._watch: dict[int, int] = {}  # a watched node → its consumer time [µs]
         self._network = network
         self._stop_v: float | None = None  # a stop under way: the speed its ramp started from [rad/s]
-        self._stop_at = 0
+        self._stop_at, self._stop_q = 0, 0.0  # when it began; where its ramp's position is now [rad]
         self.emcy_sent: list[int] = []
         self.silent = self.heartless = False  # (injected faults: it answers nothing; its heartbeat stops)
         self._publish()
@@ -175,6 +166,13 @@ class SimulatedDrive:
         for codec in self._tx:
             self._network.send_message(codec.cob_id, codec.pack(self.live))
 
+    def react(self) -> None:
+        """A cycle of the drive's own without a SYNC (it lost it): its fault reaction or quick stop runs on."""
+        self.syncs += 1
+        before = self.machine.state
+        self._drive(before)
+        self._publish()
+
     def _check_limits(self) -> None:
         if not self.machine.torque_on or self.machine.state is State.FAULT_REACTION_ACTIVE:
             return
@@ -193,16 +191,19 @@ class SimulatedDrive:
         stopping = m.state in (State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
         max_nm = self.par[0x6072, 0] * 1e-3 * u.rated_torque_nm
         if stopping:
-            _, qd, _ = self.joint.read()
-            if m.state is not before or self._stop_v is None:  # the ramp starts from the speed at the stop
-                self._stop_v, self._stop_at = qd, self.clock
+            q, qd, _ = self.joint.read()
+            if m.state is not before or self._stop_v is None:  # the ramp starts from the state at the stop
+                self._stop_v, self._stop_at, self._stop_q = qd, self.clock, q
             decel = self.par[0x6085, 0] / u.counts_per_rad
             ramp = max(0.0, abs(self._stop_v) - decel * (self.clock - self._stop_at) * 1e-6)
             if m.quick_stop_option == 0 or not decel or (ramp == 0.0 and abs(qd) < decel * self._period()):
                 m.stopped()  # at rest (or no ramp asked for: the torque goes off at once)
-            if m.torque_on:
+            if m.torque_on:  # tracking the ramp (position and speed), then holding where it ended
                 ref = ramp if self._stop_v >= 0 else -ramp
-                self.joint.apply(min(max_nm, max(-max_nm, self.velocity_gain * (ref - qd))))
+                self._stop_q += ref * self._period()
+                w, inertia = STOP_BANDWIDTH, self.inertia
+                tau = w * w * inertia * (self._stop_q - q) + 2 * w * inertia * (ref - qd)
+                self.joint.apply(min(max_nm, max(-max_nm, tau)))
                 return
         self._stop_v = None
         if m.state is State.OPERATION_ENABLED:
