@@ -18,17 +18,18 @@ hardware link.
 
 from __future__ import annotations
 
+import contextlib
 import math
-import threading
 import time
 
 import can
-
 import numpy as np
 
 from rehabkit.canopen.bus_check import check_bus
 from rehabkit.canopen.can_bus import CanBus
+from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
+from rehabkit.canopen.cycle_clock import CycleClock
 from rehabkit.canopen.drive_rig import DriveRig
 from rehabkit.canopen.master import DriveLimits, DriveMaster
 from rehabkit.canopen.sim_drive import EDS
@@ -37,6 +38,7 @@ from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.results.metric import Metric
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
+from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.stopping import joint_inertia
 from rehabkit.hardware.bridge import HOLD_KD, HOLD_KP
 from rehabkit.hardware.bridge_limits import BridgeLimits
@@ -46,13 +48,15 @@ from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 
 METRICS = (
     Metric("can_cycles", "count", clock="wall", description="SYNC cycles the loop ran on the bus"),
-    Metric("can_late_cycles", "count", clock="wall", description="cycles whose SYNC left after the next was due"),
+    Metric("can_late_cycles", "count", clock="wall", description="steps that came a cycle after their deadline"),
+    Metric("can_hold_cycles", "count", clock="wall", description="cycles the bus held the posture, the loop late"),
     Metric("can_missed_tpdos", "count", clock="wall", description="drive cycles whose TPDOs did not come in time"),
     Metric("can_latency_*", "ms", "wall", description="SYNC to a cycle's last TPDO, wall clock"),
     Metric("can_emcy", "count", description="EMCY messages from the drives"),
     Metric("can_bus_load", description="share of the bitrate the cyclic traffic takes (worst-case bit stuffing)"),
     Metric("can_frames_traced", "count", clock="wall", description="frames written to the CAN trace"),
 )
+HOLD_BANDWIDTH = 20.0  # [rad/s] this host's hold of the posture through a late step
 STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
 
 
@@ -80,12 +84,13 @@ class CanopenBackend(MirroredScene, Backend):
         self.measured = np.zeros(self.mirror.measured_count)
         self.q, self.qd, self.tau = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
         self._posed = False
-        self.cycles, self.late = 0, 0
+        self.cycles = 0
         self.latency: list[float] = []
         self.t0 = self.deadline = 0.0
         self._configured = self._started = False
         self._fault: DriveFaultError | None = None
-        self._holder: threading.Thread | None = None
+        self.clock: CycleClock | None = None  # (real time, from the reset)
+        self._hold_kp, self._hold_kd = HOLD_KP, HOLD_KD  # (the bridge's, for a robot without a dynamic model)
         self._injections = sorted(config.inject, key=lambda f: f.at_s)
         trace = None
         if config.trace is not None and context.out_dir is not None:
@@ -103,7 +108,7 @@ class CanopenBackend(MirroredScene, Backend):
                 self.rig = DriveRig(self.bus.drives, plant, [s.node_id for s in specs], self.units,
                                     clocked=not self.realtime)
                 if self.realtime:  # (their own watchdog on the wall clock: a SYNC that stops coming faults them)
-                    self.rig.watch_sync()
+                    self.rig.watch_sync(config.sync_timeout_ms * 1e-3)
             nodes = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(EDS)) for s in specs]
             self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now,
                                       [s.rated_torque_nm is None for s in specs])
@@ -164,17 +169,19 @@ class CanopenBackend(MirroredScene, Backend):
                                   observable=False)
         self.q, self.qd = self.master.q.copy(), self.master.qd.copy()
         self._started, self._fault = False, None
-        if self.realtime:  # enabled drives expect their SYNC every cycle: until the loop's first step, hold here
-            self._holding = threading.Event()
-            self._holder = threading.Thread(target=self._hold, args=(q0,), name="canopen-hold", daemon=True)
-            self._holder.start()
+        inertia = joint_inertia(self.robot, q0)
+        if inertia is not None:
+            self._hold_kp, self._hold_kd = HOLD_BANDWIDTH**2 * inertia, 2 * HOLD_BANDWIDTH * inertia
+        if self.realtime:  # enabled drives expect their SYNC every cycle: from now on, whatever the loop does
+            self.clock = CycleClock(self.period, self._cycle, self._hold_torque, lambda: self.master.q)
+            self.clock.start(self.robot.gravity_torque(self.master.q))
 
-    def _hold(self, q0: np.ndarray) -> None:
-        """Real time, from the reset to the loop's first step (the run's first plan comes between): cycles on the
-        bus's clock holding the start posture as the bridge does (PD to it with gravity compensation)."""
+    def _hold_torque(self, posture: np.ndarray) -> np.ndarray:
+        """Holding ``posture`` as the bridge holds (PD to it with gravity compensation), from the newest state; the
+        gains critically damped at HOLD_BANDWIDTH on each joint's inertia (the bus adds a cycle's delay: a light wrist
+        held with the bridge's fixed gains would ring)."""
         m = self.master
-        while not self._holding.is_set():
-            self._paced(HOLD_KP * (q0 - m.q) - HOLD_KD * m.qd + self.robot.gravity_torque(m.q))
+        return self._hold_kp * (posture - m.q) - self._hold_kd * m.qd + self.robot.gravity_torque(m.q)
 
     def _cycle(self, tau: np.ndarray) -> None:
         latency = self.master.cycle(tau, 0.8 * self.period if self.realtime else 0.0)
@@ -195,22 +202,13 @@ class CanopenBackend(MirroredScene, Backend):
 
     def step(self, n: int = 1) -> None:
         """One cycle (``n`` plant steps of the simulated drives: the control period)."""
-        if not self._started:
-            self._started = True
-            if self._holder is not None:  # (the hold's cycles end; the loop's take over at the next deadline)
-                self._holding.set()
-                self._holder.join()
-                self._holder = None
-            else:
-                self.deadline = time.monotonic()
-        if self.realtime:
-            wait_until(self.deadline)
-            if time.monotonic() - self.deadline > self.period:
-                self.late += 1
-            self.deadline += self.period
+        self._started = True
         if self._injections and self.cycles * self.period >= self._injections[0].at_s - 1e-9:
             self._inject(self._injections.pop(0))
-        self._cycle(self.tau)
+        if self.clock is not None:
+            self.clock.step(self.tau)
+        else:
+            self._cycle(self.tau)
         self.cycles += 1
         self.q, self.qd, self._posed = self.master.q.copy(), self.master.qd.copy(), False
         fault = self.master.fault()
@@ -227,8 +225,7 @@ class CanopenBackend(MirroredScene, Backend):
             self.master.beating = False
             return
         if fault.fault == "host-stall":  # (real time only: validate refuses it on a lock-step bus)
-            time.sleep(fault.for_s)  # the host stalls: no SYNC meanwhile
-            self.deadline = time.monotonic()
+            self.clock.pause(fault.for_s)  # the whole host stalls: no SYNC meanwhile
             return
         if fault.fault == "bus-off":  # its controller off the bus: every frame it is given fails, as python-can says
             self.bus.network.bus.send = _bus_off
@@ -260,6 +257,16 @@ class CanopenBackend(MirroredScene, Backend):
         self.latch.press(reason, by="rehabkit (canopen master)")
         return True
 
+    def interventions(self) -> list[SafetyEvent]:
+        """The cycles this host held the posture through, because the loop's step was a cycle late."""
+        out = []
+        for steps, cycles in self.clock.holds if self.clock is not None else ():
+            t, ms = steps * self.period, 1e3 * cycles * self.period
+            out.append(SafetyEvent(t, "stale-command", None, ms, 1e3 * self.period,
+                                   f"t={t:.3f}s: the loop's step was a cycle late: the bus's cycles held the posture "
+                                   f"for {ms:.0f} ms, until the next one", {"held_cycles": cycles}, level="WARN"))
+        return out
+
     def provenance(self) -> dict[str, str]:
         bus = self.config.bus
         return {"bus": f"{bus.interface}:{bus.channel}" if bus else "simulated CiA 402 drives (virtual CAN bus)",
@@ -267,7 +274,9 @@ class CanopenBackend(MirroredScene, Backend):
 
     def run_metrics(self) -> dict[str, float]:
         lat = np.array([x for x in self.latency if not math.isnan(x)]) * 1e3
-        out = {"can_cycles": float(self.cycles), "can_late_cycles": float(self.late),
+        late = self.clock.late if self.clock is not None else 0
+        out = {"can_cycles": float(self.cycles), "can_late_cycles": float(late),
+               "can_hold_cycles": float(sum(c for _, c in self.clock.holds)) if self.clock is not None else 0.0,
                "can_missed_tpdos": float(self.master.missed_total), "can_emcy": float(len(self.master.emcys)),
                "can_bus_load": self.load.load, "can_frames_traced": float(self.bus.frames)}
         if len(lat) and self.realtime:
@@ -288,10 +297,14 @@ class CanopenBackend(MirroredScene, Backend):
         return [f"drive {node} EMCY at t={t:.3f}s: {describe(code)}" for t, node, code in self.master.emcys]
 
     def close(self) -> None:
+        """The drives told to quick stop (the run's stop category: held, or ramped down and off), the bus closed."""
         try:
-            if self._holder is not None:
-                self._holding.set()
-                self._holder.join()
+            if self.clock is not None:
+                self.clock.close()
+            if self._configured:  # (they would else fault on the SYNC that stops coming)
+                self.master.controlword[:] = QUICK_STOP_CMD
+                with contextlib.suppress(can.CanError, DriveFaultError):
+                    self._cycle(np.zeros(self.n))
             if self.rig is not None:
                 self.rig.stop_watching()
             self.bus.close()

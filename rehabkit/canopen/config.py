@@ -103,7 +103,10 @@ class CanopenConfig(StrictModel):
     heartbeat_ms: int = Field(20, ge=1, le=65535, description="heartbeat period of the drives and the host [ms]")
     heartbeat_timeout_ms: int = Field(60, ge=1, le=65535, description="a heartbeat silent this long is lost: the "
                                       "drives fault on the host's, the host stops on a drive's [ms]")
-    missed_cycles: int = Field(3, ge=1, description="cycles in a row without a drive's TPDOs before the run stops")
+    sync_timeout_ms: float = Field(10.0, gt=0, description="the simulated drives fault (0x8100) without a SYNC this "
+                                   "long, in real time [ms]")
+    tpdo_timeout_ms: float = Field(50.0, gt=0, description="a drive whose TPDOs have not come for this long stops "
+                                   "the run (a non-real-time host may answer a cycle late now and then) [ms]")
     torque_actual: bool = Field(False, description="map each drive's actual torque (0x6077) too (2 bytes a cycle "
                                 "more each: see the bus load)")
     inject: list[Injection] = Field([], description="faults injected into the simulated drives (tests)")

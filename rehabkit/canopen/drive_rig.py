@@ -17,12 +17,12 @@ from collections.abc import Sequence
 import canopen
 import numpy as np
 
+from rehabkit.canopen.cia402 import State
 from rehabkit.canopen.config import DriveUnits
 from rehabkit.canopen.sim_drive import EDS, SYNC_ID, SimulatedDrive
 from rehabkit.hardware.plant import MujocoPlant
 
 SYNC_LOST = 0x8100  # CiA 301: communication error (here: the SYNC stopped coming)
-SYNC_TIMEOUT_CYCLES = 5  # a real-time bus without SYNC this many cycles has lost it
 
 
 class _PlantJoint:
@@ -90,10 +90,11 @@ class DriveRig:
         self._read()
         self.cycles += 1
 
-    def watch_sync(self) -> threading.Thread:
-        """In real time: a thread faulting every drive (0x8100, their EMCYs, their reactions) once the SYNC has not
-        come for ``SYNC_TIMEOUT_CYCLES`` cycles, its reactions then run on the drives' own clock (stopped by
-        :meth:`stop_watching`)."""
+    def watch_sync(self, timeout_s: float = 0.010) -> threading.Thread:
+        """In real time: a thread faulting every drive still enabled (0x8100, their EMCYs, their reactions) once the
+        SYNC has not come for ``timeout_s``; the drives' reactions and quick stops then run on their own clock
+        (stopped by :meth:`stop_watching`)."""
+        self.sync_timeout_s = timeout_s
         thread = threading.Thread(target=self._watch, name="sync-watchdog", daemon=True)
         thread.start()
         return thread
@@ -104,15 +105,15 @@ class DriveRig:
     def _watch(self) -> None:
         while not self._watching.wait(self.period):
             last = self.last_sync
-            if last is None or time.monotonic() - last <= SYNC_TIMEOUT_CYCLES * self.period:
+            if last is None or time.monotonic() - last <= self.sync_timeout_s:
                 continue
-            for d in self.drives:
-                d.fault(SYNC_LOST)
+            for d in self.drives:  # (a drive already stopping, or stopped, carries on with that)
+                if d.machine.state is State.OPERATION_ENABLED:
+                    d.fault(SYNC_LOST)
             while not self._watching.wait(self.period):  # the reactions, one cycle at a time, without a SYNC
                 if self.last_sync != last:  # (the SYNC came back: the drives take it from there)
                     break
                 self.coast()
-                last = self.last_sync
 
     def coast(self) -> None:
         """A cycle without SYNC (the drives' reactions on their own clock): each drive's reaction, the plant runs."""

@@ -91,6 +91,7 @@ class DriveMaster:
         """By SDO, in pre-operational: the cycle, heartbeats, CST, each drive's limits and PDO maps; then NMT start."""
         cfg = self.config
         value, index = interpolation_period(period_s)
+        self.missed_limit = max(1, math.ceil(cfg.tpdo_timeout_ms * 1e-3 / period_s - 1e-9))
         for i, r in enumerate(self.remotes):
             r.nmt.state = "PRE-OPERATIONAL"
             if self._read_rated[i]:  # the drive's own rated torque (the motor's [mN·m]), at the joint
@@ -220,13 +221,14 @@ class DriveMaster:
             if code:  # (0: the error reset)
                 i = [r.id for r in self.remotes].index(node)
                 return DriveFaultError(f"EMCY: {describe(code)}", node, self.names[i], code)
-        late = np.flatnonzero(self.missed >= self.config.missed_cycles)
+        late = np.flatnonzero(self.missed >= self.missed_limit)
         if len(late) == len(self.remotes):
-            return DriveFaultError(f"no TPDO from any drive for {self.config.missed_cycles} cycles: the bus is "
-                                   "silent", observable=False)
+            return DriveFaultError(f"no TPDO from any drive for {self.missed_limit} cycles: the bus is silent",
+                                   observable=False)
         if len(late):
             i = int(late[0])
-            return DriveFaultError(f"no TPDO for {self.missed[i]} cycles", self.remotes[i].id, self.names[i])
+            return DriveFaultError(f"no TPDO for {self.missed[i]} cycles ({self.config.tpdo_timeout_ms:g} ms)",
+                                   self.remotes[i].id, self.names[i])
         silent = np.flatnonzero(now - self.heard > self.config.heartbeat_timeout_ms * 1e-3)
         if len(silent):
             i = int(silent[0])

@@ -35,6 +35,7 @@ SYNC_ID = 0x80
 HEARTBEAT_LOST = 0x8130  # CiA 301/402 error code: life guard error or heartbeat error
 OVERSPEED = 0x8400  # velocity speed controller
 POSITION_LIMIT = 0x8612  # reference limit (beyond the software position limits)
+DEFAULT_UNITS = DriveUnits()
 STOP_BANDWIDTH = 40.0  # [rad/s] the drive's own loop in a quick stop or fault reaction (critically damped)
 NMT_BYTE = {"INITIALISING": 0x00, "STOPPED": 0x04, "OPERATIONAL": 0x05, "PRE-OPERATIONAL": 0x7F}
 
@@ -58,7 +59,7 @@ class SimulatedDrive:
     what its own loop (quick stops, fault reactions) is tuned to. ``own_sync``: it takes each SYNC itself
     (else whoever steps the plant calls :meth:`on_sync`, in order). ``clocked``: heartbeats on the SYNC clock."""
 
-    def __init__(self, network: canopen.Network, node_id: int, joint: Joint, units: DriveUnits = DriveUnits(),
+    def __init__(self, network: canopen.Network, node_id: int, joint: Joint, units: DriveUnits = DEFAULT_UNITS,
                  eds: Path = EDS, inertia: float = 0.01, own_sync: bool = True, clocked: bool = False):
         self.node = canopen.LocalNode(node_id, str(eds))
         network.add_node(self.node)

@@ -1,4 +1,4 @@
-"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, audit, estop, assess,
+"""``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, drives, audit, estop, assess,
 safety-report.
 
 Exit codes: 0 success (all expectations met), 1 an expectation failed or the
@@ -233,6 +233,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.cli.bridge import add_parser as add_bridge
 
     add_bridge(sub)
+    from rehabkit.cli.drives import add_parser as add_drives
+
+    add_drives(sub)
     from rehabkit.cli.audit import add_parser as add_audit
 
     add_audit(sub)
