@@ -81,7 +81,7 @@ def test_hit_round_trip_on_six_simulated_drives_tracks_like_the_simulation(tmp_p
     assert len(frames) == m["can_frames_traced"] + 19 and not list(tmp_path.glob(".can*"))
     ids = np.array([f.arbitration_id for f in frames])
     syncs = int((ids == 0x80).sum())
-    assert syncs == 4250 + 5 + 1  # the run's cycles, the 402 walk's four, the first state's, the close's
+    assert syncs == 4250 + 6 + 1  # the run's cycles, the 402 walk's five, the first state's, the close's
     for node in range(1, 7):  # each drive: an RPDO and two TPDOs a cycle (from NMT start on), its heartbeats
         assert (ids == 0x200 + node).sum() == syncs and (ids == 0x180 + node).sum() == (ids == 0x280 + node).sum()
         assert (ids == 0x180 + node).sum() == syncs
@@ -92,7 +92,7 @@ def test_hit_round_trip_on_six_simulated_drives_tracks_like_the_simulation(tmp_p
 
 FAULTS = [
     ({"fault": "drive", "node": 2, "code": 0x2310}, 2, "drive 2 (shoulder_2): EMCY: 0x2310 continuous over-current"),
-    ({"fault": "drive-silent", "node": 3}, 3, "drive 3 (elbow_1): no TPDO for 25 cycles (50 ms)"),
+    ({"fault": "drive-silent", "node": 3}, 3, "drive 3 (elbow_1): no TPDO for 10 cycles (20 ms)"),
     ({"fault": "drive-heartbeat", "node": 4}, 4, "drive 4 (elbow_2): its heartbeat is lost (silent 62 ms > 60 ms"),
     ({"fault": "host-heartbeat"}, 1, "drive 1 (shoulder_1): EMCY: 0x8130 life guard error or heartbeat error"),
 ]
@@ -100,7 +100,8 @@ FAULTS = [
 
 @pytest.mark.parametrize("fault, node, says", FAULTS, ids=[f[0]["fault"] for f in FAULTS])
 def test_each_fault_a_drive_produces_stops_the_run_with_its_reason(fault, node, says):
-    over = {**CANOPEN, "duration": 3.0, "backend": {**CANOPEN["backend"], "inject": [{"at_s": 2.0, **fault}]}}
+    backend = {**CANOPEN["backend"], "inject": [{"at_s": 2.0, **fault}], "tpdo_timeout_ms": 20}  # (before its heartbeat)
+    over = {**CANOPEN, "duration": 3.0, "backend": backend}
     r = run_scenario(HIT, over)
     (event,) = r.summary["safety"]["events"]
     assert event["rule"] == "backend" and says in event["message"]
@@ -221,6 +222,6 @@ def test_hit_on_simulated_drives_in_real_time(tmp_path):
     assert sum(e["data"]["held_cycles"] for e in holds) == m["can_hold_cycles"]
     frames = list(can.LogReader(tmp_path / "can.asc"))
     syncs = [f.timestamp for f in frames if f.arbitration_id == 0x80]
-    assert len(syncs) >= m["can_cycles"] + 5
+    assert len(syncs) >= m["can_cycles"] + 6
     assert np.median(np.diff(syncs)) == pytest.approx(0.004, rel=0.05)  # paced on the wall clock
     assert [f.data[0] for f in frames if f.arbitration_id == 0x201][-1] == 0x02  # the last controlword: quick stop

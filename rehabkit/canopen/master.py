@@ -172,7 +172,8 @@ class DriveMaster:
         if fault_reset:
             self.controlword[:] = FAULT_RESET
             cycle(zero)
-        for word in (SHUTDOWN, SWITCH_ON_CMD, ENABLE_OPERATION_CMD, ENABLE_OPERATION_CMD):
+        # from wherever the last run left them (a quick stop held: QUICK STOP ACTIVE) to SWITCH ON DISABLED first
+        for word in (DISABLE_VOLTAGE_CW, SHUTDOWN, SWITCH_ON_CMD, ENABLE_OPERATION_CMD, ENABLE_OPERATION_CMD):
             self.controlword[:] = word
             cycle(zero)
         for i, s in enumerate(self.states):
