@@ -10,7 +10,7 @@ For 2, 4 and 6 drives (a horizontal DH arm of that many joints, so gravity plays
 - UDP link: the same arm, same rate, over the hardware backend to a spawned bridge (``rehabkit bridge``), its
   round trip from command to state and its deadline misses.
 
-With the bus arithmetic at 1 Mbit/s beside each (``rehabkit.canopen.pdo_layout``): whether ``validate`` allows the
+With the bus arithmetic at 1 Mbit/s beside each (``rehabkit.canopen.bus.pdo_layout``): whether ``validate`` allows the
 rate (udp_multicast has no bitrate: over it every combination runs). Multicast stays on loopback: the script runs
 itself in a network namespace of its own (``unshare -n``, ``lo`` up, a multicast route), which needs root.
 
@@ -45,10 +45,10 @@ def arm(n: int) -> dict:
 
 def canopen_run(n: int, rate: float, seconds: float) -> dict:
     """The master's loop against ``rehabkit drives`` in another process: late cycles and SYNC→last TPDO [ms]."""
-    from rehabkit.canopen.can_bus import CanBus
+    from rehabkit.canopen.bus.can_bus import CanBus
     from rehabkit.canopen.config import CanopenConfig, DriveSpec
     from rehabkit.canopen.master import DriveLimits, DriveMaster
-    from rehabkit.canopen.sim_drive import EDS
+    from rehabkit.canopen.simulated.drive import EDS
     from rehabkit.hardware.link.clock import wait_until
 
     drives = subprocess.Popen([sys.executable, "-m", "rehabkit.cli", "drives", "dh", "--config", json.dumps(arm(n)),
@@ -124,7 +124,7 @@ def main() -> None:
         setup = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && "
         cmd = f"{setup}{sys.executable} {Path(__file__).resolve()} --inside --seconds {args.seconds}"
         sys.exit(subprocess.call(["unshare", "-n", "sh", "-c", cmd]))
-    from rehabkit.canopen.pdo_layout import bus_load
+    from rehabkit.canopen.bus.pdo_layout import bus_load
 
     os.environ["REHABKIT_STATE"] = tempfile.mkdtemp()
     print(f"# {platform.node()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "

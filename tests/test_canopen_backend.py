@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from rehabkit.api import run_scenario
-from rehabkit.canopen.pdo_layout import bus_load, frame_bits
+from rehabkit.canopen.bus.pdo_layout import bus_load, frame_bits
 from rehabkit.testing import group
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -100,7 +100,8 @@ FAULTS = [
 
 @pytest.mark.parametrize("fault, node, says", FAULTS, ids=[f[0]["fault"] for f in FAULTS])
 def test_each_fault_a_drive_produces_stops_the_run_with_its_reason(fault, node, says):
-    backend = {**CANOPEN["backend"], "inject": [{"at_s": 2.0, **fault}], "tpdo_timeout_ms": 20}  # (before its heartbeat)
+    # (the TPDO timeout below the heartbeat's: a silent drive is noticed by its missing TPDOs)
+    backend = {**CANOPEN["backend"], "inject": [{"at_s": 2.0, **fault}], "tpdo_timeout_ms": 20}
     over = {**CANOPEN, "duration": 3.0, "backend": backend}
     r = run_scenario(HIT, over)
     (event,) = r.summary["safety"]["events"]
@@ -111,11 +112,11 @@ def test_each_fault_a_drive_produces_stops_the_run_with_its_reason(fault, node, 
 
 def _bench(hit, option: int, decel: float = 3.0):
     """The HIT on six simulated drives and a master, on a lock-step bus: set up, placed at A, enabled."""
-    from rehabkit.canopen.can_bus import CanBus
+    from rehabkit.canopen.bus.can_bus import CanBus
     from rehabkit.canopen.config import CanopenConfig, DriveSpec
-    from rehabkit.canopen.drive_rig import DriveRig
     from rehabkit.canopen.master import DriveLimits, DriveMaster
-    from rehabkit.canopen.sim_drive import EDS
+    from rehabkit.canopen.simulated.drive import EDS
+    from rehabkit.canopen.simulated.rig import DriveRig
     from rehabkit.hardware.plant import MujocoPlant
 
     clock = [0.0]

@@ -182,7 +182,7 @@ def test_a_simulated_drive_follows_the_masters_pdos_on_sync_and_drives_its_joint
     import canopen
 
     from rehabkit.canopen.config import DriveUnits
-    from rehabkit.canopen.sim_drive import SimulatedDrive
+    from rehabkit.canopen.simulated.drive import SimulatedDrive
 
     drive_net, master_net = bus
     joint = _Joint()
@@ -228,7 +228,7 @@ def test_a_simulated_drive_faults_when_the_masters_heartbeat_it_watches_goes_sil
     have passed since the last beat (at the 5th SYNC without one: 12 ms), with the heartbeat error's EMCY."""
     import canopen
 
-    from rehabkit.canopen.sim_drive import HEARTBEAT_LOST, SimulatedDrive
+    from rehabkit.canopen.simulated.drive import HEARTBEAT_LOST, SimulatedDrive
 
     drive_net, master_net = bus
     drive = SimulatedDrive(drive_net, 6, _Joint())

@@ -38,7 +38,7 @@ EXECUTED_ELSEWHERE = {
     "rehabkit assess scenarios/lexos_patient.yaml --out out/rom":
         "tests/test_assessment.py::test_an_assessment_recovers_the_persons_ranges_and_narrows_the_next_session",
     "rehabkit safety-report":
-        "tests/test_safety_report.py::test_the_report_gives_every_skill_in_simulation_and_over_the_link",
+        "tests/test_safety_report.py::test_the_report_gives_every_skill_in_simulation_over_the_link_and_on_canopen",
     "rehabkit estop list": "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",
     'rehabkit estop clear sim-hit --by "J. Doe"':
         "tests/test_stops.py::test_an_estop_stays_latched_across_runs_until_a_person_clears_it",
@@ -46,6 +46,7 @@ EXECUTED_ELSEWHERE = {
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
     "rehabkit keys new hit-1 --out keys/hit-1.key --replace":
         "tests/test_link_security.py::test_the_readmes_lab_network_commands_run_as_written",
+    "rehabkit drives": "tests/test_canopen_readme.py::test_simulated_drives_in_another_process_as_the_readme_runs_them",
     "rehabkit plugins --fields dh":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
 }

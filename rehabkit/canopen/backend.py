@@ -10,7 +10,7 @@ the torque taken off by the drives when that stop ends (disable voltage). The e-
 drives' master): a run does not start while it is latched, and a drive's FAULT is reset only in the first run after a
 person has cleared it (``rehabkit estop clear``).
 
-With no ``bus`` named, simulated drives (:mod:`~rehabkit.canopen.drive_rig`) on the robot's MuJoCo model start with
+With no ``bus`` named, simulated drives (:mod:`~rehabkit.canopen.simulated.rig`) on the robot's MuJoCo model start with
 the run: in real time on a virtual bus of this process, or in lock-step (the plant advancing one cycle per SYNC,
 every frame delivered as it is sent). The scene is mirrored on the host from the measured joints, as over the
 hardware link.
@@ -25,15 +25,18 @@ import time
 import can
 import numpy as np
 
-from rehabkit.canopen.bus_check import check_bus
-from rehabkit.canopen.can_bus import CanBus
+from rehabkit.canopen.bus.bus_check import check_bus
+from rehabkit.canopen.bus.can_bus import CanBus
 from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.cycle_clock import CycleClock
-from rehabkit.canopen.drive_rig import DriveRig
+from rehabkit.canopen.emcy_codes import describe
 from rehabkit.canopen.master import DriveLimits, DriveMaster
-from rehabkit.canopen.sim_drive import EDS
+from rehabkit.canopen.simulated.drive import EDS
+from rehabkit.canopen.simulated.rig import DriveRig
+from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
 from rehabkit.core.kinds.backend import EStopLatchedError
+from rehabkit.core.kinds.capabilities import Instruments
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.results.metric import Metric
@@ -58,19 +61,21 @@ METRICS = (
 )
 HOLD_BANDWIDTH = 20.0  # [rad/s] this host's hold of the posture through a late step
 STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
+ABORT_OPTION = {0: 2, 1: 3, 2: 3}  # stop category → abort connection option code (0x6007): torque off; quick stop
 
 
-class CanopenBackend(MirroredScene, Backend):
+class CanopenBackend(MirroredScene, Backend, Instruments):
     """The robot's joints on CiA 402 drives over CANopen (see the module's doc)."""
 
     metrics = METRICS
     real_person = True
 
     def __init__(self, config: CanopenConfig, context: Context):
-        specs, self.load = check_bus(config, context)
+        specs, sensors, self.load = check_bus(config, context)
         robot = context.robot
         self.config, self.robot = config, robot
         self.timestep, self.period = config.timestep, context.control_dt
+        self.loop_delay = self.period  # (synchronous RPDOs: a cycle's torque acts from the next SYNC on)
         self.realtime = config.clock == "realtime"
         self.simulated = config.bus is None or config.bus.simulated
         self.n = robot.model.dof
@@ -90,6 +95,9 @@ class CanopenBackend(MirroredScene, Backend):
         self._configured = self._started = False
         self._fault: DriveFaultError | None = None
         self.clock: CycleClock | None = None  # (real time, from the reset)
+        self._note = context.note
+        self._states: list[str] = []
+        self._emcys_said = 0
         self._hold_kp, self._hold_kd = HOLD_KP, HOLD_KD  # (the bridge's, for a robot without a dynamic model)
         self._injections = sorted(config.inject, key=lambda f: f.at_s)
         trace = None
@@ -106,12 +114,15 @@ class CanopenBackend(MirroredScene, Backend):
                 plant = MujocoPlant(robot, config.timestep, context.instruments,
                                     context.world.loads if context.world else (), context.seed or 0)
                 self.rig = DriveRig(self.bus.drives, plant, [s.node_id for s in specs], self.units,
-                                    clocked=not self.realtime)
+                                    clocked=not self.realtime, sensors=[s.node_id for s in sensors])
                 if self.realtime:  # (their own watchdog on the wall clock: a SYNC that stops coming faults them)
                     self.rig.watch_sync(config.sync_timeout_ms * 1e-3)
             nodes = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(EDS)) for s in specs]
+            instruments = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(SENSOR_EDS), i.name)
+                           for s, i in zip(sensors, context.instruments, strict=True)]
             self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now,
-                                      [s.rated_torque_nm is None for s in specs])
+                                      [s.rated_torque_nm is None for s in specs], instruments)
+            self._instrument = {i.name: k for k, i in enumerate(context.instruments)}
         except BaseException:
             self.bus.close(keep_trace=False)
             raise
@@ -139,7 +150,8 @@ class CanopenBackend(MirroredScene, Backend):
             decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
         categories = sc.stop_category if sc is not None else {}
         category = categories.get("e-stop", categories.get("default", 2))
-        return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category])
+        return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category],
+                           ABORT_OPTION[category])
 
     # -- Backend -----------------------------------------------------------------------------------------------
 
@@ -169,6 +181,7 @@ class CanopenBackend(MirroredScene, Backend):
                                   observable=False)
         self.q, self.qd = self.master.q.copy(), self.master.qd.copy()
         self._started, self._fault = False, None
+        self._states, self._emcys_said = list(self.master.states), len(self.master.emcys)
         inertia = joint_inertia(self.robot, q0)
         if inertia is not None:
             self._hold_kp, self._hold_kd = HOLD_BANDWIDTH**2 * inertia, 2 * HOLD_BANDWIDTH * inertia
@@ -212,6 +225,7 @@ class CanopenBackend(MirroredScene, Backend):
         self.cycles += 1
         self.q, self.qd, self._posed = self.master.q.copy(), self.master.qd.copy(), False
         fault = self.master.fault()
+        self._say_changes()
         if fault is not None and self._fault is None:
             self._fault = fault  # latched as an e-stop: the drives' fault is reset only after a person clears it
             self.latch.press(str(fault), by=f"drive {fault.node}" if fault.node is not None else "the CAN bus")
@@ -257,6 +271,10 @@ class CanopenBackend(MirroredScene, Backend):
         self.latch.press(reason, by="rehabkit (canopen master)")
         return True
 
+    def read_instrument(self, name: str) -> np.ndarray:
+        """An instrument's newest reading, from its sensor's TPDO (sampled at the cycle's SYNC)."""
+        return self.master.readings[self._instrument[name]].copy()
+
     def interventions(self) -> list[SafetyEvent]:
         """The cycles this host held the posture through, because the loop's step was a cycle late."""
         out = []
@@ -290,11 +308,18 @@ class CanopenBackend(MirroredScene, Backend):
         lat = np.array(self.latency[1:]) * 1e3
         return {"can_latency_ms": (np.arange(len(lat)) * self.period, lat)}
 
-    def notes(self) -> list[str]:
-        """The drives' states and EMCYs, decoded, for the summary."""
-        from rehabkit.canopen.emcy_codes import describe
-
-        return [f"drive {node} EMCY at t={t:.3f}s: {describe(code)}" for t, node, code in self.master.emcys]
+    def _say_changes(self) -> None:
+        """Each drive's state change and each EMCY, in words, into the run's notes (summary and log)."""
+        t = self.cycles * self.period
+        for i, (old, new) in enumerate(zip(self._states, self.master.states, strict=True)):
+            if old != new and self._note is not None:
+                self._note(t, f"drive {self.master.ids[i]} ({self.names[i]}): {old} -> {new}")
+        self._states = list(self.master.states)
+        for when, node, code in self.master.emcys[self._emcys_said:]:
+            if self._note is not None:
+                name = self.master.names[self.master.ids.index(node)]
+                self._note(when if not self.realtime else t, f"drive {node} ({name}) EMCY: {describe(code)}")
+        self._emcys_said = len(self.master.emcys)
 
     def close(self) -> None:
         """The drives told to quick stop (the run's stop category: held, or ramped down and off), the bus closed."""

@@ -143,6 +143,12 @@ class Drive402:
                 self._go(State.OPERATION_ENABLED, 16)
         return self.state
 
+    def quick_stop_locally(self) -> None:
+        """The drive's own quick stop (its abort connection option code says so when its master falls silent):
+        from OPERATION ENABLED to QUICK STOP ACTIVE (transition 11); elsewhere its power stage is already off."""
+        if self.state is State.OPERATION_ENABLED:
+            self._go(State.QUICK_STOP_ACTIVE, 11)
+
     def disable_locally(self) -> None:
         """The drive's own enable input opened (no fault): its power stage off, to SWITCH ON DISABLED (as transition
         9 or 12 would take it there; the master must walk it up again)."""

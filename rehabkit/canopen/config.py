@@ -85,6 +85,15 @@ class Injection(StrictModel):
     code: int = Field(0x2310, ge=0, le=0xFFFF, description="the error code of a drive fault (default: over-current)")
 
 
+class SensorSpec(StrictModel):
+    """One of the run's instruments (a force-torque sensor's force, an accelerometer) on the bus: a three-axis
+    measuring device (CiA 404)."""
+
+    node_id: int = Field(ge=1, le=127, description="CANopen node id (1-127)")
+    eds: FilePath | None = Field(None, description="its EDS (default: rehabkit's generic three-axis sensor: three "
+                                 "INTEGER16 inputs at 0x7130 in units of 0x2100's scale)")
+
+
 class CanopenConfig(StrictModel):
     """The drives on the CAN bus, the loop's clock and the bus's watchdogs."""
 
@@ -93,6 +102,8 @@ class CanopenConfig(StrictModel):
     bitrate: int = Field(1_000_000, gt=0, le=1_000_000, description="the bus's bitrate [bit/s]")
     drives: list[DriveSpec] | None = Field(None, description="one per joint, in the robot's joint order (default: "
                                            "node ids 1, 2, ... on the generic servo's EDS)")
+    sensors: list[SensorSpec] | None = Field(None, description="one per instrument the run's sensors read, in their "
+                                             "order (default: node ids 64, 65, ...)")
     clock: Literal["realtime", "lockstep"] = Field(
         "realtime", description="realtime: SYNC on the wall clock, as a robot's bus runs; lockstep: the simulated "
         "drives' plant advances one cycle per SYNC, in this process (deterministic, faster than real time)")

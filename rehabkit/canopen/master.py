@@ -19,11 +19,12 @@ import can
 import canopen
 import numpy as np
 
+from rehabkit.canopen.bus.pdo_codec import PdoCodec
+from rehabkit.canopen.bus.pdo_layout import RPDO1, SENSOR_TPDO, TPDO1, tpdo2
+from rehabkit.canopen.bus.pdo_maps import write_maps
 from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
 from rehabkit.canopen.emcy_codes import describe
-from rehabkit.canopen.pdo_codec import PdoCodec
-from rehabkit.canopen.pdo_layout import RPDO1, TPDO1, tpdo2
 
 CST = 10  # modes of operation (0x6060): cyclic synchronous torque
 DISABLE_VOLTAGE_CW = 0x00
@@ -39,6 +40,7 @@ class DriveLimits:
     torque: np.ndarray
     decel: np.ndarray
     quick_stop_option: int
+    abort_option: int = 1  # 0x6007: what a drive does when this host falls silent (1 fault, 2 torque off, 3 quick stop)
 
 
 def interpolation_period(period_s: float) -> tuple[int, int]:
@@ -56,52 +58,72 @@ class DriveMaster:
 
     def __init__(self, network: canopen.Network, nodes: Sequence[tuple[int, str]], units: Sequence[DriveUnits],
                  names: Sequence[str], config: CanopenConfig, now: Callable[[], float],
-                 read_rated: Sequence[bool] = ()):
-        self.network, self.config, self.now, self.names = network, config, now, list(names)
+                 read_rated: Sequence[bool] = (), sensors: Sequence[tuple[int, str, str]] = ()):
+        self.network, self.config, self.now = network, config, now
         self.units = list(units)
         self._read_rated = list(read_rated) or [False] * len(self.units)
         self.remotes = [canopen.RemoteNode(node, eds) for node, eds in nodes]
-        for r in self.remotes:
+        self.sensors = [canopen.RemoteNode(node, eds) for node, eds, _ in sensors]  # (three-axis: CiA 404)
+        for r in (*self.remotes, *self.sensors):
             network.add_node(r)
-        n = len(self.remotes)
+        n, m = len(self.remotes), len(self.sensors)
+        # every node: the drives (joint i), then the sensors (instrument k at n + k)
+        self.ids = [r.id for r in (*self.remotes, *self.sensors)]
+        self.names = [*names, *(name for _, _, name in sensors)]
+        self.readings = np.zeros((m, 3))  # each sensor's newest values [its unit: N, m/s²]
+        self._sensor_scale = np.ones(m)
         self.status = np.zeros(n, int)
         self.counts = np.zeros((3, n))  # position, velocity, torque actual (drive units) of the newest TPDOs
         self.q, self.qd, self.applied = np.zeros(n), np.zeros(n), np.zeros(n)
         self._scale = np.array([u.counts_per_rad * u.direction for u in units])
         self._per_mille = np.array([1e3 * u.direction / u.rated_torque_nm for u in units])
-        self._got = np.zeros(n, bool)
-        self.missed = np.zeros(n, int)  # cycles in a row each drive's TPDOs did not come
+        self._got = np.zeros(n + m, bool)
+        self.missed = np.zeros(n + m, int)  # cycles in a row each node's TPDOs did not come
         self.missed_total = 0
         self._arrived = threading.Event()
         self.emcys: list[tuple[float, int, int]] = []  # (time, node, code) of each EMCY, in order
         self._emcy_new: list[tuple[int, int]] = []
-        self.heard = np.zeros(n)  # when each drive's heartbeat came last [s, master clock]
+        self.heard = np.zeros(n + m)  # when each node's heartbeat came last [s, master clock]
         self.enabled = False
         self.beating = True  # (False: an injected fault, the host's heartbeat stops)
         self.cycles = 0
         self._next_beat = 0.0
         self.controlword = np.full(n, SHUTDOWN, int)
         self._rpdo: list[PdoCodec | None] = [None] * n
-        self._tpdo: dict[int, tuple[int, int, object]] = {}  # COB-ID → (drive, TPDO number, its layout)
+        self._tpdo: dict[int, tuple[int, int, object]] = {}  # COB-ID → (node, TPDO number, its layout)
         self.states: list[str] = [State.NOT_READY_TO_SWITCH_ON.name] * n
 
     # -- set-up ---------------------------------------------------------------------------------------------
 
+    def wait_for_nodes(self, timeout_s: float = 10.0) -> None:
+        """Every node answering an SDO (its device type, 0x1000), within ``timeout_s`` of wall time: drives on a bus
+        powered up a moment ago, or ``rehabkit drives`` started just before the run, are given the time to boot."""
+        deadline = time.monotonic() + timeout_s
+        for r, name in zip((*self.remotes, *self.sensors), self.names, strict=True):
+            while True:
+                try:
+                    r.sdo.upload(0x1000, 0)
+                    break
+                except canopen.SdoCommunicationError:
+                    if time.monotonic() > deadline:
+                        raise DriveFaultError(f"does not answer on the bus within {timeout_s:g} s (is it powered, "
+                                              "its node id and bitrate as the scenario says; simulated: is `rehabkit "
+                                              "drives` running on this interface and channel?)", r.id, name,
+                                              observable=False) from None
+
     def configure(self, period_s: float, limits: DriveLimits) -> None:
         """By SDO, in pre-operational: the cycle, heartbeats, CST, each drive's limits and PDO maps; then NMT start."""
+        self.wait_for_nodes()
         cfg = self.config
         value, index = interpolation_period(period_s)
         self.missed_limit = max(1, math.ceil(cfg.tpdo_timeout_ms * 1e-3 / period_s - 1e-9))
         for i, r in enumerate(self.remotes):
-            r.nmt.state = "PRE-OPERATIONAL"
+            self._communication(r, period_s)
             if self._read_rated[i]:  # the drive's own rated torque (the motor's [mN·m]), at the joint
                 u = self.units[i]
                 self.units[i] = replace(u, rated_torque_nm=r.sdo[0x6076].raw * 1e-3 * u.gear_ratio)
                 self._per_mille[i] = 1e3 * u.direction / self.units[i].rated_torque_nm
             sd, u = r.sdo, self.units[i]
-            sd[0x1006].raw = round(period_s * 1e6)
-            sd[0x1017].raw = cfg.heartbeat_ms
-            sd[0x1016][1].raw = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
             sd[0x6060].raw = CST
             sd[0x60C2][1].raw, sd[0x60C2][2].raw = value, index
             lo, hi = sorted((limits.lower[i] * self._scale[i], limits.upper[i] * self._scale[i]))
@@ -110,52 +132,56 @@ class DriveMaster:
             sd[0x6072].raw = min(65535, math.ceil(limits.torque[i] / u.rated_torque_nm * 1e3))
             sd[0x6085].raw = math.ceil(limits.decel[i] * u.counts_per_rad)
             sd[0x605A].raw = limits.quick_stop_option
-            self._map(r, i)
-            r.emcy.add_callback(lambda err, node=r.id: self._emcy_new.append((node, err.code)))
-            self.network.subscribe(0x700 + r.id, self._on_heartbeat)
-        for r in self.remotes:
+            if 0x6007 in r.object_dictionary:  # (optional in the profile)
+                sd[0x6007].raw = limits.abort_option
+            rx, tx = write_maps(self.network, r, [RPDO1], [TPDO1, tpdo2(cfg.torque_actual)])
+            self._rpdo[i] = rx[0]
+            self._listen(tx, i)
+        n = len(self.remotes)
+        for k, r in enumerate(self.sensors):
+            self._communication(r, period_s)
+            self._sensor_scale[k] = float(r.sdo[0x2100].raw)
+            _, tx = write_maps(self.network, r, [], [SENSOR_TPDO])
+            self._listen(tx, n + k)
+        for r in (*self.remotes, *self.sensors):
             r.nmt.state = "OPERATIONAL"
         self.heard[:] = self.now()
 
-    def _map(self, r: canopen.RemoteNode, i: int) -> None:
-        r.rpdo.read()
-        r.tpdo.read()
-        layout = ((r.rpdo, 1, RPDO1), (r.tpdo, 1, TPDO1), (r.tpdo, 2, tpdo2(self.config.torque_actual)))
-        for pdos in (r.rpdo, r.tpdo):
-            for pdo in pdos.map.values():
-                pdo.enabled = False
-        for pdos, number, entries in layout:
-            pdo = pdos[number]
-            pdo.clear()
-            for index, sub, _ in entries:
-                pdo.add_variable(index, sub)
-            pdo.trans_type, pdo.enabled = 1, True  # synchronous: taken / sampled at every SYNC
-        r.rpdo.save()
-        r.tpdo.save()
-        for pdo in r.tpdo.map.values():  # (its frames are read here, in one unpack: canopen's decoding unsubscribed)
-            self.network.unsubscribe(pdo.cob_id, pdo.on_message)
-        self._rpdo[i] = PdoCodec.of(r.rpdo[1])
-        t1, t2 = PdoCodec.of(r.tpdo[1]), PdoCodec.of(r.tpdo[2])
-        self._tpdo[t1.cob_id] = (i, 1, t1.layout)
-        self._tpdo[t2.cob_id] = (i, 2, t2.layout)
-        self.network.subscribe(t1.cob_id, self._on_tpdo)
-        self.network.subscribe(t2.cob_id, self._on_tpdo)
+    def _communication(self, r: canopen.RemoteNode, period_s: float) -> None:
+        """A node in pre-operational: its cycle, its heartbeat and the host's it watches, its EMCYs and heartbeats
+        heard here."""
+        cfg = self.config
+        r.nmt.state = "PRE-OPERATIONAL"
+        r.sdo[0x1006].raw = round(period_s * 1e6)
+        r.sdo[0x1017].raw = cfg.heartbeat_ms
+        r.sdo[0x1016][1].raw = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
+        r.emcy.add_callback(lambda err, node=r.id: self._emcy_new.append((node, err.code)))
+        self.network.subscribe(0x700 + r.id, self._on_heartbeat)
+
+    def _listen(self, tpdos: list[PdoCodec], i: int) -> None:
+        for number, codec in enumerate(tpdos, start=1):
+            self._tpdo[codec.cob_id] = (i, number, codec.layout)
+            self.network.subscribe(codec.cob_id, self._on_tpdo)
 
     def _on_tpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
         i, number, layout = self._tpdo[can_id]
         values = layout.unpack_from(data)
-        if number == 1:
+        n = len(self.remotes)
+        if i >= n:  # a sensor's three inputs
+            self.readings[i - n] = np.array(values) * self._sensor_scale[i - n]
+        elif number == 1:
             self.status[i], self.counts[0, i] = values
             return
-        self.counts[1, i] = values[0]  # (the last of a drive's cycle)
-        if len(values) > 1:
-            self.counts[2, i] = values[1]
+        else:
+            self.counts[1, i] = values[0]  # (the last of a drive's cycle)
+            if len(values) > 1:
+                self.counts[2, i] = values[1]
         self._got[i] = True
         if self._got.all():
             self._arrived.set()
 
     def _on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
-        self.heard[[r.id for r in self.remotes].index(can_id - 0x700)] = self.now()
+        self.heard[self.ids.index(can_id - 0x700)] = self.now()
 
     def place(self, q0: np.ndarray) -> None:
         """Simulated drives only: their plant reset to ``q0`` (the simulation's own objects 0x2000, 0x2001)."""
@@ -203,10 +229,11 @@ class DriveMaster:
         arrived = self._got.all() or self._arrived.wait(wait_s)
         latency = time.perf_counter() - sent if arrived else math.nan
         self.cycles += 1
-        got = self._got.copy()
-        self.missed[got] = 0
-        self.missed[~got] += 1
-        self.missed_total += int((~got).sum())
+        seen = self._got.copy()
+        self.missed[seen] = 0
+        self.missed[~seen] += 1
+        self.missed_total += int((~seen).sum())
+        got = seen[: len(self.remotes)]
         self.q[got] = self.counts[0, got] / self._scale[got]
         self.qd[got] = self.counts[1, got] / self._scale[got]
         self.applied[got] = self.counts[2, got] / self._per_mille[got]
@@ -220,21 +247,20 @@ class DriveMaster:
             node, code = self._emcy_new.pop(0)
             self.emcys.append((now, node, code))
             if code:  # (0: the error reset)
-                i = [r.id for r in self.remotes].index(node)
-                return DriveFaultError(f"EMCY: {describe(code)}", node, self.names[i], code)
+                return DriveFaultError(f"EMCY: {describe(code)}", node, self.names[self.ids.index(node)], code)
         late = np.flatnonzero(self.missed >= self.missed_limit)
-        if len(late) == len(self.remotes):
-            return DriveFaultError(f"no TPDO from any drive for {self.missed_limit} cycles: the bus is silent",
+        if len(late) == len(self.ids):
+            return DriveFaultError(f"no TPDO from any node for {self.missed_limit} cycles: the bus is silent",
                                    observable=False)
         if len(late):
             i = int(late[0])
             return DriveFaultError(f"no TPDO for {self.missed[i]} cycles ({self.config.tpdo_timeout_ms:g} ms)",
-                                   self.remotes[i].id, self.names[i])
+                                   self.ids[i], self.names[i])
         silent = np.flatnonzero(now - self.heard > self.config.heartbeat_timeout_ms * 1e-3)
         if len(silent):
             i = int(silent[0])
             return DriveFaultError(f"its heartbeat is lost (silent {1e3 * (now - self.heard[i]):.0f} ms > "
-                                   f"{self.config.heartbeat_timeout_ms} ms: {describe(0x8130)})", self.remotes[i].id,
+                                   f"{self.config.heartbeat_timeout_ms} ms: {describe(0x8130)})", self.ids[i],
                                    self.names[i], 0x8130)
         if self.enabled:
             for i, s in enumerate(self.states):

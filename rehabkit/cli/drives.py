@@ -42,7 +42,7 @@ def cmd_drives(args: argparse.Namespace) -> int:
         return EXIT_INVALID
     import canopen
 
-    from rehabkit.canopen.drive_rig import DriveRig
+    from rehabkit.canopen.simulated.rig import DriveRig
     from rehabkit.hardware.plant import MujocoPlant
 
     kw = {"interface": args.interface, "channel": args.channel, "receive_own_messages": False}

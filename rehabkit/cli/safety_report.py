@@ -1,4 +1,5 @@
-"""``rehabkit safety-report``: the safety skills in simulation and over the link, a table per skill."""
+"""``rehabkit safety-report``: the safety skills in simulation, over the link and on CANopen drives, a table per
+skill."""
 
 from __future__ import annotations
 
@@ -19,14 +20,15 @@ def cmd_safety_report(args: argparse.Namespace) -> int:
         print("error: no safety-skill scenarios given (and none in scenarios/safety/)", file=sys.stderr)
         return EXIT_INVALID
     try:
-        runs = skill_runs(paths, args.reactions.split(",") if args.reactions else None)
+        backends = tuple(args.backends.split(","))
+        runs = skill_runs(paths, args.reactions.split(",") if args.reactions else None, backends)
     except ScenarioError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_INVALID
-    md, html = write_report(runs, Path(args.out))
+    md, html = write_report(runs, Path(args.out), backends)
     print(md.read_text())
     print(f"wrote {md} and {html}")
-    return EXIT_OK if all(r.passed for pair in runs for r in pair if r is not None) else EXIT_FAILED
+    return EXIT_OK if all(r.passed for row in runs for r in row if r is not None) else EXIT_FAILED
 
 
 def _reactions(text: str) -> str:
@@ -36,11 +38,20 @@ def _reactions(text: str) -> str:
     return text
 
 
+def _backends(text: str) -> str:
+    wrong = [b for b in text.split(",") if b not in ("simulation", "link", "canopen")]
+    if wrong:
+        raise argparse.ArgumentTypeError(f"{', '.join(wrong)}: a backend is simulation, link or canopen")
+    return text
+
+
 def add_parser(sub) -> None:
-    r = sub.add_parser("safety-report", help="run safety-skill scenarios in simulation and over the link; write "
-                                             "a report per skill (Markdown and HTML with plots)")
+    r = sub.add_parser("safety-report", help="run safety-skill scenarios in simulation, over the link and on "
+                                             "CANopen drives; a report per skill (Markdown and HTML with plots)")
     r.add_argument("scenarios", nargs="*", help="skill scenarios (default: scenarios/safety/*.yaml)")
     r.add_argument("--out", default="out/safety_report", metavar="DIR")
     r.add_argument("--reactions", metavar="LIST", type=_reactions, help="run each skill with an interaction-force "
                    "limit once per reaction, side by side, e.g. stop,yield,retreat (default: as its scenario says)")
+    r.add_argument("--backends", metavar="LIST", type=_backends, default="simulation,link,canopen",
+                   help="the columns: simulation, link (UDP to a bridge), canopen (simulated CiA 402 drives)")
     r.set_defaults(func=cmd_safety_report)

@@ -82,10 +82,12 @@ class MujocoPlant(Plant):
         self._m = measured_joints(self.model, robot.model)
         self._friction = self.model.dof_frictionloss[self._v].copy()
 
-    def brake(self):
+    def brake(self, joints=None):
+        """The holding brakes on (``joints``: those joints' only; default all)."""
         if self.robot.model.brakes is None:
             return False
-        engage_brakes(self.model, self._v, self._friction + self.robot.model.brakes)
+        at = slice(None) if joints is None else np.asarray(joints, int)
+        engage_brakes(self.model, self._v[at], self._friction[at] + self.robot.model.brakes[at])
         return True
 
     def reset(self, q0):

@@ -1,5 +1,5 @@
-"""The safety report's pages: a table per skill (simulation and link side by side) and a plot of each, as Markdown
-and as one self-contained HTML file (plots inline)."""
+"""The safety report's pages: a table per skill (simulation, link and CANopen side by side) and a plot of each, as
+Markdown and as one self-contained HTML file (plots inline)."""
 
 from __future__ import annotations
 
@@ -57,14 +57,18 @@ def _cell(run, get, fmt) -> str:
     return fmt.format(v)
 
 
-def _plot(sim, link, path: Path) -> None:
+STYLES = ("-", "--", ":")
+LABELS = {"simulation": "simulation", "link": "link", "canopen": "CANopen"}
+
+
+def _plot(runs: tuple, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 4.2), sharex=True)
-    for run, style in ((sim, "-"), (link, "--")):
+    for run, style in zip(runs, STYLES, strict=False):
         if run is None:
             continue
         tr = run.trace
@@ -78,38 +82,44 @@ def _plot(sim, link, path: Path) -> None:
                 ax.axvline(run.trip_s, color="red", lw=0.8, ls=style)
     top.set_ylabel("fastest joint [deg/s]")
     bottom.set_ylabel("force [N] (or largest |τ| [N·m])" if any(
-        r is not None and r.trace.f_h is None for r in (sim, link)) else "interaction force [N]")
+        r is not None and r.trace.f_h is None for r in runs) else "interaction force [N]")
     bottom.set_xlabel("time [s]")
     top.legend(loc="upper left", fontsize=8)
-    top.set_title((link or sim).scenario, fontsize=10)
+    top.set_title(next(r for r in runs if r is not None).scenario, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
-def write_report(runs: list, out: Path) -> tuple[Path, Path]:
+def write_report(runs: list, out: Path, backends: tuple[str, ...] = ("simulation", "link", "canopen")) \
+        -> tuple[Path, Path]:
     """``out/safety_report.md`` and ``out/safety_report.html`` (plots as PNGs beside the Markdown, inline in the
-    HTML)."""
+    HTML); ``runs``: a run per backend of ``backends`` per skill (None where it does not apply)."""
     out.mkdir(parents=True, exist_ok=True)
-    md = ["# Safety skills: simulation and robot link", "",
-          "Each skill's scenario run in simulation (MuJoCo) and over the robot link (lock-step UDP to a bridge "
-          "driving the robot's MuJoCo model). Reaction: from the limit's first crossing in truth to the stop.", ""]
+    heads = [LABELS.get(b, b) for b in backends]
+    md = [f"# Safety skills: {', '.join(heads)}", "",
+          "Each skill's scenario run in simulation (MuJoCo), over the robot link (lock-step UDP to a bridge driving "
+          "the robot's MuJoCo model) and on CANopen (simulated CiA 402 drives on the robot's MuJoCo model, lock-step "
+          "bus, at the highest control rate the bus arithmetic allows). Reaction: from the limit's first crossing in "
+          "truth to the stop.", ""]
     page = ["<!doctype html><meta charset='utf-8'><title>rehabkit safety report</title>",
-            "<style>body{font-family:sans-serif;max-width:60em}td,th{border:1px solid #ccc;padding:2px 8px}"
-            "table{border-collapse:collapse;margin-bottom:1em}</style>", "<h1>Safety skills: simulation and robot "
-            "link</h1>"]
-    for sim, link in runs:
-        name = (link or sim).scenario
+            "<style>body{font-family:sans-serif;max-width:70em}td,th{border:1px solid #ccc;padding:2px 8px}"
+            "table{border-collapse:collapse;margin-bottom:1em}</style>",
+            f"<h1>Safety skills: {html.escape(', '.join(heads))}</h1>"]
+    for row in runs:
+        name = next(r for r in row if r is not None).scenario
         png = out / f"{name}.png"
-        _plot(sim, link, png)
-        md += [f"## {name}", "", "| | simulation | link |", "|---|---|---|"]
-        page += [f"<h2>{html.escape(name)}</h2><table><tr><th></th><th>simulation</th><th>link</th></tr>"]
+        _plot(row, png)
+        md += [f"## {name}", "", "| | " + " | ".join(heads) + " |", "|---|" + "---|" * len(heads)]
+        page += [f"<h2>{html.escape(name)}</h2><table><tr><th></th>"
+                 + "".join(f"<th>{html.escape(h)}</th>" for h in heads) + "</tr>"]
         for label, get, fmt in ROWS:
-            a, b = _cell(sim, get, fmt), _cell(link, get, fmt)
-            if a in ("–", "n/a") and b in ("–", "n/a"):
+            cells = [_cell(run, get, fmt) for run in row]
+            if all(c in ("–", "n/a") for c in cells):
                 continue
-            md.append(f"| {label} | {a} | {b} |")
-            page.append(f"<tr><td>{html.escape(label)}</td><td>{html.escape(a)}</td><td>{html.escape(b)}</td></tr>")
+            md.append(f"| {label} | " + " | ".join(cells) + " |")
+            page.append(f"<tr><td>{html.escape(label)}</td>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells)
+                        + "</tr>")
         md += ["", f"![{name}]({png.name})", ""]
         data = base64.b64encode(png.read_bytes()).decode()
         page += ["</table>", f"<img alt='{html.escape(name)}' src='data:image/png;base64,{data}'>"]

@@ -1,9 +1,11 @@
-"""``rehabkit safety-report``: run safety-skill scenarios in simulation and over the robot link and tabulate, skill
-by skill, what triggered each stop, how fast it reacted, how far and how long the robot went on, and the peak
-force — Markdown and HTML (with plots) side by side, for an ethics board or a risk file.
+"""``rehabkit safety-report``: run safety-skill scenarios in simulation, over the robot link and on CANopen drives
+and tabulate, skill by skill, what triggered each stop, how fast it reacted, how far and how long the robot went on,
+and the peak force — Markdown and HTML (with plots) side by side, for an ethics board or a risk file.
 
-Each scenario runs as written (simulation) and with ``backend.type: hardware`` on a lock-step link to a bridge
-driving the robot's MuJoCo model (a scenario already on the hardware backend runs over the link only). Every run
+Each scenario runs as written (simulation), with ``backend.type: hardware`` on a lock-step link to a bridge
+driving the robot's MuJoCo model (a scenario already on the hardware backend runs over the link only), and with
+``backend.type: canopen`` on simulated CiA 402 drives on a lock-step bus, at the highest of 1000, 500, 250 Hz the bus
+arithmetic allows (a cut link there is the host's heartbeat no longer reaching the drives). Every run
 keeps its e-stop latches to itself; a scenario that presses the e-stop also shows the latch: the next session is
 refused until cleared, and the one after the clear ramps in. The reaction time is from the moment the limit was
 first crossed in truth (the rig's push reaching the force limit — a spring rig's from where its mount went — a
@@ -22,6 +24,8 @@ from typing import Any
 import numpy as np
 
 LINK = {"backend": {"type": "hardware", "clock": "lockstep"}}
+CANOPEN = {"type": "canopen", "clock": "lockstep"}
+BACKENDS = ("simulation", "link", "canopen")
 MARGIN_DEG = 0.5  # the envelope's default tolerance past a range: the truth crossed the range itself
 
 
@@ -108,7 +112,8 @@ def _onset(sc, event: dict, trace, setup=None) -> float | None:
         return event["t"]
     if rule == "backend":
         cut = getattr(sc.backend, "cut_commands_at_s", None)
-        return cut
+        injected = getattr(sc.backend, "inject", None)
+        return injected[0].at_s if injected else cut
     return None
 
 
@@ -125,12 +130,15 @@ def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun
     overrides = dict(LINK) if backend == "link" else {}
     if reaction is not None:
         overrides["safety.reactions"] = {"interaction-force": {"type": reaction}}
+    if backend == "canopen":
+        overrides = _on_canopen(path, overrides)
     loaded = load_scenario(path, overrides)
     sc = loaded.model
     with tempfile.TemporaryDirectory() as state, own_state(Path(state)):
         runner = Runner(loaded)
         result = runner.run()  # (loaded once: the scenario is read for the onsets too)
-        notes = []
+        notes = [f"at {sc.rates.control_hz:g} Hz, the bus's highest for its drives and sensors"] \
+            if backend == "canopen" else []
         events = result.summary["safety"]["events"]
         if events and events[0]["rule"] == "e-stop":  # the latch: refused, cleared, ramped in
             try:
@@ -185,9 +193,38 @@ def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun
                     ev["data"].get("category", ev["data"].get("reaction")), figures, notes, result.trace)
 
 
-def skill_runs(paths: list[Path], reactions: list[str] | None = None) -> list[tuple[SkillRun | None, SkillRun]]:
-    """(simulation, link) per scenario; simulation None for a scenario on the hardware backend. With ``reactions``
-    a scenario with an interaction-force limit runs once per reaction (``stop``, ``yield``, ``retreat``)."""
+def _on_canopen(path: Path, overrides: dict) -> dict:
+    """The overrides that take a skill scenario to simulated CANopen drives: the highest control rate of 1000, 500,
+    250 Hz the bus carries (as ``validate`` decides it), and a cut link as the host's heartbeat no longer reaching
+    the drives."""
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
+    from rehabkit.core.scenario.loader import load_scenario
+    from rehabkit.core.setup.assembly import assemble
+    from rehabkit.core.setup.errors import PluginSetupError
+
+    sc = load_scenario(path).model
+    backend = dict(CANOPEN)
+    cut = getattr(sc.backend, "cut_commands_at_s", None)
+    if cut is not None:
+        backend["inject"] = [{"at_s": cut, "fault": "host-heartbeat"}]
+    for hz in (1000, 500, 250):
+        out = {**overrides, "backend": backend, "rates.control_hz": min(hz, sc.rates.control_hz)}
+        try:
+            assemble(load_scenario(path, out), default_registry(), default_extensions(), upto="plugins")
+            return out
+        except PluginSetupError as exc:
+            if exc.diagnostics[0].path != "rates.control_hz":
+                raise
+    return out
+
+
+def skill_runs(paths: list[Path], reactions: list[str] | None = None,
+               backends: tuple[str, ...] = BACKENDS) -> list[tuple[SkillRun | None, ...]]:
+    """One run per backend of ``backends`` (simulation, link, canopen) per scenario, None where it does not apply
+    (simulation for a scenario on the hardware backend; the robot's backends for a person simulated in the scene).
+    With ``reactions`` a scenario with an interaction-force limit runs once per reaction (``stop``, ``yield``,
+    ``retreat``)."""
     from rehabkit.core.scenario.loader import load_scenario
 
     out = []
@@ -196,10 +233,15 @@ def skill_runs(paths: list[Path], reactions: list[str] | None = None) -> list[tu
         sc = loaded.model
         on_link, person = sc.backend.type == "hardware", _embodied(loaded)
         for reaction in (reactions or [None]) if sc.safety.interaction_force_n is not None else [None]:
-            sim = None if on_link else run_skill(path, "simulation", reaction)
-            if person:  # the person lives in the simulated scene: a robot link drives a real one
-                sim.notes.append("simulation only: the person is simulated in the scene")
-            out.append((sim, None if person else run_skill(path, "link", reaction)))
+            row = []
+            for backend in backends:
+                if (backend == "simulation" and on_link) or (backend != "simulation" and person):
+                    row.append(None)  # (the person lives in the simulated scene: a robot drives a real one)
+                    continue
+                row.append(run_skill(path, backend, reaction))
+            if person and row[0] is not None:
+                row[0].notes.append("simulation only: the person is simulated in the scene")
+            out.append(tuple(row))
     return out
 
 

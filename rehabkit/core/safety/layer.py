@@ -73,7 +73,7 @@ class SafetyLayer:
         self.on_yield: Callable[[bool], None] | None = None
         self._robot = robot
         self.saturated_steps = 0
-        self._dt = dt
+        self._dt, self._gain_dt = dt, dt
         self._clip: SafetyEvent | None = None  # the clipping episode under way
         self._box = None
         if config.keep_in is not None:
@@ -140,6 +140,11 @@ class SafetyLayer:
     def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
         return self.check_row(t, np.concatenate((q, qd, tau)))
+
+    def allow_for_delay(self, delay: float) -> None:
+        """The backend's loop delay beyond the control period [s]: the holds' gains stay stable with it, a stop's
+        ramp lasts long enough for it."""
+        self._gain_dt = self.stopping.gain_dt = self._dt + delay
 
     def check_row(self, t: float, row: np.ndarray) -> np.ndarray:
         """Check a packed ``[q, qd, tau]`` row; its torque part is overwritten with what to send.
@@ -311,7 +316,7 @@ class SafetyLayer:
             self.tripped_at = t
             self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
                                                self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque,
-                                               qd, self.push_torque, self._dt)
+                                               qd, self.push_torque, self._gain_dt)
             if reaction.type == "yield" and self.on_yield is not None:
                 self.on_yield(True)
             return

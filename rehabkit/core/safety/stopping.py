@@ -28,6 +28,9 @@ WORDS = {0: "torque off (category 0)", 1: "controlled stop, then torque off (cat
          2: "controlled stop, then held (category 2)"}
 
 
+STOP_DELAYS = 5  # a controlled stop lasts at least this many of the backend's loop delays
+
+
 @dataclass
 class ControlledStop:
     """The deceleration ramp of a category 1 or 2 stop, from the state at the trip."""
@@ -42,14 +45,16 @@ class ControlledStop:
 
     @classmethod
     def start(cls, category: int, t: float, q: np.ndarray, qd: np.ndarray | None, decel: np.ndarray | None,
-              effort: np.ndarray, robot, dt: float) -> ControlledStop:
+              effort: np.ndarray, robot, dt: float, delay: float = 0.0) -> ControlledStop:
         """The ramp from the state at the trip; ``decel`` [rad/s²] per joint, or None: half what each drive can give
-        its joint at this posture (effort / inertia), the quickest stop that keeps a margin for gravity."""
+        its joint at this posture (effort / inertia), the quickest stop that keeps a margin for gravity. With the
+        backend's loop ``delay`` the ramp lasts at least ``STOP_DELAYS`` of it: its decelerating torque, acting that
+        late, would else still push a joint that has stopped (a stop of two cycles on a bus overshoots backwards)."""
         v0 = np.zeros_like(q) if qd is None else np.where(np.isfinite(qd), qd, 0.0)
         inertia = mass_matrix(robot, q)
         if decel is None:
             decel = 0.5 * effort / np.diag(inertia) if inertia is not None else np.full(len(q), np.radians(360.0))
-        duration = max(float(np.max(np.abs(v0) / decel)) if len(v0) else 0.0, dt)
+        duration = max(float(np.max(np.abs(v0) / decel)) if len(v0) else 0.0, dt, STOP_DELAYS * delay)
         stop = cls(category, t, q.copy(), v0, duration)
         if inertia is not None:
             stop.feedforward = inertia @ (-v0 / duration)  # (the posture changes little over a stop)
@@ -136,8 +141,10 @@ class Stopping:
     """How :class:`~rehabkit.core.safety.layer.SafetyLayer` stops the robot once it has tripped: the category each
     rule gets, the controlled stop's ramp, the hold, the torque going off; ``note`` keeps its interventions."""
 
-    def __init__(self, robot, config, lo: np.ndarray, hi: np.ndarray, gravity, dt: float, note):
+    def __init__(self, robot, config, lo: np.ndarray, hi: np.ndarray, gravity, dt: float, note,
+                 gain_dt: float | None = None):
         self.config, self.lo, self.hi, self.gravity, self.dt, self.note = config, lo, hi, gravity, dt, note
+        self.gain_dt = gain_dt or dt  # (the period and the backend's loop delay: what the hold's gains must bear)
         self.robot, self.effort, self.zero = robot, robot.limits.effort, np.zeros(robot.dof)
         default = 2 if robot.safe_stop == "hold" else 0
         self.by_rule = {r: config.stop_category.get(r, config.stop_category.get("default", default))
@@ -159,7 +166,8 @@ class Stopping:
         self.hold_q = np.clip(hold, self.lo, self.hi)
         self.category = category
         if category:
-            self.ramp = ControlledStop.start(category, t, hold, qd, self.decel, self.effort, self.robot, self.dt)
+            self.ramp = ControlledStop.start(category, t, hold, qd, self.decel, self.effort, self.robot, self.dt,
+                                             self.gain_dt - self.dt)
 
     @property
     def torque_off(self) -> bool:
@@ -178,7 +186,7 @@ class Stopping:
         to each joint's inertia (taken where the robot first needs holding)."""
         if self._gains is None:
             inertia = joint_inertia(self.robot, np.where(np.isfinite(q), q, 0.0))
-            self._gains = stable_gains(self.config.hold_kp, self.config.hold_kd, inertia, self.dt)
+            self._gains = stable_gains(self.config.hold_kp, self.config.hold_kd, inertia, self.gain_dt)
         return self._gains
 
     def hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:

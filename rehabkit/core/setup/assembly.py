@@ -215,6 +215,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()
         a.context = replace(a.context, bodies=bodies)
         a.backend = a.make("backend", sc.backend, ("backend",))
+        a.safety.allow_for_delay(a.backend.loop_delay)
         if isinstance(a.backend, CompliantGaps):  # (its gaps in the commands bridged yielding, in a yield)
             a.safety.on_yield = a.backend.comply
     else:

@@ -1,10 +1,12 @@
-"""Simulated drives on a robot: one :class:`~rehabkit.canopen.sim_drive.SimulatedDrive` per joint, all moving one
-MuJoCo plant (the robot's model with the run's instruments and a test rig's loads, as the bridge's).
+"""Simulated drives on a robot: one :class:`~rehabkit.canopen.simulated.drive.SimulatedDrive` per joint, all moving one
+MuJoCo plant (the robot's model with the run's instruments and a test rig's loads, as the bridge's), and one
+:class:`~rehabkit.canopen.simulated.sensor.SimulatedSensor` per instrument.
 
 Each SYNC every drive samples its joint and takes its RPDOs, in node order; then the plant advances one
 communication cycle (0x1006) in steps of its own timestep, with the torques the drives latched. So the torque a host
 computes from the state of SYNC k drives the plant from SYNC k+1: the one-cycle delay of cyclic synchronous modes.
-A write of the simulation-only object 0x2001 resets the plant to the start positions written in every drive's
+A drive whose power stage goes off applies its motor's holding brake, where the robot has brakes (as drives control
+them). A write of the simulation-only object 0x2001 resets the plant to the start positions written in every drive's
 0x2000 (what a test rig's operator does by hand).
 """
 
@@ -19,7 +21,8 @@ import numpy as np
 
 from rehabkit.canopen.cia402 import State
 from rehabkit.canopen.config import DriveUnits
-from rehabkit.canopen.sim_drive import EDS, SYNC_ID, SimulatedDrive
+from rehabkit.canopen.simulated.drive import EDS, SYNC_ID, SimulatedDrive
+from rehabkit.canopen.simulated.sensor import SimulatedSensor
 from rehabkit.hardware.plant import MujocoPlant
 
 SYNC_LOST = 0x8100  # CiA 301: communication error (here: the SYNC stopped coming)
@@ -44,7 +47,7 @@ class DriveRig:
     ``clocked``: the drives' heartbeats on the SYNC clock (a lock-step bus)."""
 
     def __init__(self, network: canopen.Network, plant: MujocoPlant, nodes: Sequence[int],
-                 units: Sequence[DriveUnits], clocked: bool = False, eds=EDS):
+                 units: Sequence[DriveUnits], clocked: bool = False, eds=EDS, sensors: Sequence[int] = ()):
         self.plant = plant
         n = plant.joints
         self.q, self.qd, self.tau = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -52,10 +55,14 @@ class DriveRig:
                        for i, (node, u) in enumerate(zip(nodes, units, strict=True))]
         for d in self.drives:
             d.node.add_write_callback(self._on_write)
+        self._readings = np.zeros(3 * len(sensors))  # the plant's instruments, read once a cycle, in order
+        self.sensors = [SimulatedSensor(network, node, lambda k=k: self._readings[3 * k : 3 * k + 3],
+                                        clocked=clocked) for k, node in enumerate(sensors)]
         network.subscribe(SYNC_ID, self.on_sync)
         self.substeps, self.period = 1, plant.timestep
         self.cycles = 0
         self.last_sync: float | None = None  # [s, monotonic] (real time: the SYNC watchdog's)
+        self.sync_timeout_s = 0.010  # the drives' SYNC watchdog (see watch_sync)
         self._watching = threading.Event()
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
@@ -80,8 +87,21 @@ class DriveRig:
     def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0) -> None:
         """Every drive samples and latches, then the plant runs one cycle with the latched torques."""
         self.last_sync = time.monotonic()
-        for d in self.drives:
-            d.on_sync(can_id, data, timestamp)
+        for i, d in enumerate(self.drives):
+            on = d.machine.torque_on
+            if d.silent:  # cut off the bus: no SYNC reaches it; its SYNC watchdog, then its reaction, on its own clock
+                d.unheard += 1
+                if d.unheard * self.period > self.sync_timeout_s:
+                    d.connection_lost(SYNC_LOST)
+                d.react()
+            else:
+                d.on_sync(can_id, data, timestamp)
+            if on and not d.machine.torque_on:  # its power stage went off: the drive applies its motor's brake
+                self.plant.brake([i])
+        if self.sensors:
+            self._readings[:] = self.plant.read_instruments()
+            for s in self.sensors:
+                s.on_sync(can_id, data, timestamp)
         if not any(d.syncs for d in self.drives):  # (no drive operational yet: the plant waits)
             return
         self.plant.apply(np.clip(self.tau, -self.plant.effort, self.plant.effort))
@@ -91,9 +111,9 @@ class DriveRig:
         self.cycles += 1
 
     def watch_sync(self, timeout_s: float = 0.010) -> threading.Thread:
-        """In real time: a thread faulting every drive still enabled (0x8100, their EMCYs, their reactions) once the
-        SYNC has not come for ``timeout_s``; the drives' reactions and quick stops then run on their own clock
-        (stopped by :meth:`stop_watching`)."""
+        """In real time: a thread telling every drive still enabled that its connection is lost (0x8100: their EMCYs,
+        their reactions as 0x6007 says) once the SYNC has not come for ``timeout_s``; the drives' reactions and quick
+        stops then run on their own clock (stopped by :meth:`stop_watching`)."""
         self.sync_timeout_s = timeout_s
         thread = threading.Thread(target=self._watch, name="sync-watchdog", daemon=True)
         thread.start()
@@ -109,7 +129,7 @@ class DriveRig:
                 continue
             for d in self.drives:  # (a drive already stopping, or stopped, carries on with that)
                 if d.machine.state is State.OPERATION_ENABLED:
-                    d.fault(SYNC_LOST)
+                    d.connection_lost(SYNC_LOST)
             while not self._watching.wait(self.period):  # the reactions, one cycle at a time, without a SYNC
                 if self.last_sync != last:  # (the SYNC came back: the drives take it from there)
                     break
@@ -117,8 +137,11 @@ class DriveRig:
 
     def coast(self) -> None:
         """A cycle without SYNC (the drives' reactions on their own clock): each drive's reaction, the plant runs."""
-        for d in self.drives:
+        for i, d in enumerate(self.drives):
+            on = d.machine.torque_on
             d.react()
+            if on and not d.machine.torque_on:
+                self.plant.brake([i])
         self.plant.apply(np.clip(self.tau, -self.plant.effort, self.plant.effort))
         for _ in range(self.substeps):
             self.plant.advance()

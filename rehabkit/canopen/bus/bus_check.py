@@ -5,9 +5,10 @@ cyclic traffic within the bitrate at the control rate (refused with the arithmet
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 
-from rehabkit.canopen.config import CanopenConfig, DriveSpec
-from rehabkit.canopen.pdo_layout import RPDO1, TORQUE_ACTUAL, TPDO1, TPDO2, BusLoad, bus_load
+from rehabkit.canopen.bus.pdo_layout import RPDO1, SENSOR_TPDO, TORQUE_ACTUAL, TPDO1, TPDO2, BusLoad, bus_load
+from rehabkit.canopen.config import CanopenConfig, DriveSpec, SensorSpec
 from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Context
 
@@ -18,14 +19,29 @@ SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x605A, 0), (0x6060, 0), (0x6072,
 CST_SUPPORTED = 0x200  # 0x6502 bit 9
 
 
+SENSOR_SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x1800, 1), (0x1A00, 1), (0x2100, 0))
+
+
 def drive_specs(config: CanopenConfig, dof: int) -> list[DriveSpec]:
     """The drives as written, or node ids 1..dof on the generic servo."""
     return list(config.drives) if config.drives is not None else [DriveSpec(node_id=i + 1) for i in range(dof)]
 
 
-@lru_cache(maxsize=16)
+def sensor_specs(config: CanopenConfig, instruments: int) -> list[SensorSpec]:
+    """The instruments' sensors as written, or node ids 64.. on the generic three-axis sensor."""
+    return list(config.sensors) if config.sensors is not None else [
+        SensorSpec(node_id=64 + k) for k in range(instruments)]
+
+
 def _objects(path: str) -> tuple[frozenset, int | None]:
-    """The (index, subindex) pairs an EDS holds, and its supported drive modes (0x6502) if given."""
+    """The (index, subindex) pairs an EDS holds, and its supported drive modes (0x6502) if given (read once per
+    version of the file)."""
+    stat = Path(path).stat()
+    return _read_objects(path, stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=16)
+def _read_objects(path: str, mtime_ns: int, size: int) -> tuple[frozenset, int | None]:
     import canopen
 
     od = canopen.import_od(path)
@@ -40,11 +56,12 @@ def _objects(path: str) -> tuple[frozenset, int | None]:
     return frozenset(have), modes
 
 
-def _check_eds(config: CanopenConfig, spec: DriveSpec, i: int, context: Context) -> None:
+def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, context: Context) -> None:
     if spec.eds is None:
         return
     path = context.resolve(spec.eds)
-    where = ("drives", i, "eds")
+    sensor = isinstance(spec, SensorSpec)
+    where = ("sensors" if sensor else "drives", i, "eds")
     if not path.is_file():
         raise SettingError(where, f"no such file: {path}")
     try:
@@ -52,19 +69,24 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec, i: int, context: Context)
     except Exception as exc:  # noqa: BLE001 (canopen's parser: whatever it refuses, said at the file's setting)
         raise SettingError(where, f"canopen cannot read {path.name} as an EDS/DCF: {exc}") from None
     needed = [*((x, s) for x, s, _ in (*RPDO1, *TPDO1, *TPDO2)), *SET]
-    if config.torque_actual:
+    if sensor:
+        needed = [*((x, s) for x, s, _ in SENSOR_TPDO), *SENSOR_SET]
+    elif config.torque_actual:
         needed.append(TORQUE_ACTUAL[:2])
     missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in needed if (x, s) not in have]
     if missing:
+        what = "a CiA 404 device's EDS with three inputs at 0x7130" if sensor else \
+            "a CiA 402 drive's EDS with two RPDOs and two TPDOs"
         raise SettingError(where, f"{path.name} lacks objects the backend maps or sets: {', '.join(missing)} (is it "
-                           "a CiA 402 drive's EDS with two RPDOs and two TPDOs?)")
-    if modes is not None and not modes & CST_SUPPORTED:
+                           f"{what}?)")
+    if not sensor and modes is not None and not modes & CST_SUPPORTED:
         raise SettingError(("drives", i, "mode"), f"{path.name} says the drive does not support cyclic synchronous "
                            f"torque (0x6502 = 0x{modes:08X}, bit 9 clear)")
 
 
-def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec], BusLoad]:
-    """The drives for the run's robot, and the bus load; a :class:`SettingError` at the setting that is wrong."""
+def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec], list[SensorSpec], BusLoad]:
+    """The drives for the run's robot, the sensors for its instruments, and the bus load; a :class:`SettingError`
+    at the setting that is wrong."""
     robot = context.robot.model
     specs = drive_specs(config, robot.dof)
     if len(specs) != robot.dof:
@@ -79,6 +101,18 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
             raise SettingError(("drives", i, "node_id"), f"node id {s.node_id} is the host's (master_node_id)")
         seen[s.node_id] = i
         _check_eds(config, s, i, context)
+    sensors = sensor_specs(config, len(context.instruments))
+    if len(sensors) != len(context.instruments):
+        names = ", ".join(i.name for i in context.instruments) or "none"
+        raise SettingError("sensors", f"{len(sensors)} sensors for the run's {len(context.instruments)} instruments "
+                           f"({names}): one three-axis sensor each, in that order")
+    for k, s in enumerate(sensors):
+        if s.node_id in seen or s.node_id == config.master_node_id:
+            whose = "the host's" if s.node_id == config.master_node_id else f"drive {seen[s.node_id]}'s"
+            raise SettingError(("sensors", k, "node_id"), f"node id {s.node_id} is {whose} too: each node on a bus has "
+                               "its own")
+        seen[s.node_id] = len(specs) + k
+        _check_eds(config, s, k, context)
     if config.clock == "lockstep" and config.bus is not None:
         raise SettingError("clock", "lockstep runs the simulated drives only (a real bus runs in real time): remove "
                            "`bus` or set clock: realtime")
@@ -93,13 +127,13 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
             raise SettingError(("inject", i, "node"), f"no drive has node id {f.node} (the drives: "
                                f"{', '.join(map(str, sorted(nodes)))})")
     rate = 1.0 / context.control_dt
-    load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms)
+    load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms, len(sensors))
     if load.load > 1.0:
         raise SettingError(("rates", "control_hz"), f"the CAN bus cannot carry {len(specs)} drives at {rate:g} Hz: "
                            f"{load.describe()}; the highest control rate that fits is "
                            f"{load.highest_rate_hz():.0f} Hz (e.g. rates.control_hz: "
                            f"{_fitting(load)}), or fewer drives per bus", root=True)
-    return specs, load
+    return specs, sensors, load
 
 
 def _fitting(load: BusLoad) -> str:

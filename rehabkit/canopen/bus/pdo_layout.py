@@ -18,6 +18,7 @@ RPDO1 = ((0x6040, 0, 16), (0x6071, 0, 16))  # controlword, target torque [‰ of
 TPDO1 = ((0x6041, 0, 16), (0x6064, 0, 32))  # statusword, position actual value [counts]
 TPDO2 = ((0x606C, 0, 32),)  # velocity actual value [counts/s]
 TORQUE_ACTUAL = (0x6077, 0, 16)  # [‰ of rated], in TPDO2 when asked for
+SENSOR_TPDO = ((0x7130, 1, 16), (0x7130, 2, 16), (0x7130, 3, 16))  # a three-axis sensor's inputs (CiA 404)
 SYNC_BYTES, HEARTBEAT_BYTES = 0, 1
 
 
@@ -45,6 +46,7 @@ class BusLoad:
     bitrate: int
     bits_per_cycle: int
     heartbeat_bits_s: float
+    sensors: int = 0
 
     @property
     def load(self) -> float:
@@ -57,15 +59,17 @@ class BusLoad:
 
     def describe(self) -> str:
         """The arithmetic, as a person checks it."""
-        return (f"{self.drives} drives × (RPDO + 2 TPDOs) + SYNC = {self.bits_per_cycle} bits a cycle (worst-case "
-                f"bit stuffing) × {self.rate_hz:g} Hz + heartbeats {self.heartbeat_bits_s:.0f} bit/s = "
+        sensors = f" + {self.sensors} sensors × TPDO" if self.sensors else ""
+        return (f"{self.drives} drives × (RPDO + 2 TPDOs){sensors} + SYNC = {self.bits_per_cycle} bits a cycle "
+                f"(worst-case bit stuffing) × {self.rate_hz:g} Hz + heartbeats {self.heartbeat_bits_s:.0f} bit/s = "
                 f"{self.load:.0%} of {self.bitrate / 1e3:g} kbit/s")
 
 
 def bus_load(drives: int, rate_hz: float, bitrate: int, torque_actual: bool = False,
-             heartbeat_ms: float = 100.0) -> BusLoad:
-    """The bus load of ``drives`` drives mapped as :mod:`this module <rehabkit.canopen.pdo_layout>` maps them."""
+             heartbeat_ms: float = 100.0, sensors: int = 0) -> BusLoad:
+    """The bus load of ``drives`` drives and ``sensors`` three-axis sensors mapped as
+    :mod:`this module <rehabkit.canopen.bus.pdo_layout>` maps them."""
     per_drive = sum(frame_bits(pdo_bytes(p)) for p in (RPDO1, TPDO1, tpdo2(torque_actual)))
-    per_cycle = drives * per_drive + frame_bits(SYNC_BYTES)
-    beats = (drives + 1) * frame_bits(HEARTBEAT_BYTES) * 1e3 / heartbeat_ms
-    return BusLoad(drives, rate_hz, bitrate, per_cycle, beats)
+    per_cycle = drives * per_drive + sensors * frame_bits(pdo_bytes(SENSOR_TPDO)) + frame_bits(SYNC_BYTES)
+    beats = (drives + sensors + 1) * frame_bits(HEARTBEAT_BYTES) * 1e3 / heartbeat_ms
+    return BusLoad(drives, rate_hz, bitrate, per_cycle, beats, sensors)
