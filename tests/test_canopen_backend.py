@@ -108,6 +108,14 @@ def test_each_fault_a_drive_produces_stops_the_run_with_its_reason(fault, node, 
     assert event["rule"] == "backend" and says in event["message"]
     # within the heartbeat's timeout (60 ms) and a cycle of the drives' own answer
     assert 2.0 <= event["t"] <= 2.0 + 0.060 + 0.004
+    notes = [n["text"] for n in r.summary["notes"]]  # (the drives' states and EMCYs, in words, in the summary)
+    if fault["fault"] == "drive":
+        assert "drive 2 (shoulder_2) EMCY: 0x2310 continuous over-current" in notes
+        assert notes.index("drive 2 (shoulder_2): OPERATION_ENABLED -> FAULT_REACTION_ACTIVE") < notes.index(
+            "drive 2 (shoulder_2): FAULT_REACTION_ACTIVE -> FAULT")
+    if fault["fault"] == "host-heartbeat":  # every drive says it (then quick stops, 0x6007; the host, still sending
+        # its RPDOs, enables them again into its own stop: transition 16, the option code 6 allows it)
+        assert sum("EMCY: 0x8130 life guard error or heartbeat error" in n for n in notes) == 6
 
 
 def _bench(hit, option: int, decel: float = 3.0):

@@ -27,10 +27,11 @@ import numpy as np
 
 from rehabkit.canopen.bus.bus_check import check_bus
 from rehabkit.canopen.bus.can_bus import CanBus
+from rehabkit.canopen.bus_health import METRICS, DriveNotes, bus_metrics, hold_interventions, latency_series
 from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.cycle_clock import CycleClock
-from rehabkit.canopen.emcy_codes import describe
+from rehabkit.canopen.injection import inject
 from rehabkit.canopen.master import DriveLimits, DriveMaster
 from rehabkit.canopen.simulated.drive import EDS
 from rehabkit.canopen.simulated.rig import DriveRig
@@ -39,7 +40,6 @@ from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import Instruments
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
-from rehabkit.core.results.metric import Metric
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.stopping import joint_inertia
@@ -49,16 +49,6 @@ from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 
-METRICS = (
-    Metric("can_cycles", "count", clock="wall", description="SYNC cycles the loop ran on the bus"),
-    Metric("can_late_cycles", "count", clock="wall", description="steps that came a cycle after their deadline"),
-    Metric("can_hold_cycles", "count", clock="wall", description="cycles the bus held the posture, the loop late"),
-    Metric("can_missed_tpdos", "count", clock="wall", description="drive cycles whose TPDOs did not come in time"),
-    Metric("can_latency_*", "ms", "wall", description="SYNC to a cycle's last TPDO, wall clock"),
-    Metric("can_emcy", "count", description="EMCY messages from the drives"),
-    Metric("can_bus_load", description="share of the bitrate the cyclic traffic takes (worst-case bit stuffing)"),
-    Metric("can_frames_traced", "count", clock="wall", description="frames written to the CAN trace"),
-)
 HOLD_BANDWIDTH = 20.0  # [rad/s] this host's hold of the posture through a late step
 STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
 ABORT_OPTION = {0: 2, 1: 3, 2: 3}  # stop category → abort connection option code (0x6007): torque off; quick stop
@@ -96,8 +86,6 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         self._fault: DriveFaultError | None = None
         self.clock: CycleClock | None = None  # (real time, from the reset)
         self._note = context.note
-        self._states: list[str] = []
-        self._emcys_said = 0
         self._hold_kp, self._hold_kd = HOLD_KP, HOLD_KD  # (the bridge's, for a robot without a dynamic model)
         self._injections = sorted(config.inject, key=lambda f: f.at_s)
         trace = None
@@ -123,6 +111,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
             self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now,
                                       [s.rated_torque_nm is None for s in specs], instruments)
             self._instrument = {i.name: k for k, i in enumerate(context.instruments)}
+            self.notes = DriveNotes(context.note, self.master)
         except BaseException:
             self.bus.close(keep_trace=False)
             raise
@@ -181,7 +170,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
                                   observable=False)
         self.q, self.qd = self.master.q.copy(), self.master.qd.copy()
         self._started, self._fault = False, None
-        self._states, self._emcys_said = list(self.master.states), len(self.master.emcys)
+        self.notes.restart()
         inertia = joint_inertia(self.robot, q0)
         if inertia is not None:
             self._hold_kp, self._hold_kd = HOLD_BANDWIDTH**2 * inertia, 2 * HOLD_BANDWIDTH * inertia
@@ -217,7 +206,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         """One cycle (``n`` plant steps of the simulated drives: the control period)."""
         self._started = True
         if self._injections and self.cycles * self.period >= self._injections[0].at_s - 1e-9:
-            self._inject(self._injections.pop(0))
+            inject(self, self._injections.pop(0))
         if self.clock is not None:
             self.clock.step(self.tau)
         else:
@@ -225,35 +214,13 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         self.cycles += 1
         self.q, self.qd, self._posed = self.master.q.copy(), self.master.qd.copy(), False
         fault = self.master.fault()
-        self._say_changes()
+        self.notes.say(self.cycles * self.period, self.realtime)
         if fault is not None and self._fault is None:
             self._fault = fault  # latched as an e-stop: the drives' fault is reset only after a person clears it
             self.latch.press(str(fault), by=f"drive {fault.node}" if fault.node is not None else "the CAN bus")
             if self._stop_category() == 0:
                 self.master.torque_off()
             raise fault
-
-    def _inject(self, fault) -> None:
-        """A fault of the simulated drives' (``backend.inject``), as the run reaches its time."""
-        if fault.fault == "host-heartbeat":
-            self.master.beating = False
-            return
-        if fault.fault == "host-stall":  # (real time only: validate refuses it on a lock-step bus)
-            self.clock.pause(fault.for_s)  # the whole host stalls: no SYNC meanwhile
-            return
-        if fault.fault == "bus-off":  # its controller off the bus: every frame it is given fails, as python-can says
-            self.bus.network.bus.send = _bus_off
-            return
-        node = fault.node or self.rig.drives[0].node.id
-        drive = next(d for d in self.rig.drives if d.node.id == node)
-        if fault.fault == "drive":
-            drive.fault(fault.code)
-        elif fault.fault == "drive-disabled":
-            drive.machine.disable_locally()
-        elif fault.fault == "drive-silent":
-            drive.silent = True
-        else:
-            drive.heartless = True
 
     def _stop_category(self) -> int:
         sc = self.safety_config
@@ -276,14 +243,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         return self.master.readings[self._instrument[name]].copy()
 
     def interventions(self) -> list[SafetyEvent]:
-        """The cycles this host held the posture through, because the loop's step was a cycle late."""
-        out = []
-        for steps, cycles in self.clock.holds if self.clock is not None else ():
-            t, ms = steps * self.period, 1e3 * cycles * self.period
-            out.append(SafetyEvent(t, "stale-command", None, ms, 1e3 * self.period,
-                                   f"t={t:.3f}s: the loop's step was a cycle late: the bus's cycles held the posture "
-                                   f"for {ms:.0f} ms, until the next one", {"held_cycles": cycles}, level="WARN"))
-        return out
+        """The cycles this host held the posture through, because the loop's step was late."""
+        return hold_interventions(self)
 
     def provenance(self) -> dict[str, str]:
         bus = self.config.bus
@@ -291,35 +252,10 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
                 "drives": ", ".join(str(r.id) for r in self.master.remotes)}
 
     def run_metrics(self) -> dict[str, float]:
-        lat = np.array([x for x in self.latency if not math.isnan(x)]) * 1e3
-        late = self.clock.late if self.clock is not None else 0
-        out = {"can_cycles": float(self.cycles), "can_late_cycles": float(late),
-               "can_hold_cycles": float(sum(c for _, c in self.clock.holds)) if self.clock is not None else 0.0,
-               "can_missed_tpdos": float(self.master.missed_total), "can_emcy": float(len(self.master.emcys)),
-               "can_bus_load": self.load.load, "can_frames_traced": float(self.bus.frames)}
-        if len(lat) and self.realtime:
-            out.update({"can_latency_median_ms": float(np.median(lat)),
-                        "can_latency_p99_ms": float(np.percentile(lat, 99))})
-        return out
+        return bus_metrics(self)
 
     def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        if not self.realtime:
-            return {}
-        lat = np.array(self.latency[1:]) * 1e3
-        return {"can_latency_ms": (np.arange(len(lat)) * self.period, lat)}
-
-    def _say_changes(self) -> None:
-        """Each drive's state change and each EMCY, in words, into the run's notes (summary and log)."""
-        t = self.cycles * self.period
-        for i, (old, new) in enumerate(zip(self._states, self.master.states, strict=True)):
-            if old != new and self._note is not None:
-                self._note(t, f"drive {self.master.ids[i]} ({self.names[i]}): {old} -> {new}")
-        self._states = list(self.master.states)
-        for when, node, code in self.master.emcys[self._emcys_said:]:
-            if self._note is not None:
-                name = self.master.names[self.master.ids.index(node)]
-                self._note(when if not self.realtime else t, f"drive {node} ({name}) EMCY: {describe(code)}")
-        self._emcys_said = len(self.master.emcys)
+        return latency_series(self)
 
     def close(self) -> None:
         """The drives told to quick stop (the run's stop category: held, or ramped down and off), the bus closed."""
@@ -336,10 +272,6 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         finally:
             if self.frames is not None:
                 self.frames.close()
-
-
-def _bus_off(msg, timeout=None) -> None:
-    raise can.CanOperationError("the CAN controller is bus-off (injected)")
 
 
 @hookimpl
