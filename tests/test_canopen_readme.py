@@ -29,7 +29,7 @@ def test_the_canopen_commands_run_as_written(tmp_path):
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["metrics"]["can_cycles"] == 4250 and summary["metrics"]["can_emcy"] == 0
     frames = list(can.LogReader(tmp_path / "run" / "can.asc"))  # (as the README says to read it)
-    assert len(frames) > 4250 * 19 and sum(f.arbitration_id == 0x80 for f in frames) == 4250 + 7
+    assert len(frames) > 4250 * 19 and sum(f.arbitration_id == 0x80 for f in frames) == 4250 + 8
 
 
 def test_the_lab_robots_wiring_validates_and_its_mistakes_are_located(tmp_path):

@@ -31,6 +31,7 @@ from rehabkit.canopen.bus_health import METRICS, DriveNotes, bus_metrics, hold_i
 from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.cycle_clock import CycleClock
+from rehabkit.canopen.emcy_codes import describe
 from rehabkit.canopen.injection import inject
 from rehabkit.canopen.master import DriveLimits, DriveMaster
 from rehabkit.canopen.simulated.drive import EDS
@@ -38,7 +39,7 @@ from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import Instruments
-from rehabkit.core.kinds.interfaces import Backend, Context
+from rehabkit.core.kinds.interfaces import Backend, Context, Robot
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.safety.event import SafetyEvent
@@ -135,7 +136,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         if sc is not None and sc.stop_decel_deg_s2 is not None:
             decel = np.full(self.n, math.radians(sc.stop_decel_deg_s2))
         else:  # as the safety layer's default: half what each drive can give its joint here
-            inertia = joint_inertia(self.robot, q0)
+            inertia = joint_inertia(self.robot.model, q0)
             decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
         categories = sc.stop_category if sc is not None else {}
         category = categories.get("e-stop", categories.get("default", 2))
@@ -160,30 +161,48 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         if self.simulated:  # (placed before the drives are enabled, within their limits, and again once they are:
             self.master.place(q0)  # with the power stages off the arm sagged meanwhile)
         self.deadline = time.monotonic()
-        self.master.enable(self._paced, fault_reset=cleared)
-        if self.simulated:
-            self.master.place(q0)
-        self._paced(self.robot.gravity_torque(q0))  # (held until the controller's first torque)
+        self._paced(np.zeros(self.n))  # the drives' states and the joints, the power stages still off
+        faulted = [i for i, s in enumerate(self.master.states) if s == "FAULT"]
+        if faulted and not cleared:
+            i = faulted[0]
+            code = self.master.remotes[i].sdo[0x603F].raw
+            raise DriveFaultError(f"is in FAULT ({describe(code)}): its fault is reset only once a person has "
+                                  f"cleared the robot's e-stop latch (`rehabkit estop clear {self.latch.name} --by "
+                                  "NAME`)", self.master.ids[i], self.names[i], code, observable=False)
         if not self.simulated and np.abs(self.master.q - q0).max() > math.radians(1.0):
             raise DriveFaultError(f"the robot is not at the start posture (off by "
                                   f"{np.degrees(np.abs(self.master.q - q0).max()):.1f}°): bring it there first",
                                   observable=False)
-        self.q, self.qd = self.master.q.copy(), self.master.qd.copy()
+        self.q, self.qd = q0.copy(), np.zeros(self.n)
+        self._q0, self._cleared = q0, cleared
         self._started, self._fault = False, None
-        self.notes.restart()
-        inertia = joint_inertia(self.robot, q0)
+        inertia = joint_inertia(self.robot.model, q0)
         if inertia is not None:
             self._hold_kp, self._hold_kd = HOLD_BANDWIDTH**2 * inertia, 2 * HOLD_BANDWIDTH * inertia
+
+    def _enable(self) -> None:
+        """At the loop's first step (the run's first plan made: no gap in the SYNC before the loop takes it over): the
+        402 walk to OPERATION ENABLED, the simulated plant placed at the start again, held by gravity compensation
+        for one cycle; in real time, the bus's clock started."""
+        q0 = self._q0
+        self.deadline = time.monotonic()
+        self.master.enable(self._paced, fault_reset=self._cleared)
+        if self.simulated:
+            self.master.place(q0)
+        self._paced(self.robot.gravity_torque(q0))
+        self.notes.restart()
         if self.realtime:  # enabled drives expect their SYNC every cycle: from now on, whatever the loop does
+            self._gravity = own_gravity(self.robot)
             self.clock = CycleClock(self.period, self._cycle, self._hold_torque, lambda: self.master.q)
-            self.clock.start(self.robot.gravity_torque(self.master.q))
+            self.clock.start(self.tau)
 
     def _hold_torque(self, posture: np.ndarray) -> np.ndarray:
         """Holding ``posture`` as the bridge holds (PD to it with gravity compensation), from the newest state; the
         gains critically damped at HOLD_BANDWIDTH on each joint's inertia (the bus adds a cycle's delay: a light wrist
-        held with the bridge's fixed gains would ring)."""
+        held with the bridge's fixed gains would ring). Computed in the clock's thread while the loop's may be using
+        the robot (its first plan): the gravity from a dynamic model's workspace of its own."""
         m = self.master
-        return self._hold_kp * (posture - m.q) - self._hold_kd * m.qd + self.robot.gravity_torque(m.q)
+        return self._hold_kp * (posture - m.q) - self._hold_kd * m.qd + self._gravity(m.q)
 
     def _cycle(self, tau: np.ndarray) -> None:
         latency = self.master.cycle(tau, 0.8 * self.period if self.realtime else 0.0)
@@ -204,7 +223,11 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
 
     def step(self, n: int = 1) -> None:
         """One cycle (``n`` plant steps of the simulated drives: the control period)."""
-        self._started = True
+        if not self._started:
+            self._started = True
+            tau, self.tau = self.tau, self.robot.gravity_torque(self._q0)
+            self._enable()
+            self.tau = tau
         if self._injections and self.cycles * self.period >= self._injections[0].at_s - 1e-9:
             inject(self, self._injections.pop(0))
         if self.clock is not None:
@@ -272,6 +295,19 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         finally:
             if self.frames is not None:
                 self.frames.close()
+
+
+def own_gravity(robot):
+    """``gravity(q)`` for another thread than the run's: Pinocchio's on a workspace of its own where the robot uses
+    Pinocchio's default (its ``Data`` is not shared: two threads in one would read each other's half-written
+    values), else the robot's own (its model, its lock: a robot overriding ``gravity_torque`` keeps no workspace)."""
+    if type(robot).gravity_torque is not Robot.gravity_torque:
+        return robot.gravity_torque
+    import pinocchio as pin
+
+    model = robot.model.pin_model
+    data = model.createData()
+    return lambda q: pin.computeGeneralizedGravity(model, data, np.asarray(q, float))
 
 
 @hookimpl

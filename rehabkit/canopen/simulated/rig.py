@@ -133,7 +133,8 @@ class DriveRig:
             while not self._watching.wait(self.period):  # the reactions, one cycle at a time, without a SYNC
                 if self.last_sync != last:  # (the SYNC came back: the drives take it from there)
                     break
-                self.coast()
+                if any(d.machine.torque_on for d in self.drives):  # (none driving: the plant waits for the SYNC)
+                    self.coast()
 
     def coast(self) -> None:
         """A cycle without SYNC (the drives' reactions on their own clock): each drive's reaction, the plant runs."""
