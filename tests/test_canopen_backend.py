@@ -81,7 +81,7 @@ def test_hit_round_trip_on_six_simulated_drives_tracks_like_the_simulation(tmp_p
     assert len(frames) == m["can_frames_traced"] + 19 and not list(tmp_path.glob(".can*"))
     ids = np.array([f.arbitration_id for f in frames])
     syncs = int((ids == 0x80).sum())
-    assert syncs == 4250 + 1 + 6 + 1  # the run's cycles, the reset's, the 402 walk's five and the first state's, the close's
+    assert syncs == 4250 + 1 + 6 + 1  # the run's, the reset's, the walk's five and the first state's, the close's
     for node in range(1, 7):  # each drive: an RPDO and two TPDOs a cycle (from NMT start on), its heartbeats
         assert (ids == 0x200 + node).sum() == syncs and (ids == 0x180 + node).sum() == (ids == 0x280 + node).sum()
         assert (ids == 0x180 + node).sum() == syncs
