@@ -37,7 +37,8 @@ def test_validate_refuses_six_drives_at_1khz_at_the_control_rate_with_the_arithm
     assert line.startswith("scenarios/hit_roundtrip.yaml:37:9: rates.control_hz: backend 'canopen': the CAN bus "
                            "cannot carry 6 drives at 1000 Hz")
     assert "1885 bits a cycle" in line and "191% of 1000 kbit/s" in line
-    assert "the highest control rate that fits is 518 Hz (e.g. rates.control_hz: 500)" in line
+    assert "set rates.control_hz: 500 (the highest rate that fits in whole 1 ms steps of the simulated drives' " \
+           "plant; the bus carries up to 518 Hz), or put fewer nodes on this bus" in line
 
 
 @pytest.mark.parametrize("backend, where, says", [

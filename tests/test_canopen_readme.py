@@ -23,7 +23,7 @@ def test_the_canopen_commands_run_as_written(tmp_path):
     refused = cli(*shlex.split(validate)[1:], cwd=ROOT)
     assert refused.returncode == 2
     assert "scenarios/hit_roundtrip.yaml:37:9: rates.control_hz: backend 'canopen': the CAN bus cannot carry 6 " \
-           "drives at 1000 Hz" in refused.stderr and "highest control rate that fits is 518 Hz" in refused.stderr
+           "drives at 1000 Hz" in refused.stderr and "the bus carries up to 518 Hz" in refused.stderr
     done = cli(*shlex.split(run)[1:], "--out", str(tmp_path / "run"), cwd=ROOT)
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
@@ -60,9 +60,9 @@ def test_simulated_drives_in_another_process_as_the_readme_runs_them(tmp_path):
     drives then quick stop and say why (EMCY 0x8100), and the run stops with that reason (exit 1), or the holds
     through late steps cost the tracking its expectation (exit 1): the safety chain working, not the test failing."""
     command = BLOCKS[2][1].strip()
-    assert command.startswith("unshare -n sh -c '")
+    assert command.startswith("unshare -n sh -c '") and command.endswith("RC=$?; kill $!; exit $RC'")
     out = tmp_path / "run"
-    done = subprocess.run(command.replace("; kill $!", f" --out {out}; kill $!"), shell=True, cwd=ROOT,
+    done = subprocess.run(command.replace("; RC=$?", f" --out {out}; RC=$?"), shell=True, cwd=ROOT,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode in (0, 1), done.stderr
     summary = json.loads((out / "summary.json").read_text())

@@ -39,6 +39,7 @@ from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import Instruments
+from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Backend, Context, Robot
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
@@ -65,7 +66,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         specs, sensors, self.load = check_bus(config, context)
         robot = context.robot
         self.config, self.robot = config, robot
-        self.timestep, self.period = config.timestep, context.control_dt
+        self.timestep, self.period = self.timestep_for(config, context.control_dt), context.control_dt
         self.loop_delay = self.period  # (synchronous RPDOs: a cycle's torque acts from the next SYNC on)
         self.realtime = config.clock == "realtime"
         self.simulated = config.bus is None or config.bus.simulated
@@ -90,11 +91,16 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         self._hold_kp, self._hold_kd = HOLD_KP, HOLD_KD  # (the bridge's, for a robot without a dynamic model)
         self._injections = sorted(config.inject, key=lambda f: f.at_s)
         trace = None
-        if config.trace is not None and context.out_dir is not None:
+        if config.trace != "none" and context.out_dir is not None:
             trace = context.out_dir / f"can.{config.trace}"
         bus = config.bus
-        self.bus = CanBus(bus.interface if bus else None, bus.channel if bus else None, config.bitrate,
-                          simulated=config.bus is None, lockstep=not self.realtime, trace=trace, clock=self._now)
+        try:
+            self.bus = CanBus(bus.interface if bus else None, bus.channel if bus else None, config.bitrate,
+                              simulated=config.bus is None, lockstep=not self.realtime, trace=trace, clock=self._now,
+                              master_id=config.master_node_id)
+        except (OSError, can.CanError, ImportError, ValueError) as exc:  # (python-can's own words: no such device)
+            raise SettingError("bus", f"python-can cannot open {bus.interface} {bus.channel}: {exc} (is the "
+                               "adapter plugged in, its driver loaded, the interface up?)") from None
         try:
             self.rig = None
             if config.bus is None:  # simulated drives of this run's own
@@ -116,6 +122,11 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         except BaseException:
             self.bus.close(keep_trace=False)
             raise
+
+    @classmethod
+    def timestep_for(cls, config: CanopenConfig, control_dt: float) -> float:
+        """The simulated drives' plant step; on a robot's own bus, the cycle (no plant steps there)."""
+        return control_dt if config.bus is not None and not config.bus.simulated else config.timestep
 
     @classmethod
     def check(cls, config: CanopenConfig, context: Context) -> None:
@@ -291,7 +302,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
                     self._cycle(np.zeros(self.n))
             if self.rig is not None:
                 self.rig.stop_watching()
-            self.bus.close()
+            self.bus.close(keep_trace=self._started)  # (a run refused at its reset leaves no trace file)
         finally:
             if self.frames is not None:
                 self.frames.close()

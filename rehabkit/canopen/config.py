@@ -121,6 +121,6 @@ class CanopenConfig(StrictModel):
     torque_actual: bool = Field(False, description="map each drive's actual torque (0x6077) too (2 bytes a cycle "
                                 "more each: see the bus load)")
     inject: list[Injection] = Field([], description="faults injected into the simulated drives (tests)")
-    trace: Literal["asc", "blf", "log"] | None = Field(
+    trace: Literal["asc", "blf", "log", "none"] = Field(
         "asc", description="every frame into can.<trace> beside the run's log, by python-can's own writer (asc: "
-        "Vector ASCII, blf: Vector binary, log: candump); none: no trace")
+        "Vector ASCII, blf: Vector binary, log: candump; the host's frames Tx, the nodes' Rx); none: no trace")

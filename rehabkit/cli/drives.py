@@ -27,18 +27,32 @@ def cmd_drives(args: argparse.Namespace) -> int:
     from rehabkit.core.kinds.context import Context
     from rehabkit.core.plugins.registry import default_registry
 
-    info = default_registry().get("robot", args.robot)
-    here = Context(Path.cwd(), np.random.default_rng(args.seed), args.timestep)
-    robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), here)
+    try:
+        info = default_registry().get("robot", args.robot)
+        here = Context(Path.cwd(), np.random.default_rng(args.seed), args.timestep)
+        robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), here)
+    except ValidationError as exc:
+        wrong = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'config'}: {e['msg']}" for e in exc.errors())
+        _err(f"error: --config: robot '{args.robot}': {wrong} (its settings as the scenario's robot section has "
+             "them, as JSON; `rehabkit plugins --fields " + args.robot + "` lists them)")
+        return EXIT_INVALID
+    except (ValueError, KeyError, OSError) as exc:
+        _err(f"error: robot '{args.robot}' cannot be built from --config: {exc} (files relative to {Path.cwd()})")
+        return EXIT_INVALID
     dof = robot.model.dof
     try:
         specs = TypeAdapter(list[DriveSpec]).validate_json(args.drives) if args.drives else [
             DriveSpec(node_id=i + 1) for i in range(dof)]
     except ValidationError as exc:
-        _err(f"error: --drives: {exc}")
+        wrong = "; ".join(f"drive {'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        _err(f"error: --drives: {wrong}")
         return EXIT_INVALID
-    if len(specs) != dof or len({s.node_id for s in specs}) != dof:
-        _err(f"error: --drives: robot '{robot.model.name}' has {dof} joints: one drive each, node ids unique")
+    ids = [s.node_id for s in specs]
+    if len(specs) != dof or len(set(ids)) != dof:
+        twice = sorted({i for i in ids if ids.count(i) > 1})
+        _err(f"error: --drives: robot '{robot.model.name}' has {dof} joints ({', '.join(robot.model.joint_names)}): "
+             f"{len(specs)} drives given" + (f", node id {twice[0]} twice" if twice else "") +
+             "; one drive per joint, in that order, node ids unique (the scenario's backend.drives)")
         return EXIT_INVALID
     import canopen
 

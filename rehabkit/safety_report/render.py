@@ -97,11 +97,13 @@ def write_report(runs: list, out: Path, backends: tuple[str, ...] = ("simulation
     HTML); ``runs``: a run per backend of ``backends`` per skill (None where it does not apply)."""
     out.mkdir(parents=True, exist_ok=True)
     heads = [LABELS.get(b, b) for b in backends]
+    how = {"simulation": "in simulation (MuJoCo)", "link": "over the robot link (lock-step UDP to a bridge driving the "
+           "robot's MuJoCo model)", "canopen": "on CANopen (simulated CiA 402 drives on the robot's MuJoCo model, "
+           "lock-step bus, at the highest of 1000, 500, 250 Hz the bus arithmetic allows)"}
+    ways = [how.get(b, b) for b in backends]
+    said = ", ".join(ways[:-1]) + (" and " if len(ways) > 1 else "") + ways[-1]
     md = [f"# Safety skills: {', '.join(heads)}", "",
-          "Each skill's scenario run in simulation (MuJoCo), over the robot link (lock-step UDP to a bridge driving "
-          "the robot's MuJoCo model) and on CANopen (simulated CiA 402 drives on the robot's MuJoCo model, lock-step "
-          "bus, at the highest control rate the bus arithmetic allows). Reaction: from the limit's first crossing in "
-          "truth to the stop.", ""]
+          f"Each skill's scenario run {said}. Reaction: from the limit's first crossing in truth to the stop.", ""]
     page = ["<!doctype html><meta charset='utf-8'><title>rehabkit safety report</title>",
             "<style>body{font-family:sans-serif;max-width:70em}td,th{border:1px solid #ccc;padding:2px 8px}"
             "table{border-collapse:collapse;margin-bottom:1em}</style>",

@@ -4,6 +4,7 @@ cyclic traffic within the bitrate at the control rate (refused with the arithmet
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from pathlib import Path
 
@@ -129,17 +130,21 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
     rate = 1.0 / context.control_dt
     load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms, len(sensors))
     if load.load > 1.0:
-        raise SettingError(("rates", "control_hz"), f"the CAN bus cannot carry {len(specs)} drives at {rate:g} Hz: "
-                           f"{load.describe()}; the highest control rate that fits is "
-                           f"{load.highest_rate_hz():.0f} Hz (e.g. rates.control_hz: "
-                           f"{_fitting(load)}), or fewer drives per bus", root=True)
+        what = f"{len(specs)} drives" + (f" and {len(sensors)} sensors" if sensors else "")
+        step = config.timestep if config.bus is None or config.bus.simulated else 1e-4
+        raise SettingError(("rates", "control_hz"), f"the CAN bus cannot carry {what} at {rate:g} Hz: "
+                           f"{load.describe()}; set rates.control_hz: {_fitting(load, step)} (the highest rate that "
+                           f"fits{_steps(step)}; the bus carries up to {math.floor(load.highest_rate_hz())} Hz), "
+                           + (f"raise backend.bitrate (now {config.bitrate}; CAN's top: 1000000), "
+                              if config.bitrate < 1_000_000 else "") + "or put fewer nodes on this bus", root=True)
     return specs, sensors, load
 
 
-def _fitting(load: BusLoad) -> str:
-    """A control rate that fits and divides 1 kHz into whole milliseconds' multiples, as drives' cycles do."""
-    top = load.highest_rate_hz()
-    for hz in (1000, 500, 250, 200, 125, 100, 50):
-        if hz <= top:
-            return f"{hz}"
-    return f"{top:.0f}"
+def _steps(step: float) -> str:
+    return f" in whole {step * 1e3:g} ms steps of the simulated drives' plant" if step >= 1e-3 else ""
+
+
+def _fitting(load: BusLoad, step: float) -> str:
+    """The highest control rate the bus carries whose period is a whole number of ``step``s."""
+    k = max(1, math.ceil(1.0 / (load.highest_rate_hz() * step) - 1e-9))
+    return f"{1.0 / (k * step):g}"

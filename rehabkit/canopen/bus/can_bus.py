@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import os
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -36,6 +37,12 @@ class _PumpedNetwork(canopen.Network):
             self.pump()
 
 
+def sent_by_host(can_id: int, master_id: int) -> bool:
+    """A frame the master sends (the trace's Tx): NMT, SYNC, RPDOs, SDO requests, its own heartbeat."""
+    return can_id in (0x000, 0x080, 0x700 + master_id) or 0x200 <= can_id < 0x580 and can_id & 0x7F and \
+        (can_id >> 7) % 2 == 0 or 0x600 < can_id < 0x680
+
+
 def _drain(bus: can.BusABC, network: canopen.Network) -> None:
     while (msg := bus.recv(0.0)) is not None:
         network.notify(msg.arbitration_id, msg.data, msg.timestamp)
@@ -48,13 +55,13 @@ class CanBus:
 
     def __init__(self, interface: str | None = None, channel: str | None = None, bitrate: int = 1_000_000,
                  simulated: bool = False, lockstep: bool = False, trace: Path | None = None,
-                 clock: Callable[[], float] | None = None):
+                 clock: Callable[[], float] | None = None, master_id: int = 127):
         if interface is None:
             interface, channel = "virtual", f"rehabkit-{os.getpid()}-{next(_CHANNELS)}"
         kw = {"interface": interface, "channel": channel, "receive_own_messages": False}
         if interface not in ("virtual", "udp_multicast"):
             kw["bitrate"] = bitrate
-        self.lockstep, self.clock = lockstep, clock
+        self.lockstep, self.clock, self.master_id, self._opened = lockstep, clock, master_id, time.time()
         self.network: canopen.Network = _PumpedNetwork() if lockstep else canopen.Network()
         self.drives: canopen.Network | None = None
         self._buses: list[can.BusABC] = []
@@ -76,7 +83,7 @@ class CanBus:
                     if net is not None:
                         self._notifiers.append(can.Notifier(net.bus, net.listeners, 0.1))
                 if self._tap is not None:
-                    self._notifiers.append(can.Notifier(self._tap, [self._writer, self._count], 0.1))
+                    self._notifiers.append(can.Notifier(self._tap, [self._count, self._writer], 0.1))
         except BaseException:
             self.close(keep_trace=False)
             raise
@@ -87,6 +94,7 @@ class CanBus:
         return bus
 
     def _count(self, msg: can.Message) -> None:
+        msg.is_rx = not sent_by_host(msg.arbitration_id, self.master_id)
         self.frames += 1
 
     def pump(self) -> None:
@@ -95,8 +103,9 @@ class CanBus:
             _drain(self.drives.bus, self.drives)
         if self._tap is not None:
             while (msg := self._tap.recv(0.0)) is not None:
-                if self.clock is not None:
-                    msg.timestamp = self.clock()
+                if self.clock is not None:  # (the bus's own clock, from the moment it opened)
+                    msg.timestamp = self._opened + self.clock()
+                msg.is_rx = not sent_by_host(msg.arbitration_id, self.master_id)
                 self._writer.on_message_received(msg)
                 self.frames += 1
         _drain(self.network.bus, self.network)

@@ -150,6 +150,12 @@ class Backend(ABC):
         commands); default none."""
         return []
 
+    @classmethod
+    def timestep_for(cls, config: object, control_dt: float) -> float:
+        """The step the backend will take for ``config`` at a control period of ``control_dt`` (``validate``'s
+        question, before it is built): its ``timestep`` setting by default."""
+        return config.timestep
+
     @classmethod  # noqa: B027 (optional: most backends have nothing to check)
     def check(cls, config: object, context: object) -> None:
         """Refuse, before anything runs (``rehabkit validate``), the settings known wrong without building the

@@ -305,8 +305,13 @@ def _patient_and_safety(a: Assembly) -> None:
 
 def _schedule(a: Assembly) -> Schedule:
     sc = a.sc
-    dt = a.backend.timestep if a.backend is not None else sc.backend.timestep  # (validate builds no backend)
     control_dt = 1.0 / sc.rates.control_hz
+    if a.backend is not None:
+        dt = a.backend.timestep
+    else:  # (validate builds no backend: its class says what its step will be)
+        factory = a.registry.get("backend", sc.backend.type).factory
+        dt = factory.timestep_for(sc.backend, control_dt) if isinstance(factory, type) and issubclass(
+            factory, Backend) else sc.backend.timestep
     sub = control_dt / dt
     if abs(sub - round(sub)) > 1e-6 or round(sub) < 1:
         raise PluginSetupError(a.loaded.source, ("rates", "control_hz"),
