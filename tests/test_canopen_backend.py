@@ -123,7 +123,8 @@ def _bench(hit, option: int, decel: float = 3.0):
     """The HIT on six simulated drives and a master, on a lock-step bus: set up, placed at A, enabled."""
     from rehabkit.canopen.bus.can_bus import CanBus
     from rehabkit.canopen.config import CanopenConfig, DriveSpec
-    from rehabkit.canopen.master import DriveLimits, DriveMaster
+    from rehabkit.canopen.drive_limits import DriveLimits
+    from rehabkit.canopen.master import DriveMaster
     from rehabkit.canopen.simulated.drive import EDS
     from rehabkit.canopen.simulated.rig import DriveRig
     from rehabkit.hardware.plant import MujocoPlant

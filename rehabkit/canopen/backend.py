@@ -30,30 +30,29 @@ from rehabkit.canopen.bus.can_bus import CanBus
 from rehabkit.canopen.bus_health import METRICS, DriveNotes, bus_metrics, hold_interventions, latency_series
 from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
-from rehabkit.canopen.cycle_clock import CycleClock
+from rehabkit.canopen.cycle_clock import CycleClock, own_gravity
+from rehabkit.canopen.drive_limits import drive_limits
 from rehabkit.canopen.emcy_codes import describe
 from rehabkit.canopen.injection import inject
-from rehabkit.canopen.master import DriveLimits, DriveMaster
+from rehabkit.canopen.master import DriveMaster
 from rehabkit.canopen.simulated.drive import EDS
 from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import Instruments
 from rehabkit.core.kinds.errors import SettingError
-from rehabkit.core.kinds.interfaces import Backend, Context, Robot
+from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.stopping import joint_inertia
 from rehabkit.hardware.bridge import HOLD_KD, HOLD_KP
-from rehabkit.hardware.bridge_limits import BridgeLimits
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
 
+START_CYCLES = 50  # SYNCs a reset sends at most until every node has answered one
 HOLD_BANDWIDTH = 20.0  # [rad/s] this host's hold of the posture through a late step
-STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
-ABORT_OPTION = {0: 2, 1: 3, 2: 3}  # stop category → abort connection option code (0x6007): torque off; quick stop
 
 
 class CanopenBackend(MirroredScene, Backend, Instruments):
@@ -138,22 +137,6 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
             return time.monotonic() - self.t0
         return self.master.cycles * self.period if hasattr(self, "master") else 0.0
 
-    def _limits(self, q0: np.ndarray) -> DriveLimits:
-        """The drives' own limits: the run's range and speed a margin wider than the safety layer's (a backstop,
-        as the bridge's), its torques, the stop's deceleration and category."""
-        lim = self.robot.model.limits
-        wide = BridgeLimits(lim.lower, lim.upper, lim.velocity)
-        sc = self.safety_config
-        if sc is not None and sc.stop_decel_deg_s2 is not None:
-            decel = np.full(self.n, math.radians(sc.stop_decel_deg_s2))
-        else:  # as the safety layer's default: half what each drive can give its joint here
-            inertia = joint_inertia(self.robot.model, q0)
-            decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
-        categories = sc.stop_category if sc is not None else {}
-        category = categories.get("e-stop", categories.get("default", 2))
-        return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category],
-                           ABORT_OPTION[category])
-
     # -- Backend -----------------------------------------------------------------------------------------------
 
     def reset(self, q0: np.ndarray) -> None:
@@ -167,12 +150,19 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         q0 = np.asarray(q0, float)
         self.t0 = time.monotonic()
         if not self._configured:
-            self.master.configure(self.period, self._limits(q0))
+            self.master.configure(self.period, drive_limits(self.robot.model, self.safety_config, q0))
             self._configured = True
         if self.simulated:  # (placed before the drives are enabled, within their limits, and again once they are:
             self.master.place(q0)  # with the power stages off the arm sagged meanwhile)
         self.deadline = time.monotonic()
-        self._paced(np.zeros(self.n))  # the drives' states and the joints, the power stages still off
+        for _ in range(START_CYCLES):  # the drives' states and the joints, the power stages still off (the first
+            self._paced(np.zeros(self.n))  # cycles after NMT start may find a drive still taking its maps)
+            if not math.isnan(self.latency[-1]):
+                break
+        else:
+            silent = [self.names[i] for i, got in enumerate(self.master.missed[: self.n]) if got]
+            raise DriveFaultError(f"no TPDOs in answer to {START_CYCLES} SYNCs (from {', '.join(silent)})",
+                                  observable=False)
         faulted = [i for i, s in enumerate(self.master.states) if s == "FAULT"]
         if faulted and not cleared:
             i = faulted[0]
@@ -180,10 +170,16 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
             raise DriveFaultError(f"is in FAULT ({describe(code)}): its fault is reset only once a person has "
                                   f"cleared the robot's e-stop latch (`rehabkit estop clear {self.latch.name} --by "
                                   "NAME`)", self.master.ids[i], self.names[i], code, observable=False)
-        if not self.simulated and np.abs(self.master.q - q0).max() > math.radians(1.0):
-            raise DriveFaultError(f"the robot is not at the start posture (off by "
-                                  f"{np.degrees(np.abs(self.master.q - q0).max()):.1f}°): bring it there first",
-                                  observable=False)
+        off = np.abs(self.master.q - q0)
+        if off.max() > math.radians(1.0):
+            i = int(np.argmax(off))
+            if self.simulated:  # (placed there a moment ago: the drive's units are not the scenario's)
+                raise DriveFaultError(f"placed at {np.degrees(q0[i]):.1f}°, the drive reports "
+                                      f"{np.degrees(self.master.q[i]):.1f}°: its units differ from backend.drives' "
+                                      "(encoder_counts, gear_ratio, direction; `rehabkit drives --drives` takes the "
+                                      "scenario's)", self.master.ids[i], self.names[i], observable=False)
+            raise DriveFaultError(f"the robot is not at the start posture (joint {self.names[i]} off by "
+                                  f"{np.degrees(off[i]):.1f}°): bring it there first", observable=False)
         self.q, self.qd = q0.copy(), np.zeros(self.n)
         self._q0, self._cleared = q0, cleared
         self._started, self._fault = False, None
@@ -306,19 +302,6 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         finally:
             if self.frames is not None:
                 self.frames.close()
-
-
-def own_gravity(robot):
-    """``gravity(q)`` for another thread than the run's: Pinocchio's on a workspace of its own where the robot uses
-    Pinocchio's default (its ``Data`` is not shared: two threads in one would read each other's half-written
-    values), else the robot's own (its model, its lock: a robot overriding ``gravity_torque`` keeps no workspace)."""
-    if type(robot).gravity_torque is not Robot.gravity_torque:
-        return robot.gravity_torque
-    import pinocchio as pin
-
-    model = robot.model.pin_model
-    data = model.createData()
-    return lambda q: pin.computeGeneralizedGravity(model, data, np.asarray(q, float))
 
 
 @hookimpl

@@ -90,3 +90,18 @@ class CycleClock:
         if self._thread.is_alive():
             self._thread.join()
             sys.setswitchinterval(self._switch)
+
+
+def own_gravity(robot):
+    """``gravity(q)`` for another thread than the run's: Pinocchio's on a workspace of its own where the robot uses
+    Pinocchio's default (its ``Data`` is not shared: two threads in one would read each other's half-written
+    values), else the robot's own (a robot overriding ``gravity_torque`` keeps no Pinocchio workspace)."""
+    from rehabkit.core.kinds.interfaces import Robot
+
+    if type(robot).gravity_torque is not Robot.gravity_torque:
+        return robot.gravity_torque
+    import pinocchio as pin
+
+    model = robot.model.pin_model
+    data = model.createData()
+    return lambda q: pin.computeGeneralizedGravity(model, data, np.asarray(q, float))

@@ -13,7 +13,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import can
 import canopen
@@ -24,23 +24,11 @@ from rehabkit.canopen.bus.pdo_layout import RPDO1, SENSOR_TPDO, TPDO1, tpdo2
 from rehabkit.canopen.bus.pdo_maps import write_maps
 from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
+from rehabkit.canopen.drive_limits import DriveLimits
 from rehabkit.canopen.emcy_codes import describe
 
 CST = 10  # modes of operation (0x6060): cyclic synchronous torque
 DISABLE_VOLTAGE_CW = 0x00
-
-
-@dataclass(frozen=True)
-class DriveLimits:
-    """What each drive is told it may do, in SI units at its joint (downloaded into 0x607D, 0x6080, 0x6072, 0x6085)."""
-
-    lower: np.ndarray
-    upper: np.ndarray
-    speed: np.ndarray
-    torque: np.ndarray
-    decel: np.ndarray
-    quick_stop_option: int
-    abort_option: int = 1  # 0x6007: what a drive does when this host falls silent (1 fault, 2 torque off, 3 quick stop)
 
 
 def interpolation_period(period_s: float) -> tuple[int, int]:

@@ -1,0 +1,44 @@
+"""What each drive is told it may do: the run's limits as a backstop to the safety layer, and how it stops."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rehabkit.core.safety.stopping import joint_inertia
+from rehabkit.hardware.bridge_limits import BridgeLimits
+
+STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
+ABORT_OPTION = {0: 2, 1: 3, 2: 3}  # stop category → abort connection option code (0x6007): torque off; quick stop
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """What each drive is told it may do, in SI units at its joint (downloaded into 0x607D, 0x6080, 0x6072, 0x6085)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    speed: np.ndarray
+    torque: np.ndarray
+    decel: np.ndarray
+    quick_stop_option: int
+    abort_option: int = 1  # 0x6007: what a drive does when this host falls silent (1 fault, 2 torque off, 3 quick stop)
+
+
+def drive_limits(model, safety, q0: np.ndarray) -> DriveLimits:
+    """The drives' own limits for robot ``model`` under the run's envelope ``safety`` (or None): its range and speed a
+    margin wider than the safety layer's (a backstop, as the bridge's), its torques, the stop's deceleration (the
+    envelope's, else half what each drive can give its joint at ``q0``, as the safety layer's) and category."""
+    lim = model.limits
+    wide = BridgeLimits(lim.lower, lim.upper, lim.velocity)
+    if safety is not None and safety.stop_decel_deg_s2 is not None:
+        decel = np.full(model.dof, math.radians(safety.stop_decel_deg_s2))
+    else:
+        inertia = joint_inertia(model, q0)
+        decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
+    categories = safety.stop_category if safety is not None else {}
+    category = categories.get("e-stop", categories.get("default", 2))
+    return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category],
+                       ABORT_OPTION[category])
