@@ -236,3 +236,58 @@ def test_hit_on_simulated_drives_in_real_time(tmp_path):
     assert len(syncs) >= m["can_cycles"] + 6
     assert np.median(np.diff(syncs)) == pytest.approx(0.004, rel=0.05)  # paced on the wall clock
     assert [f.data[0] for f in frames if f.arbitration_id == 0x201][-1] == 0x02  # the last controlword: quick stop
+
+
+def _modes(mode: str) -> dict:
+    return {"drives": [{"node_id": i + 1, "mode": mode} for i in range(6)]}
+
+
+@pytest.mark.parametrize("mode, within", [("csp", 0.25), ("csv", 0.35)])
+def test_hit_on_drives_closing_their_own_position_or_velocity_loop(tmp_path, mode, within):
+    """CSP and CSV: each drive follows the plan's joint reference with its own loop (the host adds the gravity
+    compensation as the torque offset), at 250 Hz — the longer RPDO (controlword, target, offset: 8 bytes) keeps six
+    drives off 500 Hz (109 %). The round trip meets its expectations and stays near MuJoCo's joint PD at the same rate;
+    every RPDO carries the target."""
+    sim = run_scenario(HIT, {"rates": {"control_hz": 250}})
+    hw = run_scenario(HIT, {"rates": {"control_hz": 250}, "backend": {**CANOPEN["backend"], **_modes(mode)}},
+                      out_dir=tmp_path)
+    assert hw.passed, [e for e in hw.summary["expectations"] if not e["passed"]]
+    assert hw.metrics["safety_events"] == 0 and 0.55 < hw.metrics["can_bus_load"] < 0.56
+    assert np.degrees(np.abs(sim.trace.q - hw.trace.q)).max() < within
+    rpdos = [f for f in can.LogReader(tmp_path / "can.asc") if f.arbitration_id == 0x201]
+    assert {f.dlc for f in rpdos} == {8} and all(not f.is_rx for f in rpdos)  # (the host's: Tx)
+
+
+def test_a_stop_on_csp_drives_follows_the_stops_ramp():
+    """An e-stop at the move's top speed: the CSP drives' targets follow the safety layer's ramp, then the held
+    posture — the stop as long and as short as on torque drives."""
+    e_stop = ROOT / "scenarios" / "safety" / "hit_estop.yaml"
+    sim = run_scenario(e_stop, {"rates": {"control_hz": 250}})
+    csp = run_scenario(e_stop, {"rates": {"control_hz": 250}, "backend": {**CANOPEN["backend"], **_modes("csp")}})
+    assert csp.passed and csp.metrics["safety_events"] == 1
+    assert csp.metrics["stop_time_s"] == pytest.approx(sim.metrics["stop_time_s"], abs=0.012)  # three cycles
+    assert csp.metrics["stop_distance_deg"] == pytest.approx(sim.metrics["stop_distance_deg"], abs=0.3)
+
+
+@pytest.mark.parametrize("scenario, says", [
+    ("lexos_reaching.yaml", "a csp drive follows the plan's joint reference: this scenario's planner plans in "
+                            "Cartesian space"),
+    ("safety/hit_force_yield.yaml", "a csp drive holds its target stiffly: the envelope's interaction-force reaction "
+                                    "(yield) needs the torque (mode: cst)"),
+    ("hit_roundtrip.yaml", "the CAN bus cannot carry 6 drives at 500 Hz"),
+])
+def test_validate_refuses_position_drives_where_they_cannot_do_what_the_scenario_asks(tmp_path, scenario, says):
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.core.scenario.loader import load_scenario
+    from rehabkit.core.setup.assembly import assemble
+
+    n = 4 if scenario.startswith("lexos") else 6
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump({"extends": str(ROOT / "scenarios" / scenario), "rates": {"control_hz": 500},
+                                    "backend": {**CANOPEN["backend"], "drives": [
+                                        {"node_id": i + 1, "mode": "csp"} for i in range(n)]}}))
+    with pytest.raises(ScenarioError) as err:
+        assemble(load_scenario(path), default_registry(), default_extensions(), upto="plugins")
+    assert says in err.value.diagnostics[0].message

@@ -39,7 +39,7 @@ from rehabkit.canopen.simulated.drive import EDS
 from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
 from rehabkit.core.kinds.backend import EStopLatchedError
-from rehabkit.core.kinds.capabilities import Instruments
+from rehabkit.core.kinds.capabilities import FollowsReference, Instruments
 from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
@@ -55,7 +55,7 @@ START_CYCLES = 50  # SYNCs a reset sends at most until every node has answered o
 HOLD_BANDWIDTH = 20.0  # [rad/s] this host's hold of the posture through a late step
 
 
-class CanopenBackend(MirroredScene, Backend, Instruments):
+class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
     """The robot's joints on CiA 402 drives over CANopen (see the module's doc)."""
 
     metrics = METRICS
@@ -88,6 +88,9 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         self.clock: CycleClock | None = None  # (real time, from the reset)
         self._note = context.note
         self._hold_kp, self._hold_kd = HOLD_KP, HOLD_KD  # (the bridge's, for a robot without a dynamic model)
+        self._following = np.array([s.mode != "cst" for s in specs])
+        self.follows = bool(self._following.any())  # (CSP/CSV drives: the loop hands over the targets)
+        self._targets: tuple[np.ndarray, np.ndarray] | None = None
         self._injections = sorted(config.inject, key=lambda f: f.at_s)
         trace = None
         if config.trace != "none" and context.out_dir is not None:
@@ -115,7 +118,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
             instruments = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(SENSOR_EDS), i.name)
                            for s, i in zip(sensors, context.instruments, strict=True)]
             self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now,
-                                      [s.rated_torque_nm is None for s in specs], instruments)
+                                      [s.rated_torque_nm is None for s in specs], instruments, [s.mode for s in specs])
             self._instrument = {i.name: k for k, i in enumerate(context.instruments)}
             self.notes = DriveNotes(context.note, self.master)
         except BaseException:
@@ -212,8 +215,14 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
         return self._hold_kp * (posture - m.q) - self._hold_kd * m.qd + self._gravity(m.q)
 
     def _cycle(self, tau: np.ndarray) -> None:
-        latency = self.master.cycle(tau, 0.8 * self.period if self.realtime else 0.0)
+        targets = self._targets or (None, None)
+        latency = self.master.cycle(tau, 0.8 * self.period if self.realtime else 0.0, *targets)
         self.latency.append(latency)
+
+    def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
+        """CSP/CSV drives' targets for the next cycle (the reference as the safety layer lets it through); their
+        torque offset is the gravity compensation there, the controller's torque not sent."""
+        self._targets = (np.array(q, float), np.array(qd, float))
 
     def _paced(self, tau: np.ndarray) -> None:
         """One cycle of the set-up, on the bus's clock (real time: at its deadline)."""
@@ -227,6 +236,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments):
 
     def command(self, tau: np.ndarray) -> None:
         self.tau = np.array(tau, float)
+        if self._targets is not None:  # (CSP/CSV drives: gravity compensation at the target, as the torque offset)
+            self.tau[self._following] = self.robot.gravity_torque(self._targets[0])[self._following]
 
     def step(self, n: int = 1) -> None:
         """One cycle (``n`` plant steps of the simulated drives: the control period)."""

@@ -53,8 +53,11 @@ class DriveSpec(StrictModel):
     node_id: int = Field(ge=1, le=127, description="CANopen node id (1-127)")
     eds: FilePath | None = Field(None, description="the drive's EDS or DCF file (default: rehabkit's generic CiA "
                                  "402 servo, the simulated drives' own)")
-    mode: Literal["cst"] = Field("cst", description="operating mode: cst, cyclic synchronous torque (rehabkit's "
-                                 "controllers command joint torques)")
+    mode: Literal["cst", "csp", "csv"] = Field(
+        "cst", description="operating mode: cst, cyclic synchronous torque (the controller's torques, the default); "
+        "csp or csv, cyclic synchronous position or velocity: the drive closes its own loop on the plan's joint "
+        "reference as the safety layer lets it through, the host adding gravity compensation as its torque offset "
+        "(the controller's torques are then not sent: a stiff servo, for positioning, not for interaction)")
     gear_ratio: float = Field(1.0, gt=0, description="motor turns per joint turn")
     encoder_counts: int = Field(131072, gt=0, description="encoder counts per motor turn (the position unit)")
     rated_torque_nm: float | None = Field(None, gt=0, description="the motor's rated torque its per-mille torques "

@@ -20,14 +20,14 @@ import canopen
 import numpy as np
 
 from rehabkit.canopen.bus.pdo_codec import PdoCodec
-from rehabkit.canopen.bus.pdo_layout import RPDO1, SENSOR_TPDO, TPDO1, tpdo2
+from rehabkit.canopen.bus.pdo_layout import RPDO, SENSOR_TPDO, TPDO1, tpdo2
 from rehabkit.canopen.bus.pdo_maps import write_maps
 from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
 from rehabkit.canopen.drive_limits import DriveLimits
 from rehabkit.canopen.emcy_codes import describe
 
-CST = 10  # modes of operation (0x6060): cyclic synchronous torque
+MODE_CODE = {"csp": 8, "csv": 9, "cst": 10}  # modes of operation (0x6060): cyclic synchronous position/velocity/torque
 DISABLE_VOLTAGE_CW = 0x00
 
 
@@ -46,10 +46,14 @@ class DriveMaster:
 
     def __init__(self, network: canopen.Network, nodes: Sequence[tuple[int, str]], units: Sequence[DriveUnits],
                  names: Sequence[str], config: CanopenConfig, now: Callable[[], float],
-                 read_rated: Sequence[bool] = (), sensors: Sequence[tuple[int, str, str]] = ()):
+                 read_rated: Sequence[bool] = (), sensors: Sequence[tuple[int, str, str]] = (),
+                 modes: Sequence[str] = ()):
         self.network, self.config, self.now = network, config, now
         self.units = list(units)
         self._read_rated = list(read_rated) or [False] * len(self.units)
+        self.modes = list(modes) or ["cst"] * len(self.units)
+        self._follows = np.array([m != "cst" for m in self.modes])
+        self._by_velocity = np.array([m == "csv" for m in self.modes])
         self.remotes = [canopen.RemoteNode(node, eds) for node, eds in nodes]
         self.sensors = [canopen.RemoteNode(node, eds) for node, eds, _ in sensors]  # (three-axis: CiA 404)
         for r in (*self.remotes, *self.sensors):
@@ -112,7 +116,7 @@ class DriveMaster:
                 self.units[i] = replace(u, rated_torque_nm=r.sdo[0x6076].raw * 1e-3 * u.gear_ratio)
                 self._per_mille[i] = 1e3 * u.direction / self.units[i].rated_torque_nm
             sd, u = r.sdo, self.units[i]
-            sd[0x6060].raw = CST
+            sd[0x6060].raw = MODE_CODE[self.modes[i]]
             sd[0x60C2][1].raw, sd[0x60C2][2].raw = value, index
             lo, hi = sorted((limits.lower[i] * self._scale[i], limits.upper[i] * self._scale[i]))
             sd[0x607D][1].raw, sd[0x607D][2].raw = math.floor(lo), math.ceil(hi)
@@ -122,7 +126,7 @@ class DriveMaster:
             sd[0x605A].raw = limits.quick_stop_option
             if 0x6007 in r.object_dictionary:  # (optional in the profile)
                 sd[0x6007].raw = limits.abort_option
-            rx, tx = write_maps(self.network, r, [RPDO1], [TPDO1, tpdo2(cfg.torque_actual)])
+            rx, tx = write_maps(self.network, r, [RPDO[self.modes[i]]], [TPDO1, tpdo2(cfg.torque_actual)])
             self._rpdo[i] = rx[0]
             self._listen(tx, i)
         n = len(self.remotes)
@@ -198,15 +202,22 @@ class DriveMaster:
                     "e-stop latch" if s == State.FAULT.name else ""), self.remotes[i].id, self.names[i], code)
         self.enabled = True
 
-    def cycle(self, tau: np.ndarray, wait_s: float = 0.0) -> float:
+    def cycle(self, tau: np.ndarray, wait_s: float = 0.0, q: np.ndarray | None = None,
+              qd: np.ndarray | None = None) -> float:
         """RPDOs with ``tau`` [N·m], the heartbeat when due, SYNC, the TPDOs in (real time: up to ``wait_s``); the
         joint state read. Returns the wall time from SYNC to the last TPDO [s] (nan if one did not come)."""
-        targets = np.clip(np.rint(tau * self._per_mille), -32768, 32767)
+        targets = np.clip(np.rint(tau * self._per_mille), -32768, 32767)  # (CSP/CSV: the torque offset)
+        if q is not None and self._follows.any():  # their position or velocity targets [counts, counts/s]
+            setpoints = np.clip(np.rint(np.where(self._by_velocity, qd, q) * self._scale), -2**31, 2**31 - 1)
+        else:  # (no targets: the set-up's and the close's cycles) where they are, at rest
+            setpoints = np.where(self._by_velocity, 0.0, np.rint(self.q * self._scale))
         self._got[:] = False
         self._arrived.clear()
         try:
-            for codec, cw, target in zip(self._rpdo, self.controlword, targets, strict=True):
-                self.network.send_message(codec.cob_id, codec.layout.pack(int(cw), int(target)))
+            for codec, follows, cw, target, point in zip(self._rpdo, self._follows, self.controlword, targets,
+                                                         setpoints, strict=True):
+                values = (int(cw), int(point), int(target)) if follows else (int(cw), int(target))
+                self.network.send_message(codec.cob_id, codec.layout.pack(*values))
             if self.now() >= self._next_beat and self.beating:
                 self._next_beat += self.config.heartbeat_ms * 1e-3
                 self.network.send_message(0x700 + self.config.master_node_id, b"\x05")

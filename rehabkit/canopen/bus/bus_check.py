@@ -8,7 +8,7 @@ import math
 from functools import lru_cache
 from pathlib import Path
 
-from rehabkit.canopen.bus.pdo_layout import RPDO1, SENSOR_TPDO, TORQUE_ACTUAL, TPDO1, TPDO2, BusLoad, bus_load
+from rehabkit.canopen.bus.pdo_layout import RPDO, SENSOR_TPDO, TORQUE_ACTUAL, TPDO1, TPDO2, BusLoad, bus_load
 from rehabkit.canopen.config import CanopenConfig, DriveSpec, SensorSpec
 from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Context
@@ -17,7 +17,9 @@ from rehabkit.core.kinds.interfaces import Context
 SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x605A, 0), (0x6060, 0), (0x6072, 0), (0x607D, 1), (0x607D, 2),
        (0x6080, 0), (0x6085, 0), (0x60C2, 1), (0x60C2, 2), (0x1400, 1), (0x1600, 1), (0x1800, 1), (0x1A00, 1),
        (0x1801, 1), (0x1A01, 1))
-CST_SUPPORTED = 0x200  # 0x6502 bit 9
+SUPPORTED = {"csp": 0x80, "csv": 0x100, "cst": 0x200}  # 0x6502 bits 7, 8, 9
+MODE_NAMES = {"csp": "cyclic synchronous position", "csv": "cyclic synchronous velocity",
+              "cst": "cyclic synchronous torque"}
 
 
 SENSOR_SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x1800, 1), (0x1A00, 1), (0x2100, 0))
@@ -69,7 +71,7 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, cont
         have, modes = _objects(str(path))
     except Exception as exc:  # noqa: BLE001 (canopen's parser: whatever it refuses, said at the file's setting)
         raise SettingError(where, f"canopen cannot read {path.name} as an EDS/DCF: {exc}") from None
-    needed = [*((x, s) for x, s, _ in (*RPDO1, *TPDO1, *TPDO2)), *SET]
+    needed = [*((x, s) for x, s, _ in (*RPDO[spec.mode], *TPDO1, *TPDO2)), *SET] if not sensor else []
     if sensor:
         needed = [*((x, s) for x, s, _ in SENSOR_TPDO), *SENSOR_SET]
     elif config.torque_actual:
@@ -80,9 +82,10 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, cont
             "a CiA 402 drive's EDS with two RPDOs and two TPDOs"
         raise SettingError(where, f"{path.name} lacks objects the backend maps or sets: {', '.join(missing)} (is it "
                            f"{what}?)")
-    if not sensor and modes is not None and not modes & CST_SUPPORTED:
-        raise SettingError(("drives", i, "mode"), f"{path.name} says the drive does not support cyclic synchronous "
-                           f"torque (0x6502 = 0x{modes:08X}, bit 9 clear)")
+    if not sensor and modes is not None and not modes & SUPPORTED[spec.mode]:
+        bit = SUPPORTED[spec.mode].bit_length() - 1
+        raise SettingError(("drives", i, "mode"), f"{path.name} says the drive does not support "
+                           f"{MODE_NAMES[spec.mode]} (0x6502 = 0x{modes:08X}, bit {bit} clear)")
 
 
 def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec], list[SensorSpec], BusLoad]:
@@ -128,7 +131,19 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
             raise SettingError(("inject", i, "node"), f"no drive has node id {f.node} (the drives: "
                                f"{', '.join(map(str, sorted(nodes)))})")
     rate = 1.0 / context.control_dt
-    load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms, len(sensors))
+    following = [i for i, s in enumerate(specs) if s.mode != "cst"]
+    if following and context.reference_space != "joint":
+        raise SettingError(("drives", following[0], "mode"), f"a {specs[following[0]].mode} drive follows the plan's "
+                           "joint reference: this scenario's planner plans in Cartesian space (use mode: cst, or a "
+                           "joint-space planner)")
+    reactions = context.safety.reactions if context.safety is not None else {}
+    soft = [r for r, x in reactions.items() if x.type != "stop"]
+    if following and soft:
+        raise SettingError(("drives", following[0], "mode"), f"a {specs[following[0]].mode} drive holds its target "
+                           f"stiffly: the envelope's {soft[0]} reaction ({reactions[soft[0]].type}) needs the torque "
+                           "(mode: cst)")
+    load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms, len(sensors),
+                    len(following))
     if load.load > 1.0:
         what = f"{len(specs)} drives" + (f" and {len(sensors)} sensors" if sensors else "")
         step = config.timestep if config.bus is None or config.bus.simulated else 1e-4

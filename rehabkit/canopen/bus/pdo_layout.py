@@ -14,7 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 # (index, subindex, bits) of each PDO's entries, in order
-RPDO1 = ((0x6040, 0, 16), (0x6071, 0, 16))  # controlword, target torque [‰ of rated]
+RPDO1 = ((0x6040, 0, 16), (0x6071, 0, 16))  # controlword, target torque [‰ of rated] (CST)
+# CSP: controlword, target position [counts], torque offset [‰: the host's gravity compensation]; CSV: the same with
+# the target velocity [counts/s]
+RPDO_CSP = ((0x6040, 0, 16), (0x607A, 0, 32), (0x60B2, 0, 16))
+RPDO_CSV = ((0x6040, 0, 16), (0x60FF, 0, 32), (0x60B2, 0, 16))
+RPDO = {"cst": RPDO1, "csp": RPDO_CSP, "csv": RPDO_CSV}
 TPDO1 = ((0x6041, 0, 16), (0x6064, 0, 32))  # statusword, position actual value [counts]
 TPDO2 = ((0x606C, 0, 32),)  # velocity actual value [counts/s]
 TORQUE_ACTUAL = (0x6077, 0, 16)  # [‰ of rated], in TPDO2 when asked for
@@ -66,10 +71,12 @@ class BusLoad:
 
 
 def bus_load(drives: int, rate_hz: float, bitrate: int, torque_actual: bool = False,
-             heartbeat_ms: float = 100.0, sensors: int = 0) -> BusLoad:
-    """The bus load of ``drives`` drives and ``sensors`` three-axis sensors mapped as
-    :mod:`this module <rehabkit.canopen.bus.pdo_layout>` maps them."""
+             heartbeat_ms: float = 100.0, sensors: int = 0, following: int = 0) -> BusLoad:
+    """The bus load of ``drives`` drives (``following`` of them on position or velocity targets: a longer RPDO) and
+    ``sensors`` three-axis sensors mapped as :mod:`this module <rehabkit.canopen.bus.pdo_layout>` maps them."""
     per_drive = sum(frame_bits(pdo_bytes(p)) for p in (RPDO1, TPDO1, tpdo2(torque_actual)))
-    per_cycle = drives * per_drive + sensors * frame_bits(pdo_bytes(SENSOR_TPDO)) + frame_bits(SYNC_BYTES)
+    longer = frame_bits(pdo_bytes(RPDO_CSP)) - frame_bits(pdo_bytes(RPDO1))
+    per_cycle = drives * per_drive + following * longer + sensors * frame_bits(pdo_bytes(SENSOR_TPDO)) \
+        + frame_bits(SYNC_BYTES)
     beats = (drives + sensors + 1) * frame_bits(HEARTBEAT_BYTES) * 1e3 / heartbeat_ms
     return BusLoad(drives, rate_hz, bitrate, per_cycle, beats, sensors)

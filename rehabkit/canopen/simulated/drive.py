@@ -3,8 +3,9 @@
 A :class:`~rehabkit.canopen.simulated.node.SimulatedNode` serving the generic servo's EDS, with the drive's own job: the
 402 state machine (:class:`~rehabkit.canopen.cia402.Drive402`) moved by the controlword the master maps into an RPDO,
 and, on each SYNC while OPERATIONAL, the joint driven (cyclic synchronous torque: the target torque in per mille of
-the rated torque 0x6076, applied only while the power stage is on, clipped to the max torque 0x6072), and the TPDOs
-sent with the joint's state sampled at the SYNC, in the drive's units.
+the rated torque 0x6076, applied only while the power stage is on, clipped to the max torque 0x6072; or cyclic
+synchronous position or velocity: its own loop on the target, tuned to the joint's inertia, plus the torque offset),
+and the TPDOs sent with the joint's state sampled at the SYNC, in the drive's units.
 
 Its own limits: beyond the software position limits (0x607D) or the max speed (0x6080) it faults. A fault
 (:meth:`SimulatedDrive.fault`) sends its EMCY; its reaction, like a quick stop, brings the joint to rest on the quick
@@ -31,6 +32,7 @@ OVERSPEED = 0x8400  # velocity speed controller
 POSITION_LIMIT = 0x8612  # reference limit (beyond the software position limits)
 DEFAULT_UNITS = DriveUnits()
 STOP_BANDWIDTH = 40.0  # [rad/s] the drive's own loop in a quick stop or fault reaction (critically damped)
+SERVO_BANDWIDTH = 40.0  # [rad/s] its position loop in CSP and CSV
 
 
 class Joint(Protocol):
@@ -43,8 +45,9 @@ class Joint(Protocol):
 
 
 # the parameters the drive acts on, read when a master writes them, and its process data: (index, subindex)
-PARAMETERS = ((0x6007, 0), (0x605A, 0), (0x6072, 0), (0x607D, 1), (0x607D, 2), (0x6080, 0), (0x6085, 0))
-LIVE = ((0x6040, 0), (0x6071, 0), (0x6041, 0), (0x603F, 0), (0x6064, 0), (0x606C, 0), (0x6077, 0))
+PARAMETERS = ((0x6007, 0), (0x605A, 0), (0x6060, 0), (0x6072, 0), (0x607D, 1), (0x607D, 2), (0x6080, 0), (0x6085, 0))
+LIVE = ((0x6040, 0), (0x6071, 0), (0x607A, 0), (0x60FF, 0), (0x60B2, 0), (0x6041, 0), (0x603F, 0), (0x6064, 0),
+        (0x606C, 0), (0x6077, 0))
 
 
 class SimulatedDrive(SimulatedNode):
@@ -62,6 +65,7 @@ class SimulatedDrive(SimulatedNode):
             network.subscribe(SYNC_ID, self.on_sync)
         self._stop_v: float | None = None  # a stop under way: the speed its ramp started from [rad/s]
         self._stop_at, self._stop_q = 0, 0.0  # when it began; where its ramp's position is now [rad]
+        self._follow: float | None = None  # CSP/CSV: the previous target position [rad]
         self._publish()
 
     def parameter_written(self, index: int, subindex: int) -> None:
@@ -138,10 +142,31 @@ class SimulatedDrive(SimulatedNode):
                 return
         self._stop_v = None
         if m.state is State.OPERATION_ENABLED:
-            target = self.live[0x6071, 0] * 1e-3 * u.rated_torque_nm * u.direction
+            target = self._target_torque()
             self.joint.apply(min(max_nm, max(-max_nm, target)))
         else:
             self.joint.apply(0.0)
+            self._follow = None
+
+    def _target_torque(self) -> float:
+        """The torque its mode asks for: CST the target torque; CSP and CSV the drive's own loop on the target
+        position (with the velocity the targets move at) or velocity (with its integral), plus the torque offset."""
+        u, live, mode = self.units, self.live, self.par[0x6060, 0]
+        per_mille = 1e-3 * u.rated_torque_nm * u.direction
+        if mode not in (8, 9):
+            return live[0x6071, 0] * per_mille
+        q, qd, _ = self.joint.read()
+        scale, dt = u.counts_per_rad * u.direction, self._period()
+        if mode == 8:
+            q_t = live[0x607A, 0] / scale
+            v_t = 0.0 if self._follow is None else (q_t - self._follow) / dt
+            self._follow = q_t
+        else:  # (the velocity target's integral: where it leads, from where the drive was enabled)
+            v_t = live[0x60FF, 0] / scale
+            q_t = (q if self._follow is None else self._follow) + v_t * dt
+            self._follow = q_t
+        w, inertia = SERVO_BANDWIDTH, self.inertia
+        return live[0x60B2, 0] * per_mille + w * w * inertia * (q_t - q) + 2 * w * inertia * (v_t - qd)
 
     def _period(self) -> float:
         return max(self.par[0x1006, 0], 1) * 1e-6

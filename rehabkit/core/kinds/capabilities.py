@@ -200,6 +200,19 @@ class CompliantGaps(Protocol):
         ...
 
 
+@runtime_checkable
+class FollowsReference(Protocol):
+    """Drives joints on position or velocity targets (servo drives in cyclic synchronous position or velocity, their
+    own loops closed on them) when ``follows``: each step it is given the run's joint reference as the safety layer
+    lets it through (in range, within the speed limits; after a trip, the stop's ramp, then the held posture)."""
+
+    follows: bool
+
+    def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
+        """The targets for the next step: positions [rad, m] and velocities."""
+        ...
+
+
 ABILITY: dict[type, str] = {
     WorkspaceTable: "has a workspace look-up table (robot.workspace)",
     RandomReach: "draws random reachable targets (robot.random_reach)",

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabkit.core.kinds.capabilities import Contacts
+from rehabkit.core.kinds.capabilities import Contacts, FollowsReference
 from rehabkit.core.kinds.interfaces import BackendFaultError, EmbodiedPatient
 from rehabkit.core.run.session import RunSession
 
@@ -72,6 +72,9 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
     ref_q, ref_qd, ref_qdd = session.ref.views()
     state, compute, check = backend.state, controller.compute, safety.check_row
     command, step = backend.command, backend.step
+    # joints on their own servo loops (CSP/CSV drives) get the reference as the safety layer lets it through
+    follow = backend.follow if isinstance(backend, FollowsReference) and backend.follows else None
+    target = safety.target
     contacts = backend.contacts if isinstance(backend, Contacts) else list  # no contacts reported: none counted
     tq, tqd, ttau, packed = trace.q, trace.qd, trace.tau, session.packed  # column views of ``packed``
     record = a.space.recorder(trace, backend)  # what the reference's space records beside the joints
@@ -121,6 +124,8 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                     f_h[k] = math.sqrt(force @ force)
                 safety.check_force(t, q, force, qd)
             tau = check(t, packed[k])
+            if follow is not None:
+                follow(*target(t, ref_q[k], ref_qd[k], q))
             if record is not None:
                 record(k, q)
             try:

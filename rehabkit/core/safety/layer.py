@@ -141,6 +141,15 @@ class SafetyLayer:
         """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
         return self.check_row(t, np.concatenate((q, qd, tau)))
 
+    def target(self, t: float, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The position and velocity targets a joint on its own servo loop may follow at ``t`` (after
+        :meth:`check_row` of the same step): the reference within the range and the speed limits, or once tripped the
+        stop's ramp and then the held posture."""
+        if self.tripped_at is not None:
+            return self.stopping.target(t, q)
+        lim = self.limits
+        return np.clip(q_ref, lim.lower, lim.upper), np.clip(qd_ref, -lim.velocity, lim.velocity)
+
     def allow_for_delay(self, delay: float) -> None:
         """The backend's loop delay beyond the control period [s]: the holds' gains stay stable with it, a stop's
         ramp lasts long enough for it."""

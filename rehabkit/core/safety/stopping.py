@@ -197,6 +197,15 @@ class Stopping:
             tau += self.gravity(q)
         return np.clip(tau, -self.effort, self.effort)
 
+    def target(self, t: float, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where a joint on a position target goes at ``t`` while stopping (after :meth:`torque` took the stop that
+        far): along the ramp, then the held posture; with the torque off, where it is."""
+        if self.category == 0 or self.limp:
+            return np.where(np.isfinite(q), q, self.hold_q), np.zeros(len(q))
+        if self.ramp is not None:
+            return self.ramp.reference(t)
+        return self.hold_q, np.zeros(len(q))
+
     def torque(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """What to send at ``t`` while stopping: along the ramp, then held or off."""
         if self.category == 0 or self.limp:
