@@ -71,6 +71,7 @@ def test_hit_round_trip_on_six_simulated_drives_tracks_like_the_simulation(tmp_p
     the SYNC (one cycle later than the simulation applies it), the positions come back in encoder counts; the run
     meets its expectations and stays within 0.2° of MuJoCo's at the same rate, every frame in the trace."""
     sim = run_scenario(HIT, {"rates": {"control_hz": 500}})
+    tmp_path = tmp_path / "not" / "yet"  # (an output folder the run makes: the trace opens before the log)
     hw = run_scenario(HIT, CANOPEN, out_dir=tmp_path)
     m = hw.metrics
     assert hw.passed, [e for e in hw.summary["expectations"] if not e["passed"]]

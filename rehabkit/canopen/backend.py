@@ -101,6 +101,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
                               simulated=config.bus is None, lockstep=not self.realtime, trace=trace, clock=self._now,
                               master_id=config.master_node_id)
         except (OSError, can.CanError, ImportError, ValueError) as exc:  # (python-can's own words: no such device)
+            if bus is None:
+                raise
             raise SettingError("bus", f"python-can cannot open {bus.interface} {bus.channel}: {exc} (is the "
                                "adapter plugged in, its driver loaded, the interface up?)") from None
         try:

@@ -72,6 +72,7 @@ class CanBus:
             if simulated:
                 self.drives = canopen.Network(self._open(kw))
             if trace is not None:
+                trace.parent.mkdir(parents=True, exist_ok=True)
                 self._part = trace.with_name(f".{trace.stem}.part{trace.suffix}")  # (the suffix picks the writer)
                 self._writer = can.Logger(self._part)
                 self._tap = self._open(kw)
