@@ -47,7 +47,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if (why := _unwritable(out)) is not None:
         _err(why)
         return EXIT_INVALID
-    result = run_scenario(args.scenario, overrides=args.set, out_dir=out, spawn=args.spawn, progress=True)
+    sets = [*args.set, "ros.bag=true"] if args.bag else args.set
+    result = run_scenario(args.scenario, overrides=sets, out_dir=out, spawn=args.spawn, progress=True)
     print(run_report(result.summary, out))
     if result.refusal is not None:  # the scenario as written could not be planned: bad input, said where
         _err(str(result.refusal))
@@ -84,7 +85,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.out and (why := _unwritable(Path(args.out))) is not None:
         _err(why)
         return EXIT_INVALID
-    rep = replay(args.run_dir, args.set, args.out, progress=True)
+    rep = replay(args.run_dir, [*args.set, "ros.bag=true"] if args.bag else args.set, args.out, progress=True)
     print(rep.table())
     for ev in rep.result.summary["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
@@ -198,6 +199,7 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--out", metavar="DIR", help="output folder (default: out/<scenario name>)")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scenario value")
     r.add_argument("--spawn", action="store_true", help="also stream to a Rerun viewer")
+    r.add_argument("--bag", action="store_true", help="also write run.mcap, a ROS 2 bag of the run (ros.bag)")
     r.set_defaults(func=cmd_run)
     w = sub.add_parser("sweep", help="run a scenario over a grid of settings x seeds, on Ray; resumable")
     w.add_argument("scenario")
@@ -217,6 +219,7 @@ def parser() -> argparse.ArgumentParser:
     rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="what to change, e.g. controller.type=assist-as-needed")
     rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>)")
+    rp.add_argument("--bag", action="store_true", help="also write run.mcap, a ROS 2 bag of the replay")
     rp.set_defaults(func=cmd_replay)
     v = sub.add_parser("validate", help="check scenario files without running them (and their fixed targets "
                                          "against a patient's ranges)")

@@ -1,0 +1,137 @@
+"""Runs as ROS 2 bags: written with the mcap library's ROS 2 support, read back here by an independent reader
+(rosbags), checked against the run's trace, its summary and the robot itself."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from rehabkit.api import run_scenario
+from tests.conftest import ROOT
+from tests.test_cli import cli
+
+HIT = ROOT / "scenarios" / "hit_roundtrip.yaml"
+
+
+def read(bag: Path) -> tuple[dict, dict]:
+    """Each topic's type and messages (deserialised), as rosbags reads the file."""
+    types, messages = {}, {}
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as r:
+        for c in r.connections:
+            types[c.topic] = (c.msgtype, c.msgcount)
+        for c, stamp, raw in r.messages():
+            messages.setdefault(c.topic, []).append((stamp, r.deserialize(raw, c.msgtype)))
+    return types, messages
+
+
+@pytest.fixture(scope="module")
+def hit_bag(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hit")
+    result = run_scenario(HIT, {"ros": {"bag": True}}, out_dir=out)
+    return result, *read(out / "run.mcap")
+
+
+def test_the_hit_round_trip_as_a_bag_holds_the_trace_exactly(hit_bag):
+    result, types, messages = hit_bag
+    n = len(result.trace.t)
+    assert types == {"/robot_description": ("std_msgs/msg/String", 1), "/tf_static": ("tf2_msgs/msg/TFMessage", 1),
+                     "/joint_states": ("sensor_msgs/msg/JointState", n),
+                     "/reference/joint_states": ("sensor_msgs/msg/JointState", n),
+                     "/tf": ("tf2_msgs/msg/TFMessage", n // 10)}  # (the log's 100 Hz)
+    said = result.summary["bag"]["topics"]  # (the summary says what the bag holds)
+    assert {t: (v["type"], v["messages"]) for t, v in said.items()} == types
+    states = [m for _, m in messages["/joint_states"]]
+    assert [list(states[0].name)] == [list(result.summary["per_joint"])]
+    for column, field in ((result.trace.q, "position"), (result.trace.qd, "velocity"), (result.trace.tau, "effort")):
+        assert np.abs(np.array([getattr(m, field) for m in states]) - column).max() <= 1e-12
+    ref = np.array([m.position for _, m in messages["/reference/joint_states"]])
+    assert np.abs(ref - result.trace.q_ref).max() <= 1e-12
+    stamps = np.array([s for s, _ in messages["/joint_states"]], np.int64)  # (log time, ns: one control period apart)
+    assert set(np.diff(stamps)) == {1_000_000}
+
+
+def test_the_robot_description_is_the_robot(hit_bag):
+    """HIT's URDF, made from its model: Pinocchio builds the same robot from it (forward kinematics over 1,000
+    random postures, masses, gravity torques); /tf, composed from world, is the robot's own forward kinematics."""
+    result, _, messages = hit_bag
+    from rehabkit_plugins.robots.hit import HitConfig, HitRobot
+
+    robot = HitRobot(HitConfig()).model
+    mine, theirs = robot.pin_model, pin.buildModelFromXML(messages["/robot_description"][0][1].data)
+    a, b = mine.createData(), theirs.createData()
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for q in rng.uniform(robot.limits.lower, robot.limits.upper, (1000, robot.dof)):
+        pin.forwardKinematics(mine, a, q)
+        pin.forwardKinematics(theirs, b, q)
+        worst = max(worst, max(np.abs(a.oMi[j].homogeneous - b.oMi[j].homogeneous).max() for j in range(1, 7)))
+        assert np.abs(pin.computeGeneralizedGravity(mine, a, q) - pin.computeGeneralizedGravity(theirs, b, q)).max() \
+            < 1e-9
+    assert worst < 1e-12 and sum(i.mass for i in mine.inertias) == pytest.approx(sum(i.mass for i in theirs.inertias))
+    k = 300  # a logged step: /tf's links chained from the world, against the robot's own frames
+    tf = {t.child_frame_id: t for t in messages["/tf"][k][1].transforms}
+    (base,) = messages["/tf_static"][0][1].transforms
+
+    def pose(t) -> np.ndarray:
+        r, p = t.transform.rotation, t.transform.translation
+        m = np.eye(4)
+        m[:3, :3] = pin.Quaternion(r.w, r.x, r.y, r.z).toRotationMatrix()
+        m[:3, 3] = (p.x, p.y, p.z)
+        return m
+
+    chain, link = pose(base), "wrist_2_link"
+    path = []
+    while link in tf:
+        path.append(tf[link])
+        link = tf[link].header.frame_id
+    for t in reversed(path):
+        chain = chain @ pose(t)
+    pin.forwardKinematics(mine, a, result.trace.q[10 * k])
+    np.testing.assert_allclose(chain, robot.base_pose @ a.oMi[6].homogeneous, atol=1e-12)
+
+
+def test_a_urdf_robot_carries_its_own_file_and_safety_events_go_to_rosout(tmp_path):
+    """The README's URDF arm: /robot_description is its file as written. HIT's e-stop skill: the stop on /rosout as
+    an ERROR, at its time."""
+    done = cli("run", "urdf_arm4.yaml", "--bag", "--set", "duration=1", "--out", str(tmp_path / "arm"),
+               cwd=ROOT / "examples" / "robots")
+    assert done.returncode in (0, 1), done.stderr  # (a 1 s run leaves its expectations unmet)
+    _, messages = read(tmp_path / "arm" / "run.mcap")
+    assert messages["/robot_description"][0][1].data == (ROOT / "examples" / "robots" / "arm4.urdf").read_text()
+    stop = run_scenario(ROOT / "scenarios" / "safety" / "hit_estop.yaml", {"ros": {"bag": True}},
+                        out_dir=tmp_path / "estop")
+    _, messages = read(tmp_path / "estop" / "run.mcap")
+    logs = [(s, m) for s, m in messages["/rosout"] if m.level == 40]  # (the stop, then the brakes it engaged)
+    (event,) = stop.summary["safety"]["events"]
+    assert [m.msg for _, m in logs] == [f"SAFETY {event['message']}", "SAFETY t=1.128s: torque off; holding brakes "
+                                        "engaged"] and logs[0][1].name == "rehabkit"
+    first = messages["/joint_states"][0][0]
+    assert logs[0][0] - first == round(event["t"] * 1e9)
+
+
+def test_the_readmes_ros_commands_run_as_written(tmp_path):
+    """"Working with ROS 2 tools": the run with ``--bag``, then the README's reading of its joint states."""
+    import contextlib
+    import io
+    import re
+
+    section = (ROOT / "README.md").read_text().split("## Working with ROS 2 tools")[1].split("\n## ")[0]
+    (command,), code = re.findall(r"```bash\n(.*?)\n```", section, re.S), re.findall(r"```python\n(.*?)```", section,
+                                                                                       re.S)[0]
+    (tmp_path / "scenarios").symlink_to(ROOT / "scenarios")
+    done = cli(*command.split()[1:], cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    shown = io.StringIO()
+    here = Path.cwd()
+    try:
+        import os
+
+        os.chdir(tmp_path)
+        with contextlib.redirect_stdout(shown):
+            exec(compile(code, "README.md (reading a bag)", "exec"), {})
+    finally:
+        os.chdir(here)
+    assert shown.getvalue().startswith("['shoulder_1', 'shoulder_2', 'elbow_1', 'elbow_2', 'wrist_1', 'wrist_2'] [")
