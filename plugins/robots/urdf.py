@@ -1,19 +1,37 @@
-"""Robots from a URDF file."""
+"""Robots from a URDF file, or a ROS description package's URDF or xacro."""
 
 from __future__ import annotations
 
 import pinocchio as pin
+from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
-from rehabkit.plugin import Context, Robot
+from rehabkit.models.ros_package import DescriptionError, prepared
+from rehabkit.models.strict import FilePath
+from rehabkit.plugin import Context, Robot, SettingError
+
+
+class UrdfConfig(ModelFileConfig):
+    """A URDF (or ``.xacro``) file, its meshes as a ROS description package refers to them."""
+
+    packages: list[FilePath] = Field([], description="folders of ROS packages its package:// URIs name (besides "
+                                     "ROS_PACKAGE_PATH and AMENT_PREFIX_PATH): a package's own folder, or one "
+                                     "holding packages")
+    xacro_args: dict[str, str] = Field({}, description="a .xacro file's arguments (name: value)")
 
 
 class UrdfRobot(Robot):
-    """Robot from a URDF file (MuJoCo imports it; speed and effort limits read by Pinocchio)."""
+    """Robot from a URDF file (MuJoCo imports it; speed and effort limits read by Pinocchio), the description made
+    loadable first: xacro expanded, package:// and file:// URIs resolved, COLLADA meshes converted."""
 
-    def __init__(self, config: ModelFileConfig, context: Context):
+    def __init__(self, config: UrdfConfig, context: Context):
         path = context.resolve(config.file)
+        if path.exists():
+            try:
+                path = prepared(path, [context.resolve(p) for p in config.packages], config.xacro_args)
+            except DescriptionError as exc:
+                raise SettingError("file", str(exc)) from None
         velocity, effort = {}, {}
         if path.exists():
             urdf = pin.buildModelFromUrdf(str(path))  # MuJoCo's importer keeps ranges, not speeds
@@ -26,4 +44,4 @@ class UrdfRobot(Robot):
 
 @hookimpl
 def rehabkit_register_robots(registry) -> None:
-    registry.add("urdf", config=ModelFileConfig, factory=UrdfRobot)
+    registry.add("urdf", config=UrdfConfig, factory=UrdfRobot)

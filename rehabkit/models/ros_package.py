@@ -1,0 +1,134 @@
+"""A robot description as a ROS description package ships it, made loadable: ``.xacro`` expanded (the ``xacro``
+package), every mesh URI resolved — ``package://NAME/...`` the way ROS tools resolve it (the scenario's own
+``packages``, then ``ROS_PACKAGE_PATH``, then each ``AMENT_PREFIX_PATH`` prefix's ``share/NAME``), ``file://`` and
+paths relative to the file — and COLLADA meshes converted to STL, which MuJoCo loads (``trimesh`` with
+``pycollada``). The result is one URDF with absolute mesh paths, kept under ``$REHABKIT_CACHE`` by content (written
+whole: a temporary name, renamed), from which Pinocchio and MuJoCo both build the robot.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from urllib.parse import unquote, urlparse
+
+CONVERTED = (".dae",)  # mesh formats MuJoCo cannot read, converted to STL
+
+
+class DescriptionError(ValueError):
+    """A description's part that cannot be used: ``uri`` (as written), ``problem`` and the ``fix``."""
+
+    def __init__(self, uri: str, problem: str, fix: str):
+        self.uri, self.problem, self.fix = uri, problem, fix
+        super().__init__(f"{uri}: {problem}; {fix}")
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("REHABKIT_CACHE", Path.home() / ".cache" / "rehabkit")) / "descriptions"
+
+
+def _is_package(folder: Path, name: str) -> bool:
+    if not folder.is_dir():
+        return False
+    manifest = folder / "package.xml"
+    if manifest.is_file():
+        found = ET.parse(manifest).getroot().findtext("name")
+        return (found or "").strip() == name
+    return folder.name == name
+
+
+def find_package(name: str, packages: Sequence[Path] = ()) -> tuple[Path | None, list[str]]:
+    """Package ``name``'s folder, and where it was looked for."""
+    looked: list[str] = []
+    roots = [*packages, *(Path(p) for p in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if p)]
+    for root in roots:
+        looked.append(str(root))
+        for folder in (root, root / name):
+            if _is_package(folder, name):
+                return folder, looked
+        if root.is_dir():  # (a workspace's src: the package one level down, under a folder of any name)
+            for folder in sorted(root.iterdir()):
+                if _is_package(folder / name, name):
+                    return folder / name, looked
+    for prefix in (Path(p) for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p):
+        looked.append(str(prefix / "share"))
+        if (prefix / "share" / name).is_dir():
+            return prefix / "share" / name, looked
+    return None, looked
+
+
+def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = ()) -> Path:
+    """A mesh's file from its URI in a description at ``base`` (the file's folder)."""
+    parsed = urlparse(uri)
+    if parsed.scheme == "package":
+        folder, looked = find_package(parsed.netloc, packages)
+        if folder is None:
+            where = ", ".join(looked) or "nothing: no packages, ROS_PACKAGE_PATH or AMENT_PREFIX_PATH"
+            raise DescriptionError(uri, f"no package '{parsed.netloc}' found (looked in: {where})",
+                                   "name its folder in the robot's packages, or set ROS_PACKAGE_PATH / source the "
+                                   "workspace that has it")
+        path = folder / unquote(parsed.path).lstrip("/")
+    elif parsed.scheme == "file":
+        path = Path(unquote(parsed.path))
+    elif parsed.scheme:
+        raise DescriptionError(uri, f"a '{parsed.scheme}://' URI is not a file here", "use package://, file:// or a "
+                               "path relative to the description")
+    else:
+        path = base / uri
+    if not path.is_file():
+        raise DescriptionError(uri, f"no such file: {path}", "check the package's meshes folder")
+    return path.resolve()
+
+
+def _written(path: Path, data: bytes) -> Path:
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        part = path.with_name(f".{path.name}.{os.getpid()}.part")
+        part.write_bytes(data)
+        os.replace(part, path)
+    return path
+
+
+def converted(mesh: Path) -> Path:
+    """A COLLADA mesh as an STL MuJoCo loads (its scenes' geometry in the file's units, merged), once per content."""
+    import trimesh
+
+    digest = hashlib.sha256(mesh.read_bytes()).hexdigest()[:20]
+    out = cache_dir() / "meshes" / f"{mesh.stem}-{digest}.stl"
+    if out.exists():
+        return out
+    loaded = trimesh.load(str(mesh), force="mesh")
+    if loaded.is_empty:
+        raise DescriptionError(str(mesh), "the COLLADA file holds no triangles", "export the mesh with its geometry")
+    return _written(out, loaded.export(file_type="stl"))
+
+
+def prepared(path: Path, packages: Sequence[Path] = (), xacro_args: Mapping[str, str] | None = None) -> Path:
+    """The description at ``path`` as one loadable URDF (see the module's doc); a plain URDF whose meshes need
+    nothing done is returned as it is."""
+    if path.suffix == ".xacro":
+        import xacro
+
+        text = xacro.process_file(str(path), mappings=dict(xacro_args or {})).toxml()
+    else:
+        text = path.read_text()
+    root = ET.fromstring(text)
+    changed = path.suffix == ".xacro"
+    for mesh in root.iter("mesh"):
+        uri = mesh.get("filename", "")
+        if not uri:
+            continue
+        file = resolve_uri(uri, path.parent, packages)
+        if file.suffix.lower() in CONVERTED:
+            file = converted(file)
+        if str(file) != uri:
+            mesh.set("filename", str(file))
+            changed = True
+    if not changed:
+        return path
+    data = ET.tostring(root, encoding="unicode").encode()
+    digest = hashlib.sha256(data).hexdigest()[:20]
+    return _written(cache_dir() / f"{path.stem.removesuffix('.urdf')}-{digest}.urdf", data)

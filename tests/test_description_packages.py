@@ -1,0 +1,105 @@
+"""Robots from ROS description packages as they ship: a package of our own (xacro with an argument, package://
+meshes, COLLADA converted) and UR5 from example-robot-data (package:// URIs found through AMENT_PREFIX_PATH).
+Pinocchio and MuJoCo build the robot from the same resolved description: their forward kinematics and masses
+agree."""
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import yaml
+
+from rehabkit.api import run_scenario
+from tests.conftest import ROOT
+from tests.test_cli import cli
+
+DATA = ROOT / "tests" / "data"
+ERD = Path(__import__("cmeel").__file__).parent.parent / "cmeel.prefix"  # example-robot-data's install prefix
+
+
+def _robot(section: dict, folder: Path):
+    from rehabkit.core.kinds.context import Context
+    from rehabkit.core.plugins.registry import default_registry
+
+    info = default_registry().get("robot", section["type"])
+    return info.factory(info.config.model_validate(section), Context(folder, np.random.default_rng(0), 0.001))
+
+
+def _agreement(robot, postures: int = 1000) -> tuple[float, float]:
+    """Largest end-effector distance between Pinocchio's and MuJoCo's forward kinematics over random postures [m],
+    and the difference of their total masses [kg]."""
+    from rehabkit.hardware.plant import MujocoPlant
+
+    plant = MujocoPlant(robot)
+    lim = robot.model.limits
+    qs = np.random.default_rng(1).uniform(lim.lower, lim.upper, (postures, robot.model.dof))
+    site = plant.model.site(robot.model.ee_site).id
+    worst = 0.0
+    for q in qs:
+        plant.data.qpos[plant._q] = q
+        mujoco.mj_kinematics(plant.model, plant.data)
+        worst = max(worst, float(np.linalg.norm(plant.data.site_xpos[site] - robot.ee_world(q[None])[0])))
+    pin_mass = sum(i.mass for i in robot.model.pin_model.inertias)
+    mj_mass = float(plant.model.body_mass[1:].sum())
+    return worst, abs(pin_mass - mj_mass)
+
+
+def test_a_description_package_with_xacro_and_collada_runs_and_both_engines_agree(tmp_path, monkeypatch):
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
+    section = yaml.safe_load((DATA / "rehab_arm.yaml").read_text())["robot"]
+    robot = _robot(section, DATA)
+    assert robot.model.joint_names == ["shoulder", "elbow"]
+    np.testing.assert_allclose(robot.ee_world(np.zeros((1, 2)))[0], [0, 0, 0.1 + 0.32 + 0.25], atol=1e-12)  # (arg)
+    distance, mass = _agreement(robot)
+    assert distance < 1e-9 and mass < 1e-9
+    stl = list((tmp_path / "cache" / "descriptions" / "meshes").glob("link-*.stl"))
+    assert len(stl) == 1  # (converted once, by content)
+    made = stl[0].stat().st_mtime_ns
+    _robot(section, DATA)  # a second load converts nothing
+    assert stl[0].stat().st_mtime_ns == made
+    done = cli("run", "rehab_arm.yaml", "--out", str(tmp_path / "run"), cwd=DATA)
+    assert done.returncode == 0, done.stderr
+
+
+def test_ur5_from_example_robot_data_as_its_package_ships_it(tmp_path, monkeypatch):
+    """UR5's URDF exactly as example-robot-data installs it (package:// URIs, COLLADA visuals, STL collisions): refused
+    at its file's line while no package path names it; through AMENT_PREFIX_PATH it loads, and both engines agree."""
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    urdf = ERD / "share" / "example-robot-data" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+    scenario = tmp_path / "ur5.yaml"
+    scenario.write_text(yaml.safe_dump({
+        "name": "ur5", "robot": {"type": "urdf", "file": str(urdf), "ee_frame": "tool0"},
+        "planner": {"type": "multi-cubic", "segment_durations": [2.0]},
+        "controller": {"type": "joint-pd", "kp": [200, 200, 100, 50, 20, 20], "kd": [20, 20, 10, 5, 2, 2],
+                       "feedforward": "inverse-dynamics"},
+        "task": {"targets": [{"name": "A", "joints_deg": [0, -90, 90, -90, -90, 0]},
+                             {"name": "B", "joints_deg": [20, -80, 80, -90, -90, 10]}]},
+        "duration": 2.5, "expect": {"final_joint_error_deg": {"lt": 0.5}}}))
+    refused = cli("validate", str(scenario), cwd=tmp_path)
+    line = next(i for i, x in enumerate(scenario.read_text().splitlines(), 1) if x.strip().startswith("file:"))
+    assert refused.returncode == 2 and refused.stderr.startswith(f"ur5.yaml:{line}:") and "robot.file" in refused.stderr
+    assert "no package 'example-robot-data' found" in refused.stderr and "ROS_PACKAGE_PATH" in refused.stderr
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "tool0"}, tmp_path)
+    assert robot.model.dof == 6
+    distance, mass = _agreement(robot)
+    assert distance < 1e-9 and mass < 1e-6
+    result = run_scenario(scenario)
+    assert result.passed, result.failures
+
+
+def test_a_mesh_the_package_does_not_have_is_said_with_the_file(tmp_path):
+    from rehabkit.models.ros_package import DescriptionError, resolve_uri
+
+    with pytest.raises(DescriptionError, match="no such file: .*rehab_arm_description/meshes/elbow.dae; check the "
+                                               "package's meshes folder"):
+        resolve_uri("package://rehab_arm_description/meshes/elbow.dae", tmp_path, [DATA])
+
+
+def test_the_readmes_package_example_is_the_tested_one():
+    readme = (ROOT / "README.md").read_text().split("## Your robot from its ROS package")[1].split("\n## ")[0]
+    block = yaml.safe_load(readme.split("```yaml\n")[1].split("```")[0])
+    assert block["robot"] == yaml.safe_load((DATA / "rehab_arm.yaml").read_text())["robot"]
