@@ -35,7 +35,7 @@ def robots() -> dict[str, object]:
     from rehabkit_plugins.robots.urdf import UrdfRobot
 
     from rehabkit.models.dh import DHRobotSpec
-    from rehabkit.models.mjcf_import import ModelFileConfig
+    from rehabkit.models.files.mjcf_import import ModelFileConfig
 
     ex = ROOT / "examples" / "robots"
     ctx = Context(ex, np.random.default_rng(0), 0.001)

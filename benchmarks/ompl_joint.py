@@ -39,7 +39,7 @@ def main() -> None:
     from rehabkit_plugins.planners.ompl_joint import OmplJointConfig, OmplJointPlanner
     from rehabkit_plugins.robots.urdf import UrdfRobot
 
-    from rehabkit.models.mjcf_import import ModelFileConfig
+    from rehabkit.models.files.mjcf_import import ModelFileConfig
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=200)

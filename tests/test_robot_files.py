@@ -62,7 +62,7 @@ def test_mjcf_robot_runs_and_reads_limits_from_the_file(tmp_path, rng):
     from rehabkit_plugins.robots.mjcf import MjcfRobot
 
     from rehabkit.core.kinds.interfaces import Context
-    from rehabkit.models.mjcf_import import ModelFileConfig
+    from rehabkit.models.files.mjcf_import import ModelFileConfig
 
     robot = MjcfRobot(ModelFileConfig(file=str(DATA / "arm3.xml"), ee_frame="tool", default_velocity_deg_s=120),
                       Context(tmp_path, rng, 0.001))

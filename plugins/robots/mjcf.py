@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from rehabkit import hookimpl
-from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
+from rehabkit.models.files.mjcf_import import ModelFileConfig, robot_from_file
 from rehabkit.plugin import Context, Robot
 
 

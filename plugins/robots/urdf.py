@@ -6,8 +6,8 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.models.mjcf_import import ModelFileConfig, robot_from_file
-from rehabkit.models.ros_package import DescriptionError, prepared
+from rehabkit.models.files.mjcf_import import ModelFileConfig, robot_from_file
+from rehabkit.models.files.ros_package import DescriptionError, prepared
 from rehabkit.models.strict import FilePath
 from rehabkit.plugin import Context, Robot, SettingError
 

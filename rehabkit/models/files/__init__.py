@@ -1,0 +1,1 @@
+"""Robots from model files: MJCF and URDF imported, ROS description packages made loadable."""
