@@ -62,6 +62,12 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     registry = default_registry()
     for name, kind, section in CASES:
+        import xml.etree.ElementTree as ET
+
+        if section["file"].endswith(".urdf"):  # continuous joints get a range here (the scenario's limits)
+            spinning = [j.get("name") for j in ET.parse(section["file"]).getroot().iter("joint")
+                        if j.get("type") == "continuous"]
+            section = {**section, "limits": {j: {"range_deg": [-180, 180]} for j in spinning}}
         cache = Path(tempfile.mkdtemp())
         os.environ["REHABKIT_CACHE"] = str(cache)
         info = registry.get("robot", "urdf")
@@ -75,19 +81,30 @@ def main() -> None:
         cached = time.perf_counter() - t
         distance, mass = _agreement(robot)
         lim = robot.model.limits
-        a, b = lim.lower + 0.3 * (lim.upper - lim.lower), lim.lower + 0.6 * (lim.upper - lim.lower)
+        span = lim.upper - lim.lower  # (a move the plan makes within the speed limits: a cubic peaks at 1.5 × mean)
+        a = lim.lower + 0.3 * span
+        b = a + np.minimum(0.3 * span, 0.5 * lim.velocity * 2.0 / 1.5)
         n = robot.model.dof
+        from rehabkit.core.safety.stopping import joint_inertia
+
+        inertia = joint_inertia(robot.model, a)  # (gains critically damped at 20 rad/s on each joint's inertia)
+        kp, kd = (400 * inertia).tolist(), (40 * inertia).tolist()
         folder = Path(tempfile.mkdtemp())
         (folder / "s.yaml").write_text(yaml.safe_dump({
             "name": name.split()[0].lower(), "robot": section,
             "planner": {"type": "multi-cubic", "segment_durations": [2.0]},
-            "controller": {"type": "joint-pd", "kp": [100.0] * n, "kd": [10.0] * n, "feedforward": "inverse-dynamics"},
+            "controller": {"type": "joint-pd", "kp": kp, "kd": kd, "feedforward": "inverse-dynamics"},
             "task": {"targets": [{"name": "A", "joints_deg": np.degrees(a).tolist()},
                                  {"name": "B", "joints_deg": np.degrees(b).tolist()}]}, "duration": 2.5}))
         env = {**os.environ}
-        codes = [subprocess.run([sys.executable, "-m", "rehabkit.cli", *cmd, str(folder / "s.yaml")], env=env,
-                                capture_output=True, text=True).returncode
-                 for cmd in (["validate"], ["run", "--out", str(folder / "out")])]
+        commands = (["validate"], ["run", "--out", str(folder / "out")])
+        done = [subprocess.run([sys.executable, "-m", "rehabkit.cli", *cmd, str(folder / "s.yaml")], env=env,
+                               capture_output=True, text=True) for cmd in commands]
+        codes = [d.returncode for d in done]
+        for d in done:
+            if d.returncode:
+                why = [x for x in (d.stderr + d.stdout).splitlines() if "SAFETY" in x or "FAIL" in x or ":" in x]
+                print(f"  ({name}: {(why or ['?'])[0].strip()[:200]})", file=sys.stderr)
         print(f"| {name} | {kind} | {n} | {meshes(Path(section['file']))} | "
               f"{'yes' if section['file'].endswith('.xacro') else 'no'} | {codes[0]} | {codes[1]} | {distance:.1e} | "
               f"{mass:.1e} | {first:.2f} / {cached:.2f} |", flush=True)

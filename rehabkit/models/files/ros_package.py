@@ -130,5 +130,5 @@ def prepared(path: Path, packages: Sequence[Path] = (), xacro_args: Mapping[str,
     if not changed:
         return path
     data = ET.tostring(root, encoding="unicode").encode()
-    digest = hashlib.sha256(data).hexdigest()[:20]
-    return _written(cache_dir() / f"{path.stem.removesuffix('.urdf')}-{digest}.urdf", data)
+    digest = hashlib.sha256(data).hexdigest()[:20]  # (a folder per content: the file keeps its name, for messages)
+    return _written(cache_dir() / digest / f"{path.name.removesuffix('.xacro').removesuffix('.urdf')}.urdf", data)
