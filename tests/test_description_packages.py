@@ -103,3 +103,14 @@ def test_the_readmes_package_example_is_the_tested_one():
     readme = (ROOT / "README.md").read_text().split("## Your robot from its ROS package")[1].split("\n## ")[0]
     block = yaml.safe_load(readme.split("```yaml\n")[1].split("```")[0])
     assert block["robot"] == yaml.safe_load((DATA / "rehab_arm.yaml").read_text())["robot"]
+
+
+def test_an_end_effector_on_a_massless_fixed_link_is_where_both_engines_say(tmp_path, monkeypatch):
+    """Panda's ``panda_hand_tcp``: a massless link on a fixed joint 0.1034 m past the hand. Pinocchio's MJCF parser
+    put a site on such a body 0.107 m off; the end effector is Pinocchio's frame of the body itself."""
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    urdf = ERD / "share" / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
+    robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "panda_hand_tcp"}, tmp_path)
+    distance, mass = _agreement(robot, 200)
+    assert robot.model.dof == 9 and distance < 1e-9 and mass < 1e-9

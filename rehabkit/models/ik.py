@@ -36,7 +36,7 @@ class NumericIK:
         self.robot = model
         self.model = pin.Model(model.pin_model)  # a copy: its ranges are set from the limits in force
         self.data = self.model.createData()
-        self.frame = model.ee_site
+        self.frame = model.pin_model.frames[model.ee_frame_id].name  # (a body named as the end effector: its frame)
         self.starts, self.max_iter, self.tol_m, self.tol_rad, self.seed = starts, max_iter, tol_m, tol_rad, seed
         self.closest_m = float("nan")
 

@@ -78,6 +78,8 @@ class RobotModel:
         wearable: Where a simulated person's arm sits in the robot and where it is strapped to it.
         brakes: Holding brakes per joint [N·m, or N], engaged when the torque goes off (safety stop categories 0
             and 1); None: no brakes.
+        ee_body: The body the end-effector site was put at the origin of, when the file named a body: Pinocchio's
+            frame of that body is the end effector (its parser places a site on a massless body wrongly).
     """
 
     name: str
@@ -94,6 +96,7 @@ class RobotModel:
     support_geoms: list[str] = field(default_factory=list)
     wearable: Wearable | None = None  # where a person's arm sits in it (exoskeletons)
     brakes: np.ndarray | None = None
+    ee_body: str | None = None
 
     @property
     def dof(self) -> int:
@@ -136,10 +139,11 @@ class RobotModel:
     @cached_property
     def ee_frame_id(self) -> int:
         model = self.pin_model
-        if not model.existFrame(self.ee_site):
+        name = self.ee_body if self.ee_body is not None and model.existFrame(self.ee_body) else self.ee_site
+        if not model.existFrame(name):
             frames = [f.name for f in model.frames]
-            raise ValueError(f"{self.name}: end-effector '{self.ee_site}' is not a frame; frames: {frames}")
-        return model.getFrameId(self.ee_site)
+            raise ValueError(f"{self.name}: end-effector '{name}' is not a frame; frames: {frames}")
+        return model.getFrameId(name)
 
     @cached_property
     def revolute(self) -> np.ndarray:

@@ -158,11 +158,12 @@ def robot_from_file(
         vel.append(float(v))
         eff.append(float(e))
     xml = _rerooted_xml(spec, path.parent, config.ee_frame)
-    site = config.ee_frame if _has_site(xml, config.ee_frame) else f"{config.ee_frame}_ee"
+    named_site = _has_site(xml, config.ee_frame)
+    site = config.ee_frame if named_site else f"{config.ee_frame}_ee"
     return RobotModel(
         name=spec.modelname or path.stem, mjcf=xml, joint_names=names,
         limits=JointLimits(*(np.array(v) for v in (lower, upper, vel, eff))), ee_site=site,
-        base_pose=config.base.matrix(), safe_stop=config.safe_stop,
+        base_pose=config.base.matrix(), safe_stop=config.safe_stop, ee_body=None if named_site else config.ee_frame,
     )
 
 
