@@ -113,4 +113,28 @@ def test_an_end_effector_on_a_massless_fixed_link_is_where_both_engines_say(tmp_
     urdf = ERD / "share" / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
     robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "panda_hand_tcp"}, tmp_path)
     distance, mass = _agreement(robot, 200)
-    assert robot.model.dof == 9 and distance < 1e-9 and mass < 1e-9
+    assert robot.model.dof == 8 and distance < 1e-9 and mass < 1e-9  # (the mimic finger not driven: next test)
+
+
+def test_a_mimic_joint_follows_its_leader_and_is_not_driven(tmp_path, monkeypatch):
+    """Panda's second finger mimics the first (<mimic>, a joint equality in MuJoCo): the robot drives eight joints,
+    the ninth follows; in the simulation it moves with its leader."""
+    from rehabkit.hardware.plant import MujocoPlant
+
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    urdf = ERD / "share" / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
+    robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "panda_hand_tcp"}, tmp_path)
+    assert robot.model.dof == 8 and robot.model.passive_joints == ["panda_finger_joint2"]
+    assert robot.model.pin_model.nq == 8
+    plant = MujocoPlant(robot)
+    q0 = (robot.model.limits.lower + robot.model.limits.upper) / 2
+    plant.reset(q0)
+    tau = robot.gravity_torque(q0)
+    tau[-1] += 0.05  # the first finger pushed (15 g, its twin's weight on it through the coupling: it moves)
+    for _ in range(50):
+        plant.apply(tau)
+        plant.advance()
+    leader = plant.read()[0][-1]
+    follower = plant.data.qpos[plant.model.jnt_qposadr[plant.model.joint("panda_finger_joint2").id]]
+    assert abs(leader - q0[-1]) > 0.001 and abs(follower - leader) < 1e-4

@@ -14,7 +14,7 @@ from rehabkit.core.kinds.sensor import INSTRUMENT_DIM, Instrument
 from rehabkit.core.scenario.loads import Load
 from rehabkit.core.scenario.models import World
 from rehabkit.sim.loads import LoadApplier
-from rehabkit.sim.scene import InstrumentErrors, add_instruments, build_scene, engage_brakes
+from rehabkit.sim.scene import InstrumentErrors, add_instruments, build_scene, couple_joints, engage_brakes
 from rehabkit.sim.scene_view import measured_joints
 
 
@@ -100,6 +100,7 @@ class MujocoPlant(Plant):
                 adr = self.model.jnt_qposadr[self.model.joint(name).id]
                 value = np.atleast_1d(value)
                 self.data.qpos[adr : adr + len(value)] = value
+        couple_joints(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
 
     def read(self):

@@ -25,7 +25,7 @@ from rehabkit.core.kinds.interfaces import Backend, Contact, Context, StrictMode
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.sim.loads import LoadApplier
-from rehabkit.sim.scene import INTEGRATORS, InstrumentErrors, add_instruments, build_scene, engage_brakes
+from rehabkit.sim.scene import INTEGRATORS, InstrumentErrors, add_instruments, build_scene, couple_joints, engage_brakes
 from rehabkit.sim.scene_view import SceneView
 
 
@@ -116,6 +116,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self.loads.reset()
         self.model.dof_frictionloss[self._v] = self._friction
         self.data.qpos[self._q] = q0
+        couple_joints(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
         for body in self.bodies:  # fitted to the robot where it now stands
             body.place()

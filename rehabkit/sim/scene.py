@@ -80,6 +80,17 @@ class InstrumentErrors:
         return value
 
 
+def couple_joints(model: mujoco.MjModel, data: mujoco.MjData) -> None:
+    """Joints coupled to others (a URDF's ``<mimic>``: MuJoCo's joint equalities) put where their coupling says,
+    ``q1 = c0 + c1·q2 + c2·q2² + …``: a reset starts them satisfied, not pulled there by the constraint."""
+    for e in range(model.neq):
+        if model.eq_type[e] != mujoco.mjtEq.mjEQ_JOINT or model.eq_obj2id[e] < 0:
+            continue
+        follower, leader = model.jnt_qposadr[model.eq_obj1id[e]], model.jnt_qposadr[model.eq_obj2id[e]]
+        c, x = model.eq_data[e, :5], data.qpos[leader]
+        data.qpos[follower] = c[0] + c[1] * x + c[2] * x**2 + c[3] * x**3 + c[4] * x**4
+
+
 def engage_brakes(model: mujoco.MjModel, dofs, torque: np.ndarray) -> None:
     """Holding brakes on ``dofs``: dry friction up to ``torque`` (MuJoCo's friction loss, solved with the
     constraints), made hard — MuJoCo's default softness lets a loaded joint creep at degrees per second."""

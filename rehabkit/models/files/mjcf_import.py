@@ -113,6 +113,11 @@ def robot_from_file(
     joints = [j for j in range(model.njnt) if int(model.jnt_type[j]) in _MOVABLE]
     if len(joints) != model.njnt:
         raise ValueError(f"{path.name}: only hinge and slide joints are supported for robots")
+    # a joint coupled to another (a URDF's <mimic>, which MuJoCo imports as a joint equality) follows it: simulated and
+    # measured, not driven
+    followers = [int(model.eq_obj1id[e]) for e in range(model.neq)
+                 if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj2id[e] >= 0]
+    joints = [j for j in joints if j not in followers]
     names = [model.joint(j).name for j in joints]
     unknown = sorted(set(config.limits) - set(names))
     if unknown:
@@ -164,6 +169,7 @@ def robot_from_file(
         name=spec.modelname or path.stem, mjcf=xml, joint_names=names,
         limits=JointLimits(*(np.array(v) for v in (lower, upper, vel, eff))), ee_site=site,
         base_pose=config.base.matrix(), safe_stop=config.safe_stop, ee_body=None if named_site else config.ee_frame,
+        passive_joints=[model.joint(j).name for j in followers],
     )
 
 
