@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import lru_cache
 
 
 class State(Enum):
@@ -27,12 +28,17 @@ class State(Enum):
 
     @classmethod
     def of(cls, statusword: int) -> State:
-        """The state a statusword says (the master's reading of it)."""
-        for state in cls:
-            mask, value = state.value
-            if statusword & mask == value:
-                return state
-        raise ValueError(f"statusword 0x{statusword:04X} names no CiA 402 state")
+        """The state a statusword says (the master's reading of it; each cycle, each drive: cached)."""
+        return _state_of(statusword)
+
+
+@lru_cache(maxsize=256)
+def _state_of(statusword: int) -> State:
+    for state in State:
+        mask, value = state.value
+        if statusword & mask == value:
+            return state
+    raise ValueError(f"statusword 0x{statusword:04X} names no CiA 402 state")
 
 
 # statusword bits besides the state's

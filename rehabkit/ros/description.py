@@ -7,8 +7,6 @@ from __future__ import annotations
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-import numpy as np
-
 AXES = {"RX": (1, 0, 0), "RY": (0, 1, 0), "RZ": (0, 0, 1), "PX": (1, 0, 0), "PY": (0, 1, 0), "PZ": (0, 0, 1)}
 
 
@@ -75,8 +73,3 @@ def robot_description(robot, robot_section, resolve) -> str:
     if isinstance(file, str) and file.lower().endswith(".urdf"):
         return Path(resolve(file)).read_text()
     return urdf_from_model(robot.model.pin_model, robot.model.name, robot.model.limits)
-
-
-def world_from_base(robot) -> np.ndarray:
-    """The robot's base in the world (the ``world`` → ``base_link`` transform)."""
-    return np.asarray(robot.model.base_pose, float)

@@ -96,18 +96,14 @@ class DriveRig:
                 d.react()
             else:
                 d.on_sync(can_id, data, timestamp)
-            if on and not d.machine.torque_on:  # its power stage went off: the drive applies its motor's brake
-                self.plant.brake([i])
+            self._brake_if_off(i, on)
         if self.sensors:
             self._readings[:] = self.plant.read_instruments()
             for s in self.sensors:
                 s.on_sync(can_id, data, timestamp)
         if not any(d.syncs for d in self.drives):  # (no drive operational yet: the plant waits)
             return
-        self.plant.apply(np.clip(self.tau, -self.plant.effort, self.plant.effort))
-        for _ in range(self.substeps):
-            self.plant.advance()
-        self._read()
+        self._advance()
         self.cycles += 1
 
     def watch_sync(self, timeout_s: float = 0.010) -> threading.Thread:
@@ -141,8 +137,16 @@ class DriveRig:
         for i, d in enumerate(self.drives):
             on = d.machine.torque_on
             d.react()
-            if on and not d.machine.torque_on:
-                self.plant.brake([i])
+            self._brake_if_off(i, on)
+        self._advance()
+
+    def _brake_if_off(self, i: int, was_on: bool) -> None:
+        """Drive ``i``'s power stage went off: it applies its motor's brake (where the robot has them)."""
+        if was_on and not self.drives[i].machine.torque_on:
+            self.plant.brake([i])
+
+    def _advance(self) -> None:
+        """The plant through one cycle with the torques the drives latched."""
         self.plant.apply(np.clip(self.tau, -self.plant.effort, self.plant.effort))
         for _ in range(self.substeps):
             self.plant.advance()

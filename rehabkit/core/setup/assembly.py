@@ -117,6 +117,11 @@ class Assembly:
         """The validated scenario."""
         return self.loaded.model
 
+    def backend_class(self) -> type[Backend] | None:
+        """The scenario's backend plugin's class (None for a factory that is not a Backend class)."""
+        factory = self.registry.get("backend", self.sc.backend.type).factory
+        return factory if isinstance(factory, type) and issubclass(factory, Backend) else None
+
     def make(self, kind: str, config, path: tuple[str, ...], check_only: bool = False) -> Any:
         """Build plugin ``config.type`` of ``kind`` from the section at ``path`` (``check_only``: a backend's
         :meth:`~rehabkit.core.kinds.backend.Backend.check` instead, for ``validate``); whatever it raises becomes
@@ -124,8 +129,8 @@ class Assembly:
         info = self.registry.get(kind, config.type)
         try:
             if check_only:
-                backend = isinstance(info.factory, type) and issubclass(info.factory, Backend)
-                return info.factory.check(config, self.context) if backend else None
+                backend = self.backend_class()
+                return backend.check(config, self.context) if backend is not None else None
             return info.factory(config, self.context)
         except (ValueError, PlanningError) as exc:
             raise PluginSetupError.refused(self.loaded.source, path, kind, config, exc) from exc
@@ -309,9 +314,8 @@ def _schedule(a: Assembly) -> Schedule:
     if a.backend is not None:
         dt = a.backend.timestep
     else:  # (validate builds no backend: its class says what its step will be)
-        factory = a.registry.get("backend", sc.backend.type).factory
-        dt = factory.timestep_for(sc.backend, control_dt) if isinstance(factory, type) and issubclass(
-            factory, Backend) else sc.backend.timestep
+        backend = a.backend_class()
+        dt = backend.timestep_for(sc.backend, control_dt) if backend is not None else sc.backend.timestep
     sub = control_dt / dt
     if abs(sub - round(sub)) > 1e-6 or round(sub) < 1:
         raise PluginSetupError(a.loaded.source, ("rates", "control_hz"),
