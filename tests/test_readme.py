@@ -47,6 +47,8 @@ EXECUTED_ELSEWHERE = {
     "rehabkit keys new hit-1 --out keys/hit-1.key --replace":
         "tests/test_link_security.py::test_the_readmes_lab_network_commands_run_as_written",
     "rehabkit drives": "tests/test_canopen_readme.py::test_simulated_drives_in_another_process_as_the_readme_runs_them",
+    "rehabkit plugins --fields recorded-wrench":
+        "tests/test_bag_replay.py::test_bags_that_do_not_fit_are_said_at_the_bag",
     "rehabkit plugins --fields dh":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
 }

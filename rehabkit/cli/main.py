@@ -16,7 +16,7 @@ import sys
 import traceback
 from pathlib import Path
 
-from rehabkit.cli.exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK
+from rehabkit.cli.exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, unwritable
 from rehabkit.core.plugins.registry import PluginError, default_registry
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.setup.errors import SetupError
@@ -26,25 +26,12 @@ def _err(msg: str) -> None:
     print(msg, file=sys.stderr)
 
 
-def _unwritable(out: Path) -> str | None:
-    """Why the run could not write its outputs to ``out``, found before anything runs (or ``None``)."""
-    import tempfile
-
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as exc:
-        return f"error: --out {out}: cannot write there ({exc.strerror or exc}); choose another directory"
-    return None
-
-
 def cmd_run(args: argparse.Namespace) -> int:
     from rehabkit.api import run_scenario
     from rehabkit.cli.run_report import run_report
 
     out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
-    if (why := _unwritable(out)) is not None:
+    if (why := unwritable(out)) is not None:
         _err(why)
         return EXIT_INVALID
     sets = [*args.set, "ros.bag=true"] if args.bag else args.set
@@ -59,7 +46,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from rehabkit.sweep.engine import run_sweep
 
-    if args.out and (why := _unwritable(Path(args.out))) is not None:
+    if args.out and (why := unwritable(Path(args.out))) is not None:
         _err(why)
         return EXIT_INVALID
     try:
@@ -77,21 +64,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"  FAILED  {point + ', ' if point else ''}seed={rec['seed']}: {rec['error']}")
     print(f"wrote {result.out_dir / 'results.parquet'} and {result.out_dir / 'aggregate.csv'}")
     return EXIT_OK if not result.failed else EXIT_FAILED
-
-
-def cmd_replay(args: argparse.Namespace) -> int:
-    from rehabkit.rehab.replay import replay
-
-    if args.out and (why := _unwritable(Path(args.out))) is not None:
-        _err(why)
-        return EXIT_INVALID
-    rep = replay(args.run_dir, [*args.set, "ros.bag=true"] if args.bag else args.set, args.out, progress=True)
-    print(rep.table())
-    for ev in rep.result.summary["safety"]["events"]:
-        print(f"  SAFETY  {ev['message']}")
-    out, outputs = rep.result.out_dir, rep.result.summary["outputs"]
-    print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "rrd" in outputs else ""))
-    return EXIT_OK if rep.result.passed else EXIT_FAILED
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -213,14 +185,9 @@ def parser() -> argparse.ArgumentParser:
     w.add_argument("--timeout", type=float, default=None, metavar="S", help="per-run limit [s]")
     w.add_argument("--metric", action="append", default=[], help="also show this metric in the aggregate")
     w.set_defaults(func=cmd_sweep)
-    rp = sub.add_parser("replay", help="run a recorded session again with other settings (same seed, targets, "
-                                       "patient); prints the outcome measures side by side")
-    rp.add_argument("run_dir", help="a folder written by 'rehabkit run'")
-    rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="what to change, e.g. controller.type=assist-as-needed")
-    rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>)")
-    rp.add_argument("--bag", action="store_true", help="also write run.mcap, a ROS 2 bag of the replay")
-    rp.set_defaults(func=cmd_replay)
+    from rehabkit.cli.replay import add_parser as add_replay
+
+    add_replay(sub)
     v = sub.add_parser("validate", help="check scenario files without running them (and their fixed targets "
                                          "against a patient's ranges)")
     v.add_argument("scenarios", nargs="+")

@@ -43,6 +43,8 @@ class Replay:
     def table(self) -> str:
         """The metrics side by side, with which plugins each run used."""
         def label(s: dict) -> str:
+            if "label" in s:  # a recorded session, not a run
+                return s["label"]
             p = s["plugins"]
             return f"{p['controller']['type']} / {p['planner']['type']}"
 
@@ -56,10 +58,11 @@ class Replay:
                  for r in rows]
         lines.insert(1, "  ".join("-" * w for w in widths))
         same = ", ".join(f"{k} {'same' if v else 'DIFFERENT'}" for k, v in self.same_inputs.items())
-        return "\n".join(lines) + f"\ninputs: {same}"
+        return "\n".join(lines) + (f"\ninputs: {same}" if same else "")
 
 
-def _label(overrides: Iterable[str]) -> str:
+def overrides_label(overrides: Iterable[str]) -> str:
+    """A folder-name label of the overrides' values (``again`` for none)."""
     text = "_".join(o.split("=", 1)[-1] for o in overrides) or "again"
     return re.sub(r"[^A-Za-z0-9._-]+", "-", text)[:60]
 
@@ -80,7 +83,7 @@ def replay(run_dir: str | Path, overrides: Iterable[str] = (), out_dir: str | Pa
     original = json.loads(summ.read_text())
     overrides = list(overrides)
     loaded = load_scenario(snap, overrides, registry, origin=Path(original["scenario"]))
-    out = Path(out_dir) if out_dir is not None else run_dir / f"replay-{_label(overrides)}"
+    out = Path(out_dir) if out_dir is not None else run_dir / f"replay-{overrides_label(overrides)}"
     result = Runner(loaded, registry, out, progress=progress).run()
     a, b = original.get("inputs", {}), result.summary["inputs"]
     same = {key: a.get(key) == b.get(key) for key in b}

@@ -1,0 +1,66 @@
+"""``rehabkit replay``: a recorded session run again with another controller or planner — a run's folder
+(:mod:`rehabkit.rehab.replay`), or a session recorded on a robot as a ROS bag (:mod:`rehabkit.ros.bag_replay`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, unwritable
+
+BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+
+
+def _is_bag(path: Path) -> bool:
+    return path.suffix in BAG_SUFFIXES or (path / "metadata.yaml").exists()
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    if args.out and (why := unwritable(Path(args.out))) is not None:
+        print(why, file=sys.stderr)
+        return EXIT_INVALID
+    sets = [*args.set, "ros.bag=true"] if args.bag else args.set
+    source = Path(args.source)
+    if args.scenario is None and _is_bag(source):
+        print(f"error: {source} is a ROS bag: name the scenario to replay it on (--scenario S.yaml: the robot it was "
+              "recorded on, the controller and planner to try)", file=sys.stderr)
+        return EXIT_INVALID
+    if args.scenario is None:
+        if args.topics:
+            print("error: --topics goes with a bag and --scenario", file=sys.stderr)
+            return EXIT_INVALID
+        from rehabkit.rehab.replay import replay
+
+        rep = replay(source, sets, args.out, progress=True)
+    else:
+        from rehabkit.ros.bag_replay import replay_bag
+        from rehabkit.ros.session_bag import parse_topics
+
+        rep = replay_bag(source, args.scenario, parse_topics(args.topics), sets, args.out, progress=True)
+        for gap in rep.original.get("gaps", []):
+            print(f"  GAP  {gap}: bridged by interpolation")
+    print(rep.table())
+    for ev in rep.result.summary["safety"]["events"]:
+        print(f"  SAFETY  {ev['message']}")
+    out, outputs = rep.result.out_dir, rep.result.summary["outputs"]
+    print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "rrd" in outputs else ""))
+    return EXIT_OK if rep.result.passed else EXIT_FAILED
+
+
+def add_parser(sub) -> None:
+    rp = sub.add_parser("replay", help="run a recorded session again with other settings (same seed, targets, "
+                                       "patient), or a session's ROS bag on a scenario; prints the outcome measures "
+                                       "side by side")
+    rp.add_argument("source", metavar="RUN_DIR|BAG", help="a folder written by 'rehabkit run', or a ROS bag recorded "
+                                                          "on a robot (a rosbag2 folder, .mcap, .db3 or ROS 1 .bag)")
+    rp.add_argument("--scenario", metavar="S.yaml", help="a bag's replay: the scenario to run it on")
+    rp.add_argument("--topics", action="append", default=[], metavar="ROLE=TOPIC,...",
+                    help="a bag's topics where not /joint_states, /wrench, /targets "
+                         "(e.g. joint_states=/arm/joint_states,wrench=/cuff/wrench)")
+    rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="what to change, e.g. controller.type=assist-as-needed")
+    rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>, or "
+                                                 "<BAG>-replay-<values> beside the bag)")
+    rp.add_argument("--bag", action="store_true", help="also write run.mcap, a ROS 2 bag of the replay")
+    rp.set_defaults(func=cmd_replay)

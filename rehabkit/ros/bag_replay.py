@@ -1,0 +1,121 @@
+"""A real session's bag, replayed: the person's side of a session recorded on a robot, against another controller or
+planner, with the outcome measures of both side by side.
+
+The session's measures come from the bag itself (its joint states resampled at the control rate, the person's
+recorded wrench as joint torques at the recorded postures, a reach from each target shown to the next), computed by
+the same functions as the replay's (:func:`rehabkit.rehab.run_outcomes.run_outcomes`), on the same robot model.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from rehabkit.core.io import atomic_write_json
+from rehabkit.core.plugins.registry import PluginRegistry, default_registry
+from rehabkit.core.results.metrics import Trace
+from rehabkit.core.results.record import Movement
+from rehabkit.core.run.runner import Runner
+from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.rehab.replay import Replay, overrides_label
+from rehabkit.rehab.run_outcomes import run_outcomes
+from rehabkit.ros.bag_scenario import joint_order, write_session_scenario
+from rehabkit.ros.session_bag import TOPICS, SessionBag, read_session
+
+SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was replayed in, beside the replay's outputs
+SESSION_MEASURES = "session.json"  # the recorded session's own outcome measures, the table's first column
+
+
+def base_frames(robot) -> tuple[str, ...]:
+    """The names the robot's base frame goes by: its model's root bodies, and ``base_link`` (ROS's convention)."""
+    import pinocchio as pin
+
+    model = robot.model.pin_model
+    roots = [f.name for f in model.frames if f.parentJoint == 0 and f.type == pin.FrameType.BODY
+             and f.name != "universe"]
+    return (*dict.fromkeys([*roots, "base_link"]),)
+
+
+def session_trace(bag: SessionBag, robot, patient, dt: float) -> Trace:
+    """The session as a run's trace at the control step ``dt``: joints, the torque sent (the joint states' effort,
+    NaN where the bag has none) and the person's torques (from the recorded wrench, where the run has a person)."""
+    order = joint_order(bag, list(robot.model.joint_names))
+    t = np.arange(int(math.floor(bag.duration_s / dt + 1e-9)) + 1) * dt
+    q = bag.joints.at(t)[:, order]
+    qd = bag.velocity.at(t)[:, order] if bag.velocity is not None else np.gradient(q, dt, axis=0)
+    tau = bag.effort.at(t)[:, order] if bag.effort is not None else np.full_like(q, np.nan)
+    tau_h = None
+    if patient is not None and bag.wrench is not None:  # the recorded person: their torque at the recorded postures
+        goal = np.zeros(3)
+        tau_h = np.array([patient.torque(float(t[k]), q[k], qd[k], goal) for k in range(len(t))])
+    nan = np.full_like(q, np.nan)
+    return Trace(t, q, qd, tau, nan, nan, tau_h=tau_h)
+
+
+def session_reaches(bag: SessionBag, runner: Runner, n: int, dt: float) -> list[Movement]:
+    """A movement from each target shown to the next (the last to the end), to the target as the replay had it."""
+    a = runner.setup
+    shown = [s for s in a.sc.task.targets if s.name.startswith("shown_")]
+    times = [ev.at for ev in a.sc.task.events if ev.at is not None and ev.sequence]
+    out = []
+    for i, (spec, at) in enumerate(zip(shown, times)):
+        k0 = min(n - 1, int(round(at / dt)))
+        k1 = min(n, int(round(times[i + 1] / dt))) if i + 1 < len(times) else n
+        target = a.targets[spec.name]
+        goal = (np.asarray(target.pose[:3, 3], float) if target.pose is not None
+                else runner.robot.model.ee_pose(np.asarray(target.q, float))[:3, 3])
+        out.append(Movement(k0, k1, goal, goal))
+    return out
+
+
+def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str] | None = None,
+               overrides: Iterable[str] = (), out_dir: str | Path | None = None,
+               registry: PluginRegistry | None = None, progress: bool = False) -> Replay:
+    """Replay the session recorded in ``bag_path`` on ``scenario`` with ``overrides`` (e.g. another controller);
+    outputs in ``out_dir`` (default ``<bag>-replay-<values>`` beside the bag): the run's, with the scenario the
+    session was replayed in (:data:`SESSION_SCENARIO`) and the session's own measures (:data:`SESSION_MEASURES`).
+
+    Raises:
+        ScenarioError: the bag can't be replayed as asked (a topic missing, joints the robot lacks), or the scenario
+            or overrides are invalid.
+    """
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.setup.assembly import assemble
+
+    bag_path, scenario, overrides = Path(bag_path), Path(scenario), list(overrides)
+    registry = registry or default_registry()
+    bag = read_session(bag_path, topics)
+    plain = load_scenario(scenario, [], registry)
+    robot = assemble(plain, registry, default_extensions(), upto="targets").robot
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "-", bag_path.name.removesuffix(".mcap"))
+    label = overrides_label(overrides)
+    out = Path(out_dir) if out_dir is not None else bag_path.resolve().parent / f"{stem}-replay-{label}"
+    out.mkdir(parents=True, exist_ok=True)
+    path = write_session_scenario(out / SESSION_SCENARIO, scenario, bag, robot, base_frames(robot),
+                                  {**TOPICS, **(topics or {})},
+                                  plain.model.patient is not None)
+    loaded = load_scenario(path, overrides, registry)
+    runner = Runner(loaded, registry, out, progress=progress)
+    result = runner.run()
+    session = session_summary(bag, runner, result.summary)
+    atomic_write_json(out / SESSION_MEASURES, {k: v for k, v in session.items() if k != "metric_info"})
+    # (no inputs to compare: the replay's person is the bag's by construction)
+    return Replay(session, result, {})
+
+
+def session_summary(bag: SessionBag, runner: Runner, replayed: dict) -> dict:
+    """The recorded session's outcome measures, as a summary's ``metrics`` (beside what ``Replay`` compares)."""
+    a = runner.setup
+    dt = a.schedule.control_dt
+    trace = session_trace(bag, runner.robot, a.patient, dt)
+    metrics, details = run_outcomes(trace, runner.robot, session_reaches(bag, runner, len(trace.t), dt), dt,
+                                    a.sc.outcomes, 0)
+    metrics["safety_interventions"] = float("nan")  # (what the robot's safety layer did is not in the bag)
+    return {"label": f"session {bag.path.name}", "bag": str(bag.path), "duration_s": bag.duration_s,
+            "metrics": metrics, "metric_info": replayed.get("metric_info", {}),
+            "outcomes": {k: v for k, v in details.items() if k != "interaction_force_n"},
+            "gaps": [str(g) for g in bag.gaps]}

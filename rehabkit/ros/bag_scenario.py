@@ -1,0 +1,93 @@
+"""The scenario a recorded session is replayed in: the user's scenario, with the session's start posture, duration,
+targets as they were shown (each at its time, a replan to it) and its person (their recorded wrench) put in.
+
+It is written as a file that ``extends:`` the user's (``replayed_session.yaml`` in the replay's folder), so what ran
+can be read, validated and run again, and an error in it is located like any other.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from rehabkit.ros.session_bag import BagError, SessionBag, ShownTarget
+
+WORLD_FRAMES = ("world", "map")
+
+
+def joint_order(bag: SessionBag, robot_joints: list[str], role: str = "joint_states",
+                names: list[str] | None = None) -> np.ndarray:
+    """Indices into the bag's joint names of the robot's joints, in the robot's order."""
+    names = bag.joints.names if names is None else names
+    missing = [j for j in robot_joints if j not in names]
+    if missing:
+        raise BagError(bag.path, role, f"no joint(s) {missing} in the bag's joint states ({names}); the robot's "
+                                        f"joints are {robot_joints}: replay on the robot the session was recorded on")
+    return np.array([names.index(j) for j in robot_joints])
+
+
+def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_frames: tuple[str, ...]
+             ) -> tuple[np.ndarray, np.ndarray | None]:
+    """A shown point's position in the robot's base frame, and a pose's rotation there (None for a point)."""
+    import pinocchio as pin
+
+    rot = None if shown.kind == "point" else pin.Quaternion(*shown.values[[6, 3, 4, 5]]).matrix()
+    p = shown.values[:3]
+    if shown.frame in WORLD_FRAMES:
+        inv = np.linalg.inv(base_pose)
+        p, rot = inv[:3, :3] @ p + inv[:3, 3], None if rot is None else inv[:3, :3] @ rot
+    elif shown.frame and shown.frame not in base_frames:
+        raise BagError(bag.path, "targets", f"a target at t = {shown.t:.3f} s is in frame '{shown.frame}': give "
+                                             f"targets in the robot's base frame ({' or '.join(base_frames)}) or the "
+                                             f"world ({' or '.join(WORLD_FRAMES)})")
+    return p, rot
+
+
+def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...]) -> dict:
+    """The ``task:`` section: start where the session started, then a replan to each target when it was shown."""
+    import pinocchio as pin
+
+    model = robot.model
+    order = joint_order(bag, list(model.joint_names))
+    start = bag.joints.values[0, order]
+    targets: list[dict] = [{"name": "start", "joints_rad": [float(v) for v in start]}]
+    events = []
+    for i, shown in enumerate(t for t in bag.targets if 0.0 <= t.t < bag.duration_s):
+        name = f"shown_{i + 1}"
+        if shown.kind == "joints":
+            idx = joint_order(bag, list(model.joint_names), "targets", shown.names)
+            targets.append({"name": name, "joints_rad": [float(v) for v in shown.values[idx]]})
+        else:
+            p, rot = _in_base(bag, shown, np.asarray(model.base_pose, float), base_frames)
+            spec = {"name": name, "position": [float(v) for v in p]}
+            if rot is not None:
+                spec["rpy_deg"] = [float(v) for v in np.degrees(pin.rpy.matrixToRpy(rot))]
+            targets.append(spec)
+        events.append({"at": round(float(shown.t), 9), "action": "replan", "sequence": [name]})
+    return {"targets": targets, "start": "start", "sequence": ["start"], "events": events}
+
+
+def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, base_frames: tuple[str, ...],
+                           topics: dict[str, str], has_patient: bool) -> Path:
+    """``path``: a scenario extending ``scenario`` with the session's task, duration and recorded person."""
+    patient: dict = {"model": {"type": "recorded-wrench", "bag": str(bag.path.resolve()), "topic": topics["wrench"],
+                               "joint_states": topics["joint_states"]}}
+    if not has_patient:  # a profile to hold the recorded person: the session's name as its pseudonymous id
+        patient.update(id=re.sub(r"[^A-Za-z0-9_.-]+", "-", bag.path.stem).strip("-.") or "session", side="right")
+    if bag.wrench is None:
+        patient = None
+    doc = {"extends": str(scenario.resolve()),
+           "name": f"replay-of-{bag.path.stem}",
+           "duration": round(bag.duration_s, 9),
+           "task": session_task(bag, robot, base_frames)}
+    if patient is not None:
+        doc["patient"] = patient
+    head = (f"# written by `rehabkit replay {bag.path} --scenario {scenario}`: the session's start posture, duration,\n"
+            f"# targets as shown and the person's recorded wrench, on {scenario.name}\n")
+    tmp = path.with_name(f".{path.name}.part")
+    tmp.write_text(head + yaml.safe_dump(doc, sort_keys=False, width=120, default_flow_style=None))
+    tmp.replace(path)
+    return path
