@@ -53,7 +53,7 @@ from rehabkit.core.kinds.interfaces import (
     Trajectory,
 )
 from rehabkit.core.plugins.hookspecs import hookimpl
-from rehabkit.core.plugins.lifecycle import Contribution, Section
+from rehabkit.core.plugins.lifecycle import Contribution, RunTap, Section
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.types import Declared
 from rehabkit.core.results.metric import Metric
@@ -85,7 +85,7 @@ __all__ = [
     # a plugin's own data files and messages: YAML with located errors, "did you mean" for a misspelt name
     "load_yaml", "suggest",
     # describing metrics; extensions' contributions and limits
-    "Metric", "Contribution", "Section", "Narrowing", "LimitBreach",
+    "Metric", "Contribution", "RunTap", "Section", "Narrowing", "LimitBreach",
     # errors
     "PlanningError", "SettingError", "IKUnavailableError", "BackendFaultError", "EStopLatchedError", "SetupError",
 ]

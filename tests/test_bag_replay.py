@@ -136,3 +136,18 @@ def test_bags_that_do_not_fit_are_said_at_the_bag(bags, tmp_path):
     assert no_scenario.returncode == 2 and "--scenario S.yaml" in no_scenario.stderr
     fields = cli("plugins", "--fields", "recorded-wrench")
     assert fields.returncode == 0 and "max_gap_s" in fields.stdout and "reaction" in fields.stdout
+
+
+def test_rehabkits_own_bag_replays_as_a_robots_would(tmp_path):
+    """A run's run.mcap (the person's wrench on /wrench, each movement's goal on /targets) is a session like a
+    robot's: replayed with the defaults on the scenario it ran, it gives the run again."""
+    from rehabkit.api import run_scenario
+
+    run = run_scenario(SESSION, {"ros": {"bag": True}, "duration": 4.5}, out_dir=tmp_path / "run")
+    rep = replay_bag(tmp_path / "run" / "run.mcap", SESSION, out_dir=tmp_path / "replay")
+    assert np.degrees(np.abs(run.trace.q - rep.result.trace.q)).max() < 1e-4
+    rows = {k: (a, b) for k, a, b in rep.rows()}
+    assert rows["reaches_completed"] == (1.0, 1.0)  # (the second reach is cut at 4.5 s)
+    for key in ("sparc", "time_to_target_s", "peak_interaction_force_n", "rom_deg_elbow"):
+        assert rows[key][1] == pytest.approx(rows[key][0], rel=1e-4), key
+        assert rows[key][1] == pytest.approx(run.metrics[key], rel=1e-4), key

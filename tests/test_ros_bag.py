@@ -40,7 +40,10 @@ def test_the_hit_round_trip_as_a_bag_holds_the_trace_exactly(hit_bag):
     assert types == {"/robot_description": ("std_msgs/msg/String", 1), "/tf_static": ("tf2_msgs/msg/TFMessage", 1),
                      "/joint_states": ("sensor_msgs/msg/JointState", n),
                      "/reference/joint_states": ("sensor_msgs/msg/JointState", n),
-                     "/tf": ("tf2_msgs/msg/TFMessage", n // 10)}  # (the log's 100 Hz)
+                     "/tf": ("tf2_msgs/msg/TFMessage", n // 10),  # (the log's 100 Hz)
+                     "/targets": ("geometry_msgs/msg/PointStamped", 4),  # (each leg's goal as it begins)
+                     # the encoders, as a driver publishes joint angles (500 Hz, with their resolution)
+                     "/sensors/encoders/joint_states": ("sensor_msgs/msg/JointState", n // 2)}
     said = result.summary["bag"]["topics"]  # (the summary says what the bag holds)
     assert {t: (v["type"], v["messages"]) for t, v in said.items()} == types
     states = [m for _, m in messages["/joint_states"]]
@@ -135,3 +138,47 @@ def test_the_readmes_ros_commands_run_as_written(tmp_path):
     finally:
         os.chdir(here)
     assert shown.getvalue().startswith("['shoulder_1', 'shoulder_2', 'elbow_1', 'elbow_2', 'wrist_1', 'wrist_2'] [")
+
+
+def test_sensor_readings_go_to_their_ros_messages(tmp_path):
+    """hit-force: the six-axis sensor's readings as geometry_msgs/WrenchStamped in its mount's frame, each the
+    interaction force the safety layer checked (the trace's magnitude, to 1e-9 N: the loop samples an interaction
+    sensor every step, and a reading at step k gives the sample of step k - 1, the latest there is).
+    L-Exos reaching to 4.6 s: the overhead camera's frames as sensor_msgs/Image (rgb8), the ball's red blob in them
+    where the camera's own pixel reading says (within 2 px), its sighting as a PointStamped in the base frame."""
+    force = run_scenario(ROOT / "scenarios" / "safety" / "hit_force.yaml", {"ros": {"bag": True}},
+                         out_dir=tmp_path / "ft")
+    types, messages = read(tmp_path / "ft" / "run.mcap")
+    assert types["/sensors/ft/wrench"] == ("geometry_msgs/msg/WrenchStamped", 181)
+    assert types["/sensors/ft/raw_force_n"][0] == "std_msgs/msg/Float64MultiArray"
+    first = messages["/joint_states"][0][0]
+    tr = force.trace
+    checked = 0
+    for stamp, m in messages["/sensors/ft/wrench"]:
+        assert m.header.frame_id == "wrist_2_link"
+        k = round((stamp - first) / 1e6)
+        f = m.wrench.force
+        if 0 < k <= len(tr.t):
+            assert tr.f_h[k - 1] == pytest.approx(np.linalg.norm([f.x, f.y, f.z]), abs=1e-9)
+            checked += 1
+    assert checked == 180 and tr.f_h.max() > 29.0  # (the push reached the limit)
+    run_scenario(ROOT / "scenarios" / "lexos_reaching.yaml", {"ros": {"bag": True}, "duration": 4.6},
+                 out_dir=tmp_path / "cam")
+    types, messages = read(tmp_path / "cam" / "run.mcap")
+    assert types["/sensors/camera/image"] == ("sensor_msgs/msg/Image", 46)
+    pixels = {s: m.data for s, m in messages["/sensors/camera/pixel"]}
+    seen = 0
+    for stamp, m in messages["/sensors/camera/image"]:
+        assert (m.encoding, m.height, m.width, m.step) == ("rgb8", 480, 640, 1920)
+        if stamp not in pixels:
+            continue
+        img = np.frombuffer(m.data, np.uint8).reshape(480, 640, 3).astype(int)
+        red = (img[..., 0] > 150) & (img[..., 1] < 80) & (img[..., 2] < 80)
+        v, u = np.argwhere(red).mean(axis=0)
+        assert np.hypot(u - pixels[stamp][0], v - pixels[stamp][1]) < 2.0
+        seen += 1
+    assert seen >= 5
+    sighted = messages["/sensors/camera/target_position"][-1][1]
+    assert sighted.header.frame_id == "base_link"
+    ball = np.array([0.82, 0.33, 0.77]) - np.array([0, 0, 1.2])  # Target 1 in the base frame (shoulder at 1.2 m)
+    assert np.linalg.norm([sighted.point.x - ball[0], sighted.point.y - ball[1], sighted.point.z - ball[2]]) < 0.025

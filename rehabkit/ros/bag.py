@@ -5,7 +5,10 @@ Topics: ``/robot_description`` (std_msgs/String, the URDF), ``/tf_static`` (worl
 link from its parent, at the log rate: tf2_msgs/TFMessage, as ``robot_state_publisher`` publishes them),
 ``/joint_states`` (sensor_msgs/JointState: the measured joints and the torque sent, every control step, as the
 trace has them), ``/reference/joint_states`` (the reference), ``/interaction_force`` (std_msgs/Float64, where the run
-measured one), ``/rosout`` (rcl_interfaces/Log: the safety layer's events and interventions, the run's notes).
+measured one), ``/wrench`` (geometry_msgs/WrenchStamped: a person's wrench at the hand, where there is one),
+``/targets`` (geometry_msgs/PointStamped: each movement's goal as it began), every sensor's readings under
+``/sensors/<name>/`` (:mod:`rehabkit.ros.bag_sensors`), ``/rosout`` (rcl_interfaces/Log: the safety layer's events
+and interventions, the run's notes). ``rehabkit replay run.mcap --scenario S.yaml`` replays it as it would a robot's.
 Stamps: the run's start (``start_ns``, the Unix epoch) plus the run's own time.
 """
 
@@ -17,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rehabkit.core.plugins.lifecycle import RunTap
+from rehabkit.ros.bag_sensors import BASE_FRAME, reading_messages
 from rehabkit.ros.description import link_names
 from rehabkit.ros.msgdefs import datatype, msgdef
 
@@ -25,6 +30,10 @@ LOG_LEVEL = {"DEBUG": 10, "INFO": 20, "WARN": 30, "ERROR": 40, "FATAL": 50}
 
 def _stamp(ns: int) -> dict:
     return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+
+def _xyz(v) -> dict:
+    return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
 
 
 def _transform(parent: str, child: str, ns: int, m: np.ndarray) -> dict:
@@ -59,55 +68,96 @@ class _Bag:
         self.file.close()
 
 
-def write_bag(path: Path, setup, record, start_ns: int, description: str) -> dict:
-    """``path`` (written whole: a temporary name, renamed) from the finished run; returns its topics with their types
-    and message counts."""
+def _ros_frame(frame: str | None) -> str:
+    """A sensor's frame as tf names it: a body's name as it is, the robot base as ``base_link``."""
+    return BASE_FRAME if frame in (None, "", "robot base", "base") else frame
+
+
+class BagRecorder(RunTap):
+    """The run's bag as it goes: opened with the session (``.run.mcap.part``), each sensor reading as it is taken,
+    the trace's topics when the run is over (:meth:`finish`, then renamed to ``run.mcap``); dropped if the run fails."""
+
+    def __init__(self, path: Path, setup, start_ns: int, description: str):
+        self.path, self.start_ns = path, start_ns
+        self.part = path.with_name(f".{path.name}.part")
+        self.bag = _Bag(self.part)
+        self._frames = {name: _ros_frame(s.frame) for name, s in setup.sensors.items()}
+        self._channels = {name: s.channels for name, s in setup.sensors.items()}
+        self.bag.put("/robot_description", "std_msgs/String", {"data": description}, start_ns)
+        self.bag.put("/tf_static", "tf2_msgs/TFMessage", {"transforms": [
+            _transform("world", BASE_FRAME, start_ns, np.asarray(setup.robot.model.base_pose, float))]}, start_ns)
+
+    def reading(self, t: float, name: str, reading: dict) -> None:
+        ns = self.start_ns + round(t * 1e9)
+        header = {"stamp": _stamp(ns), "frame_id": ""}
+        for topic, msg_type, message in reading_messages(name, reading, header, self._frames[name],
+                                                         self._channels[name]):
+            self.bag.put(topic, msg_type, message, ns)
+
+    def discard(self) -> None:
+        self.bag.file.close()
+        self.part.unlink(missing_ok=True)
+
+    def finish(self, setup, record) -> dict:
+        """The trace's topics, the bag closed and renamed; returns its topics with their types and message counts."""
+        try:
+            _trace_topics(self.bag, setup, record, self.start_ns)
+            self.bag.finish()
+            os.replace(self.part, self.path)
+        except BaseException:
+            self.discard()
+            raise
+        bag = self.bag
+        return {topic: {"type": bag.types[topic], "messages": n} for topic, n in sorted(bag.counts.items())}
+
+
+def _trace_topics(bag: _Bag, setup, record, start_ns: int) -> None:
+    """Joint states, reference, the person's wrench and the interaction force every control step, the targets as
+    each movement began, tf at the log rate, the safety layer's events and the notes."""
     import pinocchio as pin
 
     tr, robot = record.trace, setup.robot.model
     names = list(robot.joint_names)
-    part = path.with_name(f".{path.name}.part")
-    bag = _Bag(part)
-    try:
-        bag.put("/robot_description", "std_msgs/String", {"data": description}, start_ns)
-        bag.put("/tf_static", "tf2_msgs/TFMessage",
-                {"transforms": [_transform("world", "base_link", start_ns, np.asarray(robot.base_pose, float))]},
-                start_ns)
-        ns = start_ns + np.rint(tr.t * 1e9).astype(np.int64)
-        empty = {"frame_id": ""}
-        for k in range(len(tr.t)):
-            stamp = {**empty, "stamp": _stamp(int(ns[k]))}
-            bag.put("/joint_states", "sensor_msgs/JointState",
-                    {"header": stamp, "name": names, "position": tr.q[k].tolist(), "velocity": tr.qd[k].tolist(),
-                     "effort": tr.tau[k].tolist()}, int(ns[k]))
-            if np.isfinite(tr.q_ref[k]).all():
-                bag.put("/reference/joint_states", "sensor_msgs/JointState",
-                        {"header": stamp, "name": names, "position": tr.q_ref[k].tolist(),
-                         "velocity": tr.qd_ref[k].tolist(), "effort": []}, int(ns[k]))
-            if tr.f_h is not None and np.isfinite(tr.f_h[k]):
-                bag.put("/interaction_force", "std_msgs/Float64", {"data": float(tr.f_h[k])}, int(ns[k]))
-        model = robot.pin_model
-        data, links = model.createData(), link_names(model)
-        every = max(1, setup.schedule.log_every)
-        for k in range(0, len(tr.t), every):
-            pin.forwardKinematics(model, data, tr.q[k])
-            bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [
-                _transform(links[model.parents[j]], links[j], int(ns[k]), data.liMi[j].homogeneous)
-                for j in range(1, model.njoints)]}, int(ns[k]))
-        events = list(setup.safety.events)
-        said = [(e.t, "ERROR", f"SAFETY {e.message}") for e in events]
-        trips = {(e.t, e.rule) for e in events}  # (each trip is among the interventions too: said once)
-        said += [(e.t, e.level, f"SAFETY {e.message}") for e in record.interventions if (e.t, e.rule) not in trips]
-        said += [(n["t"], "INFO", n["text"]) for n in record.notes]
-        for t, level, text in sorted(said, key=lambda x: x[0]):
-            when = start_ns + round(t * 1e9)
-            bag.put("/rosout", "rcl_interfaces/Log", {"stamp": _stamp(when), "level": LOG_LEVEL.get(level, 20),
-                                                     "name": "rehabkit", "msg": text, "file": "", "function": "",
-                                                     "line": 0}, when)
-        bag.finish()
-        os.replace(part, path)
-    except BaseException:
-        bag.file.close()
-        part.unlink(missing_ok=True)
-        raise
-    return {topic: {"type": bag.types[topic], "messages": n} for topic, n in sorted(bag.counts.items())}
+    ns = start_ns + np.rint(tr.t * 1e9).astype(np.int64)
+    person = tr.tau_h is not None and len(tr.t) and np.any(tr.tau_h)
+    model = robot.pin_model
+    data, hand = model.createData(), robot.ee_frame_id
+    for k in range(len(tr.t)):
+        stamp = {"stamp": _stamp(int(ns[k])), "frame_id": ""}
+        bag.put("/joint_states", "sensor_msgs/JointState",
+                {"header": stamp, "name": names, "position": tr.q[k].tolist(), "velocity": tr.qd[k].tolist(),
+                 "effort": tr.tau[k].tolist()}, int(ns[k]))
+        if np.isfinite(tr.q_ref[k]).all():
+            bag.put("/reference/joint_states", "sensor_msgs/JointState",
+                    {"header": stamp, "name": names, "position": tr.q_ref[k].tolist(),
+                     "velocity": tr.qd_ref[k].tolist(), "effort": []}, int(ns[k]))
+        if tr.f_h is not None and np.isfinite(tr.f_h[k]):
+            bag.put("/interaction_force", "std_msgs/Float64", {"data": float(tr.f_h[k])}, int(ns[k]))
+        if person:  # the least wrench at the hand whose joint torques are the person's (Jᵀw = τ_h), hand axes
+            J = pin.computeFrameJacobian(model, data, tr.q[k], hand, pin.LOCAL)
+            w = J @ np.linalg.lstsq(J.T @ J, tr.tau_h[k], rcond=None)[0]
+            bag.put("/wrench", "geometry_msgs/WrenchStamped",
+                    {"header": {**stamp, "frame_id": model.frames[hand].name},
+                     "wrench": {"force": _xyz(w[:3]), "torque": _xyz(w[3:])}}, int(ns[k]))
+    for mv in record.movements:
+        if mv.k0 < len(tr.t):
+            bag.put("/targets", "geometry_msgs/PointStamped",
+                    {"header": {"stamp": _stamp(int(ns[mv.k0])), "frame_id": BASE_FRAME}, "point": _xyz(mv.goal)},
+                    int(ns[mv.k0]))
+    links = link_names(model)
+    every = max(1, setup.schedule.log_every)
+    for k in range(0, len(tr.t), every):
+        pin.forwardKinematics(model, data, tr.q[k])
+        bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [
+            _transform(links[model.parents[j]], links[j], int(ns[k]), data.liMi[j].homogeneous)
+            for j in range(1, model.njoints)]}, int(ns[k]))
+    events = list(setup.safety.events)
+    said = [(e.t, "ERROR", f"SAFETY {e.message}") for e in events]
+    trips = {(e.t, e.rule) for e in events}  # (each trip is among the interventions too: said once)
+    said += [(e.t, e.level, f"SAFETY {e.message}") for e in record.interventions if (e.t, e.rule) not in trips]
+    said += [(n["t"], "INFO", n["text"]) for n in record.notes]
+    for t, level, text in sorted(said, key=lambda x: x[0]):
+        when = start_ns + round(t * 1e9)
+        bag.put("/rosout", "rcl_interfaces/Log", {"stamp": _stamp(when), "level": LOG_LEVEL.get(level, 20),
+                                                 "name": "rehabkit", "msg": text, "file": "", "function": "",
+                                                 "line": 0}, when)

@@ -44,7 +44,7 @@ def session_trace(bag: SessionBag, robot, patient, dt: float) -> Trace:
     """The session as a run's trace at the control step ``dt``: joints, the torque sent (the joint states' effort,
     NaN where the bag has none) and the person's torques (from the recorded wrench, where the run has a person)."""
     order = joint_order(bag, list(robot.model.joint_names))
-    t = np.arange(int(math.floor(bag.duration_s / dt + 1e-9)) + 1) * dt
+    t = np.arange(int(math.floor(bag.joints.t[-1] / dt + 1e-9)) + 1) * dt
     q = bag.joints.at(t)[:, order]
     qd = bag.velocity.at(t)[:, order] if bag.velocity is not None else np.gradient(q, dt, axis=0)
     tau = bag.effort.at(t)[:, order] if bag.effort is not None else np.full_like(q, np.nan)

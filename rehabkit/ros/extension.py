@@ -11,12 +11,15 @@ from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, Section
 from rehabkit.models.strict import StrictModel
 
+BAG = "ros.bag"  # the run's recorder, in the assembly's extras from the session's opening to the run's end
+
 
 class RosSpec(StrictModel):
     """What the run gives ROS tools."""
 
     bag: bool = Field(False, description="write run.mcap beside run.rrd: a ROS 2 bag of the run (joint states, "
-                      "reference, tf, robot description, safety events and notes)")
+                      "reference, tf, robot description, a person's wrench, targets, sensor readings, safety events "
+                      "and notes)")
 
 
 @hookimpl
@@ -24,15 +27,26 @@ def rehabkit_scenario_sections(registry) -> dict[str, Section]:
     return {"ros": Section(RosSpec, None, "what the run gives ROS tools (a ROS 2 bag)")}
 
 
-@hookimpl
-def rehabkit_run_finished(setup, record) -> Contribution | None:
+def _wanted(setup) -> bool:
     spec = getattr(setup.sc, "ros", None)
-    if spec is None or not spec.bag or setup.out_dir is None:
+    return spec is not None and spec.bag and setup.out_dir is not None
+
+
+@hookimpl
+def rehabkit_run_opened(setup):
+    if not _wanted(setup):
         return None
-    from rehabkit.ros.bag import write_bag
+    from rehabkit.ros.bag import BagRecorder
     from rehabkit.ros.description import robot_description
 
     description = robot_description(setup.robot, setup.sc.robot, setup.context.resolve)
-    start_ns = time.time_ns() - round(float(record.trace.t[-1] if len(record.trace.t) else 0.0) * 1e9)
-    topics = write_bag(setup.out_dir / "run.mcap", setup, record, start_ns, description)
-    return Contribution(sections={"bag": {"file": "run.mcap", "topics": topics}})
+    setup.extras[BAG] = recorder = BagRecorder(setup.out_dir / "run.mcap", setup, time.time_ns(), description)
+    return recorder
+
+
+@hookimpl
+def rehabkit_run_finished(setup, record) -> Contribution | None:
+    recorder = setup.extras.pop(BAG, None)
+    if recorder is None:
+        return None
+    return Contribution(sections={"bag": {"file": "run.mcap", "topics": recorder.finish(setup, record)}})

@@ -77,7 +77,8 @@ class SessionBag:
 
     @property
     def duration_s(self) -> float:
-        return float(self.joints.t[-1])
+        """How long the session lasted: to its last joint state, and that sample's period."""
+        return float(self.joints.t[-1] + np.median(np.diff(self.joints.t)))
 
 
 class BagError(ScenarioError):

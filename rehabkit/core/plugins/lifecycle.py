@@ -17,10 +17,12 @@ setup goes there), in this order:
 2. :func:`rehabkit_narrow_limits` — the robot built: tighter joint limits;
 3. :func:`rehabkit_force_limit` — an interaction-force limit;
 4. :func:`rehabkit_admit_targets` — the task's targets resolved: refuse or replace some;
-5. :func:`rehabkit_run_finished` — the run over: metrics, summary sections, logged series.
+5. :func:`rehabkit_run_opened` — the run's session open: a :class:`RunTap` taking each sensor reading as it comes;
+6. :func:`rehabkit_run_finished` — the run over: metrics, summary sections, logged series.
 
 :func:`rehabkit_metrics` describes the metrics an extension adds. The loop itself
-calls no hooks: what happens every step belongs to the plugins and the safety layer.
+calls no hooks: what happens every step belongs to the plugins and the safety layer (a tap is called by the
+timeline with each reading, as the log is).
 An extension's module is imported for every run: import heavy things inside the hooks.
 """
 
@@ -58,6 +60,19 @@ class Contribution:
     metrics: dict[str, float] = field(default_factory=dict)
     sections: dict[str, Any] = field(default_factory=dict)
     series: dict[str, tuple[Any, Any]] = field(default_factory=dict)
+
+
+class RunTap:
+    """What an extension takes from a run as it goes (returned by :func:`rehabkit_run_opened`): each sensor reading
+    when it is taken (``t`` the time it was taken at, ``name`` the sensor's, ``reading`` its values as the sensor
+    gave them). The run's end reaches the extension through :func:`rehabkit_run_finished`; a run that fails calls
+    :meth:`discard`, so that nothing half-written is left."""
+
+    def reading(self, t: float, name: str, reading: dict[str, Any]) -> None:
+        """A sensor's reading (default: ignored)."""
+
+    def discard(self) -> None:
+        """The run failed: drop whatever was begun (default: nothing)."""
 
 
 @dataclass(frozen=True)
@@ -102,6 +117,10 @@ def rehabkit_force_limit(setup: Assembly) -> float | None:
 def rehabkit_admit_targets(setup: Assembly) -> None:
     """The task's fixed targets resolved (``setup.targets``, within ``setup.limits``): refuse one
     (``ScenarioError``, located) or replace it in place and list it in ``setup.replaced``."""
+
+@hookspec
+def rehabkit_run_opened(setup: Assembly) -> RunTap | None:
+    """The run's session open, standing at the start: a tap for the readings as they come, or None."""
 
 @hookspec
 def rehabkit_run_finished(setup: Assembly, record: RunRecord) -> Contribution | None:

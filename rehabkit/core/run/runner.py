@@ -88,6 +88,8 @@ class Runner:
         except BaseException:
             if session is not None:
                 session.view.discard()
+                for tap in session.taps:
+                    tap.discard()
             raise
         finally:
             if session is not None and session.threads is not None:

@@ -78,6 +78,7 @@ class RunSession:
     q0: np.ndarray
     timeline: Timeline | None = None
     threads: SensorThreads | None = None
+    taps: list = field(default_factory=list)  # extensions' RunTaps: each reading as it is taken
     loop: LoopState = field(default_factory=LoopState)
     plans: list[dict] = field(default_factory=list)
     notes: list[dict] = field(default_factory=list)
@@ -196,13 +197,20 @@ def open_session(a: Assembly, spawn: bool = False, notes: list[dict] | None = No
     catalogue = metric_catalogue(a)
     session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0,
                          notes=list(notes or []))
+    session.taps = [tap for tap in a.extensions.hook.rehabkit_run_opened(setup=a) if tap is not None]
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
+        # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are)
         threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
-                                prepare=encode_images if view.active else None)
+                                prepare=encode_images if view.active and not session.taps else None)
     session.threads = threads
-    session.timeline = Timeline(a, view, threads)
-    _first_plan(session)
+    session.timeline = Timeline(a, view, threads, session.taps)
+    try:
+        _first_plan(session)
+    except BaseException:  # (no session for the runner to discard: the taps dropped here)
+        for tap in session.taps:
+            tap.discard()
+        raise
     return session
 
 

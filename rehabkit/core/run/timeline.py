@@ -36,9 +36,9 @@ class Replan:
 class Timeline:
     """Events, scene actions, sensors and the stop of one run; ``view`` records events and readings."""
 
-    def __init__(self, setup: Assembly, view, threads: SensorThreads | None):
+    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list | None = None):
         sc, sch = setup.sc, setup.schedule
-        self.setup, self.view, self.threads = setup, view, threads
+        self.setup, self.view, self.threads, self.taps = setup, view, threads, taps or []
         self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
@@ -168,6 +168,8 @@ class Timeline:
         """A sensor's reading (started at ``t_read``) into the readings and the log; 'moved' events."""
         self.readings[name] = Reading(name, t_read, reading, self._frames[name])
         self.view.sensor(t_read, name, reading)
+        for tap in self.taps:
+            tap.reading(t_read, name, reading)
         if not self._watch:
             return
         for i, state in self._watch.items():
