@@ -182,3 +182,24 @@ def test_sensor_readings_go_to_their_ros_messages(tmp_path):
     assert sighted.header.frame_id == "base_link"
     ball = np.array([0.82, 0.33, 0.77]) - np.array([0, 0, 1.2])  # Target 1 in the base frame (shoulder at 1.2 m)
     assert np.linalg.norm([sighted.point.x - ball[0], sighted.point.y - ball[1], sighted.point.z - ball[2]]) < 0.025
+
+
+def test_a_sweeps_runs_each_write_their_bag(tmp_path):
+    """``rehabkit sweep --bag``: every run keeps its folder (the run_dir column) with its own bag, whose joint
+    states are that run's (the softer gains track worse: their bags differ)."""
+    import pyarrow.parquet as pq
+    import yaml
+
+    done = cli("sweep", ROOT / "examples" / "ros_session" / "arm4_session.yaml", "--grid",
+               "controller.bandwidth_hz=4,8", "--set", "duration=1.5", "--bag", "--serial", "--out", tmp_path)
+    assert done.returncode == 0, done.stderr
+    rows = pq.read_table(tmp_path / "results.parquet").to_pylist()
+    finals = []
+    for row in rows:
+        types, messages = read(tmp_path / row["run_dir"] / "run.mcap")
+        assert types["/joint_states"] == ("sensor_msgs/msg/JointState", 1500)
+        assert types["/wrench"][1] == 1500 and types["/targets"][1] == 2
+        finals.append(np.array(messages["/joint_states"][-1][1].position))
+        ran = yaml.safe_load((tmp_path / row["run_dir"] / "scenario.yaml").read_text())
+        assert str(ran["controller"]["bandwidth_hz"]) == row["controller.bandwidth_hz"]
+    assert np.abs(finals[0] - finals[1]).max() > 1e-3

@@ -51,8 +51,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         return EXIT_INVALID
     try:
         result = run_sweep(args.scenario, args.grid, args.seeds, args.out, address=args.address, workers=args.workers,
-                           serial=args.serial, timeout_s=args.timeout, metrics=args.metric, progress=True)
-    except ValueError as exc:  # a malformed --grid
+                           serial=args.serial, timeout_s=args.timeout, metrics=args.metric, progress=True,
+                           overrides=[*args.set, "ros.bag=true"] if args.bag else args.set,
+                           keep_runs=True if args.keep_runs or args.bag else None)
+    except ValueError as exc:  # a malformed --grid or --set
         _err(f"error: {exc}")
         return EXIT_INVALID
     print(result.table())
@@ -62,7 +64,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     for rec in result.failed[:10]:
         point = ", ".join(f"{k}={rec[k]}" for k in result.keys)
         print(f"  FAILED  {point + ', ' if point else ''}seed={rec['seed']}: {rec['error']}")
-    print(f"wrote {result.out_dir / 'results.parquet'} and {result.out_dir / 'aggregate.csv'}")
+    print(f"wrote {result.out_dir / 'results.parquet'} and {result.out_dir / 'aggregate.csv'}"
+          + (" (each run's outputs in runs/<run id>/: the run_dir column)" if result.keeps_runs else ""))
     return EXIT_OK if not result.failed else EXIT_FAILED
 
 
@@ -177,6 +180,11 @@ def parser() -> argparse.ArgumentParser:
     w.add_argument("scenario")
     w.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2,...",
                    help="a setting and its values (YAML each); adds to the scenario's sweep: block")
+    w.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a setting every run has")
+    w.add_argument("--keep-runs", action="store_true",
+                   help="each run's outputs in DIR/runs/<run id>/ (sweep.keep_runs)")
+    w.add_argument("--bag", action="store_true", help="each run's ROS 2 bag: DIR/runs/<run id>/run.mcap (ros.bag, "
+                                                      "--keep-runs)")
     w.add_argument("--seeds", type=int, default=None, help="runs per grid point (scenario seeds 0..N-1)")
     w.add_argument("--out", metavar="DIR", help="sweep folder (default: out/sweep_<scenario name>); resumes there")
     w.add_argument("--address", help="an existing Ray cluster, e.g. ray://head:10001 (default: a local Ray)")

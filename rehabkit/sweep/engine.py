@@ -21,10 +21,13 @@ from typing import Any
 from tqdm import tqdm
 
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.scenario.source import parse_override
 from rehabkit.sweep.execute import execute
 from rehabkit.sweep.grid import RunSpec, expand, parse_grid
 from rehabkit.sweep.store import RunStore
 from rehabkit.sweep.tables import aggregate, flat_rows, format_table, write_csv, write_parquet
+
+RUNS = "runs"  # the sweep folder's subfolder of kept runs, one per run id
 
 
 @dataclass
@@ -39,6 +42,7 @@ class SweepResult:
     skipped: int
     out_dir: Path
     wall_s: float
+    keeps_runs: bool = False  # each run's outputs under runs/<run id>/
 
     @property
     def failed(self) -> list[dict[str, Any]]:
@@ -51,7 +55,8 @@ class SweepResult:
 def run_sweep(scenario: str | Path, grid: Mapping[str, list[Any]] | Iterable[str] | None = None,
               seeds: int | None = None, out_dir: str | Path | None = None, *, address: str | None = None,
               workers: int | None = None, serial: bool = False, timeout_s: float | None = None,
-              metrics: Iterable[str] = (), progress: bool = False) -> SweepResult:
+              metrics: Iterable[str] = (), progress: bool = False, overrides: Iterable[str] = (),
+              keep_runs: bool | None = None) -> SweepResult:
     """Run ``scenario`` over ``grid`` × ``seeds`` (default: its ``sweep:`` block; arguments add to it).
 
     Args:
@@ -63,44 +68,54 @@ def run_sweep(scenario: str | Path, grid: Mapping[str, list[Any]] | Iterable[str
         workers: CPUs of the local Ray (default: all).
         serial: run in this process, one after the other (no Ray).
         timeout_s: a run taking longer is stopped and recorded as failed.
+        overrides: ``--set`` strings every run has (under the grid's values).
+        keep_runs: each run's outputs in ``runs/<run id>/`` (default: the ``sweep:`` block's ``keep_runs``).
     """
     t0 = time.perf_counter()
     path = Path(scenario).resolve()
-    base = load_scenario(path).model  # the scenario itself must be valid (located errors if not)
+    fixed = {".".join(keys): value for keys, value in map(parse_override, overrides)}
+    base = load_scenario(path, fixed).model  # the scenario itself must be valid (located errors if not)
     spec = base.sweep
+    keep = keep_runs if keep_runs is not None else bool(spec and spec.keep_runs)
     merged: dict[str, list[Any]] = dict(spec.grid) if spec else {}
     merged.update(parse_grid(grid) if grid is not None and not isinstance(grid, Mapping) else (grid or {}))
     seeds = seeds or (spec.seeds if spec else 1)
     timeout_s = timeout_s or (spec.timeout_s if spec else 600.0)
     shown = list(dict.fromkeys([*(spec.metrics if spec else []), *metrics, *base.expect]))
     for point in _points(merged):  # every grid value must make a valid scenario: located errors before any run
-        load_scenario(path, point)
-    specs = expand(path, merged, seeds)
+        load_scenario(path, {**fixed, **point})
+    specs = expand(path, merged, seeds, fixed)
     out = Path(out_dir) if out_dir is not None else Path("out") / f"sweep_{path.stem}"
     store = RunStore(out)
     store.describe({"scenario": str(path), "grid": merged, "seeds": seeds, "timeout_s": timeout_s,
-                    "runs": len(specs)})
+                    "runs": len(specs), **({"set": fixed} if fixed else {}), **({"keep_runs": True} if keep else {})})
     rows = store.done(specs)
     todo = [s for s in specs if s.run_id not in rows]
     bar = tqdm(total=len(specs), initial=len(specs) - len(todo), unit="run", disable=not progress)
 
     def record(s: RunSpec, row: dict[str, Any]) -> None:
+        if keep:
+            row["run_dir"] = f"{RUNS}/{s.run_id}"
         store.save(s, row)
         rows[s.run_id] = row
         bar.update(1)
 
+    def run_dir(s: RunSpec) -> str | None:
+        return str((out / RUNS / s.run_id).resolve()) if keep else None
+
     if serial:
         for s in todo:
-            record(s, execute(str(path), s.overrides, timeout_s))
+            record(s, execute(str(path), s.overrides, timeout_s, run_dir(s)))
     elif todo:
-        _on_ray(todo, str(path), timeout_s, address, workers, record)
+        _on_ray(todo, str(path), timeout_s, address, workers, record, run_dir)
     bar.close()
     records = flat_rows(specs, rows)
     keys = list(merged)
     agg = aggregate(records, keys, shown)
     write_parquet(out / "results.parquet", records)
     write_csv(out / "aggregate.csv", agg)
-    return SweepResult(records, agg, keys, shown, len(todo), len(specs) - len(todo), out, time.perf_counter() - t0)
+    return SweepResult(records, agg, keys, shown, len(todo), len(specs) - len(todo), out, time.perf_counter() - t0,
+                       keep)
 
 
 def _points(grid: Mapping[str, list[Any]]) -> list[dict[str, Any]]:
@@ -124,7 +139,7 @@ def start_ray(address: str | None = None, workers: int | None = None) -> None:
 
 
 def _on_ray(todo: list[RunSpec], path: str, timeout_s: float, address: str | None, workers: int | None,
-            record: Callable[[RunSpec, dict[str, Any]], None]) -> None:
+            record: Callable[[RunSpec, dict[str, Any]], None], run_dir: Callable[[RunSpec], str | None]) -> None:
     import ray
 
     started = not ray.is_initialized()
@@ -137,7 +152,7 @@ def _on_ray(todo: list[RunSpec], path: str, timeout_s: float, address: str | Non
         while queue or running:
             while queue and len(running) < slots:
                 s = queue.popleft()
-                running[remote.remote(path, s.overrides)] = (s, time.monotonic())
+                running[remote.remote(path, s.overrides, None, run_dir(s))] = (s, time.monotonic())
             done, _ = ray.wait(list(running), num_returns=1, timeout=0.2)
             for ref in done:
                 s, t_start = running.pop(ref)

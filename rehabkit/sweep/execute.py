@@ -22,8 +22,10 @@ class RunTimeoutError(BaseException):
     """A run took longer than the sweep allows (a BaseException: plugin-error handlers must not catch it)."""
 
 
-def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None) -> dict[str, Any]:
-    """Run the scenario with ``overrides``; the row (never raises for the run's own failures)."""
+def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None,
+            out_dir: str | None = None) -> dict[str, Any]:
+    """Run the scenario with ``overrides``; the row (never raises for the run's own failures). With ``out_dir``
+    the run writes its outputs there, as ``rehabkit run --out`` does."""
     from rehabkit.core.run.runner import Runner  # in the worker: plugins load once per process
     from rehabkit.core.scenario.loader import load_scenario
 
@@ -37,7 +39,7 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
         signal.setitimer(signal.ITIMER_REAL, timeout_s)
     setup = None  # the run's plugins, watched: freed with the run, or collected
     try:
-        runner = Runner(load_scenario(Path(path), overrides))
+        runner = Runner(load_scenario(Path(path), overrides), out_dir=Path(out_dir) if out_dir else None)
         result = runner.run()
         setup = weakref.ref(runner.setup)
         del runner

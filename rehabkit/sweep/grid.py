@@ -22,10 +22,11 @@ class RunSpec:
     point: tuple[tuple[str, Any], ...]  # grid key → value, in the grid's key order
     seed: int
     run_id: str
+    fixed: tuple[tuple[str, Any], ...] = ()  # settings every run of the sweep has (--set), under the grid's
 
     @property
     def overrides(self) -> dict[str, Any]:
-        return {**dict(self.point), "seed": self.seed}
+        return {**dict(self.fixed), **dict(self.point), "seed": self.seed}
 
 
 def parse_grid(items: Iterable[str]) -> dict[str, list[Any]]:
@@ -47,8 +48,10 @@ def scenario_digest(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def expand(path: Path, grid: Mapping[str, list[Any]], seeds: int) -> list[RunSpec]:
-    """Every combination of the grid's values (first key slowest) × seeds 0..seeds-1."""
+def expand(path: Path, grid: Mapping[str, list[Any]], seeds: int, fixed: Mapping[str, Any] | None = None
+           ) -> list[RunSpec]:
+    """Every combination of the grid's values (first key slowest) × seeds 0..seeds-1, each with the ``fixed``
+    settings (a run's id covers them: a sweep resumed with other settings runs again)."""
     if "seed" in grid:
         raise ValueError("'seed' is set by the sweep's seeds, not by the grid")
     for key, values in grid.items():
@@ -56,12 +59,14 @@ def expand(path: Path, grid: Mapping[str, list[Any]], seeds: int) -> list[RunSpe
             raise ValueError(f"grid key '{key}' has no values")
     digest = scenario_digest(path)
     keys = list(grid)
+    same = tuple(sorted((fixed or {}).items()))
     runs = []
     for combo in itertools.product(*(grid[k] for k in keys)):
         point = tuple(zip(keys, combo))
         for seed in range(seeds):
-            ident = json.dumps({"scenario": digest, "point": point, "seed": seed}, sort_keys=True, default=str)
-            runs.append(RunSpec(point, seed, hashlib.sha256(ident.encode()).hexdigest()[:16]))
+            what = {"scenario": digest, "point": point, "seed": seed, **({"fixed": same} if same else {})}
+            ident = json.dumps(what, sort_keys=True, default=str)
+            runs.append(RunSpec(point, seed, hashlib.sha256(ident.encode()).hexdigest()[:16], same))
     return runs
 
 

@@ -20,6 +20,9 @@ class SweepSpec(StrictModel):
     timeout_s: float = Field(600.0, gt=0, description="a run taking longer is stopped and recorded as failed")
     metrics: list[str] = Field([], description="metrics the aggregate table shows (besides the expect: ones)")
     test_seeds: int | None = Field(None, ge=1, description="seeds the scenario's test runs (default: all)")
+    keep_runs: bool = Field(False, description="each run's folder under runs/<run id>/: its summary.json and what "
+                                               "the scenario writes (run.rrd unless logging.rrd is off, run.mcap "
+                                               "with ros.bag)")
 
 
 @hookimpl

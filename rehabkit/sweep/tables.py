@@ -23,7 +23,8 @@ def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dic
         row = rows[spec.run_id]
         rec: dict[str, Any] = {"run_id": spec.run_id, **point_label(spec.point), "seed": spec.seed,
                                "passed": bool(row["passed"]), "error": row["error"],
-                               "wall_time_s": float(row["wall_time_s"])}
+                               "wall_time_s": float(row["wall_time_s"]),
+                               **({"run_dir": row["run_dir"]} if row.get("run_dir") else {})}
         wall = set(row.get("wall_clock", ()))  # wall-clock figures: columns of their own, not compared
         rec.update({f"{'wall' if k in wall else 'metric'}.{k}": v for k, v in sorted(row["metrics"].items())})
         rec.update({f"expect.{k}": v for k, v in sorted(row["expectations"].items())})
