@@ -51,3 +51,20 @@ def test_the_joint_space_path_goes_around_the_obstacles_not_through_them(robot):
     if robot == "urdf_arm4":  # no via points: the pillar stands between its targets (the others route by them)
         assert result.metrics["path_vertices"] > 4 and result.metrics["path_length_ratio"] > 1.3  # a detour...
         assert checker.first_collision(straight) >= 0  # ...which the straight joint-space line would hit
+
+
+def test_a_joint_plan_to_where_the_arm_already_is_holds_it():
+    """The start held (a plan from the start posture to itself, as a session's first plan is): a path of one
+    point is a hold, not an index error — validate and the run's first plan both check it."""
+    from rehabkit.cspace.timing import RestToRestPath
+
+    q = np.array([0.1, -0.2, 0.3])
+    path = RestToRestPath(q[None, :], np.zeros(0))
+    qs, qds, qdds = path.sample(np.array([0.0, 0.5]))
+    assert path.duration == 0.0 and np.array_equal(qs, [q, q]) and not qds.any() and not qdds.any()
+    loaded = load_scenario(EXAMPLES.parent / "ros_session" / "arm4_session.yaml",
+                           {"planner.type": "ompl-joint", "duration": 1.0})
+    result = Runner(loaded).run()
+    assert result.summary["plans"][0]["duration_s"] >= 0.0 and result.metrics["safety_events"] == 0
+    held, moving = (np.degrees(np.abs(result.trace.q[k] - np.radians([0, 20, 60, 20]))).max() for k in (490, 990))
+    assert held < 0.01 and moving > 1.0  # held until the replan to 'left' at 0.5 s

@@ -33,6 +33,9 @@ class RestToRestPath:
 
     def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t = np.clip(np.atleast_1d(np.asarray(t, float)), 0.0, self.duration)
+        if not len(self.durations):  # one point (the goal is where the path starts): held there
+            held = np.broadcast_to(self.points[0], (len(t), self.points.shape[1])).copy()
+            return held, np.zeros_like(held), np.zeros_like(held)
         seg = np.clip(np.searchsorted(self.breaks, t, side="right") - 1, 0, len(self.durations) - 1)
         T = self.durations[seg][:, None]
         tau = (t - self.breaks[seg])[:, None] / T
