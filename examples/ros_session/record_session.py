@@ -2,11 +2,12 @@
 
 Runs a scenario with a simulated person and writes what the robot's side would have published: the joint states
 (``sensor_msgs/JointState``: position, velocity, the torque sent), the person's wrench at the hand's cuff
-(``geometry_msgs/WrenchStamped`` in the hand's frame), and each target when it was shown (``PointStamped`` in the
-world). Topics can be named as another lab names them, and a stretch of the recording dropped (a recorder's hiccup)::
+(``geometry_msgs/WrenchStamped`` in the hand's frame, as a six-axis sensor there gives it), and each target when it
+was shown (``PointStamped`` in the world; ``PoseStamped`` where the session's targets set the hand's orientation).
+Topics can be named as another lab names them, and a stretch of the recording dropped (a recorder's hiccup)::
 
-    python examples/ros_session/record_session.py out/session_bag
-    python examples/ros_session/record_session.py out/renamed_bag --topic joint_states=/arm/joint_states \\
+    python examples/ros_session/record_session.py out/session
+    python examples/ros_session/record_session.py out/renamed --topic joint_states=/arm/joint_states \\
         --topic wrench=/cuff/wrench --topic targets=/task/targets --gap 2.0,0.3
 """
 
@@ -21,6 +22,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 EPOCH_NS = 1_764_000_000 * 1_000_000_000  # the session's wall-clock start (stamps are Unix time, as a robot's are)
+TOPICS = {"joint_states": "/joint_states", "wrench": "/wrench", "targets": "/targets"}
 
 
 @functools.lru_cache(maxsize=4)
@@ -34,22 +36,64 @@ def run_session(scenario: Path):
     return result.trace, result.summary["plans"], runner.robot.model
 
 
+def task_targets(scenario: Path) -> list:
+    from rehabkit.api import load_scenario
+
+    return load_scenario(scenario).model.task.targets
+
+
+def cuff_wrenches(q: np.ndarray, tau_h: np.ndarray, model, frame: int) -> np.ndarray:
+    """The person's wrench on the cuff at ``frame`` (its own axes) per step: the least one whose joint torques are the
+    person's (Jᵀw = τ_h, J the frame's Jacobian), as a six-axis sensor there would measure it."""
+    import pinocchio as pin
+
+    pm = model.pin_model
+    data = pm.createData()
+    out = np.zeros((len(q), 6))
+    for k in range(len(q)):
+        J = pin.computeFrameJacobian(pm, data, q[k], frame, pin.LOCAL)
+        out[k] = J @ np.linalg.lstsq(J.T @ J, tau_h[k], rcond=None)[0]
+    return out
+
+
 def record(bag: Path, scenario: Path = HERE / "arm4_session.yaml", topics: dict[str, str] | None = None,
-           gap: tuple[float, float] | None = None, storage: str = "mcap", hand_frame: str = "tip") -> dict[str, int]:
-    """Run ``scenario`` and write its session to the rosbag2 folder ``bag``; returns each topic's message count."""
+           gap: tuple[float, float] | None = None, storage: str = "mcap", hand_frame: str | None = None
+           ) -> dict[str, int]:
+    """Run ``scenario`` and write its session to the rosbag2 folder ``bag`` (the wrench in ``hand_frame``, default
+    the robot's end effector); returns each topic's message count."""
+    topics = {**TOPICS, **(topics or {})}
+    tr, plans, model = run_session(Path(scenario).resolve())
+    pm = model.pin_model
+    hand_frame = hand_frame or pm.frames[model.ee_frame_id].name
+    if not pm.existFrame(hand_frame):
+        raise SystemExit(f"error: --hand-frame {hand_frame}: not a frame of robot '{model.name}' (its frames: "
+                         f"{', '.join(f.name for f in pm.frames[1:])})")
+    if tr.tau_h is None:
+        raise SystemExit(f"error: {scenario} has no simulated person: there is no wrench to record")
+    wrench = cuff_wrenches(tr.q, tr.tau_h, model, pm.getFrameId(hand_frame))
+    world = np.asarray(model.base_pose, float)
+    shown = [(p["t"], world @ model.ee_pose(np.radians(p["waypoints_deg"][-1])))
+             for p in plans[1:]]  # each target as shown: the pose its plan reaches, in the world
+    oriented = any(t.rpy_deg is not None or t.orientation_of is not None for t in task_targets(Path(scenario)))
+    if bag.exists():
+        shutil.rmtree(bag)
+    try:
+        return _write(bag, storage, topics, tr, list(model.joint_names), wrench, hand_frame, shown, oriented, gap)
+    except BaseException:  # nothing half-written left behind
+        shutil.rmtree(bag, ignore_errors=True)
+        raise
+
+
+def _write(bag: Path, storage: str, topics: dict[str, str], tr, names: list[str], wrench: np.ndarray,
+           hand_frame: str, shown: list, oriented: bool, gap: tuple[float, float] | None) -> dict[str, int]:
     import pinocchio as pin
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
-    topics = {"joint_states": "/joint_states", "wrench": "/wrench", "targets": "/targets", **(topics or {})}
-    tr, plans, model = run_session(Path(scenario).resolve())
-    pm = model.pin_model
-    data, frame = pm.createData(), pm.getFrameId(hand_frame)
-
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
-    Vec, Point = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"]
+    Vec, Point, Quat = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Quaternion"]
 
     def header(ns: int, frame_id: str = ""):
         return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id)
@@ -57,14 +101,12 @@ def record(bag: Path, scenario: Path = HERE / "arm4_session.yaml", topics: dict[
     def dropped(t: float) -> bool:
         return gap is not None and gap[0] <= t < gap[0] + gap[1]
 
-    if bag.exists():
-        shutil.rmtree(bag)
     counts = dict.fromkeys(topics.values(), 0)
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     with Writer(bag, version=8, storage_plugin=plugin) as w:
         conn = {role: w.add_connection(topics[role], msgtype, typestore=ts) for role, msgtype in (
             ("joint_states", "sensor_msgs/msg/JointState"), ("wrench", "geometry_msgs/msg/WrenchStamped"),
-            ("targets", "geometry_msgs/msg/PointStamped"))}
+            ("targets", "geometry_msgs/msg/PoseStamped" if oriented else "geometry_msgs/msg/PointStamped"))}
 
         def put(role: str, msg, ns: int) -> None:
             w.write(conn[role], ns, ts.serialize_cdr(msg, msg.__msgtype__))
@@ -75,36 +117,40 @@ def record(bag: Path, scenario: Path = HERE / "arm4_session.yaml", topics: dict[
                 continue
             ns = EPOCH_NS + int(round(t * 1e9))
             put("joint_states", T["sensor_msgs/msg/JointState"](
-                header=header(ns), name=list(model.joint_names), position=tr.q[k].copy(), velocity=tr.qd[k].copy(),
+                header=header(ns), name=names, position=tr.q[k].copy(), velocity=tr.qd[k].copy(),
                 effort=tr.tau[k].copy()), ns)
-            # the person's wrench on the cuff in the hand's frame, as a six-axis sensor there gives it: the least one
-            # whose joint torques are the person's (Jᵀ w = τ_h, J the hand frame's Jacobian in its own axes)
-            J = pin.computeFrameJacobian(pm, data, tr.q[k], frame, pin.LOCAL)
-            f = J @ np.linalg.lstsq(J.T @ J, tr.tau_h[k], rcond=None)[0]
+            f = wrench[k]
             put("wrench", T["geometry_msgs/msg/WrenchStamped"](header=header(ns, hand_frame), wrench=T[
                 "geometry_msgs/msg/Wrench"](force=Vec(x=f[0], y=f[1], z=f[2]), torque=Vec(x=f[3], y=f[4], z=f[5]))),
                 ns)
-        for plan in plans[1:]:  # each target as shown: where its plan goes, in the world
-            if dropped(plan["t"]):
+        for t, pose in shown:
+            if dropped(t):
                 continue
-            goal = model.ee_pose(np.radians(plan["waypoints_deg"][-1]))[:3, 3]
-            p = model.to_world(goal)[0]
-            ns = EPOCH_NS + int(round(plan["t"] * 1e9))
-            put("targets", T["geometry_msgs/msg/PointStamped"](header=header(ns, "world"),
-                                                                point=Point(x=p[0], y=p[1], z=p[2])), ns)
+            ns, p = EPOCH_NS + int(round(t * 1e9)), pose[:3, 3]
+            point = Point(x=p[0], y=p[1], z=p[2])
+            if oriented:  # the hand's orientation too, where the session's targets set one
+                r = pin.Quaternion(pose[:3, :3])
+                put("targets", T["geometry_msgs/msg/PoseStamped"](header=header(ns, "world"), pose=T[
+                    "geometry_msgs/msg/Pose"](position=point, orientation=Quat(x=r.x, y=r.y, z=r.z, w=r.w))), ns)
+            else:
+                put("targets", T["geometry_msgs/msg/PointStamped"](header=header(ns, "world"), point=point), ns)
     return counts
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("bag", type=Path, help="the rosbag2 folder to write")
-    ap.add_argument("--scenario", type=Path, default=HERE / "arm4_session.yaml")
-    ap.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC", help="name a topic otherwise")
+    ap.add_argument("--scenario", type=Path, default=HERE / "arm4_session.yaml",
+                    help="a scenario with a simulated person (default: the 4-joint arm's session)")
+    ap.add_argument("--topic", action="append", default=[], metavar="ROLE=TOPIC",
+                    help="name a topic otherwise (roles: joint_states, wrench, targets)")
     ap.add_argument("--gap", metavar="START,LENGTH", help="drop every message in this stretch [s]")
     ap.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
+    ap.add_argument("--hand-frame", help="the frame the wrench is given in (default: the robot's end effector)")
     args = ap.parse_args()
     gap = tuple(float(v) for v in args.gap.split(",")) if args.gap else None
-    counts = record(args.bag, args.scenario, dict(t.split("=", 1) for t in args.topic), gap, args.storage)
+    counts = record(args.bag, args.scenario, dict(t.split("=", 1) for t in args.topic), gap, args.storage,
+                    args.hand_frame)
     print(f"wrote {args.bag}: " + ", ".join(f"{topic} {n}" for topic, n in counts.items()))
 
 

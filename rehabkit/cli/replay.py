@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, unwritable
+from rehabkit.cli.run_report import wrote
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 
@@ -43,8 +44,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     print(rep.table())
     for ev in rep.result.summary["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
-    out, outputs = rep.result.out_dir, rep.result.summary["outputs"]
-    print(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "rrd" in outputs else ""))
+    print(wrote(rep.result.summary, rep.result.out_dir))
     return EXIT_OK if rep.result.passed else EXIT_FAILED
 
 

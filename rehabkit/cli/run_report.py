@@ -32,8 +32,16 @@ def run_report(s: dict[str, Any], out: Path) -> str:
     if m.get("reaches"):
         lines.append("  outcomes: " + ", ".join(f"{k} {m[k]:.3g}" for k in OUTCOMES if m.get(k) is not None))
     lines += [f"{name}:\n{text}" for name, text in s.get("reports", {}).items()]
-    lines.append(f"wrote {out / 'summary.json'}" + (f" and {out / 'run.rrd'}" if "outputs" in s else ""))
+    lines.append(wrote(s, out))
     return "\n".join(lines)
+
+
+def wrote(summary: dict, out: Path) -> str:
+    """The files a run wrote: its summary, its recording and its bag where it wrote them."""
+    files = [out / "summary.json"]
+    files += [out / summary["outputs"]["rrd"]] if "rrd" in summary.get("outputs", {}) else []
+    files += [out / summary["bag"]["file"]] if "bag" in summary else []
+    return "wrote " + ", ".join(map(str, files[:-1])) + (" and " if len(files) > 1 else "") + str(files[-1])
 
 
 def _interventions(interventions: list[dict], events: list[dict], shown: int = 3) -> list[str]:

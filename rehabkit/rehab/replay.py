@@ -14,7 +14,7 @@ import json
 import math
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,7 @@ class Replay:
     original: dict[str, Any]
     result: RunResult
     same_inputs: dict[str, bool]
+    changes: list[str] = field(default_factory=list)  # the overrides the replay ran with (--set)
 
     def rows(self) -> list[tuple[str, Any, Any]]:
         """(metric, original, replay) for the outcome measures either run has (as their summaries describe them)."""
@@ -58,7 +59,8 @@ class Replay:
                  for r in rows]
         lines.insert(1, "  ".join("-" * w for w in widths))
         same = ", ".join(f"{k} {'same' if v else 'DIFFERENT'}" for k, v in self.same_inputs.items())
-        return "\n".join(lines) + (f"\ninputs: {same}" if same else "")
+        changed = f"\nreplayed with: {', '.join(self.changes)}" if self.changes else ""
+        return "\n".join(lines) + changed + (f"\ninputs: {same}" if same else "")
 
 
 def overrides_label(overrides: Iterable[str]) -> str:
@@ -87,4 +89,4 @@ def replay(run_dir: str | Path, overrides: Iterable[str] = (), out_dir: str | Pa
     result = Runner(loaded, registry, out, progress=progress).run()
     a, b = original.get("inputs", {}), result.summary["inputs"]
     same = {key: a.get(key) == b.get(key) for key in b}
-    return Replay(original, result, same)
+    return Replay(original, result, same, overrides)

@@ -104,7 +104,7 @@ def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str
     session = session_summary(bag, runner, result.summary)
     atomic_write_json(out / SESSION_MEASURES, {k: v for k, v in session.items() if k != "metric_info"})
     # (no inputs to compare: the replay's person is the bag's by construction)
-    return Replay(session, result, {})
+    return Replay(session, result, {}, overrides)
 
 
 def session_summary(bag: SessionBag, runner: Runner, replayed: dict) -> dict:
@@ -115,7 +115,9 @@ def session_summary(bag: SessionBag, runner: Runner, replayed: dict) -> dict:
     metrics, details = run_outcomes(trace, runner.robot, session_reaches(bag, runner, len(trace.t), dt), dt,
                                     a.sc.outcomes, 0)
     metrics["safety_interventions"] = float("nan")  # (what the robot's safety layer did is not in the bag)
-    return {"label": f"session {bag.path.name}", "bag": str(bag.path), "duration_s": bag.duration_s,
+    if bag.wrench is None:  # (no person's wrench read: their share and force unknown, not none)
+        metrics["assistance_ratio"] = metrics["peak_interaction_force_n"] = float("nan")
+    return {"label": f"recorded ({bag.path.name})", "bag": str(bag.path), "duration_s": bag.duration_s,
             "metrics": metrics, "metric_info": replayed.get("metric_info", {}),
             "outcomes": {k: v for k, v in details.items() if k != "interaction_force_n"},
             "gaps": [str(g) for g in bag.gaps]}

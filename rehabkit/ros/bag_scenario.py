@@ -77,16 +77,19 @@ def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, b
                                "joint_states": topics["joint_states"]}}
     if not has_patient:  # a profile to hold the recorded person: the session's name as its pseudonymous id
         patient.update(id=re.sub(r"[^A-Za-z0-9_.-]+", "-", bag.path.stem).strip("-.") or "session", side="right")
-    if bag.wrench is None:
+    if not topics["wrench"]:  # (none: the scenario's own patient, if any)
         patient = None
     doc = {"extends": str(scenario.resolve()),
            "name": f"replay-of-{bag.path.stem}",
-           "duration": round(bag.duration_s, 9),
-           "task": session_task(bag, robot, base_frames)}
+           "duration": round(bag.duration_s, 9)}
+    if topics["targets"]:  # (none: the scenario's own task, from its own start)
+        doc["task"] = session_task(bag, robot, base_frames)
     if patient is not None:
         doc["patient"] = patient
-    head = (f"# written by `rehabkit replay {bag.path} --scenario {scenario}`: the session's start posture, duration,\n"
-            f"# targets as shown and the person's recorded wrench, on {scenario.name}\n")
+    took = [w for w, role in (("targets as shown", "targets"), ("the person's recorded wrench", "wrench"))
+            if topics[role]]
+    head = (f"# written by `rehabkit replay {bag.path} --scenario {scenario}`: the session's duration"
+            f"{', start posture' if topics['targets'] else ''}{''.join(', ' + w for w in took)}, on {scenario.name}\n")
     tmp = path.with_name(f".{path.name}.part")
     tmp.write_text(head + yaml.safe_dump(doc, sort_keys=False, width=120, default_flow_style=None))
     tmp.replace(path)

@@ -19,6 +19,11 @@ TOPICS = {"joint_states": "/joint_states", "wrench": "/wrench", "targets": "/tar
 TYPES = {"joint_states": ("sensor_msgs/msg/JointState",),
          "wrench": ("geometry_msgs/msg/WrenchStamped",),
          "targets": ("geometry_msgs/msg/PointStamped", "geometry_msgs/msg/PoseStamped", "sensor_msgs/msg/JointState")}
+FIX = {"joint_states": "name the joint states' topic: --topics joint_states=TOPIC",
+       "wrench": "name the person's wrench topic: --topics wrench=TOPIC; or --topics wrench= to replay without it, "
+                 "the scenario's own patient (if any) in the robot",
+       "targets": "name the targets' topic: --topics targets=TOPIC; or --topics targets= to replay without them, "
+                  "on the scenario's own task"}
 GAP_PERIODS = 5.0  # a stretch this many usual periods long without a message is a gap
 GAP_MIN_S = 0.05  # ... and at least this long (a 1 kHz topic missing 6 ms is jitter, not a gap)
 
@@ -94,14 +99,15 @@ class BagError(ScenarioError):
 
 
 def parse_topics(items: list[str]) -> dict[str, str]:
-    """``ROLE=TOPIC`` items (each may hold several, comma-separated) over the defaults."""
+    """``ROLE=TOPIC`` items (each may hold several, comma-separated) over the defaults; ``ROLE=`` for none (the
+    wrench or the targets: the replay keeps the scenario's own person or task)."""
     topics = dict(TOPICS)
     for item in items:
         for pair in filter(None, item.split(",")):
             role, sep, topic = pair.partition("=")
-            if not sep or role.strip() not in TOPICS or not topic.strip():
+            if not sep or role.strip() not in TOPICS or (role.strip() == "joint_states" and not topic.strip()):
                 raise BagError("--topics", "", f"'{pair}': give ROLE=TOPIC with ROLE one of {', '.join(TOPICS)} "
-                                                f"(e.g. --topics wrench=/cuff/wrench)")
+                                                f"(e.g. --topics wrench=/cuff/wrench; wrench= or targets= for none)")
             topics[role.strip()] = topic.strip()
     return topics
 
@@ -137,7 +143,7 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
     from rosbags.typesys import Stores, get_typestore
 
     path, topics = Path(path), {**TOPICS, **(topics or {})}
-    topics = {role: topic for role, topic in topics.items() if role in roles or role == "joint_states"}
+    topics = {role: topic for role, topic in topics.items() if (role in roles or role == "joint_states") and topic}
     if not path.exists():
         raise BagError(path, "", "no such bag (a rosbag2 folder with metadata.yaml, an .mcap file, or a ROS 1 .bag)")
     raw: dict[str, list] = {role: [] for role in TOPICS}
@@ -147,10 +153,7 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
             listing = ", ".join(f"{t} ({m})" for t, m in sorted(have.items()))
             for role, topic in topics.items():
                 if topic not in have:
-                    if role == "joint_states":
-                        raise BagError(path, role, f"no topic {topic}; the bag has {listing} (name the joint states' "
-                                                    f"topic: --topics joint_states=TOPIC)")
-                    continue  # the wrench and targets are optional
+                    raise BagError(path, role, f"no topic {topic}; the bag has {listing} ({FIX[role]})")
                 if have[topic] not in TYPES[role]:
                     raise BagError(path, role, f"{topic} is {have[topic]}; {role} must be "
                                                 f"{' or '.join(TYPES[role])}")
