@@ -40,8 +40,14 @@ CASES = [  # (name, kind, the robot section)
     ("Kinova Jaco2", "assistive arm (wheelchair)",
      _urdf(ROBOTS / "kinova_description/robots/kinova.urdf", "j2s6s200_end_effector")),
     ("Unitree Z1", "arm", _urdf(ROBOTS / "z1_description/urdf/z1.urdf", "gripperMover")),
-    ("Solo12", "quadruped (fixed base here)", _urdf(ROBOTS / "solo_description/robots/solo12.urdf", "FL_FOOT")),
+    ("Solo12", "quadruped, fixed base", _urdf(ROBOTS / "solo_description/robots/solo12.urdf", "FL_FOOT")),
+    ("Solo12", "quadruped, floating on its feet",
+     _urdf(ROBOTS / "solo_description/robots/solo12.urdf", "FL_FOOT", floating=True,
+           feet=["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"], base={"position": [0, 0, 0.235]})),
 ]
+# a floating robot moves between postures it can stand in (its SRDF's standing, and a crouch), not anywhere in range
+STANDING = {"Solo12": ([0.1, 0.8, -1.6, -0.1, 0.8, -1.6, 0.1, -0.8, 1.6, -0.1, -0.8, 1.6],
+                       [0.1, 1.0, -2.0, -0.1, 1.0, -2.0, 0.1, -1.0, 2.0, -0.1, -1.0, 2.0])}
 
 
 def meshes(path: Path) -> str:
@@ -84,6 +90,8 @@ def main() -> None:
         span = lim.upper - lim.lower  # (a move the plan makes within the speed limits: a cubic peaks at 1.5 × mean)
         a = lim.lower + 0.3 * span
         b = a + np.minimum(0.3 * span, 0.5 * lim.velocity * 2.0 / 1.5)
+        if section.get("floating"):
+            a, b = (np.array(p) for p in STANDING[name])
         n = robot.model.dof
         from rehabkit.core.safety.stopping import joint_inertia
 

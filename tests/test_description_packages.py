@@ -3,6 +3,7 @@ meshes, COLLADA converted) and UR5 from example-robot-data (package:// URIs foun
 Pinocchio and MuJoCo build the robot from the same resolved description: their forward kinematics and masses
 agree."""
 
+import json
 from pathlib import Path
 
 import mujoco
@@ -60,6 +61,17 @@ def test_a_description_package_with_xacro_and_collada_runs_and_both_engines_agre
     assert stl[0].stat().st_mtime_ns == made
     done = cli("run", "rehab_arm.yaml", "--out", str(tmp_path / "run"), cwd=DATA)
     assert done.returncode == 0, done.stderr
+    # the hand's OBJ (with its material library) is its collision mesh as it is, in its material's colour; what only
+    # the looks need is said once: the base's visual-only STL, the glove's texture
+    model = mujoco.MjModel.from_xml_string(robot.model.mjcf)
+    hand = model.mesh("hand")
+    assert (hand.vertnum[0], hand.facenum[0]) == (8, 12)
+    assert np.allclose(model.geom_rgba[model.body("hand").geomadr[0]], [0.85, 0.72, 0.62, 1.0])
+    assert model.body_mass[model.body("hand").id] == pytest.approx(0.3)
+    notes = [n["text"] for n in json.loads((tmp_path / "run" / "summary.json").read_text())["notes"]]
+    assert notes == ["arm.urdf: MuJoCo simulates and draws each link by its collision geometry; link(s) base_link "
+                     "have a visual and no collision geometry: not drawn; the texture of material(s) glove is not "
+                     "shown (their colour is)"]
 
 
 def test_ur5_from_example_robot_data_as_its_package_ships_it(tmp_path, monkeypatch):
@@ -138,3 +150,47 @@ def test_a_mimic_joint_follows_its_leader_and_is_not_driven(tmp_path, monkeypatc
     leader = plant.read()[0][-1]
     follower = plant.data.qpos[plant.model.jnt_qposadr[plant.model.joint("panda_finger_joint2").id]]
     assert abs(leader - q0[-1]) > 0.001 and abs(follower - leader) < 1e-4
+
+
+SOLO_STANDING = [0.1, 0.8, -1.6, -0.1, 0.8, -1.6, 0.1, -0.8, 1.6, -0.1, -0.8, 1.6]  # its SRDF's "standing"
+
+
+def test_a_floating_quadruped_stands_on_its_feet(tmp_path, monkeypatch):
+    """Solo12 as its package ships it, with a floating base (``floating: true``, its four feet the support): MuJoCo
+    simulates the free root (Pinocchio's model, root locked, agrees on the legs' kinematics), the robot holds its
+    SRDF's standing posture on the floor, level, touching it with its feet only, its base where the legs' forward
+    kinematics and the foot mesh's lowest point put it (within 2 mm: the contacts' softness)."""
+    import pinocchio as pin
+    import trimesh
+
+    from rehabkit.core.run.runner import Runner
+    from rehabkit.core.scenario.loader import load_scenario
+
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    solo = ERD / "share" / "example-robot-data" / "robots" / "solo_description"
+    feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+    section = {"type": "urdf", "file": str(solo / "robots" / "solo12.urdf"), "ee_frame": "FL_FOOT", "floating": True,
+               "feet": feet, "base": {"position": [0, 0, 0.235]}}
+    robot = _robot(section, tmp_path)
+    assert robot.model.floating and robot.model.passive_joints == ["root"] and robot.model.dof == 12
+    assert robot.model.support_geoms == [f"{f}_foot_0" for f in feet]
+    distance, mass = _agreement(robot)
+    assert distance < 1e-9 and mass < 1e-9
+    scenario = tmp_path / "solo.yaml"
+    scenario.write_text(yaml.safe_dump({
+        "name": "solo12-standing", "robot": section, "planner": {"type": "multi-cubic", "segment_durations": [1.0]},
+        "controller": {"type": "joint-pd", "kp": 20, "kd": 0.3},
+        "task": {"targets": [{"name": "stand", "joints_rad": SOLO_STANDING}]}, "duration": 2.0}))
+    runner = Runner(load_scenario(scenario))
+    result = runner.run()
+    assert result.metrics["contact_steps"] == 0  # (the feet on the floor are support)
+    position, quaternion, _, _ = runner.backend.base_state()
+    assert np.degrees(2 * np.arccos(min(1.0, abs(quaternion[0])))) < 0.1  # level
+    model = robot.model.pin_model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, result.trace.q[-1])
+    lowest = trimesh.load(solo / "meshes" / "stl" / "with_foot" / "solo_foot.stl").bounds[0][2]
+    below = max(data.oMf[model.getFrameId(f)].translation[2] for f in feet) + lowest
+    assert position[2] == pytest.approx(-below, abs=0.002)
+    assert np.degrees(np.abs(result.trace.q[-1] - SOLO_STANDING)).max() < 3.0

@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 from rehabkit import hookimpl
-from rehabkit.models.files.mjcf_import import ModelFileConfig, robot_from_file
-from rehabkit.plugin import Context, Robot
+from rehabkit.models.files.mjcf_import import ModelFileConfig, ModelFileError, robot_from_file
+from rehabkit.plugin import Context, Robot, SettingError
 
 
 class MjcfRobot(Robot):
     """Robot from an MJCF file: joints, ranges and effort from the file, speeds from the scenario."""
 
     def __init__(self, config: ModelFileConfig, context: Context):
-        self.model = robot_from_file(context.resolve(config.file), config)
+        try:
+            self.model = robot_from_file(context.resolve(config.file), config)
+        except ModelFileError as exc:
+            if exc.setting is None:
+                raise
+            raise SettingError(exc.setting, str(exc)) from None
 
 
 @hookimpl

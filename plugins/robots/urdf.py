@@ -6,8 +6,8 @@ import pinocchio as pin
 from pydantic import Field
 
 from rehabkit import hookimpl
-from rehabkit.models.files.mjcf_import import ModelFileConfig, robot_from_file
-from rehabkit.models.files.ros_package import DescriptionError, prepared
+from rehabkit.models.files.mjcf_import import ModelFileConfig, ModelFileError, robot_from_file
+from rehabkit.models.files.ros_package import DescriptionError, prepared, visual_only
 from rehabkit.models.strict import FilePath
 from rehabkit.plugin import Context, Robot, SettingError
 
@@ -32,6 +32,8 @@ class UrdfRobot(Robot):
                 path = prepared(path, [context.resolve(p) for p in config.packages], config.xacro_args)
             except DescriptionError as exc:
                 raise SettingError("file", str(exc)) from None
+            if (left := visual_only(path)) is not None and context.note is not None:
+                context.note(0.0, left)
         velocity, effort = {}, {}
         if path.exists():
             urdf = pin.buildModelFromUrdf(str(path))  # MuJoCo's importer keeps ranges, not speeds
@@ -39,7 +41,12 @@ class UrdfRobot(Robot):
                 idx = urdf.joints[jid].idx_v
                 velocity[urdf.names[jid]] = float(urdf.velocityLimit[idx])
                 effort[urdf.names[jid]] = float(urdf.effortLimit[idx])
-        self.model = robot_from_file(path, config, velocity, effort)
+        try:
+            self.model = robot_from_file(path, config, velocity, effort)
+        except ModelFileError as exc:
+            if exc.setting is None:
+                raise
+            raise SettingError(exc.setting, str(exc)) from None
 
 
 @hookimpl

@@ -45,9 +45,28 @@ class ModelFileConfig(StrictModel):
     default_velocity_deg_s: float | None = Field(None, gt=0, description="for joints whose file has no speed limit")
     default_effort: float | None = Field(None, gt=0, description="for joints whose file has no effort limit")
     safe_stop: SafeStop = "hold"
+    floating: bool = Field(False, description="the root moves freely (a legged robot): a free joint at the root, "
+                                              "base is where it starts")
+    feet: list[str] = Field([], description="floating: the links (bodies) whose contact with the floor is support, "
+                                            "not a collision")
 
 
-def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
+ROOT_JOINT = "root"  # a floating robot's free joint (simulated and measured; Pinocchio's model locks it)
+
+
+class ModelFileError(ValueError):
+    """A model file that can't be a robot as configured; ``setting`` names the plugin setting to change (None: the
+    file itself)."""
+
+    def __init__(self, message: str, setting: str | None = None):
+        self.setting = setting
+        super().__init__(message)
+
+
+def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str, floating: bool = False,
+                  feet: tuple[str, ...] = ()) -> tuple[str, str | None, list[str]]:
+    """The robot under one jointless ``base`` body (with a free joint when ``floating``), the end-effector site;
+    returns the XML, the free joint's name (None: fixed) and the feet's geoms (named where they were not)."""
     for key in ("meshdir", "texturedir"):  # assets must still resolve from a temporary copy
         current = getattr(spec, key) or ""
         setattr(spec, key, str((model_dir / current).resolve()))
@@ -61,12 +80,32 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
     movable = [c for c in list(world) if c.tag in ("body", "geom", "site", "frame")]
     taken = {b.get("name") for b in root.iter("body")}
     base = ET.Element("body", {"name": "base" if "base" not in taken else "rehabkit_base"})  # the file's own stays
+    free = None
     for child in movable:
-        if child.tag == "body" and child.find("freejoint") is not None:
-            raise ValueError(f"body '{child.get('name')}' is free-floating; rehabkit robots have a fixed base")
+        if child.tag == "body" and (own := child.find("freejoint")) is not None:
+            if not floating:
+                raise ModelFileError(f"body '{child.get('name')}' is free-floating: set floating: true (and its "
+                                     "feet), or fix it to the world", "floating")
+            child.remove(own)  # (the free joint goes to the base above it: the robot's one root)
+            free = own.get("name")
         world.remove(child)
         base.append(child)
     world.insert(0, base)
+    if floating:
+        # (Pinocchio names frames after bodies and joints alike: the free joint's name must be neither's)
+        taken = {e.get("name") for tag in ("joint", "freejoint", "body", "site") for e in root.iter(tag)}
+        free = free or (ROOT_JOINT if ROOT_JOINT not in taken else f"rehabkit_{ROOT_JOINT}")
+        base.insert(0, ET.Element("freejoint", {"name": free}))
+    support = []
+    bodies = {b.get("name"): b for b in root.iter("body")}
+    for foot in feet:
+        if foot not in bodies:
+            links = ", ".join(sorted(n for n in bodies if n))
+            raise ModelFileError(f"'{foot}' is not a link of the robot; links: {links}", "feet")
+        for i, geom in enumerate(g for g in bodies[foot].findall("geom")):
+            if geom.get("contype", "1") != "0" or geom.get("conaffinity", "1") != "0":
+                geom.set("name", geom.get("name") or f"{foot}_foot_{i}")
+                support.append(geom.get("name"))
     sites = {s.get("name") for s in root.iter("site")}
     if ee_frame not in sites:
         body = next((b for b in root.iter("body") if b.get("name") == ee_frame), None)
@@ -74,7 +113,7 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str) -> str:
             names = sorted(n for n in sites | {b.get("name") for b in root.iter("body")} if n)
             raise ValueError(f"ee_frame '{ee_frame}' is neither a site nor a body; choices: {', '.join(names)}")
         ET.SubElement(body, "site", {"name": f"{ee_frame}_ee", "size": "0.01"})
-    return ET.tostring(root, encoding="unicode")
+    return ET.tostring(root, encoding="unicode"), free, support
 
 
 def _load_spec(path: Path) -> mujoco.MjSpec:
@@ -111,8 +150,12 @@ def robot_from_file(
     except Exception as exc:  # MuJoCo's own message says what and where
         raise ValueError(f"MuJoCo cannot load {path}: {exc}") from None
     joints = [j for j in range(model.njnt) if int(model.jnt_type[j]) in _MOVABLE]
-    if len(joints) != model.njnt:
-        raise ValueError(f"{path.name}: only hinge and slide joints are supported for robots")
+    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    if len(joints) + (len(free) if config.floating else 0) != model.njnt:
+        raise ValueError(f"{path.name}: only hinge and slide joints are supported for robots (and a free root joint "
+                         "with floating: true)")
+    if config.feet and not config.floating:
+        raise ModelFileError("feet go with floating: true (a fixed robot stands on its base)", "feet")
     # a joint coupled to another (a URDF's <mimic>, which MuJoCo imports as a joint equality) follows it: simulated and
     # measured, not driven
     followers = [int(model.eq_obj1id[e]) for e in range(model.neq)
@@ -162,14 +205,15 @@ def robot_from_file(
         upper.append(float(hi))
         vel.append(float(v))
         eff.append(float(e))
-    xml = _rerooted_xml(spec, path.parent, config.ee_frame)
+    xml, root_joint, support = _rerooted_xml(spec, path.parent, config.ee_frame, config.floating, tuple(config.feet))
     named_site = _has_site(xml, config.ee_frame)
     site = config.ee_frame if named_site else f"{config.ee_frame}_ee"
     return RobotModel(
         name=spec.modelname or path.stem, mjcf=xml, joint_names=names,
         limits=JointLimits(*(np.array(v) for v in (lower, upper, vel, eff))), ee_site=site,
         base_pose=config.base.matrix(), safe_stop=config.safe_stop, ee_body=None if named_site else config.ee_frame,
-        passive_joints=[model.joint(j).name for j in followers],
+        passive_joints=[model.joint(j).name for j in followers] + ([root_joint] if root_joint else []),
+        floating=config.floating, support_geoms=support,
     )
 
 

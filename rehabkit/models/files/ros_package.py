@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
-CONVERTED = (".dae",)  # mesh formats MuJoCo cannot read, converted to STL
+CONVERTED = (".dae", ".ply")  # mesh formats MuJoCo cannot read, converted to STL
 
 
 class DescriptionError(ValueError):
@@ -93,7 +93,8 @@ def _written(path: Path, data: bytes) -> Path:
 
 
 def converted(mesh: Path) -> Path:
-    """A COLLADA mesh as an STL MuJoCo loads (its scenes' geometry in the file's units, merged), once per content."""
+    """A COLLADA (or PLY) mesh as an STL MuJoCo loads (its scenes' geometry in the file's units, merged), once per
+    content."""
     import trimesh
 
     digest = hashlib.sha256(mesh.read_bytes()).hexdigest()[:20]
@@ -102,7 +103,7 @@ def converted(mesh: Path) -> Path:
         return out
     loaded = trimesh.load(str(mesh), force="mesh")
     if loaded.is_empty:
-        raise DescriptionError(str(mesh), "the COLLADA file holds no triangles", "export the mesh with its geometry")
+        raise DescriptionError(str(mesh), "the file holds no triangles", "export the mesh with its geometry")
     return _written(out, loaded.export(file_type="stl"))
 
 
@@ -132,3 +133,21 @@ def prepared(path: Path, packages: Sequence[Path] = (), xacro_args: Mapping[str,
     data = ET.tostring(root, encoding="unicode").encode()
     digest = hashlib.sha256(data).hexdigest()[:20]  # (a folder per content: the file keeps its name, for messages)
     return _written(cache_dir() / digest / f"{path.name.removesuffix('.xacro').removesuffix('.urdf')}.urdf", data)
+
+
+def visual_only(path: Path) -> str | None:
+    """What of the (prepared) description at ``path`` only its looks need, which the simulation leaves out, said once
+    (None: nothing): MuJoCo's URDF import keeps each link's collision geometry, in its material's colour, and drops
+    the visual geometry — a link with a visual and no collision is not drawn, a material's texture not shown."""
+    root = ET.parse(path).getroot()
+    textured = sorted({m.get("name", "?") for m in root.iter("material") if m.find("texture") is not None})
+    unseen = [link.get("name", "?") for link in root.iter("link")
+              if link.find("visual") is not None and link.find("collision") is None]
+    said = []
+    if unseen:
+        said.append(f"link(s) {', '.join(unseen)} have a visual and no collision geometry: not drawn")
+    if textured:
+        said.append(f"the texture of material(s) {', '.join(textured)} is not shown (their colour is)")
+    if not said:
+        return None
+    return (f"{path.name}: MuJoCo simulates and draws each link by its collision geometry; " + "; ".join(said))
