@@ -194,3 +194,24 @@ def test_a_floating_quadruped_stands_on_its_feet(tmp_path, monkeypatch):
     below = max(data.oMf[model.getFrameId(f)].translation[2] for f in feet) + lowest
     assert position[2] == pytest.approx(-below, abs=0.002)
     assert np.degrees(np.abs(result.trace.q[-1] - SOLO_STANDING)).max() < 3.0
+
+
+def test_the_engines_are_checked_against_each_other_at_load(tmp_path):
+    """A robot from a file is refused at load when Pinocchio's model and MuJoCo's disagree: here MuJoCo's model is
+    of the arm with its upper arm 1 cm longer and 0.1 kg heavier than the robot Pinocchio was built from — the check
+    finds the end effector up to 1 cm apart and the mass 0.1 kg off; the file's own two engines agree."""
+    from rehabkit.models.files.engine_check import engine_agreement
+    from rehabkit.models.files.mjcf_import import _load_spec
+
+    urdf = ROOT / "examples" / "robots" / "arm4.urdf"
+    robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "tip"}, tmp_path)
+    same = engine_agreement(_load_spec(urdf).compile(), robot.model, "tip")
+    assert same.agree and same.distance_m < 1e-12 and same.mass_pinocchio == pytest.approx(same.mass_mujoco)
+    longer = tmp_path / "arm4.urdf"
+    longer.write_text(urdf.read_text().replace('<child link="forearm"/><origin xyz="0.3 0 0"/>',
+                                               '<child link="forearm"/><origin xyz="0.31 0 0"/>')
+                      .replace('<mass value="1.2"/>', '<mass value="1.3"/>'))
+    other = engine_agreement(_load_spec(longer).compile(), robot.model, "tip")
+    assert not other.agree and 0.005 < other.distance_m <= 0.01 + 1e-9  # (the 1 cm, seen from where the hand is)
+    assert other.mass_mujoco - other.mass_pinocchio == pytest.approx(0.1)
+    assert str(other).startswith("Pinocchio and MuJoCo read this model differently: the end effector 'tip' ")

@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit.models.dh import PoseSpec
+from rehabkit.models.files.engine_check import engine_agreement
 from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
 from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
 from rehabkit.models.strict import FilePath, StrictModel
@@ -208,13 +209,16 @@ def robot_from_file(
     xml, root_joint, support = _rerooted_xml(spec, path.parent, config.ee_frame, config.floating, tuple(config.feet))
     named_site = _has_site(xml, config.ee_frame)
     site = config.ee_frame if named_site else f"{config.ee_frame}_ee"
-    return RobotModel(
+    robot = RobotModel(
         name=spec.modelname or path.stem, mjcf=xml, joint_names=names,
         limits=JointLimits(*(np.array(v) for v in (lower, upper, vel, eff))), ee_site=site,
         base_pose=config.base.matrix(), safe_stop=config.safe_stop, ee_body=None if named_site else config.ee_frame,
         passive_joints=[model.joint(j).name for j in followers] + ([root_joint] if root_joint else []),
         floating=config.floating, support_geoms=support,
     )
+    if not (check := engine_agreement(model, robot, config.ee_frame)).agree:
+        raise ModelFileError(f"{path.name}: {check}")
+    return robot
 
 
 def _has_site(xml: str, name: str) -> bool:
