@@ -175,7 +175,10 @@ def test_a_robot_whose_model_has_meshes_is_drawn_with_them(tmp_path):
     assert box in xml
     vertices = [[0, 0, 0], [0.08, 0, 0], [0, 0.05, 0], [0, 0, 0.03]]
     mesh = " ".join(str(v) for p in vertices for v in p)
-    xml = xml.replace(box, '<geom type="mesh" mesh="tool_tip" mass="0.2" rgba="0.9 0.6 0.1 1"/>')
+    # (the hand's inertia given: Pinocchio's MJCF parser and MuJoCo compute a mesh's otherwise — the load's check of
+    # the two engines refuses the file without it)
+    xml = xml.replace(box, '<inertial pos="0.03 0.01 0.01" mass="0.2" diaginertia="2e-4 2e-4 1e-4"/>'
+                           '<geom type="mesh" mesh="tool_tip" rgba="0.9 0.6 0.1 1"/>')
     xml = xml.replace("<worldbody>", f'<asset><mesh name="tool_tip" vertex="{mesh}"/></asset>\n  <worldbody>', 1)
     (tmp_path / "arm5_mesh.xml").write_text(xml)
     scenario = (robots / "mjcf_arm5.yaml").read_text().replace("file: arm5.xml", "file: arm5_mesh.xml")

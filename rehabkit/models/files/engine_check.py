@@ -42,7 +42,9 @@ class EngineAgreement:
             said.append(f"the end effector '{self.ee_frame}' {self.distance_m:.3g} m apart (at joints "
                         f"{np.round(np.degrees(self.at), 1).tolist()} deg)")
         if not self.mass_agrees:
-            said.append(f"the mass {self.mass_pinocchio:.6g} kg in Pinocchio, {self.mass_mujoco:.6g} kg in MuJoCo")
+            said.append(f"the mass {self.mass_pinocchio:.6g} kg in Pinocchio, {self.mass_mujoco:.6g} kg in MuJoCo (a "
+                        "body whose inertia MuJoCo computes from its geoms, a mesh's for one, and Pinocchio's parser "
+                        "otherwise: give that body an <inertial>)")
         return ("Pinocchio and MuJoCo read this model differently: " + "; ".join(said or ["nothing"])
                 + " (the file's dynamics and kinematics must be one robot: report it with the file)")
 
