@@ -211,3 +211,25 @@ def test_a_bridge_started_by_hand_has_the_hosts_watchdog_defaults():
     args = parser().parse_args(["bridge", "hit"])
     assert args.watchdog_ms is None and args.stale_ms is None  # resolved to the host's when the bridge starts
     assert HardwareConfig().bridge_watchdog_ms == 50.0 and HardwareConfig().bridge_stale_ms == 10.0
+
+
+def test_a_reset_sent_again_keeps_the_ramp_in_after_a_clear(hit, tmp_path):
+    """The first session after an e-stop was cleared ramps in; a host whose reset's answer came late sends the reset
+    again — the second reset must not lose the ramp the first one took from the latch (it did: a loaded machine's
+    session after a clear started at full stiffness)."""
+    from rehabkit.core.safety.estop import EStopLatch
+    from rehabkit.hardware.link.protocol import RAMP_IN
+
+    latch = EStopLatch(tmp_path / "hit-1.json", "hit-1")
+    latch.press("test", "host")
+    latch.clear("J. Doe")
+    host = Host(Bridge(MujocoPlant(hit), watchdog_s=1.0, latch=latch))
+    host.send(Q0, CMD_RESET)
+    first = host.tick()[3]
+    host.send(Q0, CMD_RESET)  # (sent again)
+    again = host.tick()[3]
+    assert first & RAMP_IN and again & RAMP_IN and not latch.take_ramp_in()  # (taken once)
+    host.state = host.tick()
+    host.hold_gravity(5)
+    host.send(Q0, CMD_RESET)  # a new session after commands: no ramp-in any more
+    assert not host.tick()[3] & RAMP_IN

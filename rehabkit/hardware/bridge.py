@@ -158,7 +158,9 @@ class Bridge:
                     continue
                 self.plant.reset(msg.values)
                 self.tau[:] = 0.0
-                ramp = self._ramp_next or (self.latch is not None and self.latch.take_ramp_in())
+                # a reset sent again (its answer late: a loaded host resends) keeps the ramp-in the first one took
+                again = self.waiting and bool(self.status & RAMP_IN)
+                ramp = self._ramp_next or again or (self.latch is not None and self.latch.take_ramp_in())
                 self.hold_q, self.status, self.last_valid = msg.values.copy(), ENABLED | (RAMP_IN if ramp else 0), \
                     np.inf
                 self.waiting, self.since_command, self.held_ticks, self._ramp_next = True, 0, 0, False
