@@ -68,3 +68,24 @@ def test_a_joint_plan_to_where_the_arm_already_is_holds_it():
     assert result.summary["plans"][0]["duration_s"] >= 0.0 and result.metrics["safety_events"] == 0
     held, moving = (np.degrees(np.abs(result.trace.q[k] - np.radians([0, 20, 60, 20]))).max() for k in (490, 990))
     assert held < 0.01 and moving > 1.0  # held until the replan to 'left' at 0.5 s
+
+
+def test_a_plan_from_a_joint_resting_a_hair_past_its_range_may_stay_there_not_go_further():
+    """A joint resting at its limit (a target exactly there, a simulated limit giving a little) starts its plan a
+    hair past the range: the plan is refused only if it goes further out — not for where the robot already is."""
+    from rehabkit.core.kinds.interfaces import Plan
+    from rehabkit.core.setup.limits import plan_breach
+    from rehabkit.cspace.timing import RestToRestPath
+
+    runner = Runner(load_scenario(EXAMPLES / "urdf_arm4.yaml"))
+    model = runner.build().robot.model
+    upper = model.limits.upper[1]
+    start = np.array([0.0, upper + 6.5e-8, 0.5, 0.0])  # (the excess a new user met: 3.7e-6 deg)
+
+    def plan(to: np.ndarray) -> Plan:
+        return Plan(RestToRestPath(np.array([start, to]), np.array([1.0])))
+
+    assert plan_breach(plan(start + [0.3, 0.0, 0.0, 0.0]), model) is None  # stays there
+    assert plan_breach(plan(start - [0.0, 0.2, 0.0, 0.0]), model) is None  # comes back in
+    further = plan_breach(plan(start + [0.0, 0.01, 0.0, 0.0]), model)  # goes further out: refused
+    assert further.joint == model.joint_names[1] and further.quantity == "position" and further.value > start[1]

@@ -128,12 +128,13 @@ class LimitBreach:
 
 
 def first_breach(limits: JointLimits, names: list[str], q: np.ndarray, qd: np.ndarray | None = None,
-                 times: np.ndarray | None = None, tol: float = 1e-9,
+                 times: np.ndarray | None = None, tol: float | np.ndarray = 1e-9,
                  revolute: np.ndarray | None = None) -> LimitBreach | None:
     """The first sample of ``q`` (n, dof) outside the range or of ``qd`` beyond the speed limit, if any.
 
-    Positions are checked before speeds (a sample breaking both reports its position). ``revolute`` says
-    which joints turn (reported in degrees; the others in metres); default all.
+    Positions are checked before speeds (a sample breaking both reports its position); ``tol`` is how far past its
+    range a joint may be (per joint, or one for all). ``revolute`` says which joints turn (reported in degrees; the
+    others in metres); default all.
     """
     def turns(j: int) -> bool:
         return True if revolute is None else bool(revolute[j])
@@ -168,4 +169,9 @@ def plan_breach(plan, model) -> LimitBreach | None:
     sampled every ``CHECK_DT``."""
     ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
     qs, qds, _ = plan.trajectory.sample(ts)
-    return first_breach(model.limits, model.joint_names, qs, qds, ts, revolute=model.revolute)
+    # a plan starts where the robot is: a joint resting a hair past its range (a simulated limit gives a little, a
+    # target exactly at the limit) may stay there, not go further
+    lim = model.limits
+    start = np.maximum(np.maximum(lim.lower - qs[0], qs[0] - lim.upper), 0.0)
+    return first_breach(lim, model.joint_names, qs, qds, ts, tol=np.maximum(1e-9, start + 1e-12),
+                        revolute=model.revolute)
