@@ -215,3 +215,25 @@ def test_the_engines_are_checked_against_each_other_at_load(tmp_path):
     assert not other.agree and 0.005 < other.distance_m <= 0.01 + 1e-9  # (the 1 cm, seen from where the hand is)
     assert other.mass_mujoco - other.mass_pinocchio == pytest.approx(0.1)
     assert str(other).startswith("Pinocchio and MuJoCo read this model differently: the end effector 'tip' ")
+
+
+def test_the_robot_file_itself_may_be_a_package_uri(tmp_path, monkeypatch):
+    """``file: package://example-robot-data/robots/ur_description/urdf/ur5_robot.urdf`` as ROS tools take it; the
+    package not found is said at robot.file, with where it looked."""
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
+    uri = "package://example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+    (tmp_path / "ur5.yaml").write_text(yaml.safe_dump({
+        "name": "ur5-by-uri", "robot": {"type": "urdf", "file": uri, "ee_frame": "tool0"},
+        "planner": {"type": "multi-cubic", "segment_durations": [1.0]}, "controller": {"type": "joint-pd"},
+        "task": {"targets": [{"name": "A", "joints_deg": [0, -90, 90, 0, 0, 0]},
+                             {"name": "B", "joints_deg": [10, -80, 80, 0, 0, 0]}]}, "duration": 1.0}))
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    lost = cli("validate", "ur5.yaml", cwd=tmp_path)
+    assert lost.returncode == 2
+    line = next(i for i, text in enumerate((tmp_path / "ur5.yaml").read_text().splitlines(), 1) if uri in text)
+    assert lost.stderr.startswith(f"ur5.yaml:{line}:")
+    assert f"robot.file: robot 'urdf': {uri}: no package 'example-robot-data' found" in lost.stderr
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    found = cli("validate", "ur5.yaml", cwd=tmp_path)
+    assert found.returncode == 0, found.stderr

@@ -7,7 +7,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.models.files.mjcf_import import ModelFileConfig, ModelFileError, robot_from_file
-from rehabkit.models.files.ros_package import DescriptionError, prepared, visual_only
+from rehabkit.models.files.ros_package import DescriptionError, prepared, resolve_uri, visual_only
 from rehabkit.models.strict import FilePath
 from rehabkit.plugin import Context, Robot, SettingError
 
@@ -26,21 +26,26 @@ class UrdfRobot(Robot):
     loadable first: xacro expanded, package:// and file:// URIs resolved, COLLADA meshes converted."""
 
     def __init__(self, config: UrdfConfig, context: Context):
-        path = context.resolve(config.file)
-        if path.exists():
-            try:
-                path = prepared(path, [context.resolve(p) for p in config.packages], config.xacro_args)
-            except DescriptionError as exc:
-                raise SettingError("file", str(exc)) from None
-            if (left := visual_only(path)) is not None and context.note is not None:
-                context.note(0.0, left)
+        packages = [context.resolve(p) for p in config.packages]
+        try:  # a path, or a URI as ROS tools take one (package://NAME/urdf/robot.urdf, file://)
+            path = (resolve_uri(config.file, context.scenario_dir, packages) if "://" in config.file
+                    else context.resolve(config.file))
+        except DescriptionError as exc:
+            raise SettingError("file", str(exc)) from None
+        if not path.exists():
+            raise SettingError("file", f"no such file: {path}")
+        try:
+            path = prepared(path, packages, config.xacro_args)
+        except DescriptionError as exc:
+            raise SettingError("file", str(exc)) from None
+        if (left := visual_only(path)) is not None and context.note is not None:
+            context.note(0.0, left)
         velocity, effort = {}, {}
-        if path.exists():
-            urdf = pin.buildModelFromUrdf(str(path))  # MuJoCo's importer keeps ranges, not speeds
-            for jid in range(1, urdf.njoints):
-                idx = urdf.joints[jid].idx_v
-                velocity[urdf.names[jid]] = float(urdf.velocityLimit[idx])
-                effort[urdf.names[jid]] = float(urdf.effortLimit[idx])
+        urdf = pin.buildModelFromUrdf(str(path))  # MuJoCo's importer keeps ranges, not speeds
+        for jid in range(1, urdf.njoints):
+            idx = urdf.joints[jid].idx_v
+            velocity[urdf.names[jid]] = float(urdf.velocityLimit[idx])
+            effort[urdf.names[jid]] = float(urdf.effortLimit[idx])
         try:
             self.model = robot_from_file(path, config, velocity, effort)
         except ModelFileError as exc:

@@ -2,7 +2,8 @@
 
 A base file (``extends:``) that names ``file: arm4.urdf`` means the URDF beside the base, wherever the scenario
 extending it lives: such a relative path is made absolute from the folder of the file it was written in (its
-value's mark). The scenario's own relative paths stay as written (its run's snapshot keeps them portable).
+value's mark). The scenario's own relative paths stay as written (its run's snapshot keeps them portable); a URI
+(``package://``, ``file://``) is left as it is, for the plugin to resolve.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ def anchor_file_settings(src: Source, scenario: BaseModel, path: Path) -> bool:
     for loc, value in marked_settings(scenario, FILE_SETTING):
         mark = src.value_marks.get(loc)
         written = Path(mark.file).resolve() if mark is not None and not mark.file.startswith("<") else here
-        if written != here and not Path(value).expanduser().is_absolute():
+        if written != here and "://" not in value and not Path(value).expanduser().is_absolute():
             _set_at(src.data, loc, str((written.parent / value).resolve()))
             changed = True
     return changed
