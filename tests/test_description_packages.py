@@ -181,8 +181,9 @@ def test_a_floating_quadruped_stands_on_its_feet(tmp_path, monkeypatch):
     scenario.write_text(yaml.safe_dump({
         "name": "solo12-standing", "robot": section, "planner": {"type": "multi-cubic", "segment_durations": [1.0]},
         "controller": {"type": "joint-pd", "kp": 20, "kd": 0.3},
-        "task": {"targets": [{"name": "stand", "joints_rad": SOLO_STANDING}]}, "duration": 2.0}))
-    runner = Runner(load_scenario(scenario))
+        "task": {"targets": [{"name": "stand", "joints_rad": SOLO_STANDING}]}, "duration": 2.0,
+        "ros": {"bag": True}}))
+    runner = Runner(load_scenario(scenario), out_dir=tmp_path / "run")
     result = runner.run()
     assert result.metrics["contact_steps"] == 0  # (the feet on the floor are support)
     position, quaternion, _, _ = runner.backend.base_state()
@@ -194,6 +195,24 @@ def test_a_floating_quadruped_stands_on_its_feet(tmp_path, monkeypatch):
     below = max(data.oMf[model.getFrameId(f)].translation[2] for f in feet) + lowest
     assert position[2] == pytest.approx(-below, abs=0.002)
     assert np.degrees(np.abs(result.trace.q[-1] - SOLO_STANDING)).max() < 3.0
+    # its bag: every link of its own URDF in the tf tree (the feet, fixed links, on /tf_static as the URDF places
+    # them), and the floating base where the simulation has it, at the log rate
+    import xml.etree.ElementTree as ET
+
+    from tests.test_ros_bag import read
+
+    _, messages = read(tmp_path / "run" / "run.mcap")
+    own = {link.get("name") for link in ET.fromstring(messages["/robot_description"][0][1].data).iter("link")}
+    static = {t.child_frame_id: t for _, m in messages["/tf_static"] for t in m.transforms}
+    moving = {t.child_frame_id: t for t in messages["/tf"][-1][1].transforms}
+    assert own <= set(static) | set(moving)
+    foot = static["FL_FOOT"]
+    assert foot.header.frame_id == "FL_LOWER_LEG"
+    offset = foot.transform.translation
+    assert (offset.x, offset.y, offset.z) == pytest.approx((0.0, 0.008, -0.16), abs=1e-12)  # (its URDF joint's)
+    root = moving["base"]
+    assert root.header.frame_id == "world"  # (its last logged pose, 10 ms before the end: settled)
+    assert root.transform.translation.z == pytest.approx(position[2], abs=1e-4)
 
 
 def test_the_engines_are_checked_against_each_other_at_load(tmp_path):

@@ -41,7 +41,8 @@ def test_the_hit_round_trip_as_a_bag_holds_the_trace_exactly(hit_bag):
                      "/joint_states": ("sensor_msgs/msg/JointState", n),
                      "/reference/joint_states": ("sensor_msgs/msg/JointState", n),
                      "/tf": ("tf2_msgs/msg/TFMessage", n // 10),  # (the log's 100 Hz)
-                     "/targets": ("geometry_msgs/msg/PointStamped", 4),  # (each leg's goal as it begins)
+                     # each leg's goal as it begins, with the hand's orientation (B takes A's)
+                     "/targets": ("geometry_msgs/msg/PoseStamped", 4),
                      # the encoders, as a driver publishes joint angles (500 Hz, with their resolution)
                      "/sensors/encoders/joint_states": ("sensor_msgs/msg/JointState", n // 2)}
     said = result.summary["bag"]["topics"]  # (the summary says what the bag holds)
@@ -76,7 +77,7 @@ def test_the_robot_description_is_the_robot(hit_bag):
     assert worst < 1e-12 and sum(i.mass for i in mine.inertias) == pytest.approx(sum(i.mass for i in theirs.inertias))
     k = 300  # a logged step: /tf's links chained from the world, against the robot's own frames
     tf = {t.child_frame_id: t for t in messages["/tf"][k][1].transforms}
-    (base,) = messages["/tf_static"][0][1].transforms
+    (base,) = [t for t in messages["/tf_static"][0][1].transforms if t.header.frame_id == "world"]
 
     def pose(t) -> np.ndarray:
         r, p = t.transform.rotation, t.transform.translation
@@ -179,7 +180,7 @@ def test_sensor_readings_go_to_their_ros_messages(tmp_path):
         seen += 1
     assert seen >= 5
     sighted = messages["/sensors/camera/target_position"][-1][1]
-    assert sighted.header.frame_id == "base_link"
+    assert sighted.header.frame_id == "base"  # (the L-Exos base link: its model's root body)
     ball = np.array([0.82, 0.33, 0.77]) - np.array([0, 0, 1.2])  # Target 1 in the base frame (shoulder at 1.2 m)
     assert np.linalg.norm([sighted.point.x - ball[0], sighted.point.y - ball[1], sighted.point.z - ball[2]]) < 0.025
 

@@ -41,6 +41,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
         rep = replay_bag(source, args.scenario, parse_topics(args.topics), sets, args.out, progress=True)
         for gap in rep.original.get("gaps", []):
             print(f"  GAP  {gap}: bridged by interpolation")
+    if rep.result.refusal is not None:  # the replayed scenario's first plan cannot be made: bad input, said where
+        print(str(rep.result.refusal), file=sys.stderr)
+        return EXIT_INVALID
     print(rep.table())
     for ev in rep.result.summary["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")

@@ -23,7 +23,7 @@ from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.rehab.replay import Replay, overrides_label
 from rehabkit.rehab.run_outcomes import run_outcomes
-from rehabkit.ros.bag_scenario import joint_order, write_session_scenario
+from rehabkit.ros.bag_scenario import joint_order, shown_targets, write_session_scenario
 from rehabkit.ros.session_bag import TOPICS, SessionBag, read_session
 
 SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was replayed in, beside the replay's outputs
@@ -59,15 +59,14 @@ def session_trace(bag: SessionBag, robot, patient, dt: float) -> Trace:
 def session_reaches(bag: SessionBag, runner: Runner, n: int, dt: float) -> list[Movement]:
     """A movement from each target shown to the next (the last to the end), to the target as the replay had it."""
     a = runner.setup
-    shown = [s for s in a.sc.task.targets if s.name.startswith("shown_")]
-    times = [ev.at for ev in a.sc.task.events if ev.at is not None and ev.sequence]
+    shown = shown_targets(bag)
     out = []
-    for i, (spec, at) in enumerate(zip(shown, times)):
-        k0 = min(n - 1, int(round(at / dt)))
-        k1 = min(n, int(round(times[i + 1] / dt))) if i + 1 < len(times) else n
-        target = a.targets[spec.name]
-        goal = (np.asarray(target.pose[:3, 3], float) if target.pose is not None
-                else runner.robot.model.ee_pose(np.asarray(target.q, float))[:3, 3])
+    for i, target in enumerate(shown):
+        k0 = min(n - 1, int(round(target.t / dt)))
+        k1 = min(n, int(round(shown[i + 1].t / dt))) if i + 1 < len(shown) else n
+        resolved = a.targets[f"shown_{i + 1}"]
+        goal = (np.asarray(resolved.pose[:3, 3], float) if resolved.pose is not None
+                else runner.robot.model.ee_pose(np.asarray(resolved.q, float))[:3, 3])
         out.append(Movement(k0, k1, goal, goal))
     return out
 
@@ -96,8 +95,8 @@ def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str
     out = Path(out_dir) if out_dir is not None else bag_path.resolve().parent / f"{stem}-replay-{label}"
     out.mkdir(parents=True, exist_ok=True)
     path = write_session_scenario(out / SESSION_SCENARIO, scenario, bag, robot, base_frames(robot),
-                                  {**TOPICS, **(topics or {})},
-                                  plain.model.patient is not None)
+                                  {**TOPICS, **(topics or {})}, plain.model.patient is not None,
+                                  plain.model.planner.model_dump().get("segment_durations") is not None)
     loaded = load_scenario(path, overrides, registry)
     runner = Runner(loaded, registry, out, progress=progress)
     result = runner.run()

@@ -46,8 +46,15 @@ def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_fr
     return p, rot
 
 
-def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...]) -> dict:
-    """The ``task:`` section: start where the session started, then a replan to each target when it was shown."""
+def shown_targets(bag: SessionBag) -> list[ShownTarget]:
+    """The targets shown during the session (``shown_1``, ``shown_2``, … in the replay's task, in this order)."""
+    return [t for t in bag.targets if 0.0 <= t.t < bag.duration_s]
+
+
+def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...], timed: bool = False) -> dict:
+    """The ``task:`` section: start where the session started, then a replan to each target when it was shown
+    (``timed``: the planner is timed by ``segment_durations``, one per target: each replan's is the time until the
+    next target was shown, or the session's end)."""
     import pinocchio as pin
 
     model = robot.model
@@ -55,7 +62,9 @@ def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...]) -> dict:
     start = bag.joints.values[0, order]
     targets: list[dict] = [{"name": "start", "joints_rad": [float(v) for v in start]}]
     events = []
-    for i, shown in enumerate(t for t in bag.targets if 0.0 <= t.t < bag.duration_s):
+    shown_all = shown_targets(bag)
+    until = [t.t for t in shown_all[1:]] + [bag.duration_s]
+    for i, shown in enumerate(shown_all):
         name = f"shown_{i + 1}"
         if shown.kind == "joints":
             idx = joint_order(bag, list(model.joint_names), "targets", shown.names)
@@ -66,12 +75,27 @@ def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...]) -> dict:
             if rot is not None:
                 spec["rpy_deg"] = [float(v) for v in np.degrees(pin.rpy.matrixToRpy(rot))]
             targets.append(spec)
-        events.append({"at": round(float(shown.t), 9), "action": "replan", "sequence": [name]})
-    return {"targets": targets, "start": "start", "sequence": ["start"], "events": events}
+        # (a timed planner plans through its via points: from the target before, where the robot should be)
+        event = {"at": round(float(shown.t), 9), "action": "replan",
+                 "sequence": [f"shown_{i}" if i else "start", name] if timed else [name]}
+        if timed:
+            event["planner"] = {"segment_durations": [round(max(until[i] - shown.t, 1e-3), 9)]}
+        events.append(event)
+    task = {"targets": targets, "start": "start", "sequence": ["start"], "events": events}
+    if timed:  # (a timed planner's first plan has a segment: to the first target shown at once, or held till one is)
+        if events and events[0]["at"] < 1e-6:
+            first = events.pop(0)
+            task["sequence"], durations = first["sequence"], first["planner"]["segment_durations"]
+        else:
+            targets.append({"name": "start_held", "same_as": "start"})
+            task["sequence"] = ["start", "start_held"]
+            durations = [round(shown_all[0].t if shown_all else bag.duration_s, 9)]
+        task["segment_durations"] = durations  # (taken out by the caller: the planner's setting)
+    return task
 
 
 def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, base_frames: tuple[str, ...],
-                           topics: dict[str, str], has_patient: bool) -> Path:
+                           topics: dict[str, str], has_patient: bool, timed: bool = False) -> Path:
     """``path``: a scenario extending ``scenario`` with the session's task, duration and recorded person."""
     patient: dict = {"model": {"type": "recorded-wrench", "bag": str(bag.path.resolve()), "topic": topics["wrench"],
                                "joint_states": topics["joint_states"]}}
@@ -83,7 +107,9 @@ def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, b
            "name": f"replay-of-{bag.path.stem}",
            "duration": round(bag.duration_s, 9)}
     if topics["targets"]:  # (none: the scenario's own task, from its own start)
-        doc["task"] = session_task(bag, robot, base_frames)
+        doc["task"] = session_task(bag, robot, base_frames, timed)
+        if timed:
+            doc["planner"] = {"segment_durations": doc["task"].pop("segment_durations")}
     if patient is not None:
         doc["patient"] = patient
     took = [w for w, role in (("targets as shown", "targets"), ("the person's recorded wrench", "wrench"))

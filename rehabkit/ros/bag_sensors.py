@@ -1,8 +1,8 @@
 """A sensor's reading as ROS messages, on topics under ``/sensors/<name>/``, as a ROS driver of such a sensor
 would publish it: a force and torque as ``geometry_msgs/WrenchStamped`` (in the sensor's frame), an RGB image as
 ``sensor_msgs/Image`` (``rgb8``, in a frame named after the sensor), joint angles as ``sensor_msgs/JointState``
-(``joint_states``, the joints named), a seen target as ``geometry_msgs/PointStamped`` (robot base frame), a number as
-``std_msgs/Float64`` and a vector as ``std_msgs/Float64MultiArray`` (its channels named in the layout)."""
+(``joint_states``, the joints named), a seen target as ``geometry_msgs/PointStamped`` (the robot's base link), a
+number as ``std_msgs/Float64`` and a vector as ``std_msgs/Float64MultiArray`` (its channels named in the layout)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 
-BASE_FRAME = "base_link"
 Message = tuple[str, str, dict]  # (topic, message type, message)
 
 
@@ -24,8 +23,10 @@ def _image(rgb: np.ndarray) -> bool:
 
 
 def reading_messages(name: str, reading: dict[str, Any], header: dict, frame: str,
-                     channels: Callable[[str, int], list[str] | None] | None = None) -> Iterator[Message]:
-    """The messages of one reading (``header``: its stamp; ``frame``: where the sensor is)."""
+                     channels: Callable[[str, int], list[str] | None] | None = None,
+                     base_link: str = "base_link") -> Iterator[Message]:
+    """The messages of one reading (``header``: its stamp; ``frame``: where the sensor is; ``base_link``: the robot's
+    base link, the frame of a seen target)."""
     base = f"/sensors/{name}"
     wrench = "force_n" in reading and "torque_nm" in reading
     if wrench:
@@ -43,7 +44,7 @@ def reading_messages(name: str, reading: dict[str, Any], header: dict, frame: st
                                                 "encoding": "rgb8", "is_bigendian": 0, "step": 3 * w,
                                                 "data": np.ascontiguousarray(value).tobytes()})
         elif key == "target_position":
-            yield topic, "geometry_msgs/PointStamped", {"header": {**header, "frame_id": BASE_FRAME},
+            yield topic, "geometry_msgs/PointStamped", {"header": {**header, "frame_id": base_link},
                                                         "point": _vec(value)}
         elif key == "position_rad" and channels is not None and (joints := channels(key, np.size(value))):
             yield (f"{base}/joint_states", "sensor_msgs/JointState",

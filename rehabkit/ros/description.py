@@ -1,25 +1,68 @@
-"""A run's robot as ``/robot_description`` carries it: a URDF robot's own file as written, else a URDF made from the
-robot's Pinocchio model (its joints, limits, link frames and inertias: what ``robot_state_publisher`` and a viewer's
-robot model need; no meshes). Its link names are those the bag's ``/tf`` uses."""
+"""A run's robot as ROS tools see it: ``/robot_description`` and the link tree ``/tf`` and ``/tf_static`` carry.
+
+The links are the robot's bodies as Pinocchio's model holds them (a URDF's links, fixed ones too: MuJoCo keeps them
+as bodies), each under its parent body — moved by a joint, or fixed to it — and the root under ``world`` at the
+robot's base pose. ``/robot_description`` is a URDF robot's own file (a ``.xacro`` expanded), else a URDF made from
+the model with the same links (joints, limits, link frames, inertias; no meshes).
+"""
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
+
+import numpy as np
 
 AXES = {"RX": (1, 0, 0), "RY": (0, 1, 0), "RZ": (0, 0, 1), "PX": (1, 0, 0), "PY": (0, 1, 0), "PZ": (0, 0, 1)}
 
 
-def link_names(model) -> list[str]:
-    """The link each Pinocchio joint moves (its first body frame), the root as ``base_link`` when it has none."""
-    names = ["base_link"] * model.njoints
-    for frame in model.frames:
-        if str(frame.type).endswith("BODY") and names[frame.parentJoint] == "base_link" and frame.parentJoint > 0:
-            names[frame.parentJoint] = frame.name
-    for j in range(1, model.njoints):  # (a joint without a body frame of its own: named after the joint)
-        if names[j] == "base_link":
-            names[j] = f"{model.names[j]}_link"
-    return names
+@dataclass(frozen=True)
+class Link:
+    """A body of the robot: its Pinocchio frame, and its parent's (None: a root, under the world); ``moving`` when a
+    joint (``joint``, Pinocchio's index) lies between the two."""
+
+    name: str
+    frame: int
+    parent: int | None
+    joint: int
+
+    @property
+    def moving(self) -> bool:
+        return self.joint > 0
+
+
+def _is_body(frame) -> bool:
+    return str(frame.type).endswith("BODY") and frame.name != "universe"
+
+
+def links(model) -> list[Link]:
+    """The robot's bodies, parents first (the model's frame order), each with its parent body."""
+    out = []
+    for fid, frame in enumerate(model.frames):
+        if not _is_body(frame):
+            continue
+        p, seen = frame.parentFrame, {fid}
+        while p > 0 and not _is_body(model.frames[p]) and p not in seen:
+            seen.add(p)
+            p = model.frames[p].parentFrame
+        if p in seen:  # (a joint a reduced model locked can be its own parent frame: the last body before it)
+            p = max((i for i in range(fid) if _is_body(model.frames[i]) and model.frames[i].parentJoint in
+                     (frame.parentJoint, model.parents[frame.parentJoint])), default=0)
+        parent = p if p > 0 and _is_body(model.frames[p]) else None
+        above = model.frames[parent].parentJoint if parent is not None else 0
+        out.append(Link(frame.name, fid, parent, frame.parentJoint if frame.parentJoint != above else 0))
+    return out
+
+
+def base_frame(model) -> str:
+    """The name of the robot's base: its first root body."""
+    return next(link.name for link in links(model) if link.parent is None)
+
+
+def relative(data, link: Link) -> np.ndarray:
+    """``link``'s pose in its parent's frame (4x4), from Pinocchio ``data`` after frame kinematics."""
+    child = data.oMf[link.frame]
+    return (data.oMf[link.parent].actInv(child) if link.parent is not None else child).homogeneous
 
 
 def _origin(m) -> str:
@@ -30,46 +73,89 @@ def _origin(m) -> str:
     return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
 
 
+def _joint_axis(joint) -> tuple[tuple[float, float, float], bool]:
+    kind = joint.shortname().removeprefix("JointModel")
+    if kind in AXES:
+        return AXES[kind], kind.startswith("P")
+    if kind in ("RevoluteUnaligned", "PrismaticUnaligned"):
+        return tuple(joint.extract().axis), kind.startswith("Prismatic")
+    raise ValueError(f"a {kind} joint has no URDF form here")
+
+
+def _inertial(inertia) -> str:
+    c, m = inertia.lever, inertia.inertia
+    moments = " ".join(f'i{a}="{m[r, k]:.17g}"' for a, r, k in (("xx", 0, 0), ("xy", 0, 1), ("xz", 0, 2),
+                                                              ("yy", 1, 1), ("yz", 1, 2), ("zz", 2, 2)))
+    return (f'    <inertial><origin xyz="{c[0]:.17g} {c[1]:.17g} {c[2]:.17g}"/><mass value="{inertia.mass:.17g}"/>'
+            f"<inertia {moments}/></inertial>")
+
+
+def _fixed(parent: str, child: str, placement) -> list[str]:
+    return [f'  <joint name={quoteattr(f"{parent}_to_{child}")} type="fixed">',
+            f"    <parent link={quoteattr(parent)}/><child link={quoteattr(child)}/>", f"    {_origin(placement)}",
+            "  </joint>"]
+
+
 def urdf_from_model(model, name: str, limits=None) -> str:
-    """A URDF of Pinocchio ``model`` (revolute and prismatic joints, aligned or not), its limits ``limits``' (a
-    robot's ``JointLimits``: the model's own may be unbounded, which URDF cannot say)."""
-    links = link_names(model)
-    out = [f"<robot name={quoteattr(name)}>", '  <link name="base_link"/>']
-    for j in range(1, model.njoints):
-        joint, inertia = model.joints[j], model.inertias[j]
-        kind = joint.shortname().removeprefix("JointModel")
-        if kind in AXES:
-            axis, prismatic = AXES[kind], kind.startswith("P")
-        elif kind in ("RevoluteUnaligned", "PrismaticUnaligned"):
-            axis, prismatic = tuple(joint.extract().axis), kind.startswith("Prismatic")
-        else:
-            raise ValueError(f"joint {model.names[j]}: a {kind} joint has no URDF form here")
+    """A URDF of Pinocchio ``model`` with the links :func:`links` gives (revolute and prismatic joints, aligned or
+    not; a joint's inertia on the link in its frame — the body it moves, or a link of the joint's own where the body
+    sits elsewhere), its limits ``limits``' (a robot's ``JointLimits``: the model's own may be unbounded, which URDF
+    cannot say)."""
+    import pinocchio as pin
+
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    tree = links(model)
+    out = [f"<robot name={quoteattr(name)}>"]
+    if any(link.parent is None and link.moving for link in tree):  # (a joint straight off the world)
+        out.append('  <link name="base_link"/>')
+    for link in tree:
+        parent = model.frames[link.parent].name if link.parent is not None else "base_link"
+        up = data.oMf[link.parent] if link.parent is not None else pin.SE3.Identity()
+        if not link.moving:
+            out += [f"  <link name={quoteattr(link.name)}/>"]
+            if link.parent is not None:
+                out += _fixed(parent, link.name, up.actInv(data.oMf[link.frame]))
+            continue
+        joint, j = model.joints[link.joint], link.joint
+        try:
+            axis, prismatic = _joint_axis(joint)
+        except ValueError as exc:
+            raise ValueError(f"joint {model.names[j]}: {exc}") from None
+        at_joint = model.frames[link.frame].placement.isIdentity(1e-12)
+        moved = link.name if at_joint else f"{model.names[j]}_frame"  # the link in the joint's frame
+        out += [f"  <link name={quoteattr(moved)}>", _inertial(model.inertias[j]), "  </link>"]
         i, v = joint.idx_q, joint.idx_v
         lower, upper = (limits.lower[v], limits.upper[v]) if limits is not None else (
             model.lowerPositionLimit[i], model.upperPositionLimit[i])
         effort, speed = (limits.effort[v], limits.velocity[v]) if limits is not None else (
             model.effortLimit[v], model.velocityLimit[v])
-        c, m = inertia.lever, inertia.inertia
-        moments = " ".join(f'i{a}="{m[r, k]:.17g}"' for a, r, k in (("xx", 0, 0), ("xy", 0, 1), ("xz", 0, 2),
-                                                                  ("yy", 1, 1), ("yz", 1, 2), ("zz", 2, 2)))
-        out += [f"  <link name={quoteattr(links[j])}>",
-                f'    <inertial><origin xyz="{c[0]:.17g} {c[1]:.17g} {c[2]:.17g}"/><mass value="{inertia.mass:.17g}"/>'
-                f"<inertia {moments}/></inertial>", "  </link>",
-                f'  <joint name={quoteattr(model.names[j])} type="{"prismatic" if prismatic else "revolute"}">',
-                f"    <parent link={quoteattr(links[model.parents[j]])}/><child link={quoteattr(links[j])}/>",
-                f"    {_origin(model.jointPlacements[j])}",
+        out += [f'  <joint name={quoteattr(model.names[j])} type="{"prismatic" if prismatic else "revolute"}">',
+                f"    <parent link={quoteattr(parent)}/><child link={quoteattr(moved)}/>",
+                f"    {_origin(up.actInv(data.oMi[j]))}",
                 f'    <axis xyz="{axis[0]:.17g} {axis[1]:.17g} {axis[2]:.17g}"/>',
                 f'    <limit lower="{lower:.17g}" upper="{upper:.17g}" effort="{effort:.17g}" '
                 f'velocity="{speed:.17g}"/>',
                 "  </joint>"]
+        if not at_joint:
+            out += [f"  <link name={quoteattr(link.name)}/>"] + _fixed(moved, link.name,
+                                                                    model.frames[link.frame].placement)
     out.append("</robot>")
     return "\n".join(out) + "\n"
 
 
 def robot_description(robot, robot_section, resolve) -> str:
-    """The URDF for ``/robot_description``: the robot's own file when the scenario names a ``.urdf``, else made from
-    its model."""
+    """The URDF for ``/robot_description``: the robot's own file when the scenario names a URDF (a path or a
+    ``package://`` URI; a ``.xacro`` expanded with its arguments), else made from its model."""
+    from rehabkit.models.files.ros_package import resolve_uri
+
     file = getattr(robot_section, "file", None)
-    if isinstance(file, str) and file.lower().endswith(".urdf"):
-        return Path(resolve(file)).read_text()
-    return urdf_from_model(robot.model.pin_model, robot.model.name, robot.model.limits)
+    if not isinstance(file, str) or not file.lower().endswith((".urdf", ".xacro")):
+        return urdf_from_model(robot.model.pin_model, robot.model.name, robot.model.limits)
+    packages = [resolve(p) for p in getattr(robot_section, "packages", [])]
+    path = resolve_uri(file, resolve("."), packages) if "://" in file else resolve(file)
+    if path.suffix == ".xacro":
+        import xacro
+
+        return xacro.process_file(str(path), mappings=dict(getattr(robot_section, "xacro_args", {}))).toxml()
+    return path.read_text()

@@ -90,9 +90,11 @@ class BagError(ScenarioError):
     """A bag that can't be replayed as asked: the ``bag``, the topic ``role`` concerned ('' for the whole bag), and
     what is wrong with the fix (``what``); said at the bag, naming the ``--topics`` role."""
 
-    def __init__(self, bag: Path | str, role: str, what: str):
+    def __init__(self, bag: Path | str, role: str, what: str, more: list[tuple[str, str]] = ()):
         self.bag, self.role, self.what = str(bag), role, what
-        super().__init__([Diagnostic(Mark(str(bag), 0, 0), f"--topics {role}" if role else "", what)])
+        self.problems = [(role, what), *more]  # every role's, said at once
+        super().__init__([Diagnostic(Mark(str(bag), 0, 0), f"--topics {r}" if r else "", w)
+                          for r, w in self.problems])
 
 
 
@@ -151,12 +153,14 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             have = {c.topic: c.msgtype for c in reader.connections}
             listing = ", ".join(f"{t} ({m})" for t, m in sorted(have.items()))
+            problems = []
             for role, topic in topics.items():
                 if topic not in have:
-                    raise BagError(path, role, f"no topic {topic}; the bag has {listing} ({FIX[role]})")
-                if have[topic] not in TYPES[role]:
-                    raise BagError(path, role, f"{topic} is {have[topic]}; {role} must be "
-                                                f"{' or '.join(TYPES[role])}")
+                    problems.append((role, f"no topic {topic}; the bag has {listing} ({FIX[role]})"))
+                elif have[topic] not in TYPES[role]:
+                    problems.append((role, f"{topic} is {have[topic]}; {role} must be {' or '.join(TYPES[role])}"))
+            if problems:
+                raise BagError(path, *problems[0], more=problems[1:])
             wanted = {topics[r]: r for r in topics if topics[r] in have}
             conns = [c for c in reader.connections if c.topic in wanted]
             for conn, log_ns, data in reader.messages(connections=conns):

@@ -71,6 +71,10 @@ class RunTap:
     def reading(self, t: float, name: str, reading: dict[str, Any]) -> None:
         """A sensor's reading (default: ignored)."""
 
+    def logged(self, t: float, k: int) -> None:
+        """The run at a logged step (the log rate: control step ``k``, at ``t``), e.g. to ask the backend for what
+        the trace does not hold (default: nothing)."""
+
     def discard(self) -> None:
         """The run failed: drop whatever was begun (default: nothing)."""
 

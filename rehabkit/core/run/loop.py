@@ -79,7 +79,8 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
     tq, tqd, ttau, packed = trace.q, trace.qd, trace.tau, session.packed  # column views of ``packed``
     record = a.space.recorder(trace, backend)  # what the reference's space records beside the joints
     log, log_every = view.log, sch.log_every
-    next_log = (0 if view.active else -1) if st.next_log is None else st.next_log
+    taps = session.taps  # (extensions' taps see the logged steps too, logged or not)
+    next_log = (0 if view.active or taps else -1) if st.next_log is None else st.next_log
     deferred_log = view.active and backend.realtime
     if deferred_log:
         log.deferred = True
@@ -144,6 +145,8 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
             if k == next_log:
                 next_log += log_every
                 view.record_step(t, k, q, trace)
+                for tap in taps:
+                    tap.logged(t, k)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
                 log.send_one()
             if bar is not None and k % 1000 == 999:
