@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from rehabkit.core.results.metric import Metric
-from rehabkit.core.safety.layer import SafetyEvent
+from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.hardware.link.protocol import STALE
 
 METRICS = (

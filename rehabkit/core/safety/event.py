@@ -1,8 +1,12 @@
-"""What the safety layer did and why: one event (a trip, a clipping episode, a ramp, the brakes)."""
+"""What the safety layer did and why: one event (a trip, a clipping episode, a ramp, the brakes), and clipping steps
+gathered into episodes."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+
+import numpy as np
 
 
 @dataclass
@@ -21,3 +25,26 @@ class SafetyEvent:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+class Clipping:
+    """Torque clipping as interventions: steps clipped in a row (one control period apart) are one episode, its
+    peak (the largest share of a joint's effort limit) and its length kept; a new episode is told to ``note``."""
+
+    def __init__(self, names: list[str], effort: np.ndarray, dt: float, note: Callable[[SafetyEvent], None]):
+        self.names, self.effort, self.dt, self.note = names, effort, dt, note
+        self.episode: SafetyEvent | None = None  # the one under way
+
+    def step(self, t: float, tau: np.ndarray, over: np.ndarray) -> None:
+        """``tau`` was clipped at ``t`` where ``over``."""
+        j = int(np.argmax(np.where(over, np.abs(tau) / self.effort, 0.0)))
+        ep = self.episode
+        if ep is not None and t - ep.data["until_s"] <= 1.5 * self.dt:
+            ep.data["until_s"], ep.data["steps"] = t, ep.data["steps"] + 1
+            if abs(tau[j]) / self.effort[j] > abs(ep.value) / ep.limit:
+                ep.joint, ep.value, ep.limit = self.names[j], float(tau[j]), float(self.effort[j])
+            return
+        self.episode = SafetyEvent(t, "torque-clip", self.names[j], float(tau[j]), float(self.effort[j]),
+                                   f"t={t:.3f}s: commanded torque clipped to the effort limit",
+                                   {"until_s": t, "steps": 1}, level="WARN")
+        self.note(self.episode)

@@ -1,5 +1,5 @@
-"""The envelope's keep-in box (``safety.keep_in``) as the safety layer watches it: world-frame corners, and where a
-point leaves it."""
+"""The envelope's keep-in box (``safety.keep_in``) as the safety layer watches it: world-frame corners, where a
+point leaves it, and the hand watched against it (:class:`KeepIn`)."""
 
 from __future__ import annotations
 
@@ -30,3 +30,26 @@ def box_exit(box: tuple[np.ndarray, np.ndarray], points: np.ndarray) -> tuple[in
     a = int(np.argmax(out[k]))
     below = bool(points[k, a] < lo[a])
     return k, a, "min" if below else "max", float(lo[a] if below else hi[a])
+
+
+class KeepIn:
+    """The box watched: its world corners, and the hand's world position at a posture (``hand(q)``)."""
+
+    def __init__(self, box, base_pose: np.ndarray, hand):
+        if hand is None:
+            raise ValueError("safety.keep_in needs the hand's position; the runner passes it")
+        self.corners, self.hand = world_box(box, base_pose), hand
+
+    def exit(self, q: np.ndarray) -> tuple[float, float, str, dict] | None:
+        """Where the hand at ``q`` is outside the box: (its coordinate, the bound, what to say, the event's data); None
+        inside (or not finite: the non-finite rule has that)."""
+        x = self.hand(q)
+        lo, hi = self.corners
+        if (x >= lo).all() and (x <= hi).all():  # the every-step case, kept cheap
+            return None
+        found = box_exit(self.corners, x[None])
+        if found is None:
+            return None
+        _, a, side, bound = found
+        return (float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
+                {"axis": AXES[a], "side": side, "hand_m": np.round(x, 5).tolist()})

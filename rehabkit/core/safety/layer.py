@@ -28,8 +28,8 @@ from collections.abc import Callable
 import numpy as np
 
 from rehabkit.core.safety.compliance import Compliance
-from rehabkit.core.safety.event import SafetyEvent
-from rehabkit.core.safety.keep_in import AXES, box_exit, world_box
+from rehabkit.core.safety.event import Clipping, SafetyEvent
+from rehabkit.core.safety.keep_in import KeepIn, box_exit
 from rehabkit.core.safety.ramps import Ramps
 from rehabkit.core.safety.stopping import WORDS, Stopping
 from rehabkit.core.scenario.safety import SafetyConfig
@@ -74,13 +74,8 @@ class SafetyLayer:
         self._robot = robot
         self.saturated_steps = 0
         self._dt, self._gain_dt = dt, dt
-        self._clip: SafetyEvent | None = None  # the clipping episode under way
-        self._box = None
-        if config.keep_in is not None:
-            if hand is None:
-                raise ValueError("safety.keep_in needs the hand's position; the runner passes it")
-            self._box = world_box(config.keep_in, robot.base_pose)
-        self._hand = hand
+        self._clipping = Clipping(self.names, self.effort, dt, self.interventions.append)
+        self._box = KeepIn(config.keep_in, robot.base_pose, hand) if config.keep_in is not None else None
         # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
         n = robot.dof
         self._n = n
@@ -135,7 +130,7 @@ class SafetyLayer:
     @property
     def keep_in(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The keep-in box's world corners (min, max) the hand is watched against, if there is one."""
-        return self._box
+        return self._box.corners if self._box is not None else None
 
     def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
@@ -195,7 +190,7 @@ class SafetyLayer:
                     return tau
                 if self.config.torque_policy == "clip":
                     self.saturated_steps += 1
-                    self._clipped(t, tau, over)
+                    self._clipping.step(t, tau, over)
                     np.clip(tau, -self.effort, self.effort, out=tau)
                     if self._box is not None and self._outside_box(t, q, qd):
                         tau[:] = self.stopping.torque(t, q, qd)
@@ -252,34 +247,14 @@ class SafetyLayer:
 
     def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
         """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
-        return box_exit(self._box, points)
+        return box_exit(self._box.corners, points)
 
     def _outside_box(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
-        x = self._hand(q)
-        lo, hi = self._box
-        if (x >= lo).all() and (x <= hi).all():  # the every-step case, kept cheap
-            return False
-        found = box_exit(self._box, x[None])
-        if found is None:  # NaN: the non-finite rule has it
-            return False
-        _, a, side, bound = found
-        self._trip(t, q, "keep-in", None, float(x[a]), bound, f"hand outside the keep-in box ({AXES[a]} {side})",
-                   {"axis": AXES[a], "side": side, "hand_m": np.round(x, 5).tolist()}, qd=qd)
-        return True
-
-    def _clipped(self, t: float, tau: np.ndarray, over: np.ndarray) -> None:
-        """Clipping steps in a row are one intervention; its peak and length are kept."""
-        j = int(np.argmax(np.where(over, np.abs(tau) / self.effort, 0.0)))
-        ep = self._clip
-        if ep is not None and t - ep.data["until_s"] <= 1.5 * self._dt:
-            ep.data["until_s"], ep.data["steps"] = t, ep.data["steps"] + 1
-            if abs(tau[j]) / self.effort[j] > abs(ep.value) / ep.limit:
-                ep.joint, ep.value, ep.limit = self.names[j], float(tau[j]), float(self.effort[j])
-            return
-        self._clip = SafetyEvent(t, "torque-clip", self.names[j], float(tau[j]), float(self.effort[j]),
-                                 f"t={t:.3f}s: commanded torque clipped to the effort limit",
-                                 {"until_s": t, "steps": 1}, level="WARN")
-        self._note(self._clip)
+        found = self._box.exit(q)
+        if found is not None:
+            value, bound, message, data = found
+            self._trip(t, q, "keep-in", None, value, bound, message, data, qd=qd)
+        return found is not None
 
     def _note(self, event: SafetyEvent) -> None:
         self.interventions.append(event)
