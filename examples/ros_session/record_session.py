@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rehabkit.models.hand_force import least_wrenches
+
 HERE = Path(__file__).resolve().parent
 EPOCH_NS = 1_764_000_000 * 1_000_000_000  # the session's wall-clock start (stamps are Unix time, as a robot's are)
 TOPICS = {"joint_states": "/joint_states", "wrench": "/wrench", "targets": "/targets"}
@@ -27,33 +29,13 @@ TOPICS = {"joint_states": "/joint_states", "wrench": "/wrench", "targets": "/tar
 
 @functools.lru_cache(maxsize=4)
 def run_session(scenario: Path):
-    """The session itself: the scenario run (once per process) — its trace, plans and robot model."""
+    """The session itself: the scenario run (once per process) — its trace, plans, robot model and task targets."""
     from rehabkit.api import load_scenario
     from rehabkit.core.run.runner import Runner
 
     runner = Runner(load_scenario(scenario))
     result = runner.run()
-    return result.trace, result.summary["plans"], runner.robot.model
-
-
-def task_targets(scenario: Path) -> list:
-    from rehabkit.api import load_scenario
-
-    return load_scenario(scenario).model.task.targets
-
-
-def cuff_wrenches(q: np.ndarray, tau_h: np.ndarray, model, frame: int) -> np.ndarray:
-    """The person's wrench on the cuff at ``frame`` (its own axes) per step: the least one whose joint torques are the
-    person's (Jᵀw = τ_h, J the frame's Jacobian), as a six-axis sensor there would measure it."""
-    import pinocchio as pin
-
-    pm = model.pin_model
-    data = pm.createData()
-    out = np.zeros((len(q), 6))
-    for k in range(len(q)):
-        J = pin.computeFrameJacobian(pm, data, q[k], frame, pin.LOCAL)
-        out[k] = J @ np.linalg.lstsq(J.T @ J, tau_h[k], rcond=None)[0]
-    return out
+    return result.trace, result.summary["plans"], runner.robot.model, runner.sc.task.targets
 
 
 def record(bag: Path, scenario: Path = HERE / "arm4_session.yaml", topics: dict[str, str] | None = None,
@@ -62,7 +44,7 @@ def record(bag: Path, scenario: Path = HERE / "arm4_session.yaml", topics: dict[
     """Run ``scenario`` and write its session to the rosbag2 folder ``bag`` (the wrench in ``hand_frame``, default
     the robot's end effector); returns each topic's message count."""
     topics = {**TOPICS, **(topics or {})}
-    tr, plans, model = run_session(Path(scenario).resolve())
+    tr, plans, model, specs = run_session(Path(scenario).resolve())
     pm = model.pin_model
     hand_frame = hand_frame or pm.frames[model.ee_frame_id].name
     if not pm.existFrame(hand_frame):
@@ -70,11 +52,12 @@ def record(bag: Path, scenario: Path = HERE / "arm4_session.yaml", topics: dict[
                          f"{', '.join(f.name for f in pm.frames[1:])})")
     if tr.tau_h is None:
         raise SystemExit(f"error: {scenario} has no simulated person: there is no wrench to record")
-    wrench = cuff_wrenches(tr.q, tr.tau_h, model, pm.getFrameId(hand_frame))
+    # the person's wrench on the cuff, as a six-axis sensor in the hand's frame measures it
+    wrench = least_wrenches(pm, tr.q, tr.tau_h, pm.getFrameId(hand_frame))
     world = np.asarray(model.base_pose, float)
     shown = [(p["t"], world @ model.ee_pose(np.radians(p["waypoints_deg"][-1])))
              for p in plans[1:]]  # each target as shown: the pose its plan reaches, in the world
-    oriented = any(t.rpy_deg is not None or t.orientation_of is not None for t in task_targets(Path(scenario)))
+    oriented = any(t.rpy_deg is not None or t.orientation_of is not None for t in specs)
     if bag.exists():
         shutil.rmtree(bag)
     try:

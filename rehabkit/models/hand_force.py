@@ -23,6 +23,20 @@ def hand_forces(J: np.ndarray, tau: np.ndarray) -> np.ndarray:
     return np.linalg.solve(JJt, (J @ np.asarray(tau, float)[..., None]))[..., 0]
 
 
+def least_wrenches(model, qs: np.ndarray, taus: np.ndarray, frame: int) -> np.ndarray:
+    """The least wrench (force, torque: (n, 6)) at Pinocchio ``model``'s ``frame``, in its own axes, whose joint
+    torques are ``taus`` at postures ``qs`` (Jᵀ w = τ, J the frame's Jacobian): what a six-axis sensor there
+    measures of a person's torques."""
+    import pinocchio as pin
+
+    data = model.createData()
+    out = np.zeros((len(qs), 6))
+    for k in range(len(qs)):
+        J = pin.computeFrameJacobian(model, data, qs[k], frame, pin.LOCAL)
+        out[k] = J @ np.linalg.lstsq(J.T @ J, taus[k], rcond=None)[0]
+    return out
+
+
 class HandForce:
     """The hand force equivalent to joint torques (Jᵀ F = τ, damped least squares), from the robot's Jacobian."""
 

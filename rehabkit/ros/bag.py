@@ -22,6 +22,7 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import BaseState
 from rehabkit.core.plugins.lifecycle import RunTap
+from rehabkit.models.hand_force import least_wrenches
 from rehabkit.ros.bag_sensors import reading_messages
 from rehabkit.ros.description import base_frame, links, relative
 from rehabkit.ros.msgdefs import datatype, msgdef
@@ -162,6 +163,8 @@ def _trace_topics(bag: _Bag, setup, record, start_ns: int, tree: BagRecorder) ->
     person = tr.tau_h is not None and len(tr.t) and np.any(tr.tau_h)
     model = robot.pin_model
     data, hand = model.createData(), robot.ee_frame_id
+    # the person's wrench at the hand, in its axes: the least one whose joint torques are theirs
+    wrenches = least_wrenches(model, tr.q, tr.tau_h, hand) if person else None
     for k in range(len(tr.t)):
         stamp = {"stamp": _stamp(int(ns[k])), "frame_id": ""}
         bag.put("/joint_states", "sensor_msgs/JointState",
@@ -173,9 +176,8 @@ def _trace_topics(bag: _Bag, setup, record, start_ns: int, tree: BagRecorder) ->
                      "velocity": tr.qd_ref[k].tolist(), "effort": []}, int(ns[k]))
         if tr.f_h is not None and np.isfinite(tr.f_h[k]):
             bag.put("/interaction_force", "std_msgs/Float64", {"data": float(tr.f_h[k])}, int(ns[k]))
-        if person:  # the least wrench at the hand whose joint torques are the person's (Jᵀw = τ_h), hand axes
-            J = pin.computeFrameJacobian(model, data, tr.q[k], hand, pin.LOCAL)
-            w = J @ np.linalg.lstsq(J.T @ J, tr.tau_h[k], rcond=None)[0]
+        if person:
+            w = wrenches[k]
             bag.put("/wrench", "geometry_msgs/WrenchStamped",
                     {"header": {**stamp, "frame_id": model.frames[hand].name},
                      "wrench": {"force": _xyz(w[:3]), "torque": _xyz(w[3:])}}, int(ns[k]))

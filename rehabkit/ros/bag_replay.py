@@ -24,6 +24,7 @@ from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.rehab.replay import Replay, overrides_label
 from rehabkit.rehab.run_outcomes import run_outcomes
 from rehabkit.ros.bag_scenario import joint_order, shown_targets, write_session_scenario
+from rehabkit.ros.description import links
 from rehabkit.ros.session_bag import TOPICS, SessionBag, read_session
 
 SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was replayed in, beside the replay's outputs
@@ -31,13 +32,11 @@ SESSION_MEASURES = "session.json"  # the recorded session's own outcome measures
 
 
 def base_frames(robot) -> tuple[str, ...]:
-    """The names the robot's base frame goes by: its model's root bodies, and ``base_link`` (ROS's convention)."""
-    import pinocchio as pin
-
+    """The names the robot's base frame goes by: its model's bodies fixed to the world, and ``base_link`` (ROS's
+    convention)."""
     model = robot.model.pin_model
-    roots = [f.name for f in model.frames if f.parentJoint == 0 and f.type == pin.FrameType.BODY
-             and f.name != "universe"]
-    return (*dict.fromkeys([*roots, "base_link"]),)
+    fixed = [link.name for link in links(model) if model.frames[link.frame].parentJoint == 0]
+    return (*dict.fromkeys([*fixed, "base_link"]),)
 
 
 def session_trace(bag: SessionBag, robot, patient, dt: float) -> Trace:
@@ -64,9 +63,7 @@ def session_reaches(bag: SessionBag, runner: Runner, n: int, dt: float) -> list[
     for i, target in enumerate(shown):
         k0 = min(n - 1, int(round(target.t / dt)))
         k1 = min(n, int(round(shown[i + 1].t / dt))) if i + 1 < len(shown) else n
-        resolved = a.targets[f"shown_{i + 1}"]
-        goal = (np.asarray(resolved.pose[:3, 3], float) if resolved.pose is not None
-                else runner.robot.model.ee_pose(np.asarray(resolved.q, float))[:3, 3])
+        goal = np.asarray(a.targets[f"shown_{i + 1}"].pose[:3, 3], float)  # (a posture's too: its hand pose)
         out.append(Movement(k0, k1, goal, goal))
     return out
 

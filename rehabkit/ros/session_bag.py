@@ -114,7 +114,8 @@ def parse_topics(items: list[str]) -> dict[str, str]:
     return topics
 
 
-def _seconds(msg, log_ns: int) -> int:
+def _stamp_ns(msg, log_ns: int) -> int:
+    """A message's header stamp [ns], or the bag's log time where it has none."""
     stamp = getattr(getattr(msg, "header", None), "stamp", None)
     ns = stamp.sec * 1_000_000_000 + stamp.nanosec if stamp is not None else 0
     return ns if ns > 0 else log_ns
@@ -165,7 +166,7 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
             conns = [c for c in reader.connections if c.topic in wanted]
             for conn, log_ns, data in reader.messages(connections=conns):
                 msg = reader.deserialize(data, conn.msgtype)
-                raw[wanted[conn.topic]].append((_seconds(msg, log_ns), conn.msgtype, msg))
+                raw[wanted[conn.topic]].append((_stamp_ns(msg, log_ns), conn.msgtype, msg))
     except BagError:
         raise
     except Exception as exc:  # rosbags' reader errors: a damaged or unknown file
