@@ -112,6 +112,7 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     from rehabkit.cli.estop import clear_over_link
     from rehabkit.core.safety.estop import EStopLatch
     from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.bridge_clocks import serve
     from rehabkit.hardware.link.protocol import ESTOPPED, HOLDING
     from rehabkit.hardware.plant import MujocoPlant
 
@@ -121,7 +122,7 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     assert latch.latched()["by"] == "robot" and bridge.status & ESTOPPED
     restarted = Bridge(MujocoPlant(hit), latch=latch)  # a restart keeps it latched
     assert restarted.status & ESTOPPED and restarted.status & HOLDING
-    thread = threading.Thread(target=restarted.serve, args=(1.0,), daemon=True)
+    thread = threading.Thread(target=serve, args=(restarted, 1.0), daemon=True)
     thread.start()
     try:
         t0 = time.monotonic()

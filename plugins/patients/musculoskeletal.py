@@ -13,37 +13,22 @@ checks the largest, the outcome measures report them.
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 
 import mujoco
 import numpy as np
-from rehabkit_plugins.patients.musculoskeletal_settings import MusculoskeletalConfig
+from rehabkit_plugins.patients.musculoskeletal_settings import MusculoskeletalConfig, per_group, wearable_for
 
 from rehabkit import hookimpl
-from rehabkit.models.wearable import Strap, Wearable
 from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
 from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
 from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
 from rehabkit.musculo.scaling import scale_arm
 from rehabkit.musculo.static_opt import StaticOptimisation
-from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, SettingError, suggest
+from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, SettingError
 from rehabkit.sim.mujoco import span
 
 SERIES_EVERY = 10  # control steps between logged samples
 CUFF_ARROW_M_PER_N = 0.01  # the cuff forces drawn 1 cm per N: a 25 N push is a 25 cm arrow
-
-
-def _per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], n: int, what: str,
-               default: float) -> np.ndarray:
-    out = np.full(n, default)
-    names = {g: i for i, g in enumerate(arm_groups)}
-    start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
-    for group, value in values.items():
-        if group not in names:
-            raise SettingError((*what.split("."), group), f"no muscle group '{group}' in this arm"
-                               f"{suggest(group, arm_groups)}")
-        out[start[names[group]] : start[names[group] + 1]] = value
-    return out
 
 
 class Musculoskeletal(EmbodiedPatient):
@@ -66,36 +51,10 @@ class Musculoskeletal(EmbodiedPatient):
         self.config, self.robot, self.dt = config, context.robot, context.control_dt
         self.cat = CATALOGUE[config.model]
         profile = context.patient
-        if profile is not None and profile.side != self.cat.side:
-            raise SettingError("model", f"{config.model} is a {self.cat.side} arm; the profile treats the "
-                               f"{profile.side} side (mirrored arms are not available)")
-        fit = config.fit
-        self.wearable = Wearable(fit.shoulder, fit.forward, fit.up, tuple(Strap(s.segment, s.body, s.position)
-                                 for s in fit.straps)) if fit else self.robot.model.wearable
-        if self.wearable is None:
-            raise SettingError("fit", f"robot '{self.robot.model.name}' declares no fit for a person: give fit "
-                               "(shoulder and straps)")
-        self.wearable.person_axes()  # (a robot's own declaration checked as the scenario's is)
-        bodies = {e.get("name") for e in ET.fromstring(self.robot.model.mjcf).iter("body")}
-        for strap in self.wearable.straps:
-            if strap.body not in bodies:
-                raise SettingError(("fit", "straps") if fit else "fit",
-                                   f"strap on the {strap.segment}: robot '{self.robot.model.name}' has no body "
-                                   f"'{strap.body}'{suggest(strap.body, bodies)}; "
-                                   f"its bodies: {', '.join(sorted(b for b in bodies if b))}")
-        if config.model == "myoelbow" and any(s.segment == "upper_arm" for s in self.wearable.straps):
-            raise SettingError("model", "MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
-        for field, names in (("tremor.amplitude_nm", config.tremor.amplitude_nm),
-                             ("contracture_deg", config.contracture_deg)):
-            for name in names:
-                if name not in self.cat.joints:
-                    raise SettingError((*field.split("."), name),
-                                       f"no joint '{name}' in {config.model}{suggest(name, self.cat.joints)}")
-        if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in self.cat.joints:
-            raise SettingError("synergy", f"{config.model} has no shoulder")
+        self.wearable = wearable_for(config, self.cat, self.robot.model, profile)
         n = len(self.cat.muscles)
-        self.strength = _per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
-        self.reflex_gain = _per_group(config.spasticity.gain, self.cat.groups, n, "spasticity.gain", 0.0)
+        self.strength = per_group(config.weakness, self.cat.groups, n, "weakness", 1.0)
+        self.reflex_gain = per_group(config.spasticity.gain, self.cat.groups, n, "spasticity.gain", 0.0)
         self.spec = load_arm_spec(config.model)
         for name, (lo, hi) in config.contracture_deg.items():
             joint = self.spec.joint(self.cat.joints[name])

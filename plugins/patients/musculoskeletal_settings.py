@@ -3,12 +3,14 @@ parameter with its units; the impairments with the clinical sign they stand for.
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
-from rehabkit.plugin import StrictModel
+from rehabkit.models.wearable import Strap, Wearable
+from rehabkit.plugin import SettingError, StrictModel, suggest
 
 Vec3 = tuple[float, float, float]
 
@@ -116,3 +118,48 @@ class MusculoskeletalConfig(StrictModel):
     scale_to_profile: bool = Field(True, description="stretch the arm's upper arm and forearm to the profile's "
                                                      "segments (upper_arm: shoulder centre to elbow; forearm: elbow "
                                                      "to the middle of the grip)")
+
+def per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], n: int, what: str,
+              default: float) -> np.ndarray:
+    """A value per muscle from ``values`` per muscle group (``what``: the setting, for a name not in the arm)."""
+    out = np.full(n, default)
+    names = {g: i for i, g in enumerate(arm_groups)}
+    start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
+    for group, value in values.items():
+        if group not in names:
+            raise SettingError((*what.split("."), group), f"no muscle group '{group}' in this arm"
+                               f"{suggest(group, arm_groups)}")
+        out[start[names[group]] : start[names[group] + 1]] = value
+    return out
+
+
+def wearable_for(config: MusculoskeletalConfig, cat, robot, profile) -> Wearable:
+    """How the arm (``cat``: its catalogue entry) is strapped into ``robot`` (its model): the scenario's fit, else
+    the robot's own; the settings checked against both (each name used is there) and the ``profile``'s side."""
+    if profile is not None and profile.side != cat.side:
+        raise SettingError("model", f"{config.model} is a {cat.side} arm; the profile treats the {profile.side} side "
+                           "(mirrored arms are not available)")
+    fit = config.fit
+    wearable = Wearable(fit.shoulder, fit.forward, fit.up, tuple(Strap(s.segment, s.body, s.position)
+                        for s in fit.straps)) if fit else robot.wearable
+    if wearable is None:
+        raise SettingError("fit", f"robot '{robot.name}' declares no fit for a person: give fit (shoulder and straps)")
+    wearable.person_axes()  # (a robot's own declaration checked as the scenario's is)
+    bodies = {e.get("name") for e in ET.fromstring(robot.mjcf).iter("body")}
+    for strap in wearable.straps:
+        if strap.body not in bodies:
+            raise SettingError(("fit", "straps") if fit else "fit",
+                               f"strap on the {strap.segment}: robot '{robot.name}' has no body "
+                               f"'{strap.body}'{suggest(strap.body, bodies)}; "
+                               f"its bodies: {', '.join(sorted(b for b in bodies if b))}")
+    if config.model == "myoelbow" and any(s.segment == "upper_arm" for s in wearable.straps):
+        raise SettingError("model", "MyoElbow's upper arm is fixed to its trunk; strap its forearm or hand only")
+    for field, names in (("tremor.amplitude_nm", config.tremor.amplitude_nm),
+                         ("contracture_deg", config.contracture_deg)):
+        for name in names:
+            if name not in cat.joints:
+                raise SettingError((*field.split("."), name),
+                                   f"no joint '{name}' in {config.model}{suggest(name, cat.joints)}")
+    if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in cat.joints:
+        raise SettingError("synergy", f"{config.model} has no shoulder")
+    return wearable

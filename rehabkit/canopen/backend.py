@@ -32,12 +32,12 @@ from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.cycle_clock import CycleClock, own_gravity
 from rehabkit.canopen.drive_limits import drive_limits
-from rehabkit.canopen.emcy_codes import describe
 from rehabkit.canopen.injection import inject
 from rehabkit.canopen.master import DriveMaster
 from rehabkit.canopen.simulated.drive import EDS
 from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
+from rehabkit.canopen.start_checks import check_answered, check_no_fault, check_start_posture
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import FollowsReference, Instruments
 from rehabkit.core.kinds.errors import SettingError
@@ -165,26 +165,9 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
             if not math.isnan(self.latency[-1]):
                 break
         else:
-            silent = [self.names[i] for i, got in enumerate(self.master.missed[: self.n]) if got]
-            raise DriveFaultError(f"no TPDOs in answer to {START_CYCLES} SYNCs (from {', '.join(silent)})",
-                                  observable=False)
-        faulted = [i for i, s in enumerate(self.master.states) if s == "FAULT"]
-        if faulted and not cleared:
-            i = faulted[0]
-            code = self.master.remotes[i].sdo[0x603F].raw
-            raise DriveFaultError(f"is in FAULT ({describe(code)}): its fault is reset only once a person has "
-                                  f"cleared the robot's e-stop latch (`rehabkit estop clear {self.latch.name} --by "
-                                  "NAME`)", self.master.ids[i], self.names[i], code, observable=False)
-        off = np.abs(self.master.q - q0)
-        if off.max() > math.radians(1.0):
-            i = int(np.argmax(off))
-            if self.simulated:  # (placed there a moment ago: the drive's units are not the scenario's)
-                raise DriveFaultError(f"placed at {np.degrees(q0[i]):.1f}°, the drive reports "
-                                      f"{np.degrees(self.master.q[i]):.1f}°: its units differ from backend.drives' "
-                                      "(encoder_counts, gear_ratio, direction; `rehabkit drives --drives` takes the "
-                                      "scenario's)", self.master.ids[i], self.names[i], observable=False)
-            raise DriveFaultError(f"the robot is not at the start posture (joint {self.names[i]} off by "
-                                  f"{np.degrees(off[i]):.1f}°): bring it there first", observable=False)
+            check_answered(self.master, self.names, START_CYCLES)
+        check_no_fault(self.master, self.names, cleared, self.latch.name)
+        check_start_posture(self.master, self.names, q0, self.simulated)
         self.q, self.qd = q0.copy(), np.zeros(self.n)
         self._q0, self._cleared = q0, cleared
         self._started, self._fault = False, None
@@ -261,14 +244,9 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         if fault is not None and self._fault is None:
             self._fault = fault  # latched as an e-stop: the drives' fault is reset only after a person clears it
             self.latch.press(str(fault), by=f"drive {fault.node}" if fault.node is not None else "the CAN bus")
-            if self._stop_category() == 0:
+            if self.safety_config is not None and self.safety_config.category_of("backend") == 0:
                 self.master.torque_off()
             raise fault
-
-    def _stop_category(self) -> int:
-        sc = self.safety_config
-        categories = sc.stop_category if sc is not None else {}
-        return categories.get("backend", categories.get("default", 2))
 
     def engage_brakes(self) -> bool:
         """The safety layer's torque has gone off: the drives' power stages too (disable voltage); the robot's brakes

@@ -38,7 +38,6 @@ def drive_limits(model, safety, q0: np.ndarray) -> DriveLimits:
     else:
         inertia = joint_inertia(model, q0)
         decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
-    categories = safety.stop_category if safety is not None else {}
-    category = categories.get("e-stop", categories.get("default", 2))
+    category = safety.category_of("e-stop") if safety is not None else 2
     return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category],
                        ABORT_OPTION[category])

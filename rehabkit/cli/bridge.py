@@ -89,13 +89,15 @@ def cmd_bridge(args: argparse.Namespace) -> int:
         print(f"bridge: authenticated sessions only, {key}", file=sys.stderr, flush=True)
     from threadpoolctl import threadpool_limits
 
+    from rehabkit.hardware.bridge_clocks import serve, serve_lockstep
+
     # stopped by SIGINT or SIGTERM alike, its --stats written either way (a bridge started with & in a script has
     # SIGINT ignored unless it says otherwise)
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
     try:
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
-            (bridge.serve_lockstep if args.lockstep else bridge.serve)(args.duration, parent=args.parent_pid)
+            (serve_lockstep if args.lockstep else serve)(bridge, args.duration, parent=args.parent_pid)
     finally:
         if args.stats:
             from rehabkit.core.io import atomic_write_json

@@ -27,7 +27,6 @@ import numpy as np
 
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import CompliantGaps, Instruments
-from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
 from rehabkit.core.plugins.hookspecs import hookimpl
@@ -56,7 +55,6 @@ from rehabkit.hardware.link.protocol import (
 )
 from rehabkit.hardware.link_stats import METRICS, link_metrics, link_series, note_stale, stale_interventions
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
-from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key
 
 
 class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
@@ -67,17 +65,13 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
     real_person = True
 
     def __init__(self, config: HardwareConfig, context: Context):
-        beat = getattr(context.safety, "heartbeat", None)
-        if beat is not None:  # the scenario's safety envelope sets the link timing, over the backend's defaults
-            config = config.model_copy(update={"bridge_watchdog_ms": beat.command_timeout_ms,
-                                               "state_timeout_s": beat.state_timeout_ms / 1e3,
-                                               "bridge_stale_ms": beat.hold_after})
+        config = config.under(context.safety)  # the envelope's link timing over the backend's defaults
         self.config, self.timestep = config, config.timestep
         self.realtime = config.clock == "realtime"  # else the link's clock is the count of ticks (HostLink.clock)
         robot = context.robot
         self.n = robot.model.dof
         self.robot_name = robot.model.name  # (its e-stop latch at the bridge: <name>-<robot id>)
-        self.key = self._key(config, context)
+        self.key = config.key(context)
         self._note = context.note
         self.brakes = robot.model.brakes is not None
         self._flags = 0  # sent with every command (the brakes, once applied)
@@ -117,21 +111,9 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         self._fault: str | None = None
 
     @classmethod
-    def _key(cls, config: HardwareConfig, context: Context):
-        """The robot's link key, if the scenario names one: refused at ``key_file`` if unusable or another robot's."""
-        if config.key_file is None:
-            return None
-        try:
-            key = load_key(context.resolve(config.key_file))
-            check_robot(key, f"{context.robot.model.name}-{config.robot_id}")
-        except KeyFileError as exc:
-            raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
-        return key
-
-    @classmethod
     def check(cls, config: HardwareConfig, context: Context) -> None:
         """``validate``: the key file (there, owner-only, this robot's)."""
-        cls._key(config, context)
+        config.key(context)
 
     # -- link ------------------------------------------------------------------
 

@@ -27,8 +27,6 @@ clears and never feeds the watchdog.
 
 from __future__ import annotations
 
-import math
-import os
 import sys
 import time
 
@@ -36,21 +34,17 @@ import numpy as np
 
 from rehabkit.core.safety.estop import EStopLatch
 from rehabkit.hardware.bridge_limits import BridgeLimits
-from rehabkit.hardware.keypad import Keypad, handle
+from rehabkit.hardware.keypad import Keypad
 from rehabkit.hardware.link.bridge_end import BridgeLink
-from rehabkit.hardware.link.clock import wait_until
 from rehabkit.hardware.link.protocol import (
     CLEAR,
-    CLOCK,
     CMD_BRAKE,
     CMD_COMPLIANT,
     CMD_ESTOP,
     CMD_LATCH,
     CMD_RESET,
-    COMMAND,
     ENABLED,
     ESTOPPED,
-    HEADER,
     HOLDING,
     LIMIT,
     RAMP_IN,
@@ -59,18 +53,11 @@ from rehabkit.hardware.link.protocol import (
     TICK,
     WATCHDOG,
     clear_name,
-    link_tick,
 )
 from rehabkit.hardware.plant import Plant
 from rehabkit.hardware.security.keys import LinkKey
 
 HOLD_KP, HOLD_KD = 60.0, 6.0
-
-
-def _resets(plain: bytes) -> bool:
-    """An opened datagram is a host's reset (a COMMAND with ``CMD_RESET``)."""
-    fields = HEADER.unpack_from(plain)
-    return fields[2] == COMMAND and bool(fields[9] & CMD_RESET)
 
 
 class Bridge:
@@ -94,7 +81,7 @@ class Bridge:
         self.hold_q: np.ndarray | None = None
         self.last_valid = -np.inf
         self.echo = 0.0
-        self._last_tick, self._answer = -math.inf, None  # lock-step: the newest tick done and the answer sent
+        self.answer = None  # the newest state (or bare clock) sent: a lock-step tick asked again is answered again
         self.repeated_ticks = 0  # lock-step ticks the host sent again (answered again, not done again)
         self.clears: list[dict] = []  # each e-stop clear: when, by whom, how (the link, its key id)
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
@@ -139,7 +126,7 @@ class Bridge:
             self.status &= ~ENABLED
             self._ramp_next = True
 
-    def _receive(self, now: float, inbox: list[tuple[bytes, tuple]]) -> None:
+    def receive(self, now: float, inbox: list[tuple[bytes, tuple]]) -> None:
         for plain, addr in inbox:
             if plain[3] == CLEAR:
                 name = clear_name(plain, self.robot_id)
@@ -186,7 +173,7 @@ class Bridge:
     def tick(self, now: float, inbox: list[tuple[bytes, tuple]] | None = None) -> bool:
         """One cycle: commands in (what arrived, or ``inbox``: those a lock-step clock gathered), watchdog, torques,
         plant step, state out (in lock-step carrying the clock's answer); False if there was no peer to send it."""
-        self._receive(now, self.link.arrived() if inbox is None else inbox)
+        self.receive(now, self.link.arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
             self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
@@ -217,13 +204,13 @@ class Bridge:
         sent = now + self.plant.timestep if self.lockstep else None  # (in lock-step the link's clock is time)
         state = self._state
         state[0], state[1], state[2] = q, qd, tau
-        self._answer = (STATE, state.copy() if self.lockstep else state, sent, self.echo,
+        self.answer = (STATE, state.copy() if self.lockstep else state, sent, self.echo,
                         self.status | (TICK if self.lockstep else 0), self.held_ticks, self.plant.read_measured(),
                         self.plant.read_instruments())
-        self.link.send(self._answer, self.peer)
+        self.link.send(self.answer, self.peer)
         return True
 
-    def _status_to(self, addr: tuple) -> None:
+    def status_to(self, addr: tuple) -> None:
         """The state as it stands (status bits up to date), outside the lock-step clock's ticks."""
         q, qd = self.plant.read()
         self.link.send((STATE, np.stack([q, qd, self.tau]), None, self.echo, self.status, self.held_ticks,
@@ -232,73 +219,3 @@ class Bridge:
     def link_stats(self) -> dict:
         """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""
         return {**self.link.stats(), "repeated_ticks": self.repeated_ticks, "estop_clears": self.clears}
-
-    def serve(self, duration: float | None = None, parent: int | None = None) -> None:
-        """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given
-        ``parent`` — once that process is gone (a bridge a host started must not outlive it)."""
-        period = self.plant.timestep
-        start = time.monotonic()
-        deadline = start
-        ticks = 0
-        try:
-            while duration is None or deadline - start < duration:
-                ticks += 1
-                if parent is not None and ticks % 500 == 0 and os.getppid() != parent:
-                    return
-                if self.keypad is not None and ticks % 50 == 0:
-                    handle(self, self.keypad.poll(), time.monotonic())
-                self.tick(time.monotonic())
-                deadline += period
-                wait_until(deadline)
-        finally:
-            self.link.close()
-
-    def serve_lockstep(self, duration: float | None = None, parent: int | None = None) -> None:
-        """Tick when the host's clock says so, not the wall's: each tick from the host (a command carrying it, or a
-        bare CLOCK) is one tick at the time it carries (with the commands that arrived before it), answered by the
-        state carrying the clock back (a bare CLOCK if the state goes elsewhere or nowhere). A simulation's clock,
-        for tests and rehearsals: deterministic, as fast as both ends compute. ``duration`` is link time; with
-        ``parent`` the bridge stops once that process is gone."""
-        self.lockstep = True
-        inbox: list[tuple[bytes, tuple]] = []
-        try:
-            while True:
-                got = self.link.next(0.5)
-                if got is None:
-                    if parent is not None and os.getppid() != parent:
-                        return
-                    continue
-                data, addr = got
-                plain = self.link.open(data, addr)
-                if plain is None:
-                    continue
-                if plain[3] == CLEAR:  # a person's act, not the clock's: done now, and answered with the status
-                    self._receive(self._last_tick, [(plain, addr)])
-                    self._status_to(addr)
-                    continue
-                tick = link_tick(plain, self.robot_id)
-                if tick is None or not tick[1]:
-                    inbox.append((plain, addr))
-                if tick is None:
-                    continue
-                now = tick[0]
-                if duration is not None and now >= duration:
-                    return
-                if now < self._last_tick and any(_resets(p) for p, _ in inbox):  # a new session's clock, afresh
-                    self._last_tick = -math.inf
-                if now <= self._last_tick:  # the host asks again (its tick or our answer was lost): answer again,
-                    inbox = []  # the tick done once (its command, the same again, not applied twice)
-                    self.repeated_ticks += 1
-                    if self._answer is not None:
-                        self.link.send(self._answer, addr)
-                    continue
-                self._last_tick = now
-                if self.keypad is not None:
-                    handle(self, self.keypad.poll(), now)
-                answered = self.tick(now, inbox) and self.peer == addr
-                inbox = []
-                if not answered:
-                    self._answer = (CLOCK, np.zeros(0), now + self.plant.timestep, 0.0, 0, 0, None, None)
-                    self.link.send(self._answer, addr)
-        finally:
-            self.link.close()

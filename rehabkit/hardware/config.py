@@ -6,7 +6,9 @@ from typing import Literal
 
 from pydantic import Field
 
+from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
+from rehabkit.hardware.security.keys import KeyFileError, LinkKey, check_robot, load_key
 from rehabkit.models.strict import FilePath
 
 
@@ -56,3 +58,23 @@ class HardwareConfig(StrictModel):
                                    "long, until the next one (no torque is applied open-loop for longer)")
     cut_commands_at_s: float | None = Field(None, gt=0, description="a fault injected for a safety-skill test: "
                                             "from this time on no command leaves the host (a cut link)")
+
+    def under(self, safety) -> HardwareConfig:
+        """These settings with the scenario's safety envelope's link timing (``safety.heartbeat``) over them."""
+        beat = safety.heartbeat if safety is not None else None
+        if beat is None:
+            return self
+        return self.model_copy(update={"bridge_watchdog_ms": beat.command_timeout_ms,
+                                       "bridge_stale_ms": beat.hold_after,
+                                       "state_timeout_s": beat.state_timeout_ms / 1e3})
+
+    def key(self, context) -> LinkKey | None:
+        """The robot's link key, if the scenario names one: refused at ``key_file`` if unusable or another robot's."""
+        if self.key_file is None:
+            return None
+        try:
+            key = load_key(context.resolve(self.key_file))
+            check_robot(key, f"{context.robot.model.name}-{self.robot_id}")
+        except KeyFileError as exc:
+            raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
+        return key

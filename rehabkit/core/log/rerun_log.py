@@ -20,23 +20,9 @@ import numpy as np
 import rerun as rr
 
 from rehabkit.core.kinds.interfaces import BodyPoses, Drawing, GeomVisual
-from rehabkit.core.log.archetypes import (
-    LIMIT_RGB,
-    PALETTE,
-    Column,
-    encode_image,
-    entity_part,
-    in_degrees,
-    is_image,
-    paler,
-    rgba_rows,
-    shape,
-    strips,
-    xyzw,
-)
+from rehabkit.core.log.archetypes import LIMIT_RGB, PALETTE, entity_part, paler, shape, xyzw
 from rehabkit.core.log.blueprint import Contents, blueprint, labelled
-
-TIMELINE = "sim_time"
+from rehabkit.core.log.buffers import TIMELINE, Drawings, SensorSeries
 
 
 class RerunLog:
@@ -66,10 +52,8 @@ class RerunLog:
         self._queue: deque[Callable[[], None]] = deque()
         self._rows: list[tuple] = []
         self._ee_path: list[np.ndarray] = []
-        self._sensor_columns: dict[str, dict[str, Column]] = {}  # sensor -> reading key -> its column
-        self._lines: dict[str, list[tuple]] = {}  # path -> (t, points, points per line, colours) a drawing
-        self._arrows: dict[str, list[tuple]] = {}  # path -> (t, origins, vectors, colours, labels) a drawing
         rec = self.rec
+        self._drawings, self._sensors = Drawings(), SensorSeries(rec, self.contents)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for i, (name, part) in enumerate(zip(joint_names, self.joint_parts)):
             rgb = PALETTE[i % len(PALETTE)]
@@ -129,37 +113,8 @@ class RerunLog:
         self.rec.log(path, rr.LineStrips3D([points], colors=[color], radii=radius), static=t is None)
 
     def drawing(self, t: float, path: str, shapes: Drawing) -> None:
-        """Shapes that change during the run, at time ``t`` (copied and buffered, and sent as columns with the
-        poses: a row each, as a person's 60-odd muscle paths at the log rate, would cost ~1 ms a sample)."""
-        if shapes.lines is not None:
-            lengths = np.fromiter((len(line) for line in shapes.lines), np.int32, len(shapes.lines))
-            points = np.concatenate(shapes.lines) if len(lengths) else np.zeros((0, 3))
-            self._lines.setdefault(path, []).append((t, points, lengths, rgba_rows(shapes.line_rgba)))
-        if shapes.origins is not None:
-            self._arrows.setdefault(path, []).append(
-                (t, np.array(shapes.origins, float), np.array(shapes.vectors, float), rgba_rows(shapes.arrow_rgba),
-                 None if shapes.arrow_labels is None else list(shapes.arrow_labels)))
-
-    def _flush_drawings(self) -> None:
-        for path, rows in self._lines.items():
-            fields = {"strips": strips(np.concatenate([r[1] for r in rows]), np.concatenate([r[2] for r in rows]))}
-            fields["radii"] = np.full(sum(len(r[2]) for r in rows), 0.003)
-            if all(r[3] is not None for r in rows):
-                fields["colors"] = np.concatenate([r[3] for r in rows])
-            counts = [len(r[2]) for r in rows]
-            self._send(f"{path}/lines", np.array([r[0] for r in rows]),
-                       lambda f=fields, n=counts: rr.LineStrips3D.columns(**f).partition(n))
-        for path, rows in self._arrows.items():
-            fields = {"origins": np.concatenate([r[1] for r in rows]), "vectors": np.concatenate([r[2] for r in rows])}
-            fields["radii"] = np.full(len(fields["origins"]), 0.006)
-            if all(r[3] is not None for r in rows):
-                fields["colors"] = np.concatenate([r[3] for r in rows])
-            if all(r[4] is not None for r in rows):
-                fields["labels"] = [label for r in rows for label in r[4]]
-            counts = [len(r[1]) for r in rows]
-            self._send(f"{path}/arrows", np.array([r[0] for r in rows]),
-                       lambda f=fields, n=counts: rr.Arrows3D.columns(**f).partition(n))
-        self._lines, self._arrows = {}, {}
+        """Shapes that change during the run, at time ``t`` (copied; sent as columns with the poses)."""
+        self._drawings.add(t, path, shapes)
 
     def event(self, t: float, text: str, level: str = "WARN") -> None:
         self.rec.set_time(TIMELINE, duration=t)
@@ -224,37 +179,7 @@ class RerunLog:
                channels: Callable[[str, int], list[str] | None] | None = None) -> None:
         """A sensor reading: images are logged at once, numbers buffered in columns; ``channels(key, width)`` names
         a vector's values (:meth:`Sensor.channels`)."""
-        columns = self._sensor_columns.get(sensor)
-        if columns is None:
-            columns = self._sensor_columns[sensor] = {}
-        for key, value in reading.items():
-            if value is None:
-                continue
-            if type(value) is not float and not (type(value) is np.ndarray and value.ndim == 1):
-                if isinstance(value, rr.EncodedImage) or is_image(value):
-                    self.contents.add_sensor(sensor, key, True)
-                    self.rec.set_time(TIMELINE, duration=t)
-                    self.rec.log(f"sensors/{sensor}/{key}", value if isinstance(value, rr.EncodedImage) else
-                                 encode_image(value))
-                    continue
-                value = np.ravel(np.asarray(value, float))
-            column = columns.get(key)
-            if column is None:
-                column = columns[key] = Column(np.size(value), f"sensor '{sensor}' {key}")
-                self._name_sensor_series(sensor, key, np.size(value), channels)
-            column.append(t, value)
-
-    def _name_sensor_series(self, sensor: str, key: str, width: int, channels) -> None:
-        parts = channels(key, width) if channels is not None and width > 1 else None
-        if parts is not None and len(parts) != width:  # a plugin's slip: the series still logged, numbered
-            warnings.warn(f"sensor '{sensor}': channels('{key}', {width}) named {len(parts)} values; numbered instead",
-                          stacklevel=2)
-            parts = None
-        key = in_degrees(key)[0]
-        label = labelled(key)
-        names = [label] if width == 1 else [f"{part} {label}" for part in (parts or range(width))]
-        self.rec.log(f"sensors/{sensor}/{key}", rr.SeriesLines(names=names), static=True)
-        self.contents.add_sensor(sensor, key, False)
+        self._sensors.add(t, sensor, reading, channels)
 
     def flush(self) -> None:
         """Send buffered poses and sensor readings as columns."""
@@ -269,13 +194,8 @@ class RerunLog:
                            lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
             ee = np.array(self._ee_path[-len(rows):])
             self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))
-        self._flush_drawings()
-        for sensor, columns in self._sensor_columns.items():
-            for key, column in columns.items():
-                if column.n:
-                    t, values = column.take()
-                    logged, scale = in_degrees(key)
-                    self._send(f"sensors/{sensor}/{logged}", t, lambda v=values * scale: rr.Scalars.columns(scalars=v))
+        self._drawings.flush(self._send)
+        self._sensors.flush(self._send)
 
     def _send(self, path: str, t: np.ndarray, columns: Callable[[], Any]) -> None:
         """Send one entity's columns now, or queue it in deferred mode (``columns`` builds them then)."""

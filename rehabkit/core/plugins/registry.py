@@ -1,4 +1,4 @@
-"""Plugin discovery and the plugin registry.
+"""The plugin registry: what discovery (:mod:`rehabkit.core.plugins.discovery`) found, imported on demand.
 
 One entry-point group per kind — ``rehabkit.robots``, ``rehabkit.planners``, ``rehabkit.controllers``,
 ``rehabkit.sensors``, ``rehabkit.backends``, ``rehabkit.patients`` — and the entry point's name is the plugin's:
@@ -14,8 +14,6 @@ import re
 import sys
 import traceback
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
-from importlib import metadata
 from types import ModuleType
 from typing import Any, Literal
 
@@ -23,6 +21,7 @@ import pluggy
 from pydantic import BaseModel, ConfigDict, create_model
 
 from rehabkit.core.plugins import hookspecs
+from rehabkit.core.plugins.discovery import Entry, installed_entries
 from rehabkit.core.plugins.hookspecs import KINDS
 from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.types import (
@@ -36,7 +35,6 @@ from rehabkit.core.plugins.types import (
     UnknownPluginError,
 )
 
-ENTRY_POINT_GROUP = "rehabkit"
 _NAME_RE = re.compile(r"^[a-z][a-z0-9]*(-[a-z0-9]+)*$")
 
 __all__ = ["BrokenPlugin", "Entry", "PluginConflictError", "PluginError", "PluginInfo", "PluginLoadError",
@@ -94,16 +92,6 @@ class Registrar:
         typed.model_rebuild(force=True)
         self._registry._staged.append(PluginInfo(self.kind, name, typed, factory, description.strip(),
                                                  self._registry._current, declared or Declared.of(factory)))
-
-
-@dataclass(frozen=True)
-class Entry:
-    """An installed plugin as its package's metadata names it: not imported until a scenario names it."""
-
-    kind: str
-    name: str
-    load: Callable[[], Any]
-    provider: Provider
 
 
 class PluginRegistry:
@@ -245,37 +233,6 @@ class PluginRegistry:
 def _conflict(kind: str, name: str, providers: list[Provider]) -> str:
     who = " and by ".join(f"{p.package} {p.version} (entry point '{p.entry_point}')" for p in providers)
     return f"{kind} '{name}' is registered twice: by {who}; uninstall one of them or rename its plugin"
-
-
-_DISTRIBUTIONS: dict[str, tuple[str, str]] = {}  # (name, version) by dist-info folder
-
-
-def _provider(ep: metadata.EntryPoint) -> Provider:
-    dist = getattr(ep, "dist", None)
-    if dist is None:
-        return Provider("?", "?", ep.name)
-    key = str(getattr(dist, "_path", id(dist)))  # one Distribution per entry point; each read parses its file
-    known = _DISTRIBUTIONS.get(key) or _DISTRIBUTIONS.setdefault(key, (dist.metadata["Name"], dist.version))
-    return Provider(*known, ep.name)
-
-
-def installed_entries() -> list[Entry]:
-    """Every plugin installed under the groups ``rehabkit.robots``, ``rehabkit.planners``, … (metadata only)."""
-    out, seen = [], set()
-    installed = metadata.entry_points()  # one scan of the installed distributions
-    for kind in KINDS:
-        for ep in installed.select(group=group(kind)):
-            key = (kind, ep.name, ep.value)
-            if key in seen:  # the same distribution visible twice on sys.path
-                continue
-            seen.add(key)
-            out.append(Entry(kind, ep.name, ep.load, _provider(ep)))
-    return out
-
-
-def group(kind: str) -> str:
-    """The entry-point group of a plugin kind: ``rehabkit.planners`` for planners."""
-    return f"{ENTRY_POINT_GROUP}.{kind}s"
 
 
 def load_plugins(

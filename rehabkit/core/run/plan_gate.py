@@ -13,7 +13,7 @@ import numpy as np
 from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.results.metric import MetricCatalogue, combine
-from rehabkit.core.safety.keep_in import AXES
+from rehabkit.core.safety.keep_in import AXES, box_exit
 from rehabkit.core.setup.limits import CHECK_DT, LimitBreach
 from rehabkit.core.setup.space import JointSpace
 
@@ -48,10 +48,10 @@ class PlanGate:
     def warn_box(self, t: float, plan: Plan) -> str | None:
         """The keep-in box is watched, not planned around: say before moving where a plan will leave it (the
         warning, kept; None if it stays inside)."""
-        if not self.safety.watches_box:
+        if self.safety.keep_in is None:
             return None
         ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-        found = self.safety.box_exit(self.space.hand_world(plan.trajectory.sample(ts)[0]))
+        found = box_exit(self.safety.keep_in, self.space.hand_world(plan.trajectory.sample(ts)[0]))
         if found is None:
             return None
         k, a, side, bound = found

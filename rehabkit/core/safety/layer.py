@@ -1,23 +1,16 @@
 """The safety layer between every controller and every backend: the scenario's ``safety:`` envelope.
 
-Each control step it checks the measured state and the commanded torques
-against the effective limits (the robot's, narrowed by the patient's profile and
-the envelope's per-joint limits). A non-finite value, a joint outside its range or
-faster than its speed limit, the hand outside the keep-in box or an interaction
-force above its limit trips a latched stop: from then on the controller is
-ignored and the robot stopped in the category the envelope sets for the rule
-(:mod:`rehabkit.core.safety.stopping`: 0 torque off; 1 and 2 a controlled stop with
-bounded deceleration, then torque off or the posture held, PD with gravity
-compensation within effort limits); by default 2, or 0 for a robot whose
-``safe_stop`` is ``zero-torque``. The interaction force may instead get a force-limiting
-reaction (``safety.reactions``: yield or retreat, :mod:`rehabkit.core.safety.compliance`),
-under which the other rules still hold and stop the robot. Torques beyond the effort limit
-are clipped (each episode an intervention) or trip the stop if the scenario asks.
-A ramp-in blends from holding the start posture to the controller's torque, a
-ramp-out back to holding the posture where it began.
+Each control step it checks the measured state and the commanded torques against the effective limits (the
+robot's, narrowed by the patient's profile and the envelope's per-joint limits). A non-finite value, a joint outside
+its range or faster than its speed limit, the hand outside the keep-in box or an interaction force above its limit
+trips a latched stop: from then on the controller is ignored and the robot stopped in the category the envelope sets
+for the rule (:mod:`rehabkit.core.safety.stopping`; by default 2, or 0 for a robot whose ``safe_stop`` is
+``zero-torque``). The interaction force may instead get a force-limiting reaction (``safety.reactions``: yield or
+retreat, :mod:`rehabkit.core.safety.compliance`), under which the other rules still hold. Torques beyond the effort
+limit are clipped (each episode an intervention) or trip the stop if the scenario asks. A ramp-in blends from holding
+the start posture to the controller's torque, a ramp-out back to holding the posture where it began.
 
-The layer runs on the host for every backend: a breach is the same event in
-simulation and over a hardware link (whose backends take the ``heartbeat`` timings).
+The layer runs on the host for every backend: a breach is the same event in simulation and over a hardware link.
 """
 
 from __future__ import annotations
@@ -29,12 +22,12 @@ import numpy as np
 
 from rehabkit.core.safety.compliance import Compliance
 from rehabkit.core.safety.event import Clipping, SafetyEvent
-from rehabkit.core.safety.keep_in import KeepIn, box_exit
+from rehabkit.core.safety.keep_in import KeepIn
 from rehabkit.core.safety.ramps import Ramps
 from rehabkit.core.safety.stopping import WORDS, Stopping
 from rehabkit.core.scenario.safety import SafetyConfig
-from rehabkit.core.setup.limits import LimitBreach
-from rehabkit.models.robot_model import RobotModel
+from rehabkit.core.setup.limits import LimitBreach, first_breach
+from rehabkit.models.robot_model import JointLimits, RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
 _count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
@@ -56,6 +49,7 @@ class SafetyLayer:
         self.lo, self.hi = lim.lower - margin, lim.upper + margin
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
+        self._checked = JointLimits(self.lo, self.hi, self.vmax, self.effort)
         self.config = config
         self.events: list[SafetyEvent] = []  # trips
         self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
@@ -122,10 +116,6 @@ class SafetyLayer:
         """Start the soft stop: over ``ramp_out_s`` the torque blends into holding posture ``q``."""
         if self.tripped_at is None and self.ramps.begin_ramp_out(t, q):
             self._plain = False
-
-    @property
-    def watches_box(self) -> bool:
-        return self._box is not None
 
     @property
     def keep_in(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -245,19 +235,12 @@ class SafetyLayer:
         else:
             self._trip(t, q, rule, None, None, None, message, data, qd=qd)
 
-    def box_exit(self, points: np.ndarray) -> tuple[int, int, str, float] | None:
-        """The first of world ``points`` (n, 3) outside the keep-in box: (index, axis, "min"/"max", bound)."""
-        return box_exit(self._box.corners, points)
-
     def _outside_box(self, t: float, q: np.ndarray, qd: np.ndarray) -> bool:
         found = self._box.exit(q)
         if found is not None:
             value, bound, message, data = found
             self._trip(t, q, "keep-in", None, value, bound, message, data, qd=qd)
         return found is not None
-
-    def _note(self, event: SafetyEvent) -> None:
-        self.interventions.append(event)
 
     def _diagnose(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> None:
         for name, arr in (("state position", q), ("state velocity", qd), ("command torque", tau)):
@@ -266,15 +249,9 @@ class SafetyLayer:
                 j = int(np.argmax(bad))
                 self._trip(t, q, "non-finite", j, None, None, f"non-finite {name} ({arr[j]})", qd=qd)
                 return
-        for j in range(len(q)):
-            if q[j] < self.lo[j] or q[j] > self.hi[j]:
-                limit = self.lo[j] if q[j] < self.lo[j] else self.hi[j]
-                self._breach(t, q, LimitBreach("position", self.names[j], float(q[j]), float(limit),
-                                               revolute=bool(self._revolute[j])), "measured", qd)
-                return
-        j = int(np.argmax(np.abs(qd) / self.vmax))
-        self._breach(t, q, LimitBreach("velocity", self.names[j], float(qd[j]), float(self.vmax[j]),
-                                       revolute=bool(self._revolute[j])), "measured", qd)
+        # (the range with its margin, the speed limit with its factor: what the fast path checked)
+        self._breach(t, q, first_breach(self._checked, self.names, q, qd, tol=0.0, revolute=self._revolute),
+                     "measured", qd)
 
     def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str, qd: np.ndarray) -> None:
         """A limit rule's trip: the event's fields are the breach's, its message the breach's one wording."""
@@ -289,7 +266,8 @@ class SafetyLayer:
                            if value is not None and not described else "")
         text = f"t={t:.3f}s: {cause}"
         if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
-            self._note(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {}, cause=cause))
+            self.interventions.append(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {},
+                                                  cause=cause))
             return
         reaction = self.config.reactions.get(rule)
         if reaction is not None and reaction.type != "stop":
@@ -317,5 +295,5 @@ class SafetyLayer:
     def _record(self, event: SafetyEvent) -> None:
         """A trip: in the events and the interventions."""
         self.events.append(event)
-        self._note(event)
+        self.interventions.append(event)
 

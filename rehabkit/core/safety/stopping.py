@@ -147,8 +147,7 @@ class Stopping:
         self.gain_dt = gain_dt or dt  # (the period and the backend's loop delay: what the hold's gains must bear)
         self.robot, self.effort, self.zero = robot, robot.limits.effort, np.zeros(robot.dof)
         default = 2 if robot.safe_stop == "hold" else 0
-        self.by_rule = {r: config.stop_category.get(r, config.stop_category.get("default", default))
-                        for r in STOP_RULES}
+        self.by_rule = {r: config.category_of(r, default) for r in STOP_RULES}
         a = config.stop_decel_deg_s2
         self.decel = None if a is None else np.where(robot.revolute, np.radians(a), a / 1e3)
         self.category: int | None = None  # the stop under way's

@@ -125,3 +125,7 @@ class SafetyConfig(StrictModel):
             raise ValueError(f"reactions.interaction-force.release_n ({reaction.release_n:g} N) must be below "
                              f"interaction_force_n ({self.interaction_force_n:g} N): the retreat ends below the limit")
         return self
+
+    def category_of(self, rule: str, default: int = 2) -> int:
+        """The stop category ``rule`` gets: its own, else the scenario's ``default``, else ``default``."""
+        return self.stop_category.get(rule, self.stop_category.get("default", default))

@@ -1,0 +1,94 @@
+"""The bridge's two clocks: the wall's (a robot's drives tick on it) and the host's (lock-step, for a simulated
+plant: deterministic, as fast as both ends compute)."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+from rehabkit.hardware.bridge import Bridge
+from rehabkit.hardware.keypad import handle
+from rehabkit.hardware.link.clock import wait_until
+from rehabkit.hardware.link.protocol import CLEAR, CLOCK, CMD_RESET, COMMAND, HEADER, link_tick
+
+
+def serve(bridge: Bridge, duration: float | None = None, parent: int | None = None) -> None:
+    """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given ``parent`` —
+    once that process is gone (a bridge a host started must not outlive it)."""
+    period = bridge.plant.timestep
+    start = time.monotonic()
+    deadline = start
+    ticks = 0
+    try:
+        while duration is None or deadline - start < duration:
+            ticks += 1
+            if parent is not None and ticks % 500 == 0 and os.getppid() != parent:
+                return
+            if bridge.keypad is not None and ticks % 50 == 0:
+                handle(bridge, bridge.keypad.poll(), time.monotonic())
+            bridge.tick(time.monotonic())
+            deadline += period
+            wait_until(deadline)
+    finally:
+        bridge.link.close()
+
+
+def _resets(plain: bytes) -> bool:
+    """An opened datagram is a host's reset (a COMMAND with ``CMD_RESET``)."""
+    fields = HEADER.unpack_from(plain)
+    return fields[2] == COMMAND and bool(fields[9] & CMD_RESET)
+
+
+def serve_lockstep(bridge: Bridge, duration: float | None = None, parent: int | None = None) -> None:
+    """Tick when the host's clock says so, not the wall's: each tick from the host (a command carrying it, or a bare
+    CLOCK) is one tick at the time it carries (with the commands that arrived before it), answered by the state
+    carrying the clock back (a bare CLOCK if the state goes elsewhere or nowhere). ``duration`` is link time; with
+    ``parent`` the bridge stops once that process is gone."""
+    bridge.lockstep = True
+    inbox: list[tuple[bytes, tuple]] = []
+    last_tick = -math.inf  # the newest tick done
+    link = bridge.link
+    try:
+        while True:
+            got = link.next(0.5)
+            if got is None:
+                if parent is not None and os.getppid() != parent:
+                    return
+                continue
+            data, addr = got
+            plain = link.open(data, addr)
+            if plain is None:
+                continue
+            if plain[3] == CLEAR:  # a person's act, not the clock's: done now, and answered with the status
+                bridge.receive(last_tick, [(plain, addr)])
+                bridge.status_to(addr)
+                continue
+            tick = link_tick(plain, bridge.robot_id)
+            if tick is None or not tick[1]:
+                inbox.append((plain, addr))
+            if tick is None:
+                continue
+            now = tick[0]
+            if duration is not None and now >= duration:
+                return
+            if now < last_tick and any(_resets(p) for p, _ in inbox):  # a new session's clock, afresh
+                last_tick = -math.inf
+            if now <= last_tick:  # the host asks again (its tick or our answer was lost): answer again, the tick
+                inbox = []  # done once (its command, the same again, not applied twice)
+                bridge.repeated_ticks += 1
+                if bridge.answer is not None:
+                    link.send(bridge.answer, addr)
+                continue
+            last_tick = now
+            if bridge.keypad is not None:
+                handle(bridge, bridge.keypad.poll(), now)
+            answered = bridge.tick(now, inbox) and bridge.peer == addr
+            inbox = []
+            if not answered:
+                bridge.answer = (CLOCK, np.zeros(0), now + bridge.plant.timestep, 0.0, 0, 0, None, None)
+                link.send(bridge.answer, addr)
+    finally:
+        link.close()
