@@ -2,10 +2,10 @@
 the trace of every frame.
 
 In real time each network reads its bus in canopen's usual way (a python-can ``Notifier`` thread). On a lock-step
-bus nothing runs by itself: every frame the host sends is delivered at once — to the drives' network, then the
-trace, then the host's own network — in this thread, in the order sent; so an SDO's answer is there when canopen's
-client looks for it and a cycle's TPDOs are in when its SYNC has been sent. Deterministic, and as fast as both
-sides compute.
+bus (a channel in this process: :mod:`~rehabkit.canopen.bus.lockstep_channel`) nothing runs by itself: every frame
+the host sends is delivered at once — to the drives' network, then the trace, then the host's own network — in this
+thread, in the order sent; so an SDO's answer is there when canopen's client looks for it and a cycle's TPDOs are in
+when its SYNC has been sent. Deterministic, and as fast as both sides compute.
 
 The trace is a third python-can bus on the same channel, each frame written by python-can's own writer for the file's
 kind (``.asc``, ``.blf``, candump ``.log``): into a temporary name, renamed when the bus closes (never half a file).
@@ -22,6 +22,8 @@ from pathlib import Path
 
 import can
 import canopen
+
+from rehabkit.canopen.bus.lockstep_channel import LockstepChannel, LockstepEnd
 
 _CHANNELS = itertools.count()
 
@@ -43,11 +45,6 @@ def sent_by_host(can_id: int, master_id: int) -> bool:
         (can_id >> 7) % 2 == 0 or 0x600 < can_id < 0x680
 
 
-def _drain(bus: can.BusABC, network: canopen.Network) -> None:
-    while (msg := bus.recv(0.0)) is not None:
-        network.notify(msg.arbitration_id, msg.data, msg.timestamp)
-
-
 class CanBus:
     """The host's ``network`` on ``interface``/``channel`` (None: a virtual channel of its own), with a ``drives``
     network on it when simulated drives run in this process; ``trace``: the file every frame goes into;
@@ -64,10 +61,13 @@ class CanBus:
         self.lockstep, self.clock, self.master_id, self._opened = lockstep, clock, master_id, time.time()
         self.network: canopen.Network = _PumpedNetwork() if lockstep else canopen.Network()
         self.drives: canopen.Network | None = None
-        self._buses: list[can.BusABC] = []
+        self._buses: list[can.BusABC | LockstepEnd] = []
         self._notifiers: list[can.Notifier] = []
         self.frames = 0
         self.trace, self._part, self._writer, self._tap = trace, None, None, None
+        if lockstep and interface != "virtual":
+            raise ValueError(f"a lock-step bus is a channel of this process, not {interface} {channel}")
+        self._channel = LockstepChannel(channel) if lockstep else None
         try:
             if simulated:
                 self.drives = canopen.Network(self._open(kw))
@@ -89,8 +89,8 @@ class CanBus:
             self.close(keep_trace=False)
             raise
 
-    def _open(self, kw: dict) -> can.BusABC:
-        bus = can.Bus(**kw)
+    def _open(self, kw: dict) -> can.BusABC | LockstepEnd:
+        bus = self._channel.end() if self._channel is not None else can.Bus(**kw)
         self._buses.append(bus)
         return bus
 
@@ -101,15 +101,15 @@ class CanBus:
     def pump(self) -> None:
         """Deliver every frame sent so far (lock-step): the drives', the trace's, the host's."""
         if self.drives is not None:
-            _drain(self.drives.bus, self.drives)
+            self.drives.bus.deliver(self.drives)
         if self._tap is not None:
-            while (msg := self._tap.recv(0.0)) is not None:
+            for msg in self._tap.frames():
                 if self.clock is not None:  # (the bus's own clock, from the moment it opened)
                     msg.timestamp = self._opened + self.clock()
                 msg.is_rx = not sent_by_host(msg.arbitration_id, self.master_id)
                 self._writer.on_message_received(msg)
                 self.frames += 1
-        _drain(self.network.bus, self.network)
+        self.network.bus.deliver(self.network)
 
     def close(self, keep_trace: bool = True) -> None:
         """Stop reading, close the buses; the trace renamed into place (or removed)."""
