@@ -256,3 +256,32 @@ def test_the_robot_file_itself_may_be_a_package_uri(tmp_path, monkeypatch):
     monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
     found = cli("validate", "ur5.yaml", cwd=tmp_path)
     assert found.returncode == 0, found.stderr
+
+
+def test_a_target_in_a_frame_fixed_to_the_base_is_taken_through_that_frames_pose(tmp_path, monkeypatch):
+    """UR5's ``base`` link is its ``base_link`` turned half a turn about z (ROS-Industrial's convention): a target a
+    session showed in ``base`` is replayed where that frame puts it, not read as if it were in ``base_link``."""
+    from rehabkit.ros.bag_replay import base_frames
+    from rehabkit.ros.bag_scenario import _in_base
+    from rehabkit.ros.session_bag import SessionBag, ShownTarget
+
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    urdf = ERD / "share" / "example-robot-data" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+    robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "tool0"}, tmp_path)
+    frames = base_frames(robot)
+    assert {"base_link", "base"} <= set(frames)
+    np.testing.assert_allclose(frames["base_link"], np.eye(4), atol=1e-12)
+    bag = SessionBag.__new__(SessionBag)
+    point = np.array([0.4, 0.1, 0.3])
+    for frame, where in (("base", [-0.4, -0.1, 0.3]), ("base_link", point), ("", point)):
+        p, rot = _in_base(bag, ShownTarget(1.0, "point", point, frame), np.eye(4), frames)
+        np.testing.assert_allclose(p, where, atol=1e-12)
+        assert rot is None
+    pose = np.array([0.4, 0.1, 0.3, 0.0, 0.0, 0.0, 1.0])  # (x, y, z, then the quaternion x, y, z, w: no turn)
+    p, rot = _in_base(bag, ShownTarget(1.0, "pose", pose, "base"), np.eye(4), frames)
+    np.testing.assert_allclose(rot, np.diag([-1.0, -1.0, 1.0]), atol=1e-12)  # the frame's own half turn
+    # the hand's pose there is the robot's own: tool0 at the home posture, seen from base, is where FK says
+    tool = robot.fk(np.zeros(6))
+    seen = np.linalg.inv(frames["base"]) @ tool
+    p, _ = _in_base(bag, ShownTarget(1.0, "point", seen[:3, 3], "base"), np.eye(4), frames)
+    np.testing.assert_allclose(p, tool[:3, 3], atol=1e-12)

@@ -31,12 +31,14 @@ SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was repla
 SESSION_MEASURES = "session.json"  # the recorded session's own outcome measures, the table's first column
 
 
-def base_frames(robot) -> tuple[str, ...]:
-    """The names the robot's base frame goes by: its model's bodies fixed to the world, and ``base_link`` (ROS's
-    convention)."""
+def base_frames(robot) -> dict[str, np.ndarray]:
+    """The frames a target may be given in besides the world's, each with its pose in the robot's base frame (the
+    one its kinematics are in, 4x4): its model's bodies fixed to the base — a URDF's ``world`` link, a ``base``
+    turned from ``base_link`` — and ``base_link`` (ROS's name for the base) where the model has none of that name."""
     model = robot.model.pin_model
-    fixed = [link.name for link in links(model) if model.frames[link.frame].parentJoint == 0]
-    return (*dict.fromkeys([*fixed, "base_link"]),)
+    fixed = {link.name: model.frames[link.frame].placement.homogeneous for link in links(model)
+             if model.frames[link.frame].parentJoint == 0}
+    return {**fixed, "base_link": fixed.get("base_link", np.eye(4))}
 
 
 def session_trace(bag: SessionBag, robot, patient, dt: float) -> Trace:

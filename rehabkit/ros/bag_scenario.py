@@ -29,9 +29,10 @@ def joint_order(bag: SessionBag, robot_joints: list[str], role: str = "joint_sta
     return np.array([names.index(j) for j in robot_joints])
 
 
-def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_frames: tuple[str, ...]
+def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_frames: dict[str, np.ndarray]
              ) -> tuple[np.ndarray, np.ndarray | None]:
-    """A shown point's position in the robot's base frame, and a pose's rotation there (None for a point)."""
+    """A shown point's position in the robot's base frame, and a pose's rotation there (None for a point); a target
+    in a frame fixed to the base (``base_frames``: each one's pose in the base frame) taken through its pose."""
     import pinocchio as pin
 
     rot = None if shown.kind == "point" else pin.Quaternion(*shown.values[[6, 3, 4, 5]]).matrix()
@@ -39,7 +40,10 @@ def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_fr
     if shown.frame in WORLD_FRAMES:
         inv = np.linalg.inv(base_pose)
         p, rot = inv[:3, :3] @ p + inv[:3, 3], None if rot is None else inv[:3, :3] @ rot
-    elif shown.frame and shown.frame not in base_frames:
+    elif shown.frame in base_frames:
+        fixed = base_frames[shown.frame]
+        p, rot = fixed[:3, :3] @ p + fixed[:3, 3], None if rot is None else fixed[:3, :3] @ rot
+    elif shown.frame:
         raise BagError(bag.path, "targets", f"a target at t = {shown.t:.3f} s is in frame '{shown.frame}': give "
                                              f"targets in the robot's base frame ({' or '.join(base_frames)}) or the "
                                              f"world ({' or '.join(WORLD_FRAMES)})")
@@ -51,7 +55,7 @@ def shown_targets(bag: SessionBag) -> list[ShownTarget]:
     return [t for t in bag.targets if 0.0 <= t.t < bag.duration_s]
 
 
-def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...], timed: bool = False) -> dict:
+def session_task(bag: SessionBag, robot, base_frames: dict[str, np.ndarray], timed: bool = False) -> dict:
     """The ``task:`` section: start where the session started, then a replan to each target when it was shown
     (``timed``: the planner is timed by ``segment_durations``, one per target: each replan's is the time until the
     next target was shown, or the session's end)."""
@@ -94,7 +98,7 @@ def session_task(bag: SessionBag, robot, base_frames: tuple[str, ...], timed: bo
     return task
 
 
-def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, base_frames: tuple[str, ...],
+def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, base_frames: dict[str, np.ndarray],
                            topics: dict[str, str], has_patient: bool, timed: bool = False) -> Path:
     """``path``: a scenario extending ``scenario`` with the session's task, duration and recorded person."""
     patient: dict = {"model": {"type": "recorded-wrench", "bag": str(bag.path.resolve()), "topic": topics["wrench"],
