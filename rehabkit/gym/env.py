@@ -152,10 +152,12 @@ class ScenarioEnv(gym.Env):
             return None
         import mujoco
 
+        from rehabkit.sim.scene_view import SceneView
+
         backend = self._a.backend
-        model, data = getattr(backend, "model", None), getattr(backend, "data", None)
-        if model is None:
+        if not isinstance(backend, SceneView):  # (a simulation's scene: a robot's backend has none to render here)
             raise RuntimeError(f"backend '{self._a.sc.backend.type}' has no scene to render")
+        model, data = backend.model, backend.data
         if self._renderer is None or self._renderer_model is not model:
             self._renderer = mujoco.Renderer(model, *self.render_size)
             self._renderer_model = model
