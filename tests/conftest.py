@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 DATA = Path(__file__).resolve().parent / "data"
+# hypothesis keeps a cache of the constants in the code it tests; in a folder of its own, not the work tree (the suite
+# leaves that as it found it)
+os.environ.setdefault("HYPOTHESIS_STORAGE_DIRECTORY", os.path.join(tempfile.gettempdir(), "rehabkit-tests-hypothesis"))
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # every core has a worker: a lock-step link's ends wait asleep (polling would take the core the other end needs
     # to answer); bridges the tests start inherit it

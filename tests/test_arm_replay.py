@@ -147,6 +147,16 @@ def test_a_foreign_store_is_refused_and_left_untouched(tmp_path):
     assert bad.read_bytes() == before
 
 
+def test_a_run_that_writes_no_outputs_keeps_its_fresh_store_in_memory(tmp_path, monkeypatch):
+    """``store: run`` without an output folder (a run in a test, a notebook): the patch is stored and recalled in
+    that run's store, and nothing is written where the run was started (it once made ./out/patches.sqlite)."""
+    monkeypatch.chdir(tmp_path)
+    keys = [{"at": 0.2, "key": "R"}, {"at": 0.5, "key": "3"}, {"at": 1.0, "key": "store", "hold_s": 2.5}]
+    r = run_scenario(SCENARIO, {"controller.keys": keys, "world.objects": [], "duration": 4.0})
+    assert any(n["text"].startswith("keypad: patch 3: target stored at") for n in r.summary["notes"])
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_fold_and_unfold_are_preprogrammed_and_any_key_stops_a_motion(tmp_path):
     keys = [{"at": 0.5, "key": "fold"}, {"at": 20.0, "key": "unfold"}, {"at": 22.0, "key": "J"}]
     r = run_scenario(SCENARIO, {"controller.keys": keys, "world.objects": [], "duration": 25.0,

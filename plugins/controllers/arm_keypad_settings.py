@@ -23,7 +23,8 @@ class ArmKeypadConfig(StrictModel):
 
     keys: list[KeyPress] = Field(description="the user's key presses, in time order")
     store: str = Field("user", description="'user' (the user's data directory), 'run' (a fresh store in the "
-                                           "run's output folder) or a path to a patch store file")
+                                           "run's output folder; in memory for a run that writes none) or a path to "
+                                           "a patch store file")
     jog_speed_m_s: float = Field(0.05, gt=0, le=0.099, description="Cartesian jog speed (ARM limit 9.9 cm/s)")
     jog_turn_deg_s: float = Field(15.0, gt=0, le=30.0, description="gripper roll/pitch/yaw jog speed")
     jog_joint_fraction: float = Field(0.5, gt=0, le=1.0, description="joint jog speed / joint speed limit")

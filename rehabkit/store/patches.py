@@ -92,6 +92,15 @@ class PatchStore:
                              "move it away or set REHABKIT_DATA to another folder") from None
 
     @classmethod
+    def in_memory(cls) -> PatchStore:
+        """A fresh store that writes no file: a run's own, when the run has no folder to keep it in."""
+        store = cls.__new__(cls)
+        store.path = Path(":memory:")
+        store.db = sqlite3.connect(":memory:", isolation_level=None)
+        store._create()
+        return store
+
+    @classmethod
     def probe(cls, path: Path) -> None:
         """Check an existing store file read-only (a missing one is fine: a run would make it)."""
         if not (path.exists() and path.stat().st_size > 0):
@@ -169,16 +178,18 @@ class PatchStore:
 
 def open_store(where: str, out_dir: Path | None, resolve: Callable[[str], Path],
                dry: bool = False) -> PatchStore | None:
-    """``where``: 'user' (:func:`default_path`), 'run' (a fresh store in the run's folder, ``out_dir`` or
-    ./out) or a path (``resolve`` makes it absolute: the plugin context's). A store that can't be opened raises
-    ``ValueError``. ``dry`` (a scenario checked, not run): an existing file is only checked, read-only; nothing is
-    opened or made."""
+    """``where``: 'user' (:func:`default_path`), 'run' (a fresh store in the run's folder ``out_dir``; in memory
+    when the run writes no outputs, ``out_dir`` None) or a path (``resolve`` makes it absolute: the plugin
+    context's). A store that can't be opened raises ``ValueError``. ``dry`` (a scenario checked, not run): an
+    existing file is only checked, read-only; nothing is opened or made."""
     if where == "user":
         path = default_path()
     elif where == "run":
-        path = (out_dir or Path.cwd() / "out") / "patches.sqlite"
         if dry:
             return None
+        if out_dir is None:  # (a run in a test or a notebook that writes nothing: nor does its store)
+            return PatchStore.in_memory()
+        path = out_dir / "patches.sqlite"
         path.unlink(missing_ok=True)
     else:
         path = resolve(where)
