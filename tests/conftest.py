@@ -63,3 +63,9 @@ def rng():
 def _own_state(tmp_path, monkeypatch):
     """Each test keeps its e-stop latches to itself (rehabkit.core.safety.estop: $REHABKIT_STATE)."""
     monkeypatch.setenv("REHABKIT_STATE", str(tmp_path / "state"))
+
+
+def checked(layer, t: float, q, qd, tau) -> np.ndarray:
+    """The torque the safety ``layer`` sends for state ``q``, ``qd`` and command ``tau`` at ``t`` (its check of the
+    packed row the loop hands it)."""
+    return layer.check_row(t, np.concatenate((q, qd, tau)))

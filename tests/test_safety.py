@@ -6,6 +6,7 @@ import pytest
 
 from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
+from tests.conftest import checked
 
 
 @pytest.fixture
@@ -20,7 +21,7 @@ def _q_mid(hit):
 
 def test_safe_command_passes_unchanged(layer, hit):
     q, tau = _q_mid(hit), np.array([1.0, -2.0, 0.5, 0.1, 0.2, -0.3])
-    out = layer.filter(0.0, q, np.zeros(6), tau)
+    out = checked(layer, 0.0, q, np.zeros(6), tau)
     np.testing.assert_array_equal(out, tau)
     assert not layer.tripped and not layer.events
 
@@ -29,7 +30,7 @@ def test_safe_command_passes_unchanged(layer, hit):
 def test_nan_anywhere_trips_and_holds(layer, hit, where):
     q, qd, tau = _q_mid(hit), np.zeros(6), np.zeros(6)
     {"tau": tau, "q": q, "qd": qd}[where][2] = np.nan
-    out = layer.filter(0.1, q, qd, tau)
+    out = checked(layer, 0.1, q, qd, tau)
     assert layer.tripped and layer.events[0].rule == "non-finite"
     assert np.all(np.isfinite(out)) and np.all(np.abs(out) <= hit.model.limits.effort)
     assert "held" in layer.events[0].message
@@ -38,7 +39,7 @@ def test_nan_anywhere_trips_and_holds(layer, hit, where):
 def test_position_breach_names_the_joint_and_limit(layer, hit):
     q = _q_mid(hit)
     q[3] = hit.model.limits.upper[3] + np.radians(1.0)  # beyond the 0.5° margin
-    layer.filter(2.0, q, np.zeros(6), np.zeros(6))
+    checked(layer, 2.0, q, np.zeros(6), np.zeros(6))
     ev = layer.events[0]
     assert ev.rule == "position" and ev.joint == "elbow_2" and ev.t == 2.0
     assert ev.limit == pytest.approx(hit.model.limits.upper[3] + np.radians(0.5))
@@ -47,25 +48,25 @@ def test_position_breach_names_the_joint_and_limit(layer, hit):
 def test_small_excursion_inside_the_margin_is_tolerated(layer, hit):
     q = _q_mid(hit)
     q[3] = hit.model.limits.upper[3] + np.radians(0.3)
-    layer.filter(0.0, q, np.zeros(6), np.zeros(6))
+    checked(layer, 0.0, q, np.zeros(6), np.zeros(6))
     assert not layer.tripped
 
 
 def test_velocity_breach(layer, hit):
     qd = np.zeros(6)
     qd[4] = -1.2 * hit.model.limits.velocity[4]
-    layer.filter(0.0, _q_mid(hit), qd, np.zeros(6))
+    checked(layer, 0.0, _q_mid(hit), qd, np.zeros(6))
     assert layer.events[0].rule == "velocity" and layer.events[0].joint == "wrist_1"
 
 
 def test_torque_is_clipped_by_default_and_trips_on_request(hit):
     eff = hit.model.limits.effort
     clip = SafetyLayer(hit.model, SafetyConfig())
-    out = clip.filter(0.0, _q_mid(hit), np.zeros(6), 3 * eff)
+    out = checked(clip, 0.0, _q_mid(hit), np.zeros(6), 3 * eff)
     np.testing.assert_allclose(out, eff)
     assert not clip.tripped and clip.saturated_steps == 1
     stop = SafetyLayer(hit.model, SafetyConfig(torque_policy="stop"))
-    stop.filter(0.0, _q_mid(hit), np.zeros(6), 3 * eff)
+    checked(stop, 0.0, _q_mid(hit), np.zeros(6), 3 * eff)
     assert stop.tripped and stop.events[0].rule == "torque"
 
 
@@ -73,7 +74,7 @@ def test_trip_is_latched_and_hold_pulls_back_to_the_trip_posture(layer, hit):
     q0 = _q_mid(hit)
     layer.trip(1.0, q0, "plan", "test")
     q = q0 + 0.05
-    out = layer.filter(1.1, q, np.zeros(6), np.full(6, 5.0))  # the controller's wish is ignored
+    out = checked(layer, 1.1, q, np.zeros(6), np.full(6, 5.0))  # the controller's wish is ignored
     g = pin.rnea(hit.model.pin_model, hit.model.pin_model.createData(), q, np.zeros(6), np.zeros(6))
     np.testing.assert_allclose(out, np.clip(-60.0 * 0.05 + g, -hit.model.limits.effort, hit.model.limits.effort))
 
@@ -83,4 +84,4 @@ def test_zero_torque_robots_go_limp(hit):
 
     limp = SafetyLayer(replace(hit.model, safe_stop="zero-torque"), SafetyConfig())
     limp.trip(0.0, _q_mid(hit), "plan", "test")
-    np.testing.assert_array_equal(limp.filter(0.0, _q_mid(hit), np.zeros(6), np.ones(6)), np.zeros(6))
+    np.testing.assert_array_equal(checked(limp, 0.0, _q_mid(hit), np.zeros(6), np.ones(6)), np.zeros(6))

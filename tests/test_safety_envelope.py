@@ -11,7 +11,7 @@ from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.safety import SafetyConfig
-from tests.conftest import SCENARIOS
+from tests.conftest import SCENARIOS, checked
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 # the hand leaves this box (robot base frame) on the way from A to B, at z = -0.15 m, about 0.85 s in
@@ -28,9 +28,9 @@ def test_keep_in_box_trips_when_the_hand_leaves_it(hit):
     hand = np.array([0.2, 0.0, 0.0])
     layer = SafetyLayer(hit.model, cfg, gravity=hit.gravity_torque, hand=lambda q: hand)
     tau = np.ones(6)
-    assert np.array_equal(layer.filter(0.0, _mid(hit), np.zeros(6), tau.copy()), tau)
+    assert np.array_equal(checked(layer, 0.0, _mid(hit), np.zeros(6), tau.copy()), tau)
     hand[2] = 0.52
-    layer.filter(0.5, _mid(hit), np.zeros(6), tau.copy())
+    checked(layer, 0.5, _mid(hit), np.zeros(6), tau.copy())
     ev = layer.events[0]
     assert ev.rule == "keep-in" and ev.data["axis"] == "z" and ev.value == pytest.approx(0.52) and ev.limit == 0.5
     assert ev.data["side"] == "max" and layer.tripped
@@ -50,9 +50,9 @@ def test_clipping_steps_in_a_row_are_one_intervention(hit):
     tau = np.zeros(6)
     for k in range(10):
         tau[1] = hit.model.limits.effort[1] * (1.5 + 0.1 * k)
-        out = layer.filter(k * 1e-3, _mid(hit), np.zeros(6), tau.copy())
+        out = checked(layer, k * 1e-3, _mid(hit), np.zeros(6), tau.copy())
         assert abs(out[1]) == pytest.approx(hit.model.limits.effort[1])
-    layer.filter(0.05, _mid(hit), np.zeros(6), tau.copy())  # a new episode later
+    checked(layer, 0.05, _mid(hit), np.zeros(6), tau.copy())  # a new episode later
     clips = [e for e in layer.interventions if e.rule == "torque-clip"]
     assert len(clips) == 2 and clips[0].data["steps"] == 10 and clips[0].joint == "shoulder_2"
     assert clips[0].value == pytest.approx(hit.model.limits.effort[1] * 2.4)  # the episode's peak

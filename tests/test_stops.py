@@ -18,7 +18,7 @@ from rehabkit.core.safety.estop import EStopLatch, own_state
 from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.core.setup.errors import SetupError
-from tests.conftest import SCENARIOS
+from tests.conftest import SCENARIOS, checked
 
 ESTOP = SCENARIOS / "safety" / "hit_estop.yaml"
 LINK = {"backend": {"type": "hardware", "clock": "lockstep"}}
@@ -36,8 +36,8 @@ def test_each_category_sends_what_it_says(hit, category):
     layer = _layer(hit, category)
     layer.trip(1.0, q0, "plan", "test", qd=v0)
     ramp = np.radians(45) / np.radians(360)  # the fastest joint's speed over the deceleration bound: 0.125 s
-    mid = layer.filter(1.0 + ramp / 2, q0 + v0 * ramp / 2, v0 / 2, np.full(6, 5.0))  # (the controller is ignored)
-    after = layer.filter(1.0 + ramp + 0.01, q0 + v0 * ramp / 2, np.zeros(6), np.full(6, 5.0))
+    mid = checked(layer, 1.0 + ramp / 2, q0 + v0 * ramp / 2, v0 / 2, np.full(6, 5.0))  # (the controller is ignored)
+    after = checked(layer, 1.0 + ramp + 0.01, q0 + v0 * ramp / 2, np.zeros(6), np.full(6, 5.0))
     g = hit.gravity_torque(q0 + v0 * ramp / 2)
     if category == 0:
         assert not mid.any() and not after.any() and layer.torque_off

@@ -122,10 +122,6 @@ class SafetyLayer:
         """The keep-in box's world corners (min, max) the hand is watched against, if there is one."""
         return self._box.corners if self._box is not None else None
 
-    def filter(self, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """The torque to send: ``tau`` if safe (possibly clipped), else the stop torque."""
-        return self.check_row(t, np.concatenate((q, qd, tau)))
-
     def target(self, t: float, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The position and velocity targets a joint on its own servo loop may follow at ``t`` (after
         :meth:`check_row` of the same step): the reference within the range and the speed limits, or once tripped the
