@@ -292,3 +292,19 @@ def test_validate_refuses_position_drives_where_they_cannot_do_what_the_scenario
     with pytest.raises(ScenarioError) as err:
         assemble(load_scenario(path), default_registry(), default_extensions(), upto="plugins")
     assert says in err.value.diagnostics[0].message
+
+
+def test_a_limit_more_counts_than_its_object_holds_is_told_its_largest_and_said(tmp_path):
+    """A light wrist behind a 17-bit encoder and a 50:1 gear: half what its drive can give it, 5655 rad/s², is
+    5.9e9 counts/s² — more than the quick stop deceleration's UNSIGNED32 holds. The drive is told the largest it
+    holds and the run says so (the run crashed in its set-up before, with a ValueError and a run.rrd.tmp left)."""
+    drives = [{"node_id": 1}, {"node_id": 2}, {"node_id": 3}, {"node_id": 4, "gear_ratio": 50}]
+    r = run_scenario(ROOT / "examples" / "robots" / "urdf_arm4.yaml",
+                     {"duration": 1.0, "rates.control_hz": 500,
+                      "backend": {"type": "canopen", "clock": "lockstep", "drives": drives}}, out_dir=tmp_path)
+    (note,) = [n["text"] for n in r.summary["notes"] if "0x6085" in n["text"]]
+    counts_per_rad = 131072 * 50 / (2 * np.pi)
+    assert note.startswith("drive 4 (wrist): its quick stop deceleration, 5655 rad/s²")
+    assert note.endswith(f"told its largest, {(2**32 - 1) / counts_per_rad:.4g} rad/s²")
+    assert r.metrics["safety_events"] == 0 and r.metrics["tracking_rms_deg"] < 1.0
+    assert not list(tmp_path.glob("*.tmp")) and (tmp_path / "summary.json").exists()

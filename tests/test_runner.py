@@ -158,6 +158,20 @@ def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("error", [ValueError("Value does not fit in specified type"), KeyboardInterrupt()])
+def test_a_run_whose_backend_fails_at_its_reset_leaves_no_half_written_file(tmp_path, monkeypatch, error):
+    """The recording opens before the robot is reset; a reset that fails (a plugin's bug, Ctrl-C) takes it along."""
+    from rehabkit.sim.mujoco import MujocoBackend
+
+    def reset(self, q0):
+        raise error
+
+    monkeypatch.setattr(MujocoBackend, "reset", reset)
+    with pytest.raises(type(error)):
+        run_scenario(HIT, {"duration": 0.2, "expect": {}}, out_dir=tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_spawn_without_a_display_still_writes_the_file(tmp_path, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

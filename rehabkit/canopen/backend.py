@@ -11,9 +11,8 @@ drives' master): a run does not start while it is latched, and a drive's FAULT i
 person has cleared it (``rehabkit estop clear``).
 
 With no ``bus`` named, simulated drives (:mod:`~rehabkit.canopen.simulated.rig`) on the robot's MuJoCo model start with
-the run: in real time on a virtual bus of this process, or in lock-step (the plant advancing one cycle per SYNC,
-every frame delivered as it is sent). The scene is mirrored on the host from the measured joints, as over the
-hardware link.
+the run: in real time on a virtual bus of this process, or in lock-step (one cycle per SYNC, every frame delivered as
+sent). The scene is mirrored on the host from the measured joints, as over the hardware link.
 """
 
 from __future__ import annotations
@@ -86,7 +85,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         self._configured = self._started = False
         self._fault: DriveFaultError | None = None
         self.clock: CycleClock | None = None  # (real time, from the reset)
-        self._note = context.note
+        self._note = context.note or (lambda t, text: None)
         self._hold_kp, self._hold_kd = HOLD_KP, HOLD_KD  # (the bridge's, for a robot without a dynamic model)
         self._following = np.array([s.mode != "cst" for s in specs])
         self.follows = bool(self._following.any())  # (CSP/CSV drives: the loop hands over the targets)
@@ -155,7 +154,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         q0 = np.asarray(q0, float)
         self.t0 = time.monotonic()
         if not self._configured:
-            self.master.configure(self.period, drive_limits(self.robot.model, self.safety_config, q0))
+            for text in self.master.configure(self.period, drive_limits(self.robot.model, self.safety_config, q0)):
+                self._note(0.0, text)  # (a limit more than its object holds: told the largest it holds)
             self._configured = True
         if self.simulated:  # (placed before the drives are enabled, within their limits, and again once they are:
             self.master.place(q0)  # with the power stages off the arm sagged meanwhile)

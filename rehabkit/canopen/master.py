@@ -24,7 +24,7 @@ from rehabkit.canopen.bus.pdo_layout import RPDO, SENSOR_TPDO, TPDO1, tpdo2
 from rehabkit.canopen.bus.pdo_maps import write_maps
 from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
-from rehabkit.canopen.drive_limits import DriveLimits
+from rehabkit.canopen.drive_limits import DriveLimits, fitted
 from rehabkit.canopen.emcy_codes import describe
 
 MODE_CODE = {"csp": 8, "csv": 9, "cst": 10}  # modes of operation (0x6060): cyclic synchronous position/velocity/torque
@@ -103,8 +103,10 @@ class DriveMaster:
                                               "drives` running on this interface and channel?)", r.id, name,
                                               observable=False) from None
 
-    def configure(self, period_s: float, limits: DriveLimits) -> None:
-        """By SDO, in pre-operational: the cycle, heartbeats, CST, each drive's limits and PDO maps; then NMT start."""
+    def configure(self, period_s: float, limits: DriveLimits) -> list[str]:
+        """By SDO, in pre-operational: the cycle, heartbeats, CST, each drive's limits and PDO maps; then NMT start.
+        Returns what it had to say: a limit more than its object holds, told the largest it holds."""
+        notes: list[str] = []
         self.wait_for_nodes()
         cfg = self.config
         value, index = interpolation_period(period_s)
@@ -119,10 +121,17 @@ class DriveMaster:
             sd[0x6060].raw = MODE_CODE[self.modes[i]]
             sd[0x60C2][1].raw, sd[0x60C2][2].raw = value, index
             lo, hi = sorted((limits.lower[i] * self._scale[i], limits.upper[i] * self._scale[i]))
-            sd[0x607D][1].raw, sd[0x607D][2].raw = math.floor(lo), math.ceil(hi)
-            sd[0x6080].raw = math.ceil(limits.speed[i] * u.counts_per_rad)
+            sd[0x607D][1].raw, sd[0x607D][2].raw = -fitted(r.object_dictionary[0x607D][1], -lo)[0], \
+                fitted(r.object_dictionary[0x607D][2], hi)[0]
             sd[0x6072].raw = min(65535, math.ceil(limits.torque[i] / u.rated_torque_nm * 1e3))
-            sd[0x6085].raw = math.ceil(limits.decel[i] * u.counts_per_rad)
+            for obj, bound, what, unit in ((0x6080, limits.speed[i], "speed limit", "rad/s"),
+                                           (0x6085, limits.decel[i], "quick stop deceleration", "rad/s²")):
+                raw, clipped = fitted(r.object_dictionary[obj], bound * u.counts_per_rad)
+                sd[obj].raw = raw
+                if clipped:
+                    notes.append(f"drive {r.id} ({self.names[i]}): its {what}, {bound:.4g} {unit}, is more counts "
+                                 f"than 0x{obj:04X} holds at {u.counts_per_rad:.4g} counts/rad: told its largest, "
+                                 f"{raw / u.counts_per_rad:.4g} {unit}")
             sd[0x605A].raw = limits.quick_stop_option
             if 0x6007 in r.object_dictionary:  # (optional in the profile)
                 sd[0x6007].raw = limits.abort_option
@@ -138,6 +147,7 @@ class DriveMaster:
         for r in (*self.remotes, *self.sensors):
             r.nmt.state = "OPERATIONAL"
         self.heard[:] = self.now()
+        return notes
 
     def _communication(self, r: canopen.RemoteNode, period_s: float) -> None:
         """A node in pre-operational: its cycle, its heartbeat and the host's it watches, its EMCYs and heartbeats

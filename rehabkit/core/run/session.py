@@ -178,6 +178,15 @@ def open_session(a: Assembly, spawn: bool = False, notes: list[dict] | None = No
                   tau_h=np.zeros((n, dof)) if a.patient is not None else None,
                   f_h=np.zeros(n) if a.force_source is not None and a.force_source.measured else None)
     view = open_view(a, spawn)
+    try:
+        return _standing(a, view, trace, packed, notes)
+    except BaseException:  # no session for the runner to discard: its recording (and any taps) dropped here
+        view.discard()
+        raise
+
+
+def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[dict] | None) -> RunSession:
+    n = a.schedule.steps
     q0 = start_posture(a)
     try:
         a.backend.reset(q0)
@@ -207,7 +216,7 @@ def open_session(a: Assembly, spawn: bool = False, notes: list[dict] | None = No
     session.timeline = Timeline(a, view, threads, session.taps)
     try:
         _first_plan(session)
-    except BaseException:  # (no session for the runner to discard: the taps dropped here)
+    except BaseException:
         for tap in session.taps:
             tap.discard()
         raise
