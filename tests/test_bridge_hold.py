@@ -233,3 +233,34 @@ def test_a_reset_sent_again_keeps_the_ramp_in_after_a_clear(hit, tmp_path):
     host.hold_gravity(5)
     host.send(Q0, CMD_RESET)  # a new session after commands: no ramp-in any more
     assert not host.tick()[3] & RAMP_IN
+
+
+def test_a_light_joint_is_held_still_by_gains_its_tick_can_apply():
+    """urdf_arm4's wrist weighs 1.05 g·m² at the joint: the bridge's hold damping of 6 N·m·s/rad applied once a 1 ms
+    tick is 5.7 times what it can take (it swung wider each tick: a new user's 0.8 g·m² wrist reached 634 °/s 3 ms
+    into a real-time session, before the host's first command). The hold's gains are made stable for each joint's
+    inertia, as the safety layer's own hold: held after a reset without a command, the arm stays where it was put."""
+    import yaml
+
+    from rehabkit.core.kinds.context import Context
+    from rehabkit.core.plugins.registry import default_registry
+    from tests.conftest import ROOT
+
+    folder = ROOT / "examples" / "robots"
+    section = yaml.safe_load((folder / "urdf_arm4.yaml").read_text())["robot"]
+    info = default_registry().get("robot", section["type"])
+    robot = info.factory(info.config.model_validate(section), Context(folder, np.random.default_rng(0), 0.001))
+    plant = MujocoPlant(robot)
+    bridge = Bridge(plant, watchdog_s=1.0)
+    host = Host(bridge)
+    q0 = np.radians([-50.0, 20.0, 60.0, 20.0])
+    host.send(q0, CMD_RESET)
+    speeds, moved = [], []
+    for _ in range(300):  # 0.3 s held at the start posture, no command from the host
+        q, qd, _, status = host.tick()
+        speeds.append(np.abs(qd).max())
+        moved.append(np.abs(q - q0).max())
+    assert status & ENABLED and not status & (HOLDING | LIMIT)
+    assert max(speeds) < np.radians(5.0) and max(moved) < np.radians(0.5)
+    kp, kd = bridge._hold_gains()
+    assert kd[3] * plant.timestep / plant.joint_inertia()[3] <= 0.5 + 1e-9 and kd[0] == 6.0 and kp[0] == 60.0

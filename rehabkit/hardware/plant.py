@@ -46,6 +46,11 @@ class Plant(ABC):
         """Apply the holding brakes; False without any (the default)."""
         return False
 
+    def joint_inertia(self) -> np.ndarray | None:
+        """Each joint's own inertia where the robot is now [kg·m², or kg for a sliding joint], or None if unknown
+        (the default: the bridge's hold then takes its gains as they are)."""
+        return None
+
     @abstractmethod
     def apply(self, tau: np.ndarray) -> None:
         """Joint torques until the next call."""
