@@ -33,7 +33,7 @@ from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
-from rehabkit.hardware.bridge_says import hold_reason, latched_message
+from rehabkit.hardware.bridge_says import hold_breach, hold_reason, latched_message
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
@@ -108,7 +108,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         self.resync_s, self.skipped_s = config.bridge_stale_ms / 1e3, 0.0
         self._started = False
         self._estop_sent = False
-        self._fault: str | None = None
+        self._fault: BridgeHoldError | None = None
 
     @classmethod
     def check(cls, config: HardwareConfig, context: Context) -> None:
@@ -144,8 +144,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             if self._started and msg.status & HOLDING and self.held_at is None:
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
-                    self._fault = f"the bridge holds the robot ({hold_reason(self, msg.status)}) at " \
-                                  f"t={self.held_at:.3f}s"
+                    self._fault = BridgeHoldError(f"the bridge holds the robot ({hold_reason(self, msg.status)}) "
+                                                  f"at t={self.held_at:.3f}s", hold_breach(self, msg.status))
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
 
@@ -241,7 +241,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             self.silent_ticks = 0 if self._got else self.silent_ticks + 1
             if self._fault is not None:
                 fault, self._fault = self._fault, None
-                raise BridgeHoldError(fault)
+                raise fault
             silent = self._now() - self.last_state
             if silent > self.config.state_timeout_s and self.silent_ticks * self.timestep > self.config.state_timeout_s:
                 raise LinkLostError(f"no valid state from the bridge for {1e3 * silent:.0f} ms "

@@ -7,6 +7,14 @@ from rehabkit.core.setup.limits import first_breach
 from rehabkit.hardware.link.protocol import ESTOPPED, LIMIT, WATCHDOG
 
 
+def hold_breach(link, status: int):
+    """The limit the bridge's own check saw broken, from the state it held at (a margin wider than the host's), if
+    that is why it holds (a :class:`~rehabkit.core.setup.limits.LimitBreach`), else None."""
+    if not status & LIMIT or status & (WATCHDOG | ESTOPPED):
+        return None
+    return first_breach(link.limits, link.joint_names, link.q, link.qd, tol=0.0, revolute=link.revolute)
+
+
 def hold_reason(link, status: int) -> str:
     """Why the bridge behind the hardware backend ``link`` holds the robot, from the status bits it sent."""
     if status & WATCHDOG:
@@ -15,8 +23,8 @@ def hold_reason(link, status: int) -> str:
             "started by hand sets its own)"
     elif status & ESTOPPED:
         why = "an e-stop at the robot"
-    elif status & LIMIT:  # what its own limit check saw, from the state it held at (a margin wider than the host's)
-        breach = first_breach(link.limits, link.joint_names, link.q, link.qd, tol=0.0, revolute=link.revolute)
+    elif status & LIMIT:
+        breach = hold_breach(link, status)
         why = f"its own limit check: {breach.describe()}" if breach else "its own limit check"
     else:
         why = "status holding"

@@ -28,10 +28,14 @@ class LinkKeyError(BackendFaultError):
 
 
 class BridgeHoldError(BackendFaultError):
-    """The bridge stopped the robot on its own (its command watchdog, or an e-stop at the robot); it still reports
-    the robot's state."""
+    """The bridge stopped the robot on its own (its command watchdog, an e-stop at the robot, its own limit check:
+    then ``breach``, the limit it saw broken); it still reports the robot's state."""
 
     observable = True
+
+    def __init__(self, message: str, breach=None):
+        super().__init__(message)
+        self.breach = breach
 
 
 class HardwareConfig(StrictModel):

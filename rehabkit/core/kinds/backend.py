@@ -79,9 +79,11 @@ class BodyPoses:
 class BackendFaultError(RuntimeError):
     """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason.
     ``observable``: the robot side holds it and still reports its state, so the run watches it come to rest (the
-    safety stop's ``stop_after_s``) before ending."""
+    safety stop's ``stop_after_s``) before ending. ``breach``: the joint limit the robot side saw broken, where that
+    is why (a :class:`~rehabkit.core.setup.limits.LimitBreach`: its joint, value and limit become the event's)."""
 
     observable = False
+    breach = None
 
 
 class EStopLatchedError(BackendFaultError):

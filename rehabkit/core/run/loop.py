@@ -135,7 +135,7 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                     push(tau_h[k])
                 step(sub)
             except BackendFaultError as exc:  # the robot can't be driven any more: stop, logs complete
-                safety.trip(t, q, "backend", str(exc), qd)
+                safety.trip(t, q, "backend", str(exc), qd, breach=exc.breach)
                 if not exc.observable:  # (else watched while the robot side stops it, as any safety stop)
                     k += 1
                     st.stopped = True

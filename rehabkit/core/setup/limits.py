@@ -124,7 +124,8 @@ class LimitBreach:
         else:
             v, lim, unit = self.value, self.limit, " m" if self.quantity == "position" else " m/s"
         when = f" at t+{self.at_s:.3f}s" if self.at_s is not None else ""
-        return f"{self.joint} beyond its {self.quantity} limit{when} ({v:.1f}{unit}, limit {lim:.1f}{unit})"
+        d = next((d for d in range(1, 7) if f"{abs(v):.{d}f}" != f"{abs(lim):.{d}f}"), 6)  # (never "3.0, limit 3.0")
+        return f"{self.joint} beyond its {self.quantity} limit{when} ({v:.{d}f}{unit}, limit {lim:.{d}f}{unit})"
 
 
 def first_breach(limits: JointLimits, names: list[str], q: np.ndarray, qd: np.ndarray | None = None,
