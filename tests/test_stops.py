@@ -14,6 +14,7 @@ import pytest
 
 from rehabkit.api import run_scenario
 from rehabkit.cli import main
+from rehabkit.cli.run_report import run_report
 from rehabkit.core.safety.estop import EStopLatch, own_state
 from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
@@ -95,6 +96,8 @@ def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, caps
     name = "hit-1" if where != "simulation" else "sim-hit"
     first = run_scenario(ESTOP, extra)
     assert first.passed and EStopLatch.named(name).latched() is not None
+    assert first.summary["safety"]["estop_latched"] == name  # (and the run says so, with what clears it)
+    assert f"rehabkit estop clear {name} --by NAME" in run_report(first.summary, Path("out")).split("LATCHED")[1]
     with pytest.raises(SetupError, match=rf"latched.*rehabkit estop clear {name} --by NAME"):
         run_scenario(ESTOP, extra)  # a new session: refused before anything moves
     assert main(["estop", "list"]) == 0 and f"{name}: LATCHED" in capsys.readouterr().out

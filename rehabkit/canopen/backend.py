@@ -1,14 +1,13 @@
 """The canopen backend: the scenario's robot on CiA 402 servo drives on a CAN bus, the host as CANopen master.
 
 At the first reset each drive is set up by SDO (the cycle, heartbeats both ways, cyclic synchronous torque, the run's
-limits downloaded: position, speed, torque, quick stop deceleration and — from the e-stop's stop category — option
-code; the PDO maps) and started; then the 402 state machine is walked to OPERATION ENABLED. Each control step is one
-cycle: the safety layer's torques in the RPDOs, SYNC, the TPDOs in. A drive's EMCY, a drive leaving OPERATION
-ENABLED, a lost heartbeat, missing TPDOs, a bus that fails: each stops the run with its reason and code
-(:class:`~rehabkit.canopen.config.DriveFaultError`), the other drives stopped by the safety layer in its category and
-the torque taken off by the drives when that stop ends (disable voltage). The e-stop latch is this host's (it is the
-drives' master): a run does not start while it is latched, and a drive's FAULT is reset only in the first run after a
-person has cleared it (``rehabkit estop clear``).
+limits — position, speed, torque, quick stop deceleration and, from the e-stop's stop category, option code — the
+PDO maps), started, and walked to OPERATION ENABLED. Each control step is one cycle: the safety layer's torques in the
+RPDOs, SYNC, the TPDOs in. A drive's EMCY, a drive leaving OPERATION ENABLED, a lost heartbeat, missing TPDOs, a bus
+that fails: each stops the run with its reason and code (:class:`~rehabkit.canopen.config.DriveFaultError`), the
+other drives stopped by the safety layer in its category, the torque off when that stop ends. The e-stop latch is
+this host's (the drives' master): no run starts while it is latched, and a drive's FAULT is reset only in the first
+run after a person has cleared it (``rehabkit estop clear``).
 
 With no ``bus`` named, simulated drives (:mod:`~rehabkit.canopen.simulated.rig`) on the robot's MuJoCo model start with
 the run: in real time on a virtual bus of this process, or in lock-step (one cycle per SYNC, every frame delivered as
@@ -176,9 +175,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
             self._hold_kp, self._hold_kd = HOLD_BANDWIDTH**2 * inertia, 2 * HOLD_BANDWIDTH * inertia
 
     def _enable(self) -> None:
-        """At the loop's first step (the run's first plan made: no gap in the SYNC before the loop takes it over): the
-        402 walk to OPERATION ENABLED, the simulated plant placed at the start again, held by gravity compensation
-        for one cycle; in real time, the bus's clock started."""
+        """At the loop's first step (no gap in the SYNC before the loop takes over): the 402 walk to OPERATION ENABLED,
+        the simulated plant placed at the start again, held one cycle by gravity; in real time, the bus's clock."""
         q0 = self._q0
         self.deadline = time.monotonic()
         self.master.enable(self._paced, fault_reset=self._cleared)
@@ -192,10 +190,9 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
             self.clock.start(self.tau)
 
     def _hold_torque(self, posture: np.ndarray) -> np.ndarray:
-        """Holding ``posture`` as the bridge holds (PD to it with gravity compensation), from the newest state; the
-        gains critically damped at HOLD_BANDWIDTH on each joint's inertia (the bus adds a cycle's delay: a light wrist
-        held with the bridge's fixed gains would ring). Computed in the clock's thread while the loop's may be using
-        the robot (its first plan): the gravity from a dynamic model's workspace of its own."""
+        """Holding ``posture`` as the bridge holds (PD with gravity compensation) from the newest state, critically
+        damped at HOLD_BANDWIDTH on each joint's inertia (the bus's cycle of delay would make a light wrist ring at the
+        bridge's gains); in the clock's thread, its gravity from a dynamic model's workspace of its own."""
         m = self.master
         return self._hold_kp * (posture - m.q) - self._hold_kd * m.qd + self._gravity(m.q)
 
@@ -258,6 +255,9 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         """Latch the e-stop here, at the drives' master: no run starts until a person clears it."""
         self.latch.press(reason, by="rehabkit (canopen master)")
         return True
+
+    def latched_estop(self) -> str | None:  # (the drives' master's latch)
+        return self.latch.name if self.latch.latched() is not None else None
 
     def read_instrument(self, name: str) -> np.ndarray:
         """An instrument's newest reading, from its sensor's TPDO (sampled at the cycle's SYNC)."""

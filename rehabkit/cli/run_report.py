@@ -23,6 +23,9 @@ def run_report(s: dict[str, Any], out: Path) -> str:
     lines += [f"  SAFETY  {ev['message']}" for ev in s["safety"]["events"]]
     lines += _interventions(s["safety"].get("interventions", []), s["safety"]["events"])
     lines += _link(m)
+    if latch := s["safety"].get("estop_latched"):  # (a run that latched it says so: the next one is refused)
+        lines.append(f"  LATCHED the robot's e-stop ({latch}) stays latched: deal with its cause, then a person clears "
+                     f"it (`rehabkit estop clear {latch} --by NAME`) before the next run")
     if contacts := int(m.get("contact_steps") or 0):  # e.g. an arm lying on the floor, which nothing else says
         lines.append(f"  CONTACT the robot touched something in {contacts} control steps (the floor is the "
                      "plane z = 0)")

@@ -13,9 +13,8 @@ the plant: the same scenario runs against the link with only ``backend:`` change
 
 The scenario's scene is mirrored on the host, posed from the measured joints
 (:class:`~rehabkit.hardware.mirrored_scene.SceneMirror`): the log draws the whole robot, the scripted world objects
-live there, and a simulated camera looks at it — from a sensor thread, since the backend is ``realtime`` and a frame
-takes longer than a tick, with the pixels rendered in a process of their own
-(:mod:`~rehabkit.hardware.frame_server`).
+live there, and a simulated camera looks at it — from a sensor thread (a frame takes longer than a tick), its pixels
+rendered in a process of their own (:mod:`~rehabkit.hardware.frame_server`).
 """
 
 from __future__ import annotations
@@ -267,6 +266,10 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         """Latch the e-stop at the robot; this session's stop is the safety layer's, in its category."""
         self._send(self.tau, CMD_LATCH)
         return True
+
+    def latched_estop(self) -> str | None:
+        """The robot's latch at the bridge, as its newest state says."""
+        return f"{self.robot_name}-{self.config.robot_id}" if self.status & ESTOPPED else None
 
     def provenance(self) -> dict[str, str]:
         """The bridge this run drove and the session's key id (the safety log's run record)."""

@@ -172,6 +172,9 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self._latch.press(reason, by="rehabkit (simulation)")
         return True
 
+    def latched_estop(self) -> str | None:
+        return self._latch.name if self._latch.latched() is not None else None
+
     def hosted(self) -> list:
         return self.bodies
 

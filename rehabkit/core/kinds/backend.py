@@ -147,6 +147,11 @@ class Backend(ABC):
         keeps no latch (the default)."""
         return False
 
+    def latched_estop(self) -> str | None:
+        """The name of this robot's e-stop latch if it is latched now (as ``rehabkit estop clear`` takes it), else
+        None (also the default: no latch kept)."""
+        return None
+
     def interventions(self) -> list:
         """Safety events the robot side took on its own (``SafetyEvent``s, e.g. a hold through a gap in the
         commands); default none."""

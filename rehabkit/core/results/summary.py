@@ -159,7 +159,7 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
                    "interventions": [e.as_dict() for e in interventions],
-                   "plan_warnings": r.plan_warnings},
+                   "plan_warnings": r.plan_warnings, "estop_latched": a.backend.latched_estop()},
         "inputs": run_inputs(a, r),
         **sections,
         "events": r.fired, "plans": r.plans, "notes": r.notes, "actions": r.acted,
