@@ -85,3 +85,19 @@ def test_zero_torque_robots_go_limp(hit):
     limp = SafetyLayer(replace(hit.model, safe_stop="zero-torque"), SafetyConfig())
     limp.trip(0.0, _q_mid(hit), "plan", "test")
     np.testing.assert_array_equal(checked(limp, 0.0, _q_mid(hit), np.zeros(6), np.ones(6)), np.zeros(6))
+
+
+def test_a_limit_the_stop_does_not_hold_is_said_once_while_it_goes_on(hit):
+    """Tripped by another rule (here the e-stop), the layer still watches the state: a joint past its speed limit
+    while the robot is being stopped is noted once (rule, joint, value, limit), and the stop goes on."""
+    layer = SafetyLayer(hit.model, SafetyConfig(), gravity=hit.gravity_torque)
+    q, qd = _q_mid(hit), np.zeros(6)
+    layer.trip(1.0, q, "e-stop", "e-stop pressed", qd)
+    fast = np.zeros(6)
+    fast[4] = 1.2 * hit.model.limits.velocity[4]
+    for k in range(3):  # three steps past the limit: said once
+        checked(layer, 1.001 + 0.001 * k, q, fast, np.zeros(6))
+    (said,) = [e for e in layer.interventions if e.rule == "velocity"]
+    assert said.joint == hit.model.joint_names[4] and said.t == pytest.approx(1.001)
+    assert said.value == pytest.approx(fast[4]) and said.limit == pytest.approx(hit.model.limits.velocity[4])
+    assert [e.rule for e in layer.events] == ["e-stop"] and layer.category == 2  # the stop as it was

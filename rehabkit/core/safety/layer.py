@@ -20,13 +20,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from rehabkit.core.safety.breaches import Breaches
 from rehabkit.core.safety.compliance import Compliance
 from rehabkit.core.safety.event import Clipping, SafetyEvent
 from rehabkit.core.safety.keep_in import KeepIn
 from rehabkit.core.safety.ramps import Ramps
 from rehabkit.core.safety.stopping import WORDS, Stopping
 from rehabkit.core.scenario.safety import SafetyConfig
-from rehabkit.core.setup.limits import LimitBreach, first_breach
+from rehabkit.core.setup.limits import LimitBreach
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
@@ -49,7 +50,7 @@ class SafetyLayer:
         self.lo, self.hi = lim.lower - margin, lim.upper + margin
         self.vmax = lim.velocity * config.velocity_factor
         self.effort = lim.effort
-        self._checked = JointLimits(self.lo, self.hi, self.vmax, self.effort)
+        self._breaches = Breaches(JointLimits(self.lo, self.hi, self.vmax, self.effort), self.names, self._revolute)
         self.config = config
         self.events: list[SafetyEvent] = []  # trips
         self.interventions: list[SafetyEvent] = []  # every time the layer changed a command: trips, clipping, ramps
@@ -186,6 +187,8 @@ class SafetyLayer:
                              "commanded", qd)
             else:
                 self._diagnose(t, q, qd, tau)
+        elif (breach := self._breaches.during_stop(q, qd)) is not None:  # a limit the stop did not hold: said
+            self._breach(t, q, breach, "measured", qd)
         tau[:] = self.stopping.torque(t, q, qd)
         return tau
 
@@ -245,9 +248,7 @@ class SafetyLayer:
                 j = int(np.argmax(bad))
                 self._trip(t, q, "non-finite", j, None, None, f"non-finite {name} ({arr[j]})", qd=qd)
                 return
-        # (the range with its margin, the speed limit with its factor: what the fast path checked)
-        self._breach(t, q, first_breach(self._checked, self.names, q, qd, tol=0.0, revolute=self._revolute),
-                     "measured", qd)
+        self._breach(t, q, self._breaches.first(q, qd), "measured", qd)  # (what the fast path checked)
 
     def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str, qd: np.ndarray) -> None:
         """A limit rule's trip: the event's fields are the breach's, its message the breach's one wording."""
@@ -261,8 +262,9 @@ class SafetyLayer:
         cause = message + (f": {subject}{value:.{digits}g} (limit {limit:.{digits}g})"
                            if value is not None and not described else "")
         text = f"t={t:.3f}s: {cause}"
+        self._breaches.said(rule, name)
         if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
-            self.interventions.append(SafetyEvent(t, rule, name, value, limit, text + "; after the stop", data or {},
+            self.interventions.append(SafetyEvent(t, rule, name, value, limit, text + "; while stopping", data or {},
                                                   cause=cause))
             return
         reaction = self.config.reactions.get(rule)
