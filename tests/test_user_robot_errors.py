@@ -132,3 +132,16 @@ def test_every_plugins_refusal_is_said_at_once(tmp_path):
         Runner(load_scenario(bad)).build()
     found = {(d.path, d.mark.line) for d in err.value.diagnostics}
     assert found == {("sensors.encoders.joints", 3), ("planner.segment_durations", 4), ("controller.kp", 5)}
+
+
+def test_a_plan_past_a_speed_limit_names_where_the_limit_was_set_and_what_slows_the_plan():
+    """validate refuses a first plan faster than the envelope lets a joint go: at the planner (it made the plan), with
+    where the limit comes from and the settings that give the plan more time."""
+    out = cli("validate", str(SCENARIOS / "hit_roundtrip.yaml"),
+              "--set", "safety.joints={wrist_1: {velocity_deg_s: 10}}")
+    assert out.returncode == 2
+    (line,) = [x for x in out.stderr.splitlines() if "planned trajectory" in x]
+    assert ": planner.type: planner 'multi-cubic': planned trajectory: wrist_1 beyond its velocity limit" in line
+    assert line.endswith("the limit is the safety envelope's (safety.joints.wrist_1): give the plan more time (the "
+                         "planner's timing settings, `rehabkit plugins --fields multi-cubic`) or the joint a higher "
+                         "speed limit there")

@@ -44,7 +44,19 @@ def check_first_plan(a: Assembly) -> None:
     except PlanningError as exc:
         raise first_plan_refusal(a, exc) from exc
     if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
-        raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}")
+        raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
+
+
+def _fix(a: Assembly, breach) -> str:
+    """What puts a plan within a limit it breaks: where the limit was set, and for a speed, the planner's timing."""
+    source = a.limit_sources.by_joint.get(breach.joint, {}).get(
+        breach.quantity if breach.quantity == "velocity" else ("lower" if breach.value < breach.limit else "upper"))
+    where = {"safety": f"the safety envelope's (safety.joints.{breach.joint})",
+             "patient": "the patient profile's"}.get(source[0], f"{source[0]}'s") if source else "the robot's own"
+    if breach.quantity == "velocity":
+        return (f"; the limit is {where}: give the plan more time (the planner's timing settings, `rehabkit plugins "
+                f"--fields {a.sc.planner.type}`) or the joint a higher speed limit there")
+    return f"; the limit is {where}: plan through postures inside it (other targets or via points) or widen it there"
 
 
 def first_plan_refusal(a: Assembly, why: Exception | str) -> PluginSetupError:
