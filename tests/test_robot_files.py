@@ -134,3 +134,21 @@ def test_dh_robot_written_in_yaml(tmp_path, rng):
         t = t @ sdh_transform(row.row(), qi)
     np.testing.assert_allclose(robot.model.ee_pose(q), t, atol=1e-12)
     _same_robot_in_both_engines(robot.model, rng)
+
+
+def test_urdf_limits_written_in_degrees_are_refused_with_their_radians(tmp_path):
+    """URDF limits are radians; lower="-110" upper="110" (the shoulder's ±1.9 rad written in degrees) would give a
+    joint 17.5 turns each way. validate refuses it at robot.file, with the values in radians."""
+    from tests.conftest import ROOT
+    from tests.test_cli import cli
+
+    urdf = (ROOT / "examples" / "robots" / "arm4.urdf").read_text()
+    assert urdf.count('lower="-1.9" upper="1.9"') == 1
+    (tmp_path / "arm4.urdf").write_text(urdf.replace('lower="-1.9" upper="1.9"', 'lower="-110" upper="110"'))
+    scenario = (ROOT / "examples" / "robots" / "urdf_arm4.yaml").read_text()
+    (tmp_path / "s.yaml").write_text(scenario)
+    out = cli("validate", "s.yaml", cwd=tmp_path)
+    assert out.returncode == 2
+    (line,) = [x for x in out.stderr.splitlines() if "URDF limits are radians" in x]
+    assert ": robot.file: " in line and "has limits -110 to 110 rad, 17.5 turns" in line
+    assert line.endswith('write lower="-1.9199" upper="1.9199"')

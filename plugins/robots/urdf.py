@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pinocchio as pin
 from pydantic import Field
 
@@ -46,12 +48,28 @@ class UrdfRobot(Robot):
             idx = urdf.joints[jid].idx_v
             velocity[urdf.names[jid]] = float(urdf.velocityLimit[idx])
             effort[urdf.names[jid]] = float(urdf.effortLimit[idx])
+            _radians(urdf, jid, path)
         try:
             self.model = robot_from_file(path, config, velocity, effort)
         except ModelFileError as exc:
             if exc.setting is None:
                 raise
             raise SettingError(exc.setting, str(exc)) from None
+
+
+def _radians(urdf, jid: int, path) -> None:
+    """A revolute joint's limits as URDF has them, in radians: a range of more than two turns each way is degrees
+    written where radians go (``lower="-90"``), refused with what they would be."""
+    shape = urdf.joints[jid].shortname()
+    if not shape.startswith("JointModelR") or shape.startswith("JointModelRUB"):  # (continuous joints: no range)
+        return
+    at = urdf.joints[jid].idx_q
+    lo, hi = float(urdf.lowerPositionLimit[at]), float(urdf.upperPositionLimit[at])
+    if max(abs(lo), abs(hi)) > 4 * math.pi:
+        raise SettingError("file", f"{path.name}: joint '{urdf.names[jid]}' has limits {lo:g} to {hi:g} rad, "
+                                   f"{max(abs(lo), abs(hi)) / (2 * math.pi):.1f} turns: URDF limits are radians — if "
+                                   f"those are degrees, write lower=\"{math.radians(lo):.4f}\" upper=\""
+                                   f"{math.radians(hi):.4f}\"")
 
 
 @hookimpl
