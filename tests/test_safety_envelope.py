@@ -94,6 +94,17 @@ def test_hand_leaving_the_box_stops_the_run_in_simulation(box_run, hit):
     assert (warning["axis"], warning["side"]) == (ev[0]["data"]["axis"], ev[0]["data"]["side"]) == ("z", "min")
 
 
+def test_validate_says_before_any_run_where_the_plan_leaves_the_box(box_run, tmp_path):
+    """The same warning `run` gives before it moves, from `validate` (the scenario is valid: exit 0)."""
+    from tests.test_cli import cli
+
+    (tmp_path / "box.yaml").write_text(yaml.safe_dump({"extends": str(HIT), "safety": BOX}))
+    out = cli("validate", tmp_path / "box.yaml")
+    assert out.returncode == 0
+    (said,) = [line.strip() for line in out.stdout.splitlines() if line.strip().startswith("PLAN")]
+    assert said == "PLAN    " + box_run.summary["safety"]["plan_warnings"][0]["message"]
+
+
 def test_ramp_in_starts_from_holding_and_ramp_out_ends_there(scenario_run):
     result = run_scenario(HIT, {"safety": {"ramp_in_s": 0.5, "ramp_out_s": 0.5}})
     iv = result.summary["safety"]["interventions"]

@@ -95,15 +95,16 @@ def _admission(loaded) -> str:
     from rehabkit.core.setup.first_plan import check_first_plan
 
     setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins")
-    check_first_plan(setup)
+    warned = "".join(f"\n  PLAN    {w}" for w in check_first_plan(setup))  # (as run says them, before it moves)
     sc = loaded.model
     if sc.patient is None and not sc.safety.joints:
-        return ""
+        return warned
     whose = f"patient {sc.patient.id}" if sc.patient is not None else "the safety envelope"
     if not setup.replaced:
-        return f" (fixed targets within {whose}'s ranges)"
-    return "".join(f"\n  target '{r['target']}' outside the range of {', '.join(r['joints'])}: would be replaced by "
-                   f"the nearest admissible posture ({1e3 * r['moved_m']:.1f} mm away)" for r in setup.replaced)
+        return f" (fixed targets within {whose}'s ranges){warned}"
+    replaced = "".join(f"\n  target '{r['target']}' outside the range of {', '.join(r['joints'])}: would be replaced "
+                       f"by the nearest admissible posture ({1e3 * r['moved_m']:.1f} mm away)" for r in setup.replaced)
+    return replaced + warned
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:

@@ -13,7 +13,7 @@ import numpy as np
 from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.results.metric import MetricCatalogue, combine
-from rehabkit.core.safety.keep_in import AXES, box_exit
+from rehabkit.core.safety.keep_in import plan_exit
 from rehabkit.core.setup.limits import CHECK_DT, LimitBreach
 from rehabkit.core.setup.space import JointSpace
 
@@ -51,15 +51,11 @@ class PlanGate:
         if self.safety.keep_in is None:
             return None
         ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-        found = box_exit(self.safety.keep_in, self.space.hand_world(plan.trajectory.sample(ts)[0]))
-        if found is None:
+        warning = plan_exit(t, ts, self.space.hand_world(plan.trajectory.sample(ts)[0]), self.safety.keep_in)
+        if warning is None:
             return None
-        k, a, side, bound = found
-        message = (f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) "
-                   f"at t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")
-        self.warnings.append({"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "axis": AXES[a], "side": side,
-                              "bound": bound, "message": message})
-        return message
+        self.warnings.append(warning)
+        return warning["message"]
 
     def account(self, plan: Plan) -> Plan:
         """Merge the plan's diagnostics into the run's, each by its metric's rule (default: the worst)."""

@@ -19,6 +19,19 @@ def world_box(box, base_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def plan_exit(t: float, ts: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> dict | None:
+    """Where a plan made at ``t`` takes the hand (world ``points`` at its times ``ts``) out of ``box``, said before it
+    moves (the box is watched, not planned around): when, the axis and side, the bound and the message; else None."""
+    found = box_exit(box, points)
+    if found is None:
+        return None
+    k, a, side, bound = found
+    message = (f"the plan made at t={t:.3f}s takes the hand out of the keep-in box ({AXES[a]} {side} {bound:g}) at "
+               f"t={t + ts[k]:.3f}s: the safety layer will stop the robot there; move the target or the box")
+    return {"t": round(t, 6), "at_s": round(t + float(ts[k]), 3), "axis": AXES[a], "side": side, "bound": bound,
+            "message": message}
+
+
 def box_exit(box: tuple[np.ndarray, np.ndarray], points: np.ndarray) -> tuple[int, int, str, float] | None:
     """The first of world ``points`` (n, 3) outside ``box``: (index, axis, "min"/"max", bound); None if all are in."""
     lo, hi = box

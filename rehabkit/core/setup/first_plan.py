@@ -6,9 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from rehabkit.core.kinds.interfaces import PlanningError, PlanRequest
+from rehabkit.core.safety.keep_in import plan_exit
 from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.setup.checks import at_target
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.core.setup.limits import CHECK_DT
 
 
 def start_posture(a: Assembly) -> np.ndarray:
@@ -30,14 +32,15 @@ def start_posture(a: Assembly) -> np.ndarray:
     return inside[0]
 
 
-def check_first_plan(a: Assembly) -> None:
+def check_first_plan(a: Assembly) -> list[str]:
     """Make the task's first plan without running it (``rehabkit validate``); a planner's refusal is located at
-    the setting it names. Skipped where the run alone can plan: sensed targets, a controller planning itself."""
+    the setting it names. Skipped where the run alone can plan: sensed targets, a controller planning itself.
+    Returns what the run would warn of before it moves: the plan leaving the keep-in box, where and when."""
     sc = a.sc
     names = sc.task.order()
     sensed = any(t.sensor for t in sc.task.targets if t.name in names)
     if not names or sensed or a.controller.reference == "own":
-        return
+        return []
     q0 = start_posture(a)
     try:
         plan = a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
@@ -45,6 +48,11 @@ def check_first_plan(a: Assembly) -> None:
         raise first_plan_refusal(a, exc) from exc
     if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
         raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
+    if a.safety.keep_in is None:
+        return []
+    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+    warning = plan_exit(0.0, ts, a.space.hand_world(plan.trajectory.sample(ts)[0]), a.safety.keep_in)
+    return [warning["message"]] if warning is not None else []
 
 
 def _fix(a: Assembly, breach) -> str:
