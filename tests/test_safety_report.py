@@ -65,3 +65,16 @@ def test_the_report_gives_every_skill_in_simulation_over_the_link_and_on_canopen
     assert all(r == "yes" for s in sections.values() for r in _row(s, "expectations met") if r != "n/a")
     html = (tmp_path / "report" / "safety_report.html").read_text()
     assert html.count("data:image/png;base64,") == 10 and "<table>" in html and "<th>CANopen</th>" in html
+
+
+def test_a_skill_that_misses_an_expectation_is_reported_with_the_one_it_missed():
+    """"expectations met" says which it missed, not only that one was (a new user's CANopen column read "NO")."""
+    from rehabkit.api import run_scenario
+    from rehabkit.safety_report.render import ROWS
+    from rehabkit.safety_report.report import SkillRun, _failed
+
+    r = run_scenario(ROOT / "scenarios" / "safety" / "hit_estop.yaml", {"expect.stop_time_s": {"lt": 1e-4}})
+    assert not r.passed and _failed(r) == ("stop_time_s < 0.0001",)
+    label, cell, _ = ROWS[0]
+    run = SkillRun("hit-estop", "simulation", r.passed, "e-stop", 1.0, 1.0, 2, failed=_failed(r))
+    assert label == "expectations met" and cell(run) == "NO: stop_time_s < 0.0001"

@@ -13,7 +13,7 @@ import numpy as np
 from rehabkit.core.io import atomic_write_text
 
 ROWS = [  # (label, how to get it from a SkillRun, format)
-    ("expectations met", lambda r: "yes" if r.passed else "NO", "{}"),
+    ("expectations met", lambda r: "yes" if r.passed else f"NO: {'; '.join(r.failed)}", "{}"),
     ("trigger", lambda r: r.trigger, "{}"),
     ("limit crossed at [s]", lambda r: r.onset_s, "{:.3f}"),
     ("stop triggered at [s]", lambda r: r.trip_s, "{:.3f}"),

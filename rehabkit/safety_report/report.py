@@ -43,6 +43,7 @@ class SkillRun:
     figures: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     trace: Any = None
+    failed: tuple[str, ...] = ()  # the expectations it did not meet (their metrics), or why else it did not pass
 
     @property
     def reaction_ms(self) -> float | None:
@@ -167,7 +168,7 @@ def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun
         figures["torque_rate_max_nm_s"] = rate
         figures["ramp_in_s"] = ramp["data"]["duration_s"] if ramp else 0.0
         return SkillRun(sc.name or path.stem, backend, result.passed, "ramp-in" if ramp else "none", None, None,
-                        None, figures, notes, result.trace)
+                        None, figures, notes, result.trace, _failed(result))
     ev = dict(events[0])
     names = result.summary["per_joint"]
     if ev.get("joint") in names:
@@ -190,7 +191,14 @@ def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun
             notes.append(f"then at {later['t']:.3f} s: {later['cause']}")
     name = (sc.name or path.stem) + (f"-{reaction}" if reaction is not None else "")
     return SkillRun(name, backend, result.passed, trigger, onset, trip,
-                    ev["data"].get("category", ev["data"].get("reaction")), figures, notes, result.trace)
+                    ev["data"].get("category", ev["data"].get("reaction")), figures, notes, result.trace,
+                    _failed(result))
+
+
+def _failed(result) -> tuple[str, ...]:
+    """What kept a run from passing: each expectation it missed (metric and bound), or a stop none expected."""
+    missed = tuple(f"{e['metric']} {e['bound']}" for e in result.summary["expectations"] if not e["passed"])
+    return missed or (() if result.passed else ("a safety stop the scenario does not expect",))
 
 
 def _on_canopen(path: Path, overrides: dict) -> dict:
