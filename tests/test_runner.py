@@ -106,7 +106,7 @@ class _BadConfig(StrictModel):
 
 
 class _BadController(Controller):
-    """A good joint PD that returns NaN (or raises) after a while."""
+    """A good joint PD that returns NaN (or raises, or one torque too few) after a while."""
 
     def __init__(self, config, context):
         from rehabkit_plugins.controllers.joint_pd import JointPD, JointPDConfig
@@ -119,6 +119,8 @@ class _BadController(Controller):
             return self.good.compute(t, q, qd, q_ref, qd_ref, qdd_ref)
         if self.config.mode == "raise":
             raise ZeroDivisionError("gain schedule broke")
+        if self.config.mode == "short":  # one torque short
+            return np.zeros(self.n - 1)
         return np.full(self.n, np.nan)
 
 
@@ -127,11 +129,16 @@ def bad_registry():
     return registry_with("controller", "bad", _BadConfig, _BadController)
 
 
-@pytest.mark.parametrize("mode, rule", [("nan", "non-finite"), ("raise", "plugin-error")])
+@pytest.mark.parametrize("mode, rule", [("nan", "non-finite"), ("raise", "plugin-error"), ("short", "plugin-error")])
 def test_broken_controller_stops_the_robot_and_the_logs_say_why(tmp_path, bad_registry, mode, rule):
     r = run_scenario(HIT, {"controller": {"type": "bad", "mode": mode}}, out_dir=tmp_path, registry=bad_registry)
     (ev,) = r.summary["safety"]["events"]
     assert ev["rule"] == rule and ev["t"] == pytest.approx(0.5, abs=0.002)
+    if rule == "plugin-error":  # whose bug, and what it did: raised, or returned torques that do not fit
+        assert {k: ev["data"][k] for k in ("plugin", "kind", "package", "error")} == \
+            {"plugin": "bad", "kind": "controller", "package": "tests", "error": {"raise": "ZeroDivisionError",
+                                                                                 "short": "ValueError"}[mode]}
+        assert ev["data"].get("returned_shape") == ([5] if mode == "short" else None)
     assert not r.passed and r.summary["metrics"]["sim_time_s"] == pytest.approx(1.0, abs=0.01)  # stop_after_s = 0.5
     assert np.all(np.isfinite(r.trace.tau))
     after = r.trace.qd[int(0.9 * 1000):]

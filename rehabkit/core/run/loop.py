@@ -17,6 +17,7 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import Contacts, FollowsReference
 from rehabkit.core.kinds.interfaces import BackendFaultError, EmbodiedPatient
+from rehabkit.core.run.plugin_fault import NOTHING, plugin_fault
 from rehabkit.core.run.session import RunSession
 
 
@@ -112,10 +113,13 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                     st.stopped = True
                     break
             tq[k], tqd[k] = q, qd  # the row's columns, written one by one: cheaper than a concatenation
+            out = NOTHING
             try:
-                ttau[k] = compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
+                out = compute(t, q, qd, ref_q[k], ref_qd[k], ref_qdd[k])
+                ttau[k] = out
             except Exception as exc:  # a crashing controller must still leave the robot held
-                safety.trip(t, q, "plugin-error", f"controller raised {type(exc).__name__}: {exc}", qd)
+                said, data = plugin_fault(a.registry, "controller", a.sc.controller.type, exc, out, dof)
+                safety.trip(t, q, "plugin-error", said, qd, data=data)
                 compute, st.failed, ttau[k] = _idle(dof), True, 0.0  # the safety layer drives from now on
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])

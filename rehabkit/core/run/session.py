@@ -21,6 +21,7 @@ from rehabkit.core.log.run_view import NullView, RunView, open_view
 from rehabkit.core.results.metric import MetricCatalogue
 from rehabkit.core.results.metrics import Trace
 from rehabkit.core.run.plan_gate import PlanGate
+from rehabkit.core.run.plugin_fault import plugin_fault
 from rehabkit.core.run.reference import ReferenceBuffer
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.run.timeline import Replan, Timeline
@@ -97,7 +98,9 @@ class RunSession:
             for request in replans:
                 self.replan(k, t, q, qd, request)
         except Exception as exc:
-            self.setup.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
+            a = self.setup
+            said, data = plugin_fault(a.registry, "planner", a.sc.planner.type, exc)
+            a.safety.trip(t, q, "plugin-error", said, qd, data=data)
 
     def replan(self, k: int, t: float, q: np.ndarray, qd: np.ndarray, request: Replan, first: bool = False) -> None:
         """Plan through the request's targets from the current state and follow it from step ``k`` (by the planner

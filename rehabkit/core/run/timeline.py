@@ -16,6 +16,7 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.sensor import Reading
+from rehabkit.core.run.plugin_fault import debug_traceback
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.setup.assembly import Assembly
 
@@ -127,6 +128,7 @@ class Timeline:
                 return -1, self._take_replans()
             self._read_sensors(k, t, q, qd)
         except Exception as exc:
+            debug_traceback(exc)
             a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
         replans = self._take_replans()
         nxt = self.stop_at
