@@ -37,6 +37,10 @@ def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path):
     assert named.returncode == 2 and "Traceback" not in named.stderr
     assert "<--set robot.type>" in named.stderr and "robot plugin 'exo' can't be used" in named.stderr
     assert "not_a_real_module_xyz" in named.stderr and "rehabkit-exo-driver 1.2.3" in named.stderr
+    # its reference: installed, and why it does not load (not "no plugin named 'exo'; did you mean 'exo'")
+    fields = rehabkit(site, "plugins", "--fields", "exo")
+    assert fields.returncode == 2 and "did you mean" not in fields.stderr
+    assert "robot 'exo' is installed but does not load" in fields.stderr and "not_a_real_module_xyz" in fields.stderr
 
 
 def test_a_run_imports_only_the_plugins_it_names(tmp_path):

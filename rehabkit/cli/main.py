@@ -116,6 +116,13 @@ def cmd_plugins(args: argparse.Namespace) -> int:
 
         found = [p for p in (reg.find(kind, args.fields) for kind in KINDS) if p is not None]
         if not found:
+            installed = [kind for kind in KINDS if args.fields in reg.names(kind)]
+            if installed:  # installed, and it does not load: why, not "no such plugin"
+                try:
+                    reg.get(installed[0], args.fields)
+                except PluginError as exc:
+                    _err(f"error: {installed[0]} '{args.fields}' is installed but does not load: {exc}")
+                    return EXIT_INVALID
             names = sorted({n for kind in KINDS for n in reg.names(kind)})
             _err(f"error: no plugin named '{args.fields}'{suggest(args.fields, names)}")
             return EXIT_INVALID

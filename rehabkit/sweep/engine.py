@@ -83,7 +83,7 @@ def run_sweep(scenario: str | Path, grid: Mapping[str, list[Any]] | Iterable[str
     timeout_s = timeout_s or (spec.timeout_s if spec else 600.0)
     shown = list(dict.fromkeys([*(spec.metrics if spec else []), *metrics, *base.expect]))
     for point in _points(merged):  # every grid value must make a valid scenario: located errors before any run
-        load_scenario(path, {**fixed, **point})
+        load_scenario(path, fixed, grid=point)
     specs = expand(path, merged, seeds, fixed)
     out = Path(out_dir) if out_dir is not None else Path("out") / f"sweep_{path.stem}"
     store = RunStore(out)

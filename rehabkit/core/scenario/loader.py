@@ -89,6 +89,7 @@ def load_scenario(
     registry: PluginRegistry | None = None,
     origin: Path | None = None,
     extensions: Extensions | None = None,
+    grid: Mapping[str, Any] | None = None,
 ) -> LoadedScenario:
     """Read, merge, override and validate a scenario file.
 
@@ -99,6 +100,7 @@ def load_scenario(
         origin: For a run's snapshot of a scenario: the file it was taken from (relative paths resolve
             from its folder, and the run reports it as its scenario).
         extensions: The layers whose sections the scenario may have (default: the installed ones).
+        grid: A sweep's grid point, ``{"a.b": 1}``, applied after ``overrides`` (its errors said at ``<--grid KEY>``).
 
     Raises:
         ScenarioError: with one :class:`Diagnostic` per problem.
@@ -116,8 +118,10 @@ def load_scenario(
         apply_overrides(src, overrides)
     except ValueError as exc:
         raise ScenarioError([Diagnostic(Mark("<--set>", 0, 0), "", str(exc))]) from None
+    apply_overrides(src, grid or {}, flag="--grid")
     with_file_sections(src, path, as_files)  # --set patient=FILE (a sweep over profiles), from the scenario's folder
     _fit_new_types(src, overrides, registry, extensions.plugin_slots(registry))
+    _fit_new_types(src, grid or {}, registry, extensions.plugin_slots(registry))
     _relabel(src, path)
     scenario = validate_source(src, registry, path, extensions)
     if anchor_file_settings(src, scenario, path):  # a base file's relative paths, made absolute from its folder

@@ -187,13 +187,14 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return parts, value
 
 
-def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any]) -> None:
+def apply_overrides(src: Source, overrides: Iterable[str] | Mapping[str, Any], flag: str = "--set") -> None:
     """Apply ``--set`` style overrides in place; list items are addressed by index; ``null`` deletes the key (its
-    default applies), as in a file that extends another."""
+    default applies), as in a file that extends another. ``flag``: what gave them, where their errors are said
+    (``<--set KEY>``; a sweep's grid values ``<--grid KEY>``)."""
     items = overrides.items() if isinstance(overrides, Mapping) else (parse_override(o) for o in overrides)
     for key, value in items:
         parts = key.split(".") if isinstance(key, str) else list(key)
-        mark = Mark(f"<--set {'.'.join(parts)}>", 0, 0)
+        mark = Mark(f"<{flag} {'.'.join(parts)}>", 0, 0)
         node: Any = src.data
         path: KeyPath = ()
         for i, part in enumerate(parts):
