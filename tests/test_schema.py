@@ -82,3 +82,26 @@ def test_an_extending_file_is_partial_and_null_deletes(schema, tmp_path, capsys)
     refused = _refused(schema, [good, typo, wrong_type])
     assert set(refused) == {"typo.yaml", "wrong_type.yaml"}
     assert "'controler' was unexpected" in json.dumps(refused["typo.yaml"])
+
+
+def test_every_bound_is_written_in_json_schemas_own_words(schema):
+    """A bound on a union (``scale: float | list[float]`` with ``gt=0``) came out as pydantic's own ``gt``, which
+    JSON Schema validators ignore: an editor let ``scale: 2`` through. Every bound is ``minimum``,
+    ``exclusiveMinimum``, … (``gt``/``ge``/``lt``/``le`` stay only as the names of ``expect:``'s fields)."""
+    misplaced = []
+
+    def walk(node, at):
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if key in ("gt", "ge", "lt", "le") and not isinstance(value, dict):
+                    misplaced.append(f"{at}/{key}")
+                walk(value, f"{at}/{key}")
+        elif isinstance(node, list):
+            for i, value in enumerate(node):
+                walk(value, f"{at}/{i}")
+
+    doc = json.loads(schema.read_text())
+    walk(doc, "")
+    assert misplaced == []
+    scale = doc["$defs"]["ActionSpec"]["properties"]["scale"]["anyOf"]
+    assert scale[0] == {"exclusiveMinimum": 0.0, "maximum": 1.0, "type": "number"}

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from typing import Annotated
 
 import numpy as np
 import pinocchio as pin
@@ -37,6 +38,7 @@ from rehabkit.plugin import Context, Metric, Patient, SettingError, StrictModel
 from rehabkit.rehab.profile import JointRom
 
 PerJoint = float | list[float]
+NonNegative = Annotated[float, Field(ge=0)]  # (a bound on each branch of a union: JSON Schema has no 'ge' on a union)
 SERIES_EVERY = 10  # control steps between logged samples of the person's state
 # rows of SimulatedArm.joint (per-joint parameters) and entries of SimulatedArm.const, as the compiled step reads them
 K, B, REST, PASSIVE_LO, PASSIVE_HI, GAIN_S, V_TH, STRENGTH, ACTIVE_LO, ACTIVE_HI, INV_STRENGTH = range(11)
@@ -47,7 +49,7 @@ class Spasticity(StrictModel):
     """Velocity-dependent stretch reflex."""
 
     gain_nms_rad: PerJoint = Field(0.0, description="resistance per rad/s above the threshold [N·m·s/rad]")
-    threshold_deg_s: PerJoint = Field(30.0, ge=0, description="reflex threshold speed")
+    threshold_deg_s: NonNegative | list[NonNegative] = Field(30.0, description="reflex threshold speed")
     reflex_delay_s: float = Field(0.03, ge=0, le=0.2, description="reflex loop delay")
 
 

@@ -7,7 +7,7 @@ how often it acts (``policy_hz``, over the control loop). The DSL only, contribu
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
@@ -20,6 +20,9 @@ OBSERVATION_TERMS = ("joint_state", "reference", "tracking_error", "goal", "phas
 REWARD_TERMS = ("tracking", "interaction_force", "assistance", "jerk", "reached")
 
 
+Fraction = Annotated[float, Field(gt=0, le=1)]  # (bounds on each branch of a union: JSON Schema has none on a union)
+
+
 class ActionSpec(StrictModel):
     """What the policy's action in [−1, 1]ⁿ does."""
 
@@ -29,8 +32,8 @@ class ActionSpec(StrictModel):
                                 "settings, each over its range")
     parameters: dict[str, tuple[float, float]] = Field(
         {}, description="parameters: setting → [value at −1, value at +1] (e.g. assist-as-needed's k_max)")
-    scale: float | list[float] = Field(
-        0.2, gt=0, description="action 1.0 is this fraction of each joint's effort limit (one value or one per joint)")
+    scale: Fraction | list[Fraction] = Field(
+        0.2, description="action 1.0 is this fraction of each joint's effort limit (one value or one per joint)")
 
     @model_validator(mode="after")
     def _positive(self) -> ActionSpec:
