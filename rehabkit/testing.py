@@ -166,16 +166,16 @@ def run_sweep(tmp_path: Path) -> Callable[..., Any]:
 
 @pytest.fixture(scope="session")
 def scenario_run(pytestconfig: pytest.Config) -> Callable[[str | Path], Any]:
-    """The run of a scenario file as written, once per session (shared with its scenario test); a
-    :class:`rehabkit.core.run.runner.RunResult` with its outputs in ``out_dir``."""
+    """``scenario_run(path)``: the run of a scenario file as written, once per session (shared with its scenario
+    test); a :class:`rehabkit.core.results.summary.RunResult` with its outputs in ``out_dir``."""
     return lambda path: shared_run(pytestconfig, path)
 
 
 @pytest.fixture
 def run_scenario(tmp_path: Path, request: pytest.FixtureRequest) -> Callable[..., Any]:
-    """Run a scenario file with overrides; returns a :class:`rehabkit.core.run.runner.RunResult`. A relative path is
-    from the current directory, or else from the test file's folder (``run_scenario("planar_reach.yaml")`` beside
-    the test runs wherever pytest starts)."""
+    """Run a scenario file with overrides; returns a :class:`rehabkit.core.results.summary.RunResult`. A relative
+    path is from the current directory, or else from the test file's folder (``run_scenario("planar_reach.yaml")``
+    beside the test runs wherever pytest starts)."""
     from rehabkit.api import run_scenario as _run
 
     counter = iter(range(1_000_000))
