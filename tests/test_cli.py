@@ -106,9 +106,10 @@ def test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its
     r = cli("plugins", "--fields", "dh")
     assert r.returncode == 0
     assert "  table: list[DHRowSpec] = required" in r.stdout
-    assert "      mass: float = required — [kg]" in r.stdout  # a joint's setting, under the joints
+    assert "      mass: float = required (> 0) — [kg]" in r.stdout  # a joint's setting, under the joints, its bound
     r = cli("plugins", "--fields", "ompl-joint")
-    assert "  clearance_m: float = 0.01 — distance below which a link counts as touching the world [m]" in r.stdout
+    clearance = "  clearance_m: float = 0.01 (≥ 0) — distance below which a link counts as touching the world [m]"
+    assert clearance in r.stdout
     assert "  states_checked [count] — states checked for collision by MuJoCo" in r.stdout
     r = cli("plugins", "--fields", "musculoskeletal")  # a patient's: nested impairments, with their units
     assert "  model: Literal['myoarm', 'myoelbow'] = 'myoarm'" in r.stdout

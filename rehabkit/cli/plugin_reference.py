@@ -26,8 +26,19 @@ def _type_name(annotation: Any) -> str:
     return text or re.sub(r"(?:\w+\.)+(\w+)", r"\1", str(annotation)).replace("NoneType", "None")
 
 
+_BOUNDS = (("gt", ">"), ("ge", "≥"), ("lt", "<"), ("le", "≤"), ("min_length", "at least"), ("max_length", "at most"))
+
+
+def _bounds(metadata: list) -> str:
+    """A field's bounds as its model declares them (``gt=0, le=1`` → ``(> 0, ≤ 1)``), or nothing."""
+    said = [f"{sign} {getattr(m, key)!r}" for m in metadata for key, sign in _BOUNDS
+            if getattr(m, key, None) is not None]
+    return f" ({', '.join(said)})" if said else ""
+
+
 def field_lines(model: type[BaseModel], indent: str = "  ", seen: tuple[type, ...] = ()) -> list[str]:
-    """One line per field of ``model`` (``name: type = default — description``), nested models below theirs."""
+    """One line per field of ``model`` (``name: type = default (bounds) — description``), nested models below
+    theirs."""
     lines = []
     for name, f in model.model_fields.items():
         if name == "type":
@@ -36,7 +47,7 @@ def field_lines(model: type[BaseModel], indent: str = "  ", seen: tuple[type, ..
             f"{f.default_factory()!r}" if f.default_factory is not None else
             "none" if f.default is None else repr(f.default) if f.default is not PydanticUndefined else "required")
         marked = [repr(m) for m in f.metadata if m in (FILE_SETTING, SENSOR_SETTING)]  # FilePath, SensorName
-        text = f"{indent}{name}: {marked[0] if marked else _type_name(f.annotation)} = {default}"
+        text = f"{indent}{name}: {marked[0] if marked else _type_name(f.annotation)} = {default}{_bounds(f.metadata)}"
         if f.description:
             text += f" — {f.description}"
         lines.append(text)
