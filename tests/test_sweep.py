@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from rehabkit.core.scenario.errors import ScenarioError
@@ -57,6 +58,8 @@ def test_serial_and_ray_give_the_same_rows_and_a_second_call_runs_nothing(tmp_pa
     assert all(lengths["voxel-astar", s] <= lengths["voxel-beam", s] + 1e-9 for s in range(3))
     agg = {a["planner.type"]: a for a in serial.aggregate}
     assert agg["voxel-astar"]["runs"] == 3 and agg["voxel-astar"]["decimated_path_length_m.n"] == 3
+    astar = [lengths["voxel-astar", s] for s in range(3)]  # the spread across seeds: the sample's
+    assert agg["voxel-astar"]["decimated_path_length_m.std"] == pytest.approx(np.std(astar, ddof=1))
     assert (tmp_path / "serial" / "results.parquet").stat().st_size > 0
     assert (tmp_path / "serial" / "aggregate.csv").read_text().startswith("planner.type,runs,errors,passed")
     again = run_sweep(TRIAL, grid, 3, tmp_path / "serial", serial=True)
@@ -109,10 +112,10 @@ def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, m
         request.getfixturevalue("running_ray")
     # 300 s of simulated HIT take far longer than the 3 s allowed; the 0.5 s run finishes (in ~0.5 s)
     result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=3)
-    by = {r["duration"]: r for r in result.records}
-    assert by["0.5"]["error"] is None and by["0.5"]["metric.sim_time_s"] == pytest.approx(0.5)
-    assert by["300"]["error"].startswith("RunTimeoutError") and not by["300"]["passed"]
-    assert by["300"]["wall_time_s"] < 30
+    by = {r["duration"]: r for r in result.records}  # (a grid of numbers: a column of numbers)
+    assert by[0.5]["error"] is None and by[0.5]["metric.sim_time_s"] == pytest.approx(0.5)
+    assert by[300]["error"].startswith("RunTimeoutError") and not by[300]["passed"]
+    assert by[300]["wall_time_s"] < 30
     assert [a["errors"] for a in result.aggregate] == [0, 1]
 
 

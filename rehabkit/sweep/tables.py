@@ -19,9 +19,11 @@ from rehabkit.sweep.grid import RunSpec, point_label
 def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """One flat record per run, in the sweep's order: grid values, seed, outcome, metric.*, expect.*."""
     out = []
+    numeric = _numeric_keys(specs)
     for spec in specs:
         row = rows[spec.run_id]
-        rec: dict[str, Any] = {"run_id": spec.run_id, **point_label(spec.point), "seed": spec.seed,
+        label = {**point_label(spec.point), **{k: v for k, v in spec.point if k in numeric}}
+        rec: dict[str, Any] = {"run_id": spec.run_id, **label, "seed": spec.seed,
                                "passed": bool(row["passed"]), "error": row["error"],
                                "wall_time_s": float(row["wall_time_s"]),
                                **({"run_dir": row["run_dir"]} if row.get("run_dir") else {})}
@@ -30,6 +32,16 @@ def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dic
         rec.update({f"expect.{k}": v for k, v in sorted(row["expectations"].items())})
         out.append(rec)
     return out
+
+
+def _numeric_keys(specs: list[RunSpec]) -> set[str]:
+    """Grid keys whose every value is a number: kept as numbers (a column to plot against), the rest as text."""
+    values: dict[str, list[Any]] = {}
+    for spec in specs:
+        for k, v in spec.point:
+            values.setdefault(k, []).append(v)
+    return {k for k, vs in values.items()
+            if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vs)}
 
 
 def reproducible(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -53,7 +65,8 @@ def read_parquet(path: Path) -> list[dict[str, Any]]:
 
 
 def aggregate(records: list[dict[str, Any]], keys: list[str], metrics: list[str]) -> list[dict[str, Any]]:
-    """Per grid point (in first-seen order): runs, errors, share passed, and mean/std/n of ``metrics``."""
+    """Per grid point (in first-seen order): runs, errors, share passed, and mean, std (the sample's, across seeds:
+    none for one run) and n of ``metrics``."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for rec in records:
         groups.setdefault(tuple(rec[k] for k in keys), []).append(rec)
@@ -66,7 +79,7 @@ def aggregate(records: list[dict[str, Any]], keys: list[str], metrics: list[str]
             got = (r.get(f"metric.{m}", r.get(f"wall.{m}")) for r in recs)
             vals = np.array([v for v in got if v is not None], float)
             row[f"{m}.mean"] = float(vals.mean()) if len(vals) else math.nan
-            row[f"{m}.std"] = float(vals.std()) if len(vals) else math.nan
+            row[f"{m}.std"] = float(vals.std(ddof=1)) if len(vals) > 1 else math.nan  # (across seeds: none of one)
             row[f"{m}.n"] = len(vals)
         out.append(row)
     return out
@@ -87,7 +100,8 @@ def format_table(rows: list[dict[str, Any]], keys: list[str], metrics: list[str]
     lines = [head]
     for r in rows:
         cells = [str(r[k]) for k in keys] + [str(r["runs"]), str(r["errors"]), f"{r['passed']:.1%}"]
-        cells += [f"{r[f'{m}.mean']:.4g} ± {r[f'{m}.std']:.2g} ({r[f'{m}.n']})" for m in metrics]
+        cells += [f"{r[f'{m}.mean']:.4g}" + (f" ± {r[f'{m}.std']:.2g}" if r[f"{m}.n"] > 1 else "") + f" ({r[f'{m}.n']})"
+                  for m in metrics]
         lines.append(cells)
     widths = [max(len(line[i]) for line in lines) for i in range(len(head))]
     return "\n".join("  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip() for line in lines)
