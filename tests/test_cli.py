@@ -80,6 +80,12 @@ def test_validate_checks_fixed_targets_against_the_patients_range():
     r = cli("validate", example, "--set", "patient.outside_rom=nearest")
     assert r.returncode == 0
     assert "target 'A' outside the range of elbow_1: would be replaced by the nearest admissible posture" in r.stdout
+    # the envelope's range without a patient: its own range is the fix to name (a profile's choice is not there)
+    r = cli("validate", str(SCENARIOS / "hit_roundtrip.yaml"),
+            "--set", "safety.joints={elbow_1: {range_deg: [20, 80]}}")
+    assert r.returncode == 2 and "the safety envelope's range is [20.0, 80.0]°" in r.stderr
+    assert r.stderr.rstrip().endswith("move the target into the range, or widen safety.joints.elbow_1.range_deg")
+    assert "outside_rom" not in r.stderr
 
 
 def test_missing_file_and_setup_errors_are_messages_not_tracebacks(tmp_path):

@@ -141,10 +141,13 @@ def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robo
             high = q[j] > limits.upper[j]
             breach = LimitBreach("position", names[j], float(q[j]), float(limits.upper[j] if high else limits.lower[j]),
                                  revolute=bool(robot.model.revolute[j]))
+            # (nearest is a patient profile's choice: without one, the envelope's range is the one to change)
+            fix = ("set patient.outside_rom: nearest to use the nearest admissible point" if profile is not None else
+                   f"widen safety.joints.{names[j]}.range_deg")
             problems.append(Diagnostic(mark, ".".join(map(str, path)), (
                 f"target '{spec.name}': {how} {breach.describe()}: {whose} is "
                 f"[{math.degrees(limits.lower[j]):.1f}, {math.degrees(limits.upper[j]):.1f}]°; move the target into "
-                "the range, or set patient.outside_rom: nearest to use the nearest admissible point")))
+                f"the range, or {fix}")))
     if problems:
         raise ScenarioError(problems)
     for spec in task.targets:  # aliases of a replaced target go where it went
