@@ -121,8 +121,8 @@ class DriveMaster:
             sd[0x6060].raw = MODE_CODE[self.modes[i]]
             sd[0x60C2][1].raw, sd[0x60C2][2].raw = value, index
             lo, hi = sorted((limits.lower[i] * self._scale[i], limits.upper[i] * self._scale[i]))
-            sd[0x607D][1].raw, sd[0x607D][2].raw = -fitted(r.object_dictionary[0x607D][1], -lo)[0], \
-                fitted(r.object_dictionary[0x607D][2], hi)[0]
+            od = r.object_dictionary[0x607D]
+            sd[0x607D][1].raw, sd[0x607D][2].raw = fitted(od[1], lo, down=True)[0], fitted(od[2], hi)[0]
             sd[0x6072].raw = min(65535, math.ceil(limits.torque[i] / u.rated_torque_nm * 1e3))
             for obj, bound, what, unit in ((0x6080, limits.speed[i], "speed limit", "rad/s"),
                                            (0x6085, limits.decel[i], "quick stop deceleration", "rad/s²")):
