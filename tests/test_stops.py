@@ -100,6 +100,9 @@ def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, caps
     assert f"rehabkit estop clear {name} --by NAME" in run_report(first.summary, Path("out")).split("LATCHED")[1]
     with pytest.raises(SetupError, match=rf"latched.*rehabkit estop clear {name} --by NAME"):
         run_scenario(ESTOP, extra)  # a new session: refused before anything moves
+    sets = [a for k, v in extra.items() for a in ("--set", f"{k}={json.dumps(v)}")]
+    assert main(["validate", str(ESTOP), *sets]) == 0  # (the file is valid) and validate says what a run would meet
+    assert f"LATCHED the robot's e-stop ({name}) is latched" in capsys.readouterr().out
     assert main(["estop", "list"]) == 0 and f"{name}: LATCHED" in capsys.readouterr().out
     assert main(["estop", "clear", name + "x", "--by", "J. Doe"]) == 2  # a misspelt name clears nothing
     assert f"did you mean '{name}'" in capsys.readouterr().err

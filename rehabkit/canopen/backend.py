@@ -58,6 +58,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
 
     metrics = METRICS
     real_person = True
+    latch_name = "{robot}-{robot_id}"  # (this host's: the drives' master)
 
     def __init__(self, config: CanopenConfig, context: Context):
         specs, sensors, self.load = check_bus(config, context)
@@ -136,9 +137,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         check_bus(config, context)
 
     def _now(self) -> float:
-        if self.realtime:
-            return time.monotonic() - self.t0
-        return self.master.cycles * self.period if hasattr(self, "master") else 0.0
+        return time.monotonic() - self.t0 if self.realtime else self.master.cycles * self.period if \
+            hasattr(self, "master") else 0.0
 
     # -- Backend -----------------------------------------------------------------------------------------------
 

@@ -111,3 +111,17 @@ def add_parser(sub) -> None:
     e.add_argument("--key", metavar="FILE", help="the robot's link key: a bridge with a key clears only in an "
                    "authenticated session")
     e.set_defaults(func=cmd_estop)
+
+
+def latched_note(setup) -> str:
+    """``validate``'s line for a robot whose e-stop latch on this machine (where its backend keeps one) is latched:
+    a run is refused until a person clears it."""
+    sc = setup.sc
+    template = setup.registry.get("backend", sc.backend.type).declared.latch_name
+    if template is None:
+        return ""
+    name = template.format(robot=setup.robot.model.name, **sc.backend.model_dump())
+    if EStopLatch.named(name).latched() is None:
+        return ""
+    return (f"\n  LATCHED the robot's e-stop ({name}) is latched: a run is refused until a person clears it "
+            f"(`rehabkit estop clear {name} --by NAME`)")

@@ -90,12 +90,14 @@ def cmd_validate(args: argparse.Namespace) -> int:
 def _admission(loaded) -> str:
     """The run's setup but its backend (robot, narrowed limits, capabilities, admitted targets, plugins) and its
     first plan, as `run` makes them; with a patient or envelope ranges, what became of the fixed targets."""
+    from rehabkit.cli.estop import latched_note
     from rehabkit.core.plugins.lifecycle import default_extensions
     from rehabkit.core.setup.assembly import assemble
     from rehabkit.core.setup.first_plan import check_first_plan
 
     setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins")
     warned = "".join(f"\n  PLAN    {w}" for w in check_first_plan(setup))  # (as run says them, before it moves)
+    warned += latched_note(setup)
     sc = loaded.model
     if sc.patient is None and not sc.safety.joints:
         return warned

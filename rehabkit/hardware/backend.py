@@ -6,15 +6,14 @@ and round-trip latency (from the echo of each command in the bridge's state) are
 so are the bridge's holds through gaps in the commands (``bridge_stale_ms``; see the bridge), each a ``stale-
 command`` safety intervention. A stall of this host longer than that hold pauses the task's timeline (the missed
 ticks are skipped and counted, ``ticks_skipped_s``) rather than catching up: the bridge has held the robot
-meanwhile, and a burst of late commands would drive it toward a reference that ran ahead. If no valid state arrives
-for ``state_timeout_s`` the link is lost: the run stops with that reason (:class:`LinkLostError`), the logs
-complete. With ``spawn_bridge`` the backend starts ``rehabkit bridge`` itself, driving the robot's MuJoCo model as
-the plant: the same scenario runs against the link with only ``backend:`` changed.
+meanwhile, and a burst of late commands would drive it toward a reference that ran ahead. No valid state for
+``state_timeout_s``: the link is lost, the run stops with that reason (:class:`LinkLostError`), the logs complete.
+With ``spawn_bridge`` the backend starts ``rehabkit bridge`` itself, driving the robot's MuJoCo model as the plant:
+the same scenario runs against the link with only ``backend:`` changed.
 
-The scenario's scene is mirrored on the host, posed from the measured joints
-(:class:`~rehabkit.hardware.mirrored_scene.SceneMirror`): the log draws the whole robot, the scripted world objects
-live there, and a simulated camera looks at it — from a sensor thread (a frame takes longer than a tick), its pixels
-rendered in a process of their own (:mod:`~rehabkit.hardware.frame_server`).
+The scene is mirrored on the host from the measured joints (:class:`~rehabkit.hardware.mirrored_scene.SceneMirror`):
+the log draws the whole robot, the scripted objects live there, a simulated camera looks at it from a sensor thread
+(its pixels rendered in a process of their own: :mod:`~rehabkit.hardware.frame_server`).
 """
 
 from __future__ import annotations
@@ -62,6 +61,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
 
     metrics = METRICS
     real_person = True
+    latch_name = "{robot}-{robot_id}"  # (a bridge this run starts reads it here)
 
     def __init__(self, config: HardwareConfig, context: Context):
         config = config.under(context.safety)  # the envelope's link timing over the backend's defaults

@@ -48,6 +48,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
     """MuJoCo physics: the robot's MJCF plus the scenario's world (and a simulated person's body, strapped in),
     driven by joint torques."""
 
+    latch_name = "sim-{robot}"
+
     def __init__(self, config: MujocoConfig, context: Context):
         robot = context.robot.model
         self.robot = robot
@@ -63,7 +65,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
             body.bind(self.model, self.data)
         self.loads = LoadApplier(self.model, context.world.loads if context.world is not None else ())
         self._errors = InstrumentErrors(context.instruments, context.seed or 0)
-        self._latch = EStopLatch.named(f"sim-{robot.name}")  # a rehearsal's robot latches as the real one will
+        self._latch = EStopLatch.named(self.latch_name.format(robot=robot.name))  # (a rehearsal's latches as a robot's)
         self.ramp_in_after_clear = 0.0
         jids = [self.model.joint(name).id for name in robot.joint_names]
         self._q = span(np.array([self.model.jnt_qposadr[j] for j in jids]))

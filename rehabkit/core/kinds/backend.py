@@ -107,6 +107,9 @@ class Backend(ABC):
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     realtime: bool = False  # steps in wall-clock time (a robot link): the loop must never wait on slow work
     real_person: ClassVar[bool] = False  # drives a real robot (or its stand-in over a link): its person is real
+    # its robot's e-stop latch (rehabkit.core.safety.estop) on this machine, named from the robot's name and the
+    # backend's settings (``"{robot}-{robot_id}"``); None: it keeps none here
+    latch_name: ClassVar[str | None] = None
     ramp_in_after_clear: float = 0.0  # set by reset: the first session after an e-stop was cleared ramps in this long
     # how long after the control period a torque takes to act on the robot, from the state it was computed at [s]: a
     # bus whose drives take their targets at the next SYNC adds one period (the safety layer's gains allow for it)

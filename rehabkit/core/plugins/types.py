@@ -34,11 +34,13 @@ class Declared:
     """What a plugin declares as class attributes of its kind's base class, known before one is built:
 
     ``requires`` (capabilities it needs of the robot or backend), ``metrics`` (what its ``run_metrics`` reports,
-    for ``expect:``), and of a backend ``real_person`` (it drives a real robot: a person in it is not simulated)."""
+    for ``expect:``), and of a backend ``real_person`` (it drives a real robot: a person in it is not simulated) and
+    ``latch_name`` (its robot's e-stop latch's name on this machine, a template over ``robot`` and its settings)."""
 
     requires: tuple[type, ...] = ()
     metrics: tuple[Any, ...] = ()
     real_person: bool = False
+    latch_name: str | None = None
 
     @classmethod
     def of(cls, factory: Callable[..., Any]) -> Declared:
@@ -47,7 +49,7 @@ class Declared:
         if not isinstance(factory, type):
             return cls()
         return cls(tuple(getattr(factory, "requires", ())), tuple(getattr(factory, "metrics", ())),
-                   bool(getattr(factory, "real_person", False)))
+                   bool(getattr(factory, "real_person", False)), getattr(factory, "latch_name", None))
 
 
 @dataclass(frozen=True)
