@@ -35,7 +35,7 @@ from rehabkit.canopen.master import DriveMaster
 from rehabkit.canopen.simulated.drive import EDS
 from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
-from rehabkit.canopen.start_checks import check_answered, check_no_fault, check_start_posture
+from rehabkit.canopen.start_checks import check_no_fault, check_start_posture, unanswered
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import FollowsReference, Instruments
 from rehabkit.core.kinds.errors import SettingError
@@ -164,7 +164,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
             if not math.isnan(self.latency[-1]):
                 break
         else:
-            check_answered(self.master, self.names, START_CYCLES)
+            raise unanswered(self.master, self.names, START_CYCLES)
         check_no_fault(self.master, self.names, cleared, self.latch.name)
         check_start_posture(self.master, self.names, q0, self.simulated)
         self.q, self.qd = q0.copy(), np.zeros(self.n)

@@ -1,5 +1,5 @@
-"""What a reset checks of the drives before the run may enable them: each answered, none in FAULT (unless a person
-has cleared the e-stop since), the joints where the run starts."""
+"""What a reset checks of the drives before the run may enable them: each answered (else :func:`unanswered`), none in
+FAULT (unless a person has cleared the e-stop since), the joints where the run starts."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ from rehabkit.canopen.emcy_codes import describe
 from rehabkit.canopen.master import DriveMaster
 
 
-def check_answered(master: DriveMaster, names: list[str], syncs: int) -> None:
-    """Every drive sent its TPDOs within ``syncs`` SYNCs."""
+def unanswered(master: DriveMaster, names: list[str], syncs: int) -> DriveFaultError:
+    """The fault of drives that sent no TPDOs in answer to ``syncs`` SYNCs, naming them."""
     silent = [names[i] for i, got in enumerate(master.missed[: len(names)]) if got]
-    raise DriveFaultError(f"no TPDOs in answer to {syncs} SYNCs (from {', '.join(silent)})", observable=False)
+    return DriveFaultError(f"no TPDOs in answer to {syncs} SYNCs (from {', '.join(silent)})", observable=False)
 
 
 def check_no_fault(master: DriveMaster, names: list[str], cleared: bool, latch_name: str) -> None:

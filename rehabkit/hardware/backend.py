@@ -69,7 +69,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         self.realtime = config.clock == "realtime"  # else the link's clock is the count of ticks (HostLink.clock)
         robot = context.robot
         self.n = robot.model.dof
-        self.robot_name = robot.model.name  # (its e-stop latch at the bridge: <name>-<robot id>)
+        self.estop_name = self.latch_name.format(robot=robot.model.name, robot_id=config.robot_id)  # (at the bridge)
         self.key = config.key(context)
         self._note = context.note
         self.brakes = robot.model.brakes is not None
@@ -179,7 +179,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             if self.wire.refused is not None:
                 raise LinkKeyError(self.wire.where, None, self.wire.refused)
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
-                raise EStopLatchedError(latched_message(self), f"{self.robot_name}-{self.config.robot_id}",
+                raise EStopLatchedError(latched_message(self), self.estop_name,
                                         f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
             if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
@@ -269,7 +269,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
 
     def latched_estop(self) -> str | None:
         """The robot's latch at the bridge, as its newest state says."""
-        return f"{self.robot_name}-{self.config.robot_id}" if self.status & ESTOPPED else None
+        return self.estop_name if self.status & ESTOPPED else None
 
     def provenance(self) -> dict[str, str]:
         """The bridge this run drove and the session's key id (the safety log's run record)."""

@@ -34,7 +34,7 @@ def hold_reason(link, status: int) -> str:
 def latched_message(link) -> str:
     """Why no session starts at a latched robot, and the command that clears it (with the link's key, if keyed)."""
     where = f"udp://{link.addr[0]}:{link.addr[1]}"
-    name = f"{link.robot_name}-{link.config.robot_id}"
+    name = link.estop_name
     key = f" --key {link.key.path}" if link.key else ""
     how = (f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this machine)"
            if link.process is not None else f"`rehabkit estop clear {name} --by NAME --bridge "

@@ -14,7 +14,7 @@ from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.results.metric import MetricCatalogue, combine
 from rehabkit.core.safety.keep_in import plan_exit
-from rehabkit.core.setup.limits import CHECK_DT, LimitBreach
+from rehabkit.core.setup.limits import LimitBreach
 from rehabkit.core.setup.space import JointSpace
 
 
@@ -50,8 +50,7 @@ class PlanGate:
         warning, kept; None if it stays inside)."""
         if self.safety.keep_in is None:
             return None
-        ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-        warning = plan_exit(t, ts, self.space.hand_world(plan.trajectory.sample(ts)[0]), self.safety.keep_in)
+        warning = plan_exit(t, plan.trajectory, self.space.hand_world, self.safety.keep_in)
         if warning is None:
             return None
         self.warnings.append(warning)

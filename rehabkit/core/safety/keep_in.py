@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rehabkit.core.setup.limits import CHECK_DT
+
 AXES = "xyz"
 
 
@@ -19,10 +21,12 @@ def world_box(box, base_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def plan_exit(t: float, ts: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np.ndarray]) -> dict | None:
-    """Where a plan made at ``t`` takes the hand (world ``points`` at its times ``ts``) out of ``box``, said before it
-    moves (the box is watched, not planned around): when, the axis and side, the bound and the message; else None."""
-    found = box_exit(box, points)
+def plan_exit(t: float, trajectory, hand_world, box: tuple[np.ndarray, np.ndarray]) -> dict | None:
+    """Where a plan made at ``t`` takes the hand out of ``box`` (its ``trajectory`` sampled every ``CHECK_DT``, the
+    hand's world position ``hand_world(qs)``), said before it moves (the box is watched, not planned around): when,
+    the axis and side, the bound and the message; else None."""
+    ts = np.arange(0.0, trajectory.duration + 1e-9, CHECK_DT)
+    found = box_exit(box, hand_world(trajectory.sample(ts)[0]))
     if found is None:
         return None
     k, a, side, bound = found

@@ -10,7 +10,6 @@ from rehabkit.core.safety.keep_in import plan_exit
 from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.setup.checks import at_target
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
-from rehabkit.core.setup.limits import CHECK_DT
 
 
 def start_posture(a: Assembly) -> np.ndarray:
@@ -50,8 +49,7 @@ def check_first_plan(a: Assembly) -> list[str]:
         raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
     if a.safety.keep_in is None:
         return []
-    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
-    warning = plan_exit(0.0, ts, a.space.hand_world(plan.trajectory.sample(ts)[0]), a.safety.keep_in)
+    warning = plan_exit(0.0, plan.trajectory, a.space.hand_world, a.safety.keep_in)
     return [warning["message"]] if warning is not None else []
 
 
