@@ -47,7 +47,7 @@ def canopen_run(n: int, rate: float, seconds: float) -> dict:
     """The master's loop against ``rehabkit drives`` in another process: late cycles and SYNC→last TPDO [ms]."""
     from rehabkit.canopen.bus.can_bus import CanBus
     from rehabkit.canopen.config import CanopenConfig, DriveSpec
-    from rehabkit.canopen.drive_limits import DriveLimits
+    from rehabkit.canopen.drives.limits import DriveLimits
     from rehabkit.canopen.master import DriveMaster
     from rehabkit.canopen.simulated.drive import EDS
     from rehabkit.hardware.link.clock import wait_until

@@ -231,7 +231,7 @@ def test_a_simulated_drive_faults_when_the_masters_heartbeat_it_watches_goes_sil
     from rehabkit.canopen.simulated.drive import HEARTBEAT_LOST, SimulatedDrive
 
     drive_net, master_net = bus
-    drive = SimulatedDrive(drive_net, 6, _Joint())
+    drive = SimulatedDrive(drive_net, 6, _Joint(), clocked=True)  # (its consumer on its own clock: the SYNCs')
     remote = canopen.RemoteNode(6, str(EDS))
     master_net.add_node(remote)
     remote.sdo[0x1006].raw = 2000  # [µs]

@@ -93,7 +93,7 @@ def _ramp_in(result) -> float | None:
 @pytest.mark.parametrize("where", ["simulation", "link", "canopen"])
 def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, capsys):
     extra = {"simulation": {}, "link": LINK, "canopen": CANOPEN}[where]
-    name = "hit-1" if where != "simulation" else "sim-hit"
+    name = "hit-1" if where == "link" else "sim-hit"  # (simulated drives: a rehearsal's latch)
     first = run_scenario(ESTOP, extra)
     assert first.passed and EStopLatch.named(name).latched() is not None
     assert first.summary["safety"]["estop_latched"] == name  # (and the run says so, with what clears it)

@@ -26,16 +26,17 @@ import numpy as np
 from rehabkit.canopen.bus.bus_check import check_bus
 from rehabkit.canopen.bus.can_bus import CanBus
 from rehabkit.canopen.bus_health import METRICS, DriveNotes, bus_metrics, hold_interventions, latency_series
-from rehabkit.canopen.cia402 import QUICK_STOP_CMD
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.cycle_clock import CycleClock, own_gravity
-from rehabkit.canopen.drive_limits import drive_limits
+from rehabkit.canopen.drives.ending import ENDED, bring_to_rest, release
+from rehabkit.canopen.drives.limits import STOP_OPTION, drive_limits
+from rehabkit.canopen.drives.start_checks import check_no_fault, check_start_posture, unanswered
+from rehabkit.canopen.drives.units import units_of
 from rehabkit.canopen.injection import inject
 from rehabkit.canopen.master import DriveMaster
 from rehabkit.canopen.simulated.drive import EDS
 from rehabkit.canopen.simulated.rig import DriveRig
 from rehabkit.canopen.simulated.sensor import EDS as SENSOR_EDS
-from rehabkit.canopen.start_checks import check_no_fault, check_start_posture, unanswered
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import FollowsReference, Instruments
 from rehabkit.core.kinds.errors import SettingError
@@ -58,7 +59,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
 
     metrics = METRICS
     real_person = True
-    latch_name = "{robot}-{robot_id}"  # (this host's: the drives' master)
+    latch_name = "{latch_prefix}{robot}{latch_suffix}"  # (this host's, the drives' master: sim-<robot> on simulated
+    # drives, a rehearsal never latching the real robot; <robot>-<robot_id> on its own)
 
     def __init__(self, config: CanopenConfig, context: Context):
         specs, sensors, self.load = check_bus(config, context)
@@ -71,8 +73,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         self.n = robot.model.dof
         self.names = robot.model.joint_names
         effort = robot.model.limits.effort
-        self.units = [s.units(effort[i]) for i, s in enumerate(specs)]
-        self.latch = EStopLatch.for_robot(robot.model.name, config.robot_id)
+        self.latch = EStopLatch.named(self.latch_name.format(robot=robot.model.name, **config.model_dump()))
         self.safety_config = context.safety
         self.mirror = SceneMirror(robot.model, context.world)
         self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
@@ -83,6 +84,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         self.latency: list[float] = []
         self.t0 = self.deadline = 0.0
         self._configured = self._started = False
+        self.ending = ""  # (how the drives ended the run, in words)
         self._fault: DriveFaultError | None = None
         self.clock: CycleClock | None = None  # (real time, from the reset)
         self._note = context.note or (lambda t, text: None)
@@ -105,6 +107,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
             raise SettingError("bus", f"python-can cannot open {bus.interface} {bus.channel}: {exc} (is the "
                                "adapter plugged in, its driver loaded, the interface up?)") from None
         try:
+            eds = [str(context.resolve(s.eds)) if s.eds else str(EDS) for s in specs]
+            self.units = [units_of(s, effort[i], eds[i]) for i, s in enumerate(specs)]
             self.rig = None
             if config.bus is None:  # simulated drives of this run's own
                 from rehabkit.hardware.plant import MujocoPlant  # (only a run with simulated drives loads MuJoCo here)
@@ -112,14 +116,15 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
                 plant = MujocoPlant(robot, config.timestep, context.instruments,
                                     context.world.loads if context.world else (), context.seed or 0)
                 self.rig = DriveRig(self.bus.drives, plant, [s.node_id for s in specs], self.units,
-                                    clocked=not self.realtime, sensors=[s.node_id for s in sensors])
+                                    clocked=not self.realtime, eds=eds, sensors=[s.node_id for s in sensors])
                 if self.realtime:  # (their own watchdog on the wall clock: a SYNC that stops coming faults them)
                     self.rig.watch_sync(config.sync_timeout_ms * 1e-3)
-            nodes = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(EDS)) for s in specs]
+            nodes = [(s.node_id, path) for s, path in zip(specs, eds, strict=True)]
             instruments = [(s.node_id, str(context.resolve(s.eds)) if s.eds else str(SENSOR_EDS), i.name)
                            for s, i in zip(sensors, context.instruments, strict=True)]
             self.master = DriveMaster(self.bus.network, nodes, self.units, self.names, config, self._now,
-                                      [s.rated_torque_nm is None for s in specs], instruments, [s.mode for s in specs])
+                                      [s.rated_torque_nm is None for s in specs], instruments, [s.mode for s in specs],
+                                      [s.enable for s in specs])
             self._instrument = {i.name: k for k, i in enumerate(context.instruments)}
             self.notes = DriveNotes(context.note, self.master)
         except BaseException:
@@ -153,7 +158,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         q0 = np.asarray(q0, float)
         self.t0 = time.monotonic()
         if not self._configured:
-            for text in self.master.configure(self.period, drive_limits(self.robot.model, self.safety_config, q0)):
+            self._limits = drive_limits(self.robot.model, self.safety_config, q0)
+            for text in self.master.configure(self.period, self._limits):
                 self._note(0.0, text)  # (a limit more than its object holds: told the largest it holds)
             self._configured = True
         if self.simulated:  # (placed before the drives are enabled, within their limits, and again once they are:
@@ -279,20 +285,29 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         return latency_series(self)
 
     def close(self) -> None:
-        """The drives told to quick stop (the run's stop category: held, or ramped down and off), the bus closed."""
+        """The run's end, however it came (:mod:`~rehabkit.canopen.drives.ending`): the robot brought to rest in the
+        run's stop category, the power stages off, the drives' watchdogs of the host disarmed, NMT pre-operational;
+        then the bus closed."""
         try:
             if self.clock is not None:
                 self.clock.close()
-            if self._configured:  # (they would else fault on the SYNC that stops coming)
-                self.master.controlword[:] = QUICK_STOP_CMD
-                with contextlib.suppress(can.CanError, DriveFaultError):
-                    self._cycle(np.zeros(self.n))
+            if self._configured:
+                self._end()
             if self.rig is not None:
                 self.rig.stop_watching()
             self.bus.close(keep_trace=self._started)  # (a run refused at its reset leaves no trace file)
         finally:
             if self.frames is not None:
                 self.frames.close()
+
+    def _end(self) -> None:
+        limits = self._limits
+        category = next(c for c, option in STOP_OPTION.items() if option == limits.quick_stop_option)
+        self.deadline = time.monotonic()
+        with contextlib.suppress(*ENDED):  # (a bus already down: nothing more reaches the drives)
+            said = bring_to_rest(self.master, self._paced, category, limits.decel, self.period)
+            self.ending = said
+        release(self.master, "STOPPED" if self.config.end_nmt == "stopped" else "PRE-OPERATIONAL")
 
 
 @hookimpl

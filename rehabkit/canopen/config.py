@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, computed_field
 
 from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
 from rehabkit.models.strict import FilePath
+
+DRIVE_EDS = Path(__file__).resolve().parent / "eds" / "cia402_servo.eds"  # rehabkit's generic servo (simulated)
+SENSOR_EDS = Path(__file__).resolve().parent / "eds" / "cia404_sensor.eds"  # its generic three-axis sensor
 
 
 @dataclass(frozen=True)
@@ -22,6 +26,33 @@ class DriveUnits:
     rated_torque_nm: float = 10.0
     direction: int = 1
     gear_ratio: float = 1.0
+    # what the drive declares (rehabkit.canopen.drives.units.declared_units); None: increments, increments/s, rpm
+    position_per_rad: float | None = None
+    velocity_per_rad_s: float | None = None
+    accel_per_rad_s2: float | None = None
+    motor_speed_per_rad_s: float | None = None
+    velocity_unit: str = "position units/s"
+    accel_unit: str = "position units/s/s"
+
+    @property
+    def position(self) -> float:
+        """Position units (0x607A, 0x6064, 0x607D) per radian at the joint."""
+        return self.position_per_rad or self.counts_per_rad
+
+    @property
+    def velocity(self) -> float:
+        """Velocity units (0x60FF, 0x606C, 0x607F) per rad/s at the joint."""
+        return self.velocity_per_rad_s or self.position
+
+    @property
+    def acceleration(self) -> float:
+        """Acceleration units (0x6085) per rad/s² at the joint."""
+        return self.accel_per_rad_s2 or self.velocity
+
+    @property
+    def motor_speed(self) -> float:
+        """0x6080's unit (the motor's speed) per rad/s at the joint."""
+        return self.motor_speed_per_rad_s or self.gear_ratio * 60.0 / (2 * math.pi)
 
 
 class DriveFaultError(BackendFaultError):
@@ -63,6 +94,10 @@ class DriveSpec(StrictModel):
     rated_torque_nm: float | None = Field(None, gt=0, description="the motor's rated torque its per-mille torques "
                                           "refer to [N·m] (default: the drive's own, 0x6076, read at the start)")
     direction: Literal[1, -1] = Field(1, description="-1 where the drive's positive sense is the joint's negative")
+    enable: Literal["pdo", "sdo"] = Field(
+        "pdo", description="how the controlword goes: pdo, in the cyclic RPDO (the default); sdo, written by SDO "
+        "whenever it changes (the walk to OPERATION ENABLED, the stop, the end), for a drive that does not take it "
+        "in a PDO")
 
     def units(self, effort_nm: float) -> DriveUnits:
         """Its units at the joint, the joint's effort limit standing in for an unnamed rated torque (a simulated
@@ -121,9 +156,32 @@ class CanopenConfig(StrictModel):
                                    "long, in real time [ms]")
     tpdo_timeout_ms: float = Field(50.0, gt=0, description="a drive whose TPDOs have not come for this long stops "
                                    "the run (a non-real-time host may answer a cycle late now and then) [ms]")
+    other_pdos: Literal["keep", "disable"] = Field(
+        "keep", description="the drives' PDOs the run does not use: keep, as each drive has them (the ones it sends "
+        "count in the bus load); disable, turned off at the set-up")
+    end_nmt: Literal["pre-operational", "stopped"] = Field(
+        "pre-operational", description="the NMT state the drives are left in when a run ends (after its stop, the "
+        "power stages off): pre-operational (configurable by SDO, no PDOs) or stopped (NMT and heartbeat only)")
     torque_actual: bool = Field(False, description="map each drive's actual torque (0x6077) too (2 bytes a cycle "
                                 "more each: see the bus load)")
     inject: list[Injection] = Field([], description="faults injected into the simulated drives (tests)")
+    @computed_field
+    @property
+    def latch_prefix(self) -> str:
+        """``sim-`` on simulated drives: a rehearsal latches ``sim-<robot>``, never the real robot's latch."""
+        return "sim-" if self.simulated else ""
+
+    @computed_field
+    @property
+    def latch_suffix(self) -> str:
+        """``-<robot_id>`` on a robot's own drives (its latch ``<robot>-<robot_id>``)."""
+        return "" if self.simulated else f"-{self.robot_id}"
+
+    @property
+    def simulated(self) -> bool:
+        """The drives are simulations: this run's own, or ``rehabkit drives`` on the named bus."""
+        return self.bus is None or self.bus.simulated
+
     trace: Literal["asc", "blf", "log", "none"] = Field(
         "asc", description="every frame into can.<trace> beside the run's log, by python-can's own writer (asc: "
         "Vector ASCII, blf: Vector binary, log: candump; the host's frames Tx, the nodes' Rx); none: no trace")

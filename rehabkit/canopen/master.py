@@ -10,34 +10,31 @@ bus, where nothing moves between cycles, cannot give it.
 from __future__ import annotations
 
 import math
+import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 
 import can
 import canopen
 import numpy as np
 
+from rehabkit.canopen.bus.drive_dictionary import from_od
 from rehabkit.canopen.bus.pdo_codec import PdoCodec
-from rehabkit.canopen.bus.pdo_layout import RPDO, SENSOR_TPDO, TPDO1, tpdo2
-from rehabkit.canopen.bus.pdo_maps import write_maps
+from rehabkit.canopen.bus.pdo_maps import write_plan
+from rehabkit.canopen.bus.pdo_plan import entry, plan_pdos
 from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
-from rehabkit.canopen.drive_limits import DriveLimits, fitted
+from rehabkit.canopen.drives.limits import DriveLimits
+from rehabkit.canopen.drives.setup import set_up_drive
 from rehabkit.canopen.emcy_codes import describe
 
-MODE_CODE = {"csp": 8, "csv": 9, "cst": 10}  # modes of operation (0x6060): cyclic synchronous position/velocity/torque
 DISABLE_VOLTAGE_CW = 0x00
-
-
-def interpolation_period(period_s: float) -> tuple[int, int]:
-    """0x60C2: the cycle as value × 10^index s (value 0-255, index -3 to -6)."""
-    for index in range(-3, -7, -1):
-        value = period_s / 10.0**index
-        if abs(value - round(value)) < 1e-6 and round(value) <= 255:
-            return round(value), index
-    raise ValueError(f"a cycle of {period_s:g} s is no whole number of microseconds up to 255")
+# the process data's (index, subindex), as each node's newest TPDOs and the cycle's RPDOs carry them
+CONTROLWORD, TORQUE, OFFSET, POSITION, VELOCITY = (0x6040, 0), (0x6071, 0), (0x60B2, 0), (0x607A, 0), (0x60FF, 0)
+STATUSWORD, POSITION_ACTUAL, VELOCITY_ACTUAL, TORQUE_ACTUAL_KEY = (0x6041, 0), (0x6064, 0), (0x606C, 0), (0x6077, 0)
+SENSOR_KEYS = ((0x7130, 1), (0x7130, 2), (0x7130, 3))  # a three-axis sensor's inputs (CiA 404)
+LIVE_KEYS = (STATUSWORD, POSITION_ACTUAL, VELOCITY_ACTUAL, TORQUE_ACTUAL_KEY, *SENSOR_KEYS)
 
 
 class DriveMaster:
@@ -47,13 +44,15 @@ class DriveMaster:
     def __init__(self, network: canopen.Network, nodes: Sequence[tuple[int, str]], units: Sequence[DriveUnits],
                  names: Sequence[str], config: CanopenConfig, now: Callable[[], float],
                  read_rated: Sequence[bool] = (), sensors: Sequence[tuple[int, str, str]] = (),
-                 modes: Sequence[str] = ()):
+                 modes: Sequence[str] = (), enable_by: Sequence[str] = ()):
         self.network, self.config, self.now = network, config, now
         self.units = list(units)
         self._read_rated = list(read_rated) or [False] * len(self.units)
         self.modes = list(modes) or ["cst"] * len(self.units)
+        self.by_pdo = [e != "sdo" for e in enable_by] or [True] * len(self.units)
         self._follows = np.array([m != "cst" for m in self.modes])
         self._by_velocity = np.array([m == "csv" for m in self.modes])
+        self.paths = [eds for _, eds in nodes]
         self.remotes = [canopen.RemoteNode(node, eds) for node, eds in nodes]
         self.sensors = [canopen.RemoteNode(node, eds) for node, eds, _ in sensors]  # (three-axis: CiA 404)
         for r in (*self.remotes, *self.sensors):
@@ -65,24 +64,30 @@ class DriveMaster:
         self.readings = np.zeros((m, 3))  # each sensor's newest values [its unit: N, m/s²]
         self._sensor_scale = np.ones(m)
         self.status = np.zeros(n, int)
-        self.counts = np.zeros((3, n))  # position, velocity, torque actual (drive units) of the newest TPDOs
         self.q, self.qd, self.applied = np.zeros(n), np.zeros(n), np.zeros(n)
-        self._scale = np.array([u.counts_per_rad * u.direction for u in units])
+        self._scale = np.array([u.position * u.direction for u in units])  # position units per rad (signed)
+        self._vscale = np.array([u.velocity * u.direction for u in units])  # velocity units per rad/s (signed)
         self._per_mille = np.array([1e3 * u.direction / u.rated_torque_nm for u in units])
+        self._live: list[dict[tuple[int, int], int]] = [dict.fromkeys(LIVE_KEYS, 0) for _ in range(n + m)]
+        self._mask, self._expect = [0] * (n + m), [0] * (n + m)  # each node's TPDOs in this cycle / all of them
         self._got = np.zeros(n + m, bool)
         self.missed = np.zeros(n + m, int)  # cycles in a row each node's TPDOs did not come
         self.missed_total = 0
         self._arrived = threading.Event()
         self.emcys: list[tuple[float, int, int]] = []  # (time, node, code) of each EMCY, in order
         self._emcy_new: list[tuple[int, int]] = []
+        self._heeded: set[int] = set()
         self.heard = np.zeros(n + m)  # when each node's heartbeat came last [s, master clock]
         self.enabled = False
         self.beating = True  # (False: an injected fault, the host's heartbeat stops)
         self.cycles = 0
         self._next_beat = 0.0
         self.controlword = np.full(n, SHUTDOWN, int)
-        self._rpdo: list[PdoCodec | None] = [None] * n
-        self._tpdo: dict[int, tuple[int, int, object]] = {}  # COB-ID → (node, TPDO number, its layout)
+        self._sent_cw = np.full(n, -1, int)  # the controlword last written by SDO (drives enabled by SDO)
+        self._rpdo: list[list[PdoCodec]] = [[] for _ in range(n)]
+        self._tpdo: dict[int, tuple[int, PdoCodec, int]] = {}  # COB-ID → (node, its codec, its bit in the mask)
+        self.plans: list = []
+        self.setup_notes: list[str] = []
         self.states: list[str] = [State.NOT_READY_TO_SWITCH_ON.name] * n
 
     # -- set-up ---------------------------------------------------------------------------------------------
@@ -96,6 +101,8 @@ class DriveMaster:
                 try:
                     r.sdo.upload(0x1000, 0)
                     break
+                except canopen.SdoAbortedError:  # (it answered: there, if without a device type to give)
+                    break
                 except canopen.SdoCommunicationError:
                     if time.monotonic() > deadline:
                         raise DriveFaultError(f"does not answer on the bus within {timeout_s:g} s (is it powered, "
@@ -104,45 +111,36 @@ class DriveMaster:
                                               observable=False) from None
 
     def configure(self, period_s: float, limits: DriveLimits) -> list[str]:
-        """By SDO, in pre-operational: the cycle, heartbeats, CST, each drive's limits and PDO maps; then NMT start.
-        Returns what it had to say: a limit more than its object holds, told the largest it holds."""
-        notes: list[str] = []
+        """By SDO, in pre-operational: the cycle, heartbeats, each drive set up from what it says it has (its mode,
+        limits in its units, the PDOs the run needs: :func:`~rehabkit.canopen.drives.setup.set_up_drive`); then NMT
+        start. Returns what it had to say (a limit more than its object holds, told the largest it holds)."""
+        notes = self.setup_notes = []
         self.wait_for_nodes()
         cfg = self.config
-        value, index = interpolation_period(period_s)
         self.missed_limit = max(1, math.ceil(cfg.tpdo_timeout_ms * 1e-3 / period_s - 1e-9))
+        self.plans = []
         for i, r in enumerate(self.remotes):
             self._communication(r, period_s)
-            if self._read_rated[i]:  # the drive's own rated torque (the motor's [mN·m]), at the joint
-                u = self.units[i]
-                self.units[i] = replace(u, rated_torque_nm=r.sdo[0x6076].raw * 1e-3 * u.gear_ratio)
-                self._per_mille[i] = 1e3 * u.direction / self.units[i].rated_torque_nm
-            sd, u = r.sdo, self.units[i]
-            sd[0x6060].raw = MODE_CODE[self.modes[i]]
-            sd[0x60C2][1].raw, sd[0x60C2][2].raw = value, index
-            lo, hi = sorted((limits.lower[i] * self._scale[i], limits.upper[i] * self._scale[i]))
-            od = r.object_dictionary[0x607D]
-            sd[0x607D][1].raw, sd[0x607D][2].raw = fitted(od[1], lo, down=True)[0], fitted(od[2], hi)[0]
-            sd[0x6072].raw = min(65535, math.ceil(limits.torque[i] / u.rated_torque_nm * 1e3))
-            for obj, bound, what, unit in ((0x6080, limits.speed[i], "speed limit", "rad/s"),
-                                           (0x6085, limits.decel[i], "quick stop deceleration", "rad/s²")):
-                raw, clipped = fitted(r.object_dictionary[obj], bound * u.counts_per_rad)
-                sd[obj].raw = raw
-                if clipped:
-                    notes.append(f"drive {r.id} ({self.names[i]}): its {what}, {bound:.4g} {unit}, is more counts "
-                                 f"than 0x{obj:04X} holds at {u.counts_per_rad:.4g} counts/rad: told its largest, "
-                                 f"{raw / u.counts_per_rad:.4g} {unit}")
-            sd[0x605A].raw = limits.quick_stop_option
-            if 0x6007 in r.object_dictionary:  # (optional in the profile)
-                sd[0x6007].raw = limits.abort_option
-            rx, tx = write_maps(self.network, r, [RPDO[self.modes[i]]], [TPDO1, tpdo2(cfg.torque_actual)])
-            self._rpdo[i] = rx[0]
+            setup = set_up_drive(r, self.paths[i], self.names[i], self.units[i], self.modes[i], limits, i, period_s,
+                                 cfg.torque_actual, self._read_rated[i], self.by_pdo[i],
+                                 cfg.other_pdos == "keep")
+            self.units[i] = u = setup.units
+            self._scale[i] = u.position * u.direction
+            self._vscale[i] = u.velocity * u.direction
+            self._per_mille[i] = 1e3 * u.direction / u.rated_torque_nm
+            notes += setup.notes
+            self.plans.append(setup.plan)
+            rx, tx = write_plan(self.network, r, setup.plan)
+            self._rpdo[i] = rx
             self._listen(tx, i)
         n = len(self.remotes)
         for k, r in enumerate(self.sensors):
             self._communication(r, period_s)
             self._sensor_scale[k] = float(r.sdo[0x2100].raw)
-            _, tx = write_maps(self.network, r, [], [SENSOR_TPDO])
+            d = from_od(r.object_dictionary)
+            plan = plan_pdos(d, r.id, [], [entry(d, *key) for key in SENSOR_KEYS], period_s)
+            self.plans.append(plan)
+            _, tx = write_plan(self.network, r, plan)
             self._listen(tx, n + k)
         for r in (*self.remotes, *self.sensors):
             r.nmt.state = "OPERATIONAL"
@@ -150,46 +148,48 @@ class DriveMaster:
         return notes
 
     def _communication(self, r: canopen.RemoteNode, period_s: float) -> None:
-        """A node in pre-operational: its cycle, its heartbeat and the host's it watches, its EMCYs and heartbeats
-        heard here."""
+        """A node in pre-operational: its cycle (0x1006, where it has one: many drives take the SYNCs as they come),
+        its heartbeat and the host's it watches, its EMCYs and heartbeats heard here."""
         cfg = self.config
         r.nmt.state = "PRE-OPERATIONAL"
-        r.sdo[0x1006].raw = round(period_s * 1e6)
+        if 0x1006 in r.object_dictionary:
+            r.sdo[0x1006].raw = round(period_s * 1e6)
         r.sdo[0x1017].raw = cfg.heartbeat_ms
-        r.sdo[0x1016][1].raw = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
-        r.emcy.add_callback(lambda err, node=r.id: self._emcy_new.append((node, err.code)))
-        self.network.subscribe(0x700 + r.id, self._on_heartbeat)
+        try:
+            r.sdo[0x1016][1].raw = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
+        except canopen.SdoAbortedError as exc:  # (an EDS whose limits say it cannot: Elmo's caps 0x1016sub1 at 65535)
+            self.setup_notes.append(f"node {r.id}: it does not take the host's heartbeat to watch (0x1016sub1 = "
+                                    f"0x{cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms:08X}: SDO abort "
+                                    f"0x{exc.code:08X}): the host's silence reaches it as its SYNC stopping only")
+        if r.id not in self._heeded:  # (a second configure, after a reset of the node, adds no second callback)
+            self._heeded.add(r.id)
+            r.emcy.add_callback(lambda err, node=r.id: self._emcy_new.append((node, err.code)))
+            self.network.subscribe(0x700 + r.id, self._on_heartbeat)
 
     def _listen(self, tpdos: list[PdoCodec], i: int) -> None:
-        for number, codec in enumerate(tpdos, start=1):
-            self._tpdo[codec.cob_id] = (i, number, codec.layout)
+        self._expect[i] = (1 << len(tpdos)) - 1
+        for k, codec in enumerate(tpdos):
+            self._tpdo[codec.cob_id] = (i, codec, 1 << k)
             self.network.subscribe(codec.cob_id, self._on_tpdo)
 
     def _on_tpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
-        i, number, layout = self._tpdo[can_id]
-        values = layout.unpack_from(data)
-        n = len(self.remotes)
-        if i >= n:  # a sensor's three inputs
-            self.readings[i - n] = np.array(values) * self._sensor_scale[i - n]
-        elif number == 1:
-            self.status[i], self.counts[0, i] = values
-            return
-        else:
-            self.counts[1, i] = values[0]  # (the last of a drive's cycle)
-            if len(values) > 1:
-                self.counts[2, i] = values[1]
-        self._got[i] = True
-        if self._got.all():
-            self._arrived.set()
+        i, codec, bit = self._tpdo[can_id]
+        codec.unpack_into(data, self._live[i])
+        self._mask[i] |= bit
+        if self._mask[i] == self._expect[i]:
+            self._got[i] = True
+            if self._got.all():
+                self._arrived.set()
 
     def _on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         self.heard[self.ids.index(can_id - 0x700)] = self.now()
 
     def place(self, q0: np.ndarray) -> None:
-        """Simulated drives only: their plant reset to ``q0`` (the simulation's own objects 0x2000, 0x2001)."""
+        """Simulated drives only: their plant reset to ``q0`` (the simulation's own objects 0x5FFE, the start
+        position, and 0x5FFF, place: raw downloads, since a vendor's EDS the master reads has neither)."""
         for r, scale, q in zip(self.remotes, self._scale, q0, strict=True):
-            r.sdo[0x2000].raw = round(q * scale)
-        self.remotes[0].sdo[0x2001].raw = 1
+            r.sdo.download(0x5FFE, 0, struct.pack("<i", round(q * scale)))
+        self.remotes[0].sdo.download(0x5FFF, 0, b"\x01")
 
     # -- cycles ---------------------------------------------------------------------------------------------
 
@@ -217,17 +217,22 @@ class DriveMaster:
         """RPDOs with ``tau`` [N·m], the heartbeat when due, SYNC, the TPDOs in (real time: up to ``wait_s``); the
         joint state read. Returns the wall time from SYNC to the last TPDO [s] (nan if one did not come)."""
         targets = np.clip(np.rint(tau * self._per_mille), -32768, 32767)  # (CSP/CSV: the torque offset)
-        if q is not None and self._follows.any():  # their position or velocity targets [counts, counts/s]
-            setpoints = np.clip(np.rint(np.where(self._by_velocity, qd, q) * self._scale), -2**31, 2**31 - 1)
+        if q is not None and self._follows.any():  # their position or velocity targets [their units]
+            setpoints = np.clip(np.rint(np.where(self._by_velocity, qd * self._vscale, q * self._scale)), -2**31,
+                                2**31 - 1)
         else:  # (no targets: the set-up's and the close's cycles) where they are, at rest
             setpoints = np.where(self._by_velocity, 0.0, np.rint(self.q * self._scale))
         self._got[:] = False
+        self._mask[:] = [0] * len(self._mask)
         self._arrived.clear()
         try:
-            for codec, follows, cw, target, point in zip(self._rpdo, self._follows, self.controlword, targets,
-                                                         setpoints, strict=True):
-                values = (int(cw), int(point), int(target)) if follows else (int(cw), int(target))
-                self.network.send_message(codec.cob_id, codec.layout.pack(*values))
+            self._controlwords_by_sdo()
+            for codecs, follows, cw, target, point in zip(self._rpdo, self._follows, self.controlword, targets,
+                                                          setpoints, strict=True):
+                values = {CONTROLWORD: int(cw), TORQUE: int(target), OFFSET: int(target), POSITION: int(point),
+                          VELOCITY: int(point)} if follows else {CONTROLWORD: int(cw), TORQUE: int(target)}
+                for codec in codecs:
+                    self.network.send_message(codec.cob_id, codec.pack(values))
             if self.now() >= self._next_beat and self.beating:
                 self._next_beat += self.config.heartbeat_ms * 1e-3
                 self.network.send_message(0x700 + self.config.master_node_id, b"\x05")
@@ -242,12 +247,29 @@ class DriveMaster:
         self.missed[seen] = 0
         self.missed[~seen] += 1
         self.missed_total += int((~seen).sum())
-        got = seen[: len(self.remotes)]
-        self.q[got] = self.counts[0, got] / self._scale[got]
-        self.qd[got] = self.counts[1, got] / self._scale[got]
-        self.applied[got] = self.counts[2, got] / self._per_mille[got]
+        n = len(self.remotes)
+        for i in np.flatnonzero(seen[:n]):
+            live = self._live[i]
+            self.status[i] = live[STATUSWORD]
+            self.q[i] = live[POSITION_ACTUAL] / self._scale[i]
+            self.qd[i] = live[VELOCITY_ACTUAL] / self._vscale[i]
+            self.applied[i] = live[TORQUE_ACTUAL_KEY] / self._per_mille[i]
+        for k in np.flatnonzero(seen[n:]):
+            live = self._live[n + k]
+            self.readings[k] = np.array([live[key] for key in SENSOR_KEYS]) * self._sensor_scale[k]
         self.states = [State.of(int(s)).name for s in self.status]
         return latency
+
+    def _controlwords_by_sdo(self) -> None:
+        """Drives enabled by SDO: a controlword that changed written before the cycle's RPDOs."""
+        for i, by_pdo in enumerate(self.by_pdo):
+            if not by_pdo and self.controlword[i] != self._sent_cw[i]:
+                try:
+                    self.remotes[i].sdo[0x6040].raw = int(self.controlword[i])
+                except (canopen.SdoAbortedError, canopen.SdoCommunicationError) as exc:
+                    raise DriveFaultError(f"its controlword could not be written by SDO ({exc})", self.remotes[i].id,
+                                          self.names[i]) from exc
+                self._sent_cw[i] = self.controlword[i]
 
     def fault(self) -> DriveFaultError | None:
         """What went wrong since the last cycle, if anything (the first thing: one stop, one reason)."""

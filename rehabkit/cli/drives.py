@@ -56,6 +56,7 @@ def cmd_drives(args: argparse.Namespace) -> int:
         return EXIT_INVALID
     import canopen
 
+    from rehabkit.canopen.drives.units import units_of
     from rehabkit.canopen.simulated.rig import DriveRig
     from rehabkit.hardware.plant import MujocoPlant
 
@@ -67,7 +68,11 @@ def cmd_drives(args: argparse.Namespace) -> int:
     try:
         plant = MujocoPlant(robot, args.timestep)
         effort = robot.model.limits.effort
-        rig = DriveRig(network, plant, [s.node_id for s in specs], [s.units(effort[i]) for i, s in enumerate(specs)])
+        from rehabkit.canopen.simulated.drive import EDS
+
+        eds = [Path(s.eds) if s.eds else EDS for s in specs]  # (each drive serves its own EDS/DCF, as the robot's)
+        units = [units_of(s, effort[i], str(path)) for i, (s, path) in enumerate(zip(specs, eds, strict=True))]
+        rig = DriveRig(network, plant, [s.node_id for s in specs], units, eds=eds)
         rig.reset(np.clip(np.zeros(dof), robot.model.limits.lower, robot.model.limits.upper))
         rig.watch_sync(args.sync_timeout_ms * 1e-3)
         nodes = ", ".join(str(s.node_id) for s in specs)

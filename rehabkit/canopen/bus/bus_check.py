@@ -1,28 +1,26 @@
 """What ``validate`` knows of a CANopen bus before anything runs: one drive per joint, node ids unique and in range,
-each EDS there and holding the objects the backend maps and sets, cyclic synchronous torque supported, and the
-cyclic traffic within the bitrate at the control rate (refused with the arithmetic and the highest rate that fits)."""
+each EDS/DCF read as the master reads it — the objects the backend sets there, the mode supported (0x6502), its units
+convertible, a PDO for every object the run needs each cycle, each of them mappable — and the cyclic traffic (the
+run's PDOs, and those the drives keep sending) within the bitrate at the control rate (refused with the arithmetic and
+the highest rate that fits)."""
 
 from __future__ import annotations
 
 import math
-from functools import lru_cache
-from pathlib import Path
 
-from rehabkit.canopen.bus.pdo_layout import RPDO, SENSOR_TPDO, TORQUE_ACTUAL, TPDO1, TPDO2, BusLoad, bus_load
-from rehabkit.canopen.config import CanopenConfig, DriveSpec, SensorSpec
+from rehabkit.canopen.bus.drive_dictionary import read_dictionary
+from rehabkit.canopen.bus.pdo_layout import BusLoad, needed, plans_load
+from rehabkit.canopen.bus.pdo_plan import PdoPlan, PdoPlanError, entry, plan_pdos
+from rehabkit.canopen.config import DRIVE_EDS, SENSOR_EDS, CanopenConfig, DriveSpec, SensorSpec
+from rehabkit.canopen.drives.setup import unsupported_mode
+from rehabkit.canopen.drives.units import UnitsError, declared_units
 from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Context
 
-# what the backend writes by SDO besides the PDOs' objects: (index, subindex)
-SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x605A, 0), (0x6060, 0), (0x6072, 0), (0x607D, 1), (0x607D, 2),
-       (0x6080, 0), (0x6085, 0), (0x60C2, 1), (0x60C2, 2), (0x1400, 1), (0x1600, 1), (0x1800, 1), (0x1A00, 1),
-       (0x1801, 1), (0x1A01, 1))
-SUPPORTED = {"csp": 0x80, "csv": 0x100, "cst": 0x200}  # 0x6502 bits 7, 8, 9
-MODE_NAMES = {"csp": "cyclic synchronous position", "csv": "cyclic synchronous velocity",
-              "cst": "cyclic synchronous torque"}
-
-
-SENSOR_SET = ((0x1006, 0), (0x1016, 1), (0x1017, 0), (0x1800, 1), (0x1A00, 1), (0x2100, 0))
+# what the backend writes by SDO, and so every drive must have: (index, subindex)
+SET = ((0x1016, 1), (0x1017, 0), (0x6060, 0))
+SENSOR_SET = ((0x1016, 1), (0x1017, 0), (0x2100, 0))
+SENSOR_TX = ((0x7130, 1, 16), (0x7130, 2, 16), (0x7130, 3, 16))
 
 
 def drive_specs(config: CanopenConfig, dof: int) -> list[DriveSpec]:
@@ -36,56 +34,42 @@ def sensor_specs(config: CanopenConfig, instruments: int) -> list[SensorSpec]:
         SensorSpec(node_id=64 + k) for k in range(instruments)]
 
 
-def _objects(path: str) -> tuple[frozenset, int | None]:
-    """The (index, subindex) pairs an EDS holds, and its supported drive modes (0x6502) if given (read once per
-    version of the file)."""
-    stat = Path(path).stat()
-    return _read_objects(path, stat.st_mtime_ns, stat.st_size)
-
-
-@lru_cache(maxsize=16)
-def _read_objects(path: str, mtime_ns: int, size: int) -> tuple[frozenset, int | None]:
-    import canopen
-
-    od = canopen.import_od(path)
-    have = set()
-    for index in od.indices:
-        obj = od[index]
-        if hasattr(obj, "subindices"):
-            have.update((index, sub) for sub in obj.subindices)
-        else:
-            have.add((index, 0))
-    modes = od[0x6502].default if 0x6502 in od else None
-    return frozenset(have), modes
-
-
-def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, context: Context) -> None:
-    if spec.eds is None:
-        return
-    path = context.resolve(spec.eds)
+def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, context: Context, period_s: float
+               ) -> PdoPlan:
+    """The node's EDS/DCF read as a master reads it (its PDOs, what can be mapped, its modes and units), and the PDOs
+    the run would use on it; refused at the file's setting (or the mode's) where it cannot work."""
     sensor = isinstance(spec, SensorSpec)
+    default = SENSOR_EDS if sensor else DRIVE_EDS
+    path = context.resolve(spec.eds) if spec.eds is not None else default
     where = ("sensors" if sensor else "drives", i, "eds")
     if not path.is_file():
         raise SettingError(where, f"no such file: {path}")
     try:
-        have, modes = _objects(str(path))
+        d = read_dictionary(path, spec.node_id)
     except Exception as exc:  # noqa: BLE001 (canopen's parser: whatever it refuses, said at the file's setting)
         raise SettingError(where, f"canopen cannot read {path.name} as an EDS/DCF: {exc}") from None
-    needed = [*((x, s) for x, s, _ in (*RPDO[spec.mode], *TPDO1, *TPDO2)), *SET] if not sensor else []
-    if sensor:
-        needed = [*((x, s) for x, s, _ in SENSOR_TPDO), *SENSOR_SET]
-    elif config.torque_actual:
-        needed.append(TORQUE_ACTUAL[:2])
-    missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in needed if (x, s) not in have]
+    missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in (SENSOR_SET if sensor else SET) if not d.has(x, s)]
     if missing:
-        what = "a CiA 404 device's EDS with three inputs at 0x7130" if sensor else \
-            "a CiA 402 drive's EDS with two RPDOs and two TPDOs"
-        raise SettingError(where, f"{path.name} lacks objects the backend maps or sets: {', '.join(missing)} (is it "
-                           f"{what}?)")
-    if not sensor and modes is not None and not modes & SUPPORTED[spec.mode]:
-        bit = SUPPORTED[spec.mode].bit_length() - 1
-        raise SettingError(("drives", i, "mode"), f"{path.name} says the drive does not support "
-                           f"{MODE_NAMES[spec.mode]} (0x6502 = 0x{modes:08X}, bit {bit} clear)")
+        what = "a CiA 404 device's EDS" if sensor else "a CiA 402 drive's EDS"
+        raise SettingError(where, f"{path.name} lacks objects the backend sets: {', '.join(missing)} (is it {what}?)")
+    if sensor:
+        rx, tx = [], [entry(d, x, s) for x, s, _ in SENSOR_TX]
+    else:
+        why = unsupported_mode(d.supported_modes, spec.mode)
+        if why:
+            raise SettingError(("drives", i, "mode"), f"{path.name}: {why}" + (
+                "; a drive without any cannot be driven cycle by cycle: rehabkit runs drives in cyclic synchronous "
+                "modes only" if "no cyclic" in why else ": set mode to one it has"))
+        try:
+            declared_units(spec.units(1.0), d)
+        except UnitsError as exc:
+            raise SettingError(where, f"{path.name}: {exc.what} ({d.where(exc.index)})") from None
+        rx, tx = needed(d, spec.mode, config.torque_actual, spec.enable == "pdo")
+    try:
+        return plan_pdos(d, spec.node_id, rx, tx, period_s, config.other_pdos == "keep")
+    except PdoPlanError as exc:
+        fix = " (set enable: sdo: the controlword then goes by SDO)" if exc.index == 0x6040 else ""
+        raise SettingError(where, f"{path.name}: {exc.what}{fix}") from None
 
 
 def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec], list[SensorSpec], BusLoad]:
@@ -97,6 +81,7 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
         raise SettingError("drives", f"{len(specs)} drives for the {robot.dof} joints of robot '{robot.name}' "
                            f"({', '.join(robot.joint_names)}): one drive per joint, in that order")
     seen: dict[int, int] = {}
+    plans: list[PdoPlan] = []
     for i, s in enumerate(specs):
         if s.node_id in seen:
             raise SettingError(("drives", i, "node_id"), f"node id {s.node_id} is drive {seen[s.node_id]}'s too: each "
@@ -104,7 +89,7 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
         if s.node_id == config.master_node_id:
             raise SettingError(("drives", i, "node_id"), f"node id {s.node_id} is the host's (master_node_id)")
         seen[s.node_id] = i
-        _check_eds(config, s, i, context)
+        plans.append(_check_eds(config, s, i, context, context.control_dt))
     sensors = sensor_specs(config, len(context.instruments))
     if len(sensors) != len(context.instruments):
         names = ", ".join(i.name for i in context.instruments) or "none"
@@ -116,7 +101,8 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
             raise SettingError(("sensors", k, "node_id"), f"node id {s.node_id} is {whose} too: each node on a bus has "
                                "its own")
         seen[s.node_id] = len(specs) + k
-        _check_eds(config, s, k, context)
+        plans.append(_check_eds(config, s, k, context, context.control_dt))
+    _check_cob_ids(plans, specs, sensors)
     if config.clock == "lockstep" and config.bus is not None:
         raise SettingError("clock", "lockstep runs the simulated drives only (a real bus runs in real time): remove "
                            "`bus` or set clock: realtime")
@@ -142,17 +128,34 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
         raise SettingError(("drives", following[0], "mode"), f"a {specs[following[0]].mode} drive holds its target "
                            f"stiffly: the envelope's {soft[0]} reaction ({reactions[soft[0]].type}) needs the torque "
                            "(mode: cst)")
-    load = bus_load(len(specs), rate, config.bitrate, config.torque_actual, config.heartbeat_ms, len(sensors),
-                    len(following))
+    load = plans_load(plans, rate, config.bitrate, config.heartbeat_ms, len(specs), len(sensors))
     if load.load > 1.0:
         what = f"{len(specs)} drives" + (f" and {len(sensors)} sensors" if sensors else "")
         step = config.timestep if config.bus is None or config.bus.simulated else 1e-4
         raise SettingError(("rates", "control_hz"), f"the CAN bus cannot carry {what} at {rate:g} Hz: "
                            f"{load.describe()}; set rates.control_hz: {_fitting(load, step)} (the highest rate that "
                            f"fits{_steps(step)}; the bus carries up to {math.floor(load.highest_rate_hz())} Hz), "
+                           + ("turn off the drives' own PDOs the run does not use (backend.other_pdos: disable), "
+                              if load.others_bits else "")
                            + (f"raise backend.bitrate (now {config.bitrate}; CAN's top: 1000000), "
                               if config.bitrate < 1_000_000 else "") + "or put fewer nodes on this bus", root=True)
     return specs, sensors, load
+
+
+def _check_cob_ids(plans: list[PdoPlan], specs: list[DriveSpec], sensors: list[SensorSpec]) -> None:
+    """No two PDOs on the bus with one COB-ID (a DCF written for one node id, given to another, says another's)."""
+    owner: dict[int, tuple[int, str]] = {}
+    nodes = [("drives", i, s.node_id) for i, s in enumerate(specs)] + [("sensors", k, s.node_id)
+                                                                       for k, s in enumerate(sensors)]
+    for k, (plan, (kind, i, node)) in enumerate(zip(plans, nodes, strict=True)):
+        pdos = [(p.cob_id, p.slot.name) for p in (*plan.rx, *plan.tx)] + [(s.cob_id, s.name) for s, _ in plan.others]
+        for cob, name in pdos:
+            if cob in owner and owner[cob][0] != k:
+                other = nodes[owner[cob][0]]
+                raise SettingError((kind, i, "eds"), f"its {name} (node {node}) has COB-ID 0x{cob:03X}, as node "
+                                   f"{other[2]}'s {owner[cob][1]} has: frames on a bus must not share one (a DCF "
+                                   "is written for one node id: give each node its own)")
+            owner[cob] = (k, name)
 
 
 def _steps(step: float) -> str:

@@ -11,6 +11,7 @@ Network (CAN) schedulability analysis", Real-Time Systems 35, 2007): 55 bits for
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 # (index, subindex, bits) of each PDO's entries, in order
@@ -25,6 +26,24 @@ TPDO2 = ((0x606C, 0, 32),)  # velocity actual value [counts/s]
 TORQUE_ACTUAL = (0x6077, 0, 16)  # [‰ of rated], in TPDO2 when asked for
 SENSOR_TPDO = ((0x7130, 1, 16), (0x7130, 2, 16), (0x7130, 3, 16))  # a three-axis sensor's inputs (CiA 404)
 SYNC_BYTES, HEARTBEAT_BYTES = 0, 1
+TARGET = {"cst": (0x6071, 0, 16), "csp": (0x607A, 0, 32), "csv": (0x60FF, 0, 32)}
+TORQUE_OFFSET = (0x60B2, 0, 16)
+
+
+def needed(d, mode: str, torque_actual: bool = False, controlword_by_pdo: bool = True) -> tuple[list, list]:
+    """The (index, subindex, bits) a drive with dictionary ``d`` (a
+    :class:`~rehabkit.canopen.bus.drive_dictionary.DriveDictionary`) must carry each cycle in ``mode``: host to drive
+    (the controlword unless it goes by SDO, the target; CSP/CSV the torque offset where the drive can take it), drive
+    to host (statusword, position and velocity actual, the torque actual when asked for); widths as ``d`` says."""
+    def width(e):
+        return (e[0], e[1], d.widths.get((e[0], e[1]), e[2]))
+
+    rx = [RPDO1[0]] if controlword_by_pdo else []
+    rx.append(TARGET[mode])
+    if mode != "cst" and (0x60B2, 0) in d.mappable:  # (optional: without it the drive's own loop holds gravity)
+        rx.append(TORQUE_OFFSET)
+    tx = [*TPDO1, *TPDO2, *((TORQUE_ACTUAL,) if torque_actual else ())]
+    return [width(e) for e in rx], [width(e) for e in tx]
 
 
 def frame_bits(data_bytes: int) -> int:
@@ -52,6 +71,8 @@ class BusLoad:
     bits_per_cycle: int
     heartbeat_bits_s: float
     sensors: int = 0
+    shape: str | None = None  # (what each drive carries, where not the usual RPDO + 2 TPDOs)
+    others_bits: int = 0  # (of bits_per_cycle: the PDOs the drives keep sending that the run does not use)
 
     @property
     def load(self) -> float:
@@ -65,9 +86,27 @@ class BusLoad:
     def describe(self) -> str:
         """The arithmetic, as a person checks it."""
         sensors = f" + {self.sensors} sensors × TPDO" if self.sensors else ""
-        return (f"{self.drives} drives × (RPDO + 2 TPDOs){sensors} + SYNC = {self.bits_per_cycle} bits a cycle "
+        each = self.shape or "RPDO + 2 TPDOs"
+        own = f", {self.others_bits} of them the drives' own PDOs the run does not use" if self.others_bits else ""
+        return (f"{self.drives} drives × ({each}){sensors} + SYNC = {self.bits_per_cycle} bits a cycle{own} "
                 f"(worst-case bit stuffing) × {self.rate_hz:g} Hz + heartbeats {self.heartbeat_bits_s:.0f} bit/s = "
                 f"{self.load:.0%} of {self.bitrate / 1e3:g} kbit/s")
+
+
+def plans_load(plans: Sequence, rate_hz: float, bitrate: int, heartbeat_ms: float, drives: int,
+               sensors: int = 0) -> BusLoad:
+    """The bus load of the PDOs each node's plan (:class:`~rehabkit.canopen.bus.pdo_plan.PdoPlan`) uses, and of those
+    it leaves the drive sending, at ``rate_hz``."""
+    bits = frame_bits(SYNC_BYTES)
+    for plan in plans:
+        bits += sum(frame_bits(p.bytes) for p in (*plan.rx, *plan.tx))
+        bits += plan.others_bits
+    beats = (len(plans) + 1) * frame_bits(HEARTBEAT_BYTES) * 1e3 / heartbeat_ms
+    shapes = {(len(p.rx), len(p.tx), bool(p.others)) for p in plans[:drives]}
+    others = round(sum(p.others_bits for p in plans))
+    return BusLoad(drives, rate_hz, bitrate, round(bits), beats, sensors,
+                   shape=None if len(shapes) == 1 and next(iter(shapes))[:2] == (1, 2) else
+                   "the PDOs each drive's EDS gives", others_bits=others)
 
 
 def bus_load(drives: int, rate_hz: float, bitrate: int, torque_actual: bool = False,

@@ -1,13 +1,18 @@
-"""Simulated drives on a robot: one :class:`~rehabkit.canopen.simulated.drive.SimulatedDrive` per joint, all moving one
-MuJoCo plant (the robot's model with the run's instruments and a test rig's loads, as the bridge's), and one
-:class:`~rehabkit.canopen.simulated.sensor.SimulatedSensor` per instrument.
+"""Simulated drives on a robot: one :class:`~rehabkit.canopen.simulated.drive.SimulatedDrive` per joint (each serving
+the generic servo's EDS or its own vendor's EDS/DCF), all moving one MuJoCo plant (the robot's model with the run's
+instruments and a test rig's loads, as the bridge's), and one :class:`~rehabkit.canopen.simulated.sensor.
+SimulatedSensor` per instrument.
 
 Each SYNC every drive samples its joint and takes its RPDOs, in node order; then the plant advances one
-communication cycle (0x1006) in steps of its own timestep, with the torques the drives latched. So the torque a host
-computes from the state of SYNC k drives the plant from SYNC k+1: the one-cycle delay of cyclic synchronous modes.
-A drive whose power stage goes off applies its motor's holding brake, where the robot has brakes (as drives control
-them). A write of the simulation-only object 0x2001 resets the plant to the start positions written in every drive's
-0x2000 (what a test rig's operator does by hand).
+communication cycle (the drives' cycle: 0x1006, else 0x60C2, else the plant's step) in steps of its own timestep,
+with the torques the drives latched. So the torque a host computes from the state of SYNC k drives the plant from
+SYNC k+1: the one-cycle delay of cyclic synchronous modes. A drive whose power stage goes off applies its motor's
+holding brake, where the robot has brakes (as drives control them). A write of the simulation-only object 0x5FFF
+resets the plant to the start positions written in every drive's 0x5FFE (what a test rig's operator does by hand).
+
+The drives' watchdogs (heartbeat consumer, SYNC watchdog) go on their own clocks on a lock-step bus; in real time on
+the wall clock, polled by the rig's watchdog thread (:meth:`DriveRig.watch_sync`), which also runs the drives'
+reactions (a quick stop, a fault reaction) on their own while the SYNC does not come.
 """
 
 from __future__ import annotations
@@ -15,17 +20,18 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import canopen
 import numpy as np
 
-from rehabkit.canopen.cia402 import State
 from rehabkit.canopen.config import DriveUnits
-from rehabkit.canopen.simulated.drive import EDS, SYNC_ID, SimulatedDrive
+from rehabkit.canopen.simulated.drive import EDS, PLACE, START_POSITION, SYNC_ID, SYNC_LOST, SimulatedDrive
 from rehabkit.canopen.simulated.sensor import SimulatedSensor
+from rehabkit.canopen.simulated.watchdogs import Watchdog
 from rehabkit.hardware.plant import MujocoPlant
 
-SYNC_LOST = 0x8100  # CiA 301: communication error (here: the SYNC stopped coming)
+__all__ = ["SYNC_LOST", "DriveRig"]
 
 
 class _PlantJoint:
@@ -43,16 +49,22 @@ class _PlantJoint:
 
 
 class DriveRig:
-    """``plant``'s joints each on a simulated drive (``nodes``: node ids, ``units``: each drive's) on ``network``;
-    ``clocked``: the drives' heartbeats on the SYNC clock (a lock-step bus)."""
+    """``plant``'s joints each on a simulated drive (``nodes``: node ids, ``units``: each drive's, ``eds``: one EDS
+    or DCF for all or one per drive) on ``network``; ``clocked``: the drives' heartbeats and watchdogs on their own
+    clocks (a lock-step bus)."""
 
     def __init__(self, network: canopen.Network, plant: MujocoPlant, nodes: Sequence[int],
-                 units: Sequence[DriveUnits], clocked: bool = False, eds=EDS, sensors: Sequence[int] = ()):
+                 units: Sequence[DriveUnits], clocked: bool = False, eds: Path | str | Sequence[Path | str] = EDS,
+                 sensors: Sequence[int] = ()):
         self.plant = plant
         n = plant.joints
         self.q, self.qd, self.tau = np.zeros(n), np.zeros(n), np.zeros(n)
-        self.drives = [SimulatedDrive(network, node, _PlantJoint(self, i), u, eds, own_sync=False, clocked=clocked)
-                       for i, (node, u) in enumerate(zip(nodes, units, strict=True))]
+        files = list(eds) if isinstance(eds, (list, tuple)) else [eds] * len(nodes)  # (one for all, or each its own)
+        step_us = max(1, round(plant.timestep * 1e6))
+        self.drives = [SimulatedDrive(network, node, _PlantJoint(self, i), u, Path(path), own_sync=False,
+                                      clocked=clocked, cycle_us=step_us)
+                       for i, (node, u, path) in enumerate(zip(nodes, units, files, strict=True))]
+        self._powered = [False] * n  # each drive's power stage at the last cycle (its brake when it goes off)
         for d in self.drives:
             d.node.add_write_callback(self._on_write)
         self._readings = np.zeros(3 * len(sensors))  # the plant's instruments, read once a cycle, in order
@@ -63,14 +75,15 @@ class DriveRig:
         self.cycles = 0
         self.last_sync: float | None = None  # [s, monotonic] (real time: the SYNC watchdog's)
         self.sync_timeout_s = 0.010  # the drives' SYNC watchdog (see watch_sync)
-        self._watching = threading.Event()
+        self._lock = threading.RLock()  # (real time: the bus's thread and the watchdog's)
+        self._watchdog: Watchdog | None = None
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
-        if index == 0x2001:
-            q0 = np.array([d.node.sdo[0x2000].raw / (d.units.counts_per_rad * d.units.direction) for d in self.drives])
+        if index == PLACE:
+            q0 = np.array([d.values[START_POSITION, 0] / (d.units.position * d.units.direction) for d in self.drives])
             self.reset(q0)
-        elif index == 0x1006:
-            self.period = od.decode_raw(data) * 1e-6
+        elif index in (0x1006, 0x60C2):  # (the drives' cycle: the plant's steps per cycle)
+            self.period = self.drives[0].cycle_us * 1e-6
             self.substeps = max(1, round(self.period / self.plant.timestep))
 
     def reset(self, q0: np.ndarray) -> None:
@@ -86,64 +99,63 @@ class DriveRig:
 
     def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0) -> None:
         """Every drive samples and latches, then the plant runs one cycle with the latched torques."""
-        self.last_sync = time.monotonic()
-        for i, d in enumerate(self.drives):
-            on = d.machine.torque_on
-            if d.silent:  # cut off the bus: no SYNC reaches it; its SYNC watchdog, then its reaction, on its own clock
-                d.unheard += 1
-                if d.unheard * self.period > self.sync_timeout_s:
-                    d.connection_lost(SYNC_LOST)
-                d.react()
-            else:
-                d.on_sync(can_id, data, timestamp)
-            self._brake_if_off(i, on)
-        if self.sensors:
-            self._readings[:] = self.plant.read_instruments()
-            for s in self.sensors:
-                s.on_sync(can_id, data, timestamp)
-        if not any(d.syncs for d in self.drives):  # (no drive operational yet: the plant waits)
-            return
-        self._advance()
-        self.cycles += 1
+        with self._lock:
+            self.last_sync = time.monotonic()
+            for d in self.drives:
+                if d.silent:  # cut off the bus: no SYNC reaches it; its watchdog, then its reaction, on its own clock
+                    d.react()
+                else:
+                    d.on_sync(can_id, data, timestamp)
+            self._brakes()
+            if self.sensors:
+                self._readings[:] = self.plant.read_instruments()
+                for s in self.sensors:
+                    s.on_sync(can_id, data, timestamp)
+            if not any(d.syncs for d in self.drives):  # (no drive operational yet: the plant waits)
+                return
+            self._advance()
+            self.cycles += 1
 
     def watch_sync(self, timeout_s: float = 0.010) -> threading.Thread:
-        """In real time: a thread telling every drive still enabled that its connection is lost (0x8100: their EMCYs,
-        their reactions as 0x6007 says) once the SYNC has not come for ``timeout_s``; the drives' reactions and quick
-        stops then run on their own clock (stopped by :meth:`stop_watching`)."""
+        """In real time: a thread polling every drive's watchdogs on the wall clock each plant period — its
+        heartbeat consumer, its SYNC watchdog (``timeout_s``: 0x8100, the reaction 0x6007 says) — and, while the
+        SYNC does not come and a drive's power stage is on, running the drives' reactions on their own clock (stopped
+        by :meth:`stop_watching`)."""
         self.sync_timeout_s = timeout_s
-        thread = threading.Thread(target=self._watch, name="sync-watchdog", daemon=True)
-        thread.start()
-        return thread
+        for d in self.drives:
+            d.sync_watchdog.timeout_s = timeout_s
+        self._watchdog = Watchdog(self._watch, lambda: self.period, "drive-watchdog").start()
+        return self._watchdog.thread
 
     def stop_watching(self) -> None:
-        self._watching.set()
+        if self._watchdog is not None:
+            self._watchdog.stop()
 
     def _watch(self) -> None:
-        while not self._watching.wait(self.period):
+        with self._lock:
+            for node in (*self.drives, *self.sensors):
+                node.poll()
             last = self.last_sync
-            if last is None or time.monotonic() - last <= self.sync_timeout_s:
-                continue
-            for d in self.drives:  # (a drive already stopping, or stopped, carries on with that)
-                if d.machine.state is State.OPERATION_ENABLED:
-                    d.connection_lost(SYNC_LOST)
-            while not self._watching.wait(self.period):  # the reactions, one cycle at a time, without a SYNC
-                if self.last_sync != last:  # (the SYNC came back: the drives take it from there)
-                    break
-                if any(d.machine.torque_on for d in self.drives):  # (none driving: the plant waits for the SYNC)
-                    self.coast()
+            late = last is not None and time.monotonic() - last > self.sync_timeout_s
+            if late and any(d.machine.torque_on for d in self.drives):  # (none driving: the plant waits)
+                self.coast()
 
     def coast(self) -> None:
         """A cycle without SYNC (the drives' reactions on their own clock): each drive's reaction, the plant runs."""
+        with self._lock:
+            for d in self.drives:
+                d.react()
+            self._brakes()
+            self._advance()
+
+    def _brakes(self) -> None:
+        """A drive whose power stage went off since the last cycle applies its motor's brake (where the robot has
+        them)."""
         for i, d in enumerate(self.drives):
             on = d.machine.torque_on
-            d.react()
-            self._brake_if_off(i, on)
-        self._advance()
-
-    def _brake_if_off(self, i: int, was_on: bool) -> None:
-        """Drive ``i``'s power stage went off: it applies its motor's brake (where the robot has them)."""
-        if was_on and not self.drives[i].machine.torque_on:
-            self.plant.brake([i])
+            if self._powered[i] and not on:
+                self.plant.brake([i])
+            self._powered[i] = on
 
     def _advance(self) -> None:
         """The plant through one cycle with the torques the drives latched."""

@@ -21,15 +21,16 @@ class SimulatedSensor(SimulatedNode):
 
     def __init__(self, network: canopen.Network, node_id: int, read: Callable[[], np.ndarray], eds: Path = EDS,
                  clocked: bool = False):
-        super().__init__(network, node_id, eds, (), INPUTS, clocked)
+        super().__init__(network, node_id, eds, INPUTS, clocked=clocked)
         self.read = read
-        self.scale = float(self.node.sdo[0x2100].raw)
+        self.scale = float(self.node.value(0x2100))
+        self.boot()
 
     def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0) -> None:
         """A SYNC: the inputs sampled, the TPDO sent."""
-        if not self.begin_cycle():
+        if not self.begin_cycle() or self.nmt.state != "OPERATIONAL":
             return
         values = np.clip(np.rint(np.asarray(self.read(), float) / self.scale), -32768, 32767)
         for key, v in zip(INPUTS, values, strict=True):
-            self.live[key] = int(v)
+            self.values[key] = int(v)
         self.send_tpdos()

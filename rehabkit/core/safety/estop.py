@@ -3,9 +3,11 @@ holding it, and power cycles of the machine keeping the file — until a person 
 does the next session start, and it ramps in.
 
 A latch is a small JSON file, written whole (temp, then rename), under ``$REHABKIT_STATE/estop/`` (default
-``~/.local/state/rehabkit/estop/``), named for what it latches: ``<robot>-<robot id>`` for a robot behind a bridge
-(the bridge keeps it), ``sim-<robot>`` for a simulated robot (the MuJoCo backend keeps it, so that a rehearsal
-behaves as the robot will). ``rehabkit estop list`` shows them, ``rehabkit estop clear NAME --by WHO`` clears one.
+``$XDG_STATE_HOME/rehabkit/estop/``, ``~/.local/state/rehabkit/estop/``: each user's own, in a folder only its owner
+may read or write, on a PC a lab shares), named for what it latches: ``<robot>-<robot id>`` for a robot behind a
+bridge or on its own CAN drives (the bridge, the drives' master keep it), ``sim-<robot>`` for a simulated robot (the
+MuJoCo backend, and the master of simulated drives, keep it: a rehearsal behaves as the robot will and never latches
+the robot). ``rehabkit estop list`` shows them, ``rehabkit estop clear NAME --by WHO`` clears one.
 """
 
 from __future__ import annotations
@@ -26,7 +28,10 @@ RAMP_IN_AFTER_CLEAR_S = 1.0  # the first session after a clear ramps in at least
 def state_dir() -> Path:
     """Where rehabkit keeps state across sessions on this machine."""
     given = os.environ.get("REHABKIT_STATE")
-    return Path(given) if given else Path.home() / ".local" / "state" / "rehabkit"
+    if given:
+        return Path(given)
+    xdg = os.environ.get("XDG_STATE_HOME")
+    return (Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".local" / "state") / "rehabkit"
 
 
 @contextlib.contextmanager
@@ -109,7 +114,7 @@ class EStopLatch:
                 f"deal with its cause, then clear it with `rehabkit estop clear {self.name} --by NAME`")
 
     def _write(self, record: dict) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # (the user's own: no one else's to clear)
         atomic_write_text(self.path, json.dumps({**record, "name": self.name, "written": time.time()}, indent=1))
 
 

@@ -44,11 +44,16 @@ def drive_limits(model, safety, q0: np.ndarray) -> DriveLimits:
 
 
 def fitted(variable, value: float, down: bool = False) -> tuple[int, bool]:
-    """``value`` rounded up (``down``: down) to a whole count, within what the object dictionary ``variable``'s data
-    type holds (its end where it holds less: then True). A light joint behind a fine encoder and a high gear can ask
-    for more counts per s² than an UNSIGNED32 holds; its largest then is the bound (4 × 10⁹ counts/s²)."""
+    """``value`` rounded up (``down``: down) to a whole count, within what the object dictionary ``variable`` holds:
+    its data type's range and the limits its EDS declares (LowLimit, HighLimit; its end where it holds less: then
+    True). A light joint behind a fine encoder and a high gear can ask for more counts per s² than an UNSIGNED32
+    holds; its largest then is the bound (4 × 10⁹ counts/s²)."""
     st = variable.STRUCT_TYPES[variable.data_type]
     bits = 8 * st.size
     lo, hi = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if st.format[-1].islower() else (0, (1 << bits) - 1)
+    if isinstance(variable.min, int):
+        lo = max(lo, variable.min)
+    if isinstance(variable.max, int):
+        hi = min(hi, variable.max)
     v = math.floor(value) if down else math.ceil(value)
     return min(max(v, lo), hi), not lo <= v <= hi
