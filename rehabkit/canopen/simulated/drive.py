@@ -43,6 +43,9 @@ POSITION_LIMIT = 0x8612  # reference limit (beyond the software position limits)
 DEFAULT_UNITS = DriveUnits()
 STOP_BANDWIDTH = 40.0  # [rad/s] the drive's own loop in a quick stop or fault reaction (critically damped)
 SERVO_BANDWIDTH = 40.0  # [rad/s] its position loop in CSP and CSV
+# its integral action, as a servo's position loop has (a steady load held without offset: the arm's weight where no
+# torque offset comes): Ki = INTEGRAL · w³ · J, well inside the PD's stability bound (Ki < 2 w³ J)
+INTEGRAL = 0.25
 START_POSITION, PLACE = 0x5FFE, 0x5FFF  # the simulation's own objects (a vendor may use any of 0x2000-0x5FFD)
 SUPPORTED_MODES = 0x3A5  # PP, PV, HM, CSP, CSV, CST: where an EDS gives 0x6502 no value
 CSP, CSV, CST = 8, 9, 10
@@ -109,6 +112,7 @@ class SimulatedDrive(SimulatedNode):
         self._stop_v: float | None = None  # a stop under way: the speed its ramp started from [rad/s]
         self._stop_at, self._stop_q = 0, 0.0  # when it began; where its ramp's position is now [rad]
         self._follow: float | None = None  # CSP/CSV: the previous target position [rad]; else where it holds
+        self._integral = 0.0  # [rad·s] its position loop's integral of the error, from where it was enabled
         self._cycle_state = self.machine.state  # (its state at the end of the last cycle)
         self._publish()
 
@@ -240,7 +244,7 @@ class SimulatedDrive(SimulatedNode):
             self.joint.apply(min(max_nm, max(-max_nm, target)))
         else:
             self.joint.apply(0.0)
-            self._follow = None
+            self._follow, self._integral = None, 0.0
 
     def _target_torque(self) -> float:
         """The torque its mode asks for: CST the target torque; CSP and CSV the drive's own loop on the target
@@ -262,7 +266,9 @@ class SimulatedDrive(SimulatedNode):
             q_t, v_t = q if self._follow is None else self._follow, 0.0
         self._follow = q_t
         w, inertia = SERVO_BANDWIDTH, self.inertia
-        return live[0x60B2, 0] * per_mille + w * w * inertia * (q_t - q) + 2 * w * inertia * (v_t - qd)
+        self._integral += (q_t - q) * dt
+        return live[0x60B2, 0] * per_mille + w * w * inertia * (q_t - q) + 2 * w * inertia * (v_t - qd) + \
+            INTEGRAL * w**3 * inertia * self._integral
 
     def _period(self) -> float:
         return self.cycle_us * 1e-6
