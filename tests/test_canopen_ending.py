@@ -64,3 +64,31 @@ def test_drives_enabled_by_sdo_walk_and_end_by_sdo_and_carry_no_controlword_in_t
     words = [f.data[4] for f in frames if f.arbitration_id == 0x601 and f.data[:4] == bytes([0x2B, 0x40, 0x60, 0])]
     assert words == [0x06, 0x00, 0x06, 0x07, 0x0F, 0x02, 0x00]  # set-up, the walk, quick stop and power off
     assert {f.dlc for f in frames if f.arbitration_id == 0x201} == {2}  # (the target torque: 2 bytes)
+
+
+def test_ctrl_c_mid_motion_ends_the_same_way_and_a_second_one_does_not_cut_it_short(tmp_path, monkeypatch):
+    """Ctrl-C at 1 s, mid-motion (KeyboardInterrupt raised in the loop's step, as SIGINT raises it), and a second one
+    while the drives are stopping: the quick stop runs to rest all the same, then the power off and pre-operational."""
+    import signal
+
+    from rehabkit.canopen.backend import CanopenBackend
+
+    step, close = CanopenBackend.step, CanopenBackend.close
+
+    def interrupted(self, n=1):
+        if self.cycles == 500:
+            raise KeyboardInterrupt
+        step(self, n)
+
+    def close_pressed_again(self):
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # (a second Ctrl-C now is held off)
+        close(self)
+
+    monkeypatch.setattr(CanopenBackend, "step", interrupted)
+    monkeypatch.setattr(CanopenBackend, "close", close_pressed_again)
+    with pytest.raises(KeyboardInterrupt):
+        run_scenario(HIT, CANOPEN, out_dir=tmp_path)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    tail, _ = _tail(tmp_path / "can.asc")
+    controlwords = _ending_as_the_standards_say(tail)
+    assert 10 < len(controlwords) < 0.3 / 0.002  # (moving at 1 s: the quick stop took its ramp)

@@ -11,6 +11,9 @@ them, and calls the extensions at setup and at the end.
 
 from __future__ import annotations
 
+import logging
+import signal
+import threading
 import time
 import weakref
 from pathlib import Path
@@ -87,6 +90,7 @@ class Runner:
             return finish(session, loop, loop.started - t_setup, self.out_dir)
         except BaseException:
             if session is not None:
+                release_backend(session.setup.backend)  # (the robot stopped first, however the run ended)
                 session.view.discard()
                 for tap in session.taps:
                     tap.discard()
@@ -94,6 +98,24 @@ class Runner:
         finally:
             if session is not None and session.threads is not None:
                 session.threads.close()
+
+
+def release_backend(backend) -> None:
+    """The backend's end as at a normal finish (a robot brought to rest, its hardware released: its ``close``), once:
+    after an error or Ctrl-C too. A second Ctrl-C meanwhile does not cut the robot's stop short: SIGINT is held
+    off until it is done (in the main thread, where Python takes signals)."""
+    if getattr(backend, "_rehabkit_released", False):
+        return
+    held = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if held else None
+    try:
+        backend.close()
+    except Exception:  # noqa: BLE001 (the run's own error is what the user needs; the close's is logged)
+        logging.getLogger(__name__).exception("closing the backend after the run's error failed")
+    finally:
+        backend._rehabkit_released = True
+        if held:
+            signal.signal(signal.SIGINT, previous)
 
 
 class _Calls:
@@ -148,4 +170,5 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                                                       safety_log.run_records(a, snapshot, summary))
         atomic_write_json(out_dir / "summary.json", summary)
     a.backend.close()
+    a.backend._rehabkit_released = True
     return RunResult(summary, trace, out_dir, first.located if first is not None else None)
