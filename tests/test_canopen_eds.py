@@ -176,3 +176,40 @@ def test_hit_runs_on_six_drives_of_each_file_and_tracks_mujoco(tmp_path, mujoco_
         assert sum("no torque offset to map (0x60B2)" in n for n in notes) == 6
     tail = [f for f in can.LogReader(tmp_path / "can.asc")][-12:]
     assert [bytes(f.data) for f in tail if f.arbitration_id == 0][-6:] == [bytes([0x80, k]) for k in range(1, 7)]
+
+
+def _fixed_tpdos(tmp_path, entries: dict[int, list[int]]) -> Path:
+    """The generic servo's EDS with TPDO1 and TPDO2's maps fixed (read-only) to ``entries`` (sub → value)."""
+    import re
+
+    text = (ROOT / "rehabkit" / "canopen" / "eds" / "cia402_servo.eds").read_text()
+    for k, values in entries.items():
+        mapping = f"1A0{k - 1}"
+        for sub in range(9):
+            value = len(values) if sub == 0 else (values[sub - 1] if sub <= len(values) else 0)
+            text = re.sub(rf"(\[{mapping}sub{sub}\][^\[]*?)AccessType=rw([^\[]*?)DefaultValue=\S+",
+                          rf"\g<1>AccessType=ro\g<2>DefaultValue={value:#x}", text)
+    path = tmp_path / "fixed.eds"
+    path.write_text(text)
+    return path
+
+
+def test_a_fixed_mapping_is_used_as_it_is_when_it_carries_what_the_run_needs(tmp_path):
+    """TPDO1 fixed to (statusword, position), TPDO2 to (velocity, torque actual): both used as the drive has them,
+    the torque actual decoded and not asked for."""
+    path = _fixed_tpdos(tmp_path, {1: [0x60410010, 0x60640020], 2: [0x606C0020, 0x60770010]})
+    d = read_dictionary(path, 2)
+    assert not d.tpdos[0].configurable and d.tpdos[0].entries == ((0x6041, 0, 16), (0x6064, 0, 32))
+    plan = plan_pdos(d, 2, *needed(d, "cst"))
+    assert [(p.slot.name, p.configure, len(p.entries)) for p in plan.tx] == [("TPDO1", False, 2), ("TPDO2", False, 2)]
+
+
+def test_a_fixed_mapping_without_what_the_run_needs_is_refused_at_the_drives_file(tmp_path):
+    """Every TPDO fixed, none with the velocity: refused by validate, naming the object and the drive's PDOs."""
+    path = _fixed_tpdos(tmp_path, {k: [0x60410010] for k in (1, 2, 3, 4)})
+    drives = [{"node_id": k} for k in range(1, 7)]
+    drives[2]["eds"] = str(path)
+    diag = _validate(tmp_path, {"drives": drives})
+    assert diag.path == "backend.drives.2.eds"
+    assert "no TPDO left to carry 0x6064 (position actual value), 0x606C (velocity actual value)" in diag.message
+    assert "0 of them with a mapping a master can write" in diag.message
