@@ -102,3 +102,13 @@ def test_every_package_is_in_the_distribution():
     found |= {".".join(("rehabkit_plugins", *p.parent.relative_to(ROOT / "plugins").parts))
               for p in (ROOT / "plugins").rglob("__init__.py")}
     assert found - listed == set()
+
+
+def test_no_secret_is_tracked():
+    """No file git tracks is a link key (by name or by its header): one was committed once (keys/arm4.key)."""
+    files = subprocess.run(["git", "ls-files", "-z"], capture_output=True, cwd=ROOT, check=True).stdout.split(b"\0")
+    keys = [f for f in (f.decode() for f in files if f) if f.endswith(".key") or f.startswith("keys/") or
+            (ROOT / f).is_file() and (ROOT / f).read_bytes()[:40].startswith(b"# rehabkit link key")]
+    assert keys == []
+    for path in ("keys/hit-1.key", "robots/lab/arm.key"):  # (the README's `keys new ... --out keys/hit-1.key`)
+        assert subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT).returncode == 0, path

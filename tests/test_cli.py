@@ -122,3 +122,15 @@ def test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its
     assert "threshold_l0_s: float = 0.3" in r.stdout and "peak_cuff_force_n [N]" in r.stdout
     r = cli("plugins", "--fields", "multicubic")
     assert r.returncode == 2 and "did you mean 'multi-cubic'?" in r.stderr
+
+
+def test_a_key_written_into_a_git_tree_that_does_not_ignore_it_is_warned_of(tmp_path):
+    import subprocess
+
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    r = cli("keys", "new", "arm-1", "--out", str(tmp_path / "arm.key"), cwd=tmp_path)
+    assert r.returncode == 0 and "warning: " in r.stderr and "git does not ignore it" in r.stderr
+    assert f"Add it to {tmp_path / '.gitignore'}" in r.stderr
+    (tmp_path / ".gitignore").write_text("*.key\n")
+    quiet = cli("keys", "new", "arm-2", "--out", str(tmp_path / "arm2.key"), cwd=tmp_path)
+    assert quiet.returncode == 0 and quiet.stderr == ""

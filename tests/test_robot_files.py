@@ -71,7 +71,7 @@ def test_mjcf_robot_runs_and_reads_limits_from_the_file(tmp_path, rng):
     _same_robot_in_both_engines(robot.model, rng)
 
 
-def test_urdf_robot_takes_speed_and_effort_from_the_urdf(tmp_path, rng):
+def test_urdf_robot_takes_speed_and_effort_from_the_urdf(tmp_path, rng, monkeypatch):
     p = scenario(tmp_path, f"""\
         robot: {{type: urdf, file: {DATA / 'arm2.urdf'}, ee_frame: l2, base: {{position: [0, 0, 0.8]}}}}
         """, """\
@@ -81,9 +81,15 @@ def test_urdf_robot_takes_speed_and_effort_from_the_urdf(tmp_path, rng):
             - {name: b, joints_deg: [-40, 60]}
             - {name: c, same_as: a}
         """)
+    import tempfile
+
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))  # (this process's temporary folder)
     r = run_scenario(p)
     assert r.passed, r.failures
     assert r.summary["plugins"]["robot"]["type"] == "urdf"
+    # (Pinocchio reads the robot's MJCF from a file: removed once read, 45 had gathered in /tmp before)
+    assert not list((tmp_path / "tmp").iterdir())
 
 
 def test_missing_limits_are_named(tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from rehabkit.cli.exits import EXIT_INVALID, EXIT_OK
 
@@ -18,6 +19,11 @@ def cmd_keys(args: argparse.Namespace) -> int:
             print(f"{key.robot}: key {key.id} written to {out} (owner-only). Give the same file to the bridge "
                   f"(`rehabkit bridge ... --key {out}`) and to the host (backend.key_file); copy it over a channel "
                   "you trust (scp, a USB stick), never by e-mail or chat")
+            tree = unignored_in_git(Path(out))
+            if tree is not None:
+                print(f"warning: {out} is inside the git work tree {tree} and git does not ignore it: a commit could "
+                      f"publish the secret. Add it to {tree / '.gitignore'} (e.g. a line `*.key`), or keep keys "
+                      "outside the tree (the default place: $REHABKIT_STATE/keys/)", file=sys.stderr)
         else:
             key = load_key(args.robot)
             print(f"{key.path}: key {key.id} for {key.robot}")
@@ -25,6 +31,21 @@ def cmd_keys(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     return EXIT_OK
+
+
+def unignored_in_git(path: Path) -> Path | None:
+    """The git work tree ``path`` lies in where git would not ignore it (None: no tree, ignored, or no git)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None:
+        return None
+    folder = path.resolve().parent
+    top = subprocess.run(["git", "-C", str(folder), "rev-parse", "--show-toplevel"], capture_output=True, text=True)
+    if top.returncode:
+        return None
+    ignored = subprocess.run(["git", "-C", str(folder), "check-ignore", "-q", str(path.resolve())])
+    return None if ignored.returncode == 0 else Path(top.stdout.strip())
 
 
 def add_parser(sub) -> None:

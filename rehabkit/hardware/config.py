@@ -80,5 +80,5 @@ class HardwareConfig(StrictModel):
             key = load_key(context.resolve(self.key_file))
             check_robot(key, f"{context.robot.model.name}-{self.robot_id}")
         except KeyFileError as exc:
-            raise SettingError("key_file", f"{exc.problem}; {exc.fix}") from None
+            raise SettingError("key_file", f"{exc.path}: {exc.problem}; {exc.fix}") from None
         return key

@@ -8,7 +8,7 @@ file, so the controller's dynamics and the simulator's can't drift apart.
 
 from __future__ import annotations
 
-import hashlib
+import os
 import tempfile
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -102,17 +102,20 @@ class RobotModel:
     def dof(self) -> int:
         return len(self.joint_names)
 
-    @cached_property
-    def mjcf_path(self) -> Path:
-        """The MJCF written to a content-addressed file (Pinocchio's parser reads files only)."""
-        digest = hashlib.sha256(self.mjcf.encode()).hexdigest()[:16]
+    def _pin_from_mjcf(self):
+        """Pinocchio's model of the MJCF: its parser reads files only, so the MJCF goes into a file of its own for
+        the moment it reads it — beside the robot's assets where its mesh paths are relative to them, else in the
+        temporary folder — and is removed at once (runs left one per robot variant behind before)."""
+        import pinocchio as pin
+
         where = self.asset_dir or Path(tempfile.gettempdir())
-        path = where / f".rehabkit-{self.name}-{digest}.xml"
-        if not path.exists():
-            tmp = path.with_suffix(f".{digest}.tmp")
-            tmp.write_text(self.mjcf)
-            tmp.replace(path)
-        return path
+        fd, name = tempfile.mkstemp(prefix=f".rehabkit-{self.name}-", suffix=".xml", dir=where)
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(self.mjcf)
+            return pin.buildModelFromMJCF(name)
+        finally:
+            Path(name).unlink(missing_ok=True)
 
     @cached_property
     def pin_model(self):
@@ -123,7 +126,7 @@ class RobotModel:
         """
         import pinocchio as pin
 
-        model = pin.buildModelFromMJCF(str(self.mjcf_path))
+        model = self._pin_from_mjcf()
         if self.passive_joints:
             missing = [j for j in self.passive_joints if not model.existJointName(j)]
             if missing:
