@@ -92,3 +92,15 @@ def test_ctrl_c_mid_motion_ends_the_same_way_and_a_second_one_does_not_cut_it_sh
     tail, _ = _tail(tmp_path / "can.asc")
     controlwords = _ending_as_the_standards_say(tail)
     assert 10 < len(controlwords) < 0.3 / 0.002  # (moving at 1 s: the quick stop took its ramp)
+
+
+def test_the_wrote_line_names_every_file_the_run_wrote(tmp_path):
+    from tests.test_cli import cli
+
+    out = tmp_path / "run"
+    r = cli("run", str(HIT), "--set", "backend.type=canopen", "--set", "backend.clock=lockstep", "--set",
+            "rates.control_hz=500", "--set", "duration=0.5", "--out", str(out))
+    line = next(x for x in r.stdout.splitlines() if x.startswith("wrote "))
+    named = {p.strip() for p in line[len("wrote "):].replace(" and ", ", ").split(", ")}
+    assert named == {str(p) for p in out.iterdir()}  # summary, recording, scenario, safety log, CAN trace
+    assert str(out / "can.asc") in named

@@ -281,6 +281,10 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
     def run_metrics(self) -> dict[str, float]:
         return bus_metrics(self)
 
+    def outputs(self) -> dict[str, str]:
+        """Its CAN trace (renamed into place when the bus closes)."""
+        return {"can_trace": self.bus.trace.name} if self.bus.trace is not None else {}
+
     def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         return latency_series(self)
 

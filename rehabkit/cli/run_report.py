@@ -40,11 +40,12 @@ def run_report(s: dict[str, Any], out: Path) -> str:
 
 
 def wrote(summary: dict, out: Path) -> str:
-    """The files a run wrote: its summary, its recording and its bag where it wrote them."""
-    files = [out / "summary.json"]
-    files += [out / summary["outputs"]["rrd"]] if "rrd" in summary.get("outputs", {}) else []
-    files += [out / summary["bag"]["file"]] if "bag" in summary else []
-    return "wrote " + ", ".join(map(str, files[:-1])) + (" and " if len(files) > 1 else "") + str(files[-1])
+    """Every file a run wrote: its summary, its recording, the scenario as run, the safety log, what the backend
+    wrote (a CAN trace) and its bag, where it wrote them."""
+    names = ["summary.json", *summary.get("outputs", {}).values()]
+    names += [summary["bag"]["file"]] if "bag" in summary else []
+    files = [str(out / name) for name in dict.fromkeys(names)]
+    return "wrote " + ", ".join(files[:-1]) + (" and " if len(files) > 1 else "") + files[-1]
 
 
 def _interventions(interventions: list[dict], events: list[dict], shown: int = 3) -> list[str]:

@@ -176,5 +176,10 @@ class Backend(ABC):
         its session was authenticated and under which key id; never a secret); default nothing to add."""
         return {}
 
+    def outputs(self) -> dict[str, str]:
+        """Files the backend writes into the run's folder, by what each is (a CAN trace: ``{"can_trace":
+        "can.asc"}``), named in ``summary.json`` and the run's "wrote" line; default none."""
+        return {}
+
     def close(self) -> None:  # noqa: B027 (optional hook: most backends hold nothing to release)
         """Release resources."""

@@ -160,7 +160,7 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
     summary = summarize(a, record, session.catalogue, session.view)
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:
-        summary["outputs"] = {**session.view.close(), "scenario": SNAPSHOT}
+        summary["outputs"] = {**session.view.close(), "scenario": SNAPSHOT, **a.backend.outputs()}
         snapshot = (f"# {a.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "
                     "`rehabkit replay` reads it\n" + yaml.dump(a.loaded.source.data, Dumper=_DUMPER, sort_keys=False))
         atomic_write_text(out_dir / SNAPSHOT, snapshot)
