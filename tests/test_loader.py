@@ -92,7 +92,22 @@ def test_duplicate_keys_are_errors(tmp_path):
 def test_yaml_syntax_error_is_located(tmp_path):
     p = write(tmp_path, "robot:\n  type: hit\n  l1: [0.3\n")
     (err,) = errors(p)
-    assert err.startswith(f"{p}:4:1: YAML syntax")
+    assert err.startswith(f"{p}:4:1: YAML syntax: a list in [brackets] not closed: end it with ']'")
+
+
+@pytest.mark.parametrize("text, where, says", [
+    ("name: x\nrobot:\n\ttype: hit\n", "3:1", "a tab: YAML indents with spaces only"),
+    ("name: x\nrobot:\n  type: hit\n   planner: {type: a}\n", "4:11", "usually this line is indented deeper than "
+     "the key above it"),
+    ("name: x\nrobot:\n  type: hit\n ee: 1\n", "4:2", "this line's indentation does not match its section's"),
+    ("name: x\nrobot: {type: hit\n", "3:1", "a mapping in {braces} not closed"),
+])
+def test_yaml_syntax_is_said_in_plain_words_with_its_usual_cause(tmp_path, text, where, says):
+    """PyYAML's own words ('mapping values are not allowed in this context') stay, in parentheses, after them."""
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    (err,) = errors(p)
+    assert err.startswith(f"{p}:{where}: YAML syntax: ") and says in err and err.endswith(")")
 
 
 def test_extends_merges_deeply_and_null_deletes(tmp_path):

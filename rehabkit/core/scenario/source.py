@@ -28,6 +28,36 @@ class Source:
     files: list[Path]
 
 
+# PyYAML's problems in plain words, with the usual cause and its fix
+_USUAL = (
+    ("mapping values are not allowed", "a `key: value` where none can be: usually this line is indented deeper than "
+     "the key above it (indent it as its siblings are), or a value holding ': ' that needs quotes"),
+    ("could not find expected ':'", "a line that is not `key: value`: a ':' missing, or the space after it "
+     "(`type:hit` must be `type: hit`)"),
+    ("expected <block end>", "this line's indentation does not match its section's: align it with the keys beside "
+     "it"),
+    ("did not find expected key", "this line's indentation does not match its section's: align it with the keys "
+     "beside it"),
+    ("did not find expected ',' or ']'", "a list in [brackets] not closed: end it with ']'"),
+    ("did not find expected ',' or '}'", "a mapping in {braces} not closed: end it with '}'"),
+    ("found unexpected end of stream", "a quote or bracket opened and never closed"),
+    ("found duplicate anchor", "an anchor (&name) defined twice"),
+    ("found undefined alias", "an alias (*name) whose anchor (&name) is not defined above it"),
+)
+
+
+def yaml_words(exc: yaml.MarkedYAMLError, text: str) -> str:
+    """PyYAML's problem in words a person can act on (its own words after them, in parentheses)."""
+    problem = exc.problem or str(exc)
+    mark = exc.problem_mark
+    if mark is not None and 0 <= mark.index < len(text) and text[mark.index] == "\t":
+        return f"a tab: YAML indents with spaces only (replace the tab with spaces) ({problem})"
+    for start, words in _USUAL:
+        if problem.startswith(start):
+            return f"{words} ({problem})"
+    return problem
+
+
 def _mark(file: str, m: yaml.Mark) -> Mark:
     return Mark(file, m.line + 1, m.column + 1)
 
@@ -54,7 +84,7 @@ def read_yaml(path: Path) -> Source:
         data = loader.construct_document(node)
     except yaml.MarkedYAMLError as exc:
         mark = _mark(name, exc.problem_mark) if exc.problem_mark else Mark(name, 0, 0)
-        raise ScenarioError([Diagnostic(mark, "", f"YAML syntax: {exc.problem}")]) from None
+        raise ScenarioError([Diagnostic(mark, "", f"YAML syntax: {yaml_words(exc, text)}")]) from None
     finally:
         loader.dispose()
     if not isinstance(data, dict):
