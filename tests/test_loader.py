@@ -132,7 +132,9 @@ def test_circular_extends(tmp_path):
     write(tmp_path, "extends: b.yaml\n", "a.yaml")
     write(tmp_path, "extends: a.yaml\n", "b.yaml")
     (err,) = errors(tmp_path / "a.yaml")
-    assert "circular extends" in err
+    assert err.startswith(f"{tmp_path / 'b.yaml'}:1:10: extends: circular extends: ")  # (the line closing it)
+    assert err.split(": circular extends: ")[1].startswith(" -> ".join(str(tmp_path / f) for f in ("a.yaml", "b.yaml",
+                                                                                                    "a.yaml")))
 
 
 def test_set_overrides_parse_yaml_values_and_index_lists():

@@ -167,9 +167,13 @@ def read_with_extends(path: Path, chain: tuple[Path, ...] = ()) -> Source:
     files: list[Path] = []
     for i, parent in enumerate(parents):
         ppath = (path.parent / parent).resolve()
+        mark = src.value_marks.get(("extends", i), src.value_marks[("extends",)])
         if not ppath.exists():
-            mark = src.value_marks.get(("extends", i), src.value_marks[("extends",)])
             raise ScenarioError([Diagnostic(mark, "extends", f"file not found: {ppath}")])
+        if ppath in (*chain, path):  # (said at the line that closes the cycle)
+            cycle = " -> ".join(str(p) for p in (*chain, path, ppath))
+            raise ScenarioError([Diagnostic(mark, "extends", f"circular extends: {cycle} (a file cannot extend "
+                                            "itself through others: remove this extends)")])
         base = read_with_extends(ppath, (*chain, path))
         merged_data = deep_merge(merged_data, base.data)
         keys.update(base.key_marks)
