@@ -145,3 +145,13 @@ def test_a_plan_past_a_speed_limit_names_where_the_limit_was_set_and_what_slows_
     assert line.endswith("the limit is the safety envelope's (safety.joints.wrist_1): give the plan more time (the "
                          "planner's timing settings, `rehabkit plugins --fields multi-cubic`) or the joint a higher "
                          "speed limit there")
+
+
+def test_an_unknown_joint_under_robot_limits_is_said_at_its_key_with_a_did_you_mean(tmp_path):
+    p = tmp_path / "s.yaml"
+    p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nrobot:\n  type: urdf\n"
+                 f"  file: {DATA / 'arm2.urdf'}\n  ee_frame: l2\n  limits:\n    j11: {{effort: 5}}\n")
+    r = cli("validate", str(p))
+    assert r.returncode == 2
+    assert f"{p}:7:5: robot.limits.j11: robot 'urdf': arm2.urdf has no joint 'j11'; did you mean 'j1'? (its " \
+           "joints: j1, j2)" in r.stderr

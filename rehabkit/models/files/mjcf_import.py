@@ -10,6 +10,7 @@ an error naming the joint and the key to add.
 
 from __future__ import annotations
 
+import difflib
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -59,7 +60,7 @@ class ModelFileError(ValueError):
     """A model file that can't be a robot as configured; ``setting`` names the plugin setting to change (None: the
     file itself)."""
 
-    def __init__(self, message: str, setting: str | None = None):
+    def __init__(self, message: str, setting: str | tuple | None = None):
         self.setting = setting
         super().__init__(message)
 
@@ -165,7 +166,9 @@ def robot_from_file(
     names = [model.joint(j).name for j in joints]
     unknown = sorted(set(config.limits) - set(names))
     if unknown:
-        raise ValueError(f"limits given for unknown joint(s) {unknown}; joints are {names}")
+        close = difflib.get_close_matches(unknown[0], names, n=1, cutoff=0.5)
+        raise ModelFileError(f"{path.name} has no joint '{unknown[0]}'" + (f"; did you mean '{close[0]}'?" if close
+                             else "") + f" (its joints: {', '.join(names)})", setting=("limits", unknown[0]))
     motor_effort: dict[int, float] = {}
     for a in range(model.nu):
         if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and model.actuator_ctrllimited[a]:
