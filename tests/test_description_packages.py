@@ -75,8 +75,10 @@ def test_a_description_package_with_xacro_and_collada_runs_and_both_engines_agre
 
 
 def test_ur5_from_example_robot_data_as_its_package_ships_it(tmp_path, monkeypatch):
-    """UR5's URDF exactly as example-robot-data installs it (package:// URIs, COLLADA visuals, STL collisions): refused
-    at its file's line while no package path names it; through AMENT_PREFIX_PATH it loads, and both engines agree."""
+    """UR5's URDF exactly as example-robot-data installs it (package:// URIs, COLLADA visuals, STL collisions): its
+    package found where pip put it (cmeel's prefix of this interpreter) with no variable set — a new user had to find
+    that folder with `pip show -f` and name it in AMENT_PREFIX_PATH — and both engines agree. A package that is
+    nowhere is refused at the file's line, saying where it was looked for."""
     monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path / "cache"))
     monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
@@ -90,11 +92,15 @@ def test_ur5_from_example_robot_data_as_its_package_ships_it(tmp_path, monkeypat
         "task": {"targets": [{"name": "A", "joints_deg": [0, -90, 90, -90, -90, 0]},
                              {"name": "B", "joints_deg": [20, -80, 80, -90, -90, 10]}]},
         "duration": 2.5, "expect": {"final_joint_error_deg": {"lt": 0.5}}}))
-    refused = cli("validate", str(scenario), cwd=tmp_path)
+    assert cli("validate", str(scenario), cwd=tmp_path).returncode == 0
+    nowhere = tmp_path / "nowhere.urdf"
+    nowhere.write_text(urdf.read_text().replace("package://example-robot-data/", "package://no_such_package/"))
+    (tmp_path / "nowhere.yaml").write_text(scenario.read_text().replace(str(urdf), str(nowhere)))
+    refused = cli("validate", str(tmp_path / "nowhere.yaml"), cwd=tmp_path)
     line = next(i for i, x in enumerate(scenario.read_text().splitlines(), 1) if x.strip().startswith("file:"))
-    assert refused.returncode == 2 and refused.stderr.startswith(f"ur5.yaml:{line}:") and "robot.file" in refused.stderr
-    assert "no package 'example-robot-data' found" in refused.stderr and "ROS_PACKAGE_PATH" in refused.stderr
-    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
+    assert refused.returncode == 2 and refused.stderr.startswith(f"nowhere.yaml:{line}:")
+    assert "robot.file" in refused.stderr and "no package 'no_such_package' found" in refused.stderr
+    assert "cmeel.prefix/share" in refused.stderr  # (where it looked, pip's prefixes among them)
     robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "tool0"}, tmp_path)
     assert robot.model.dof == 6
     distance, mass = _agreement(robot)
@@ -248,14 +254,15 @@ def test_the_robot_file_itself_may_be_a_package_uri(tmp_path, monkeypatch):
                              {"name": "B", "joints_deg": [10, -80, 80, 0, 0, 0]}]}, "duration": 1.0}))
     monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
-    lost = cli("validate", "ur5.yaml", cwd=tmp_path)
-    assert lost.returncode == 2
-    line = next(i for i, text in enumerate((tmp_path / "ur5.yaml").read_text().splitlines(), 1) if uri in text)
-    assert lost.stderr.startswith(f"ur5.yaml:{line}:")
-    assert f"robot.file: robot 'urdf': {uri}: no package 'example-robot-data' found" in lost.stderr
-    monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
-    found = cli("validate", "ur5.yaml", cwd=tmp_path)
+    found = cli("validate", "ur5.yaml", cwd=tmp_path)  # (pip's prefix: no variable needed)
     assert found.returncode == 0, found.stderr
+    (tmp_path / "lost.yaml").write_text((tmp_path / "ur5.yaml").read_text().replace("example-robot-data", "no-such"))
+    lost = cli("validate", "lost.yaml", cwd=tmp_path)
+    assert lost.returncode == 2
+    line = next(i for i, text in enumerate((tmp_path / "lost.yaml").read_text().splitlines(), 1) if "no-such" in text)
+    assert lost.stderr.startswith(f"lost.yaml:{line}:")
+    assert f"robot.file: robot 'urdf': {uri.replace('example-robot-data', 'no-such')}: no package 'no-such' found" \
+        in lost.stderr
 
 
 def test_a_target_in_a_frame_fixed_to_the_base_is_taken_through_that_frames_pose(tmp_path, monkeypatch):

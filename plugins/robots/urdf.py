@@ -30,7 +30,7 @@ class UrdfRobot(Robot):
     def __init__(self, config: UrdfConfig, context: Context):
         packages = [context.resolve(p) for p in config.packages]
         try:  # a path, or a URI as ROS tools take one (package://NAME/urdf/robot.urdf, file://)
-            path = (resolve_uri(config.file, context.scenario_dir, packages) if "://" in config.file
+            path = (resolve_uri(config.file, context.scenario_dir, packages, what="description") if "://" in config.file
                     else context.resolve(config.file))
         except DescriptionError as exc:
             raise SettingError("file", str(exc)) from None

@@ -153,7 +153,7 @@ def robot_description(robot, robot_section, resolve) -> str:
     if not isinstance(file, str) or not file.lower().endswith((".urdf", ".xacro")):
         return urdf_from_model(robot.model.pin_model, robot.model.name, robot.model.limits)
     packages = [resolve(p) for p in getattr(robot_section, "packages", [])]
-    path = resolve_uri(file, resolve("."), packages) if "://" in file else resolve(file)
+    path = resolve_uri(file, resolve("."), packages, what="description") if "://" in file else resolve(file)
     if path.suffix == ".xacro":
         import xacro
 

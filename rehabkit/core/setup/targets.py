@@ -55,7 +55,9 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
         elif spec.joints_deg is not None or spec.joints_rad is not None:
             q = np.radians(spec.joints_deg) if spec.joints_deg is not None else np.asarray(spec.joints_rad, float)
             if len(q) != robot.model.dof:
-                raise PlanningError(f"target '{name}' has {len(q)} joint values; robot has {robot.model.dof} joints",
+                names = robot.model.joint_names
+                raise PlanningError(f"target '{name}' has {len(q)} joint values; robot '{robot.model.name}' has "
+                                    f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}",
                                     target=name)
             tgt = Target(name, q=q, pose=robot.fk(q))
         else:

@@ -1,7 +1,8 @@
 """A robot description as a ROS description package ships it, made loadable: ``.xacro`` expanded (the ``xacro``
 package), every mesh URI resolved — ``package://NAME/...`` the way ROS tools resolve it (the scenario's own
-``packages``, then ``ROS_PACKAGE_PATH``, then each ``AMENT_PREFIX_PATH`` prefix's ``share/NAME``), ``file://`` and
-paths relative to the file — and COLLADA meshes converted to STL, which MuJoCo loads (``trimesh`` with
+``packages``, then ``ROS_PACKAGE_PATH``, then each ``AMENT_PREFIX_PATH`` prefix's ``share/NAME``, then the running
+interpreter's prefixes where pip puts packages: ``sys.prefix`` and cmeel's ``site-packages/cmeel.prefix``),
+``file://`` and paths relative to the file — and COLLADA meshes converted to STL, which MuJoCo loads (``trimesh`` with
 ``pycollada``). The result is one URDF with absolute mesh paths, kept under ``$REHABKIT_CACHE`` by content (written
 whole: a temporary name, renamed), from which Pinocchio and MuJoCo both build the robot.
 """
@@ -53,20 +54,32 @@ def find_package(name: str, packages: Sequence[Path] = ()) -> tuple[Path | None,
             for folder in sorted(root.iterdir()):
                 if _is_package(folder / name, name):
                     return folder / name, looked
-    for prefix in (Path(p) for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p):
+    ament = [Path(p) for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    for prefix in dict.fromkeys([*ament, *interpreter_prefixes()]):
         looked.append(str(prefix / "share"))
         if (prefix / "share" / name).is_dir():
             return prefix / "share" / name, looked
     return None, looked
 
 
-def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = ()) -> Path:
-    """A mesh's file from its URI in a description at ``base`` (the file's folder)."""
+def interpreter_prefixes() -> list[Path]:
+    """Where pip puts description packages for the running interpreter: its environment's prefix (``share/NAME``)
+    and cmeel's (``site-packages/cmeel.prefix``: example-robot-data, Pinocchio's own), so a pip-installed package
+    needs no variable."""
+    import sys
+    import sysconfig
+
+    return [p for p in (Path(sys.prefix), Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix") if p.is_dir()]
+
+
+def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = (), what: str = "mesh") -> Path:
+    """A file from its URI (``what``: a description's mesh, or the robot's ``description`` file itself) relative to
+    ``base`` (the description's folder, or the scenario's)."""
     parsed = urlparse(uri)
     if parsed.scheme == "package":
         folder, looked = find_package(parsed.netloc, packages)
         if folder is None:
-            where = ", ".join(looked) or "nothing: no packages, ROS_PACKAGE_PATH or AMENT_PREFIX_PATH"
+            where = ", ".join(looked) or "nothing: no packages, ROS_PACKAGE_PATH, AMENT_PREFIX_PATH or pip's prefixes"
             raise DescriptionError(uri, f"no package '{parsed.netloc}' found (looked in: {where})",
                                    "name its folder in the robot's packages, or set ROS_PACKAGE_PATH / source the "
                                    "workspace that has it")
@@ -79,7 +92,9 @@ def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = ()) -> Path:
     else:
         path = base / uri
     if not path.is_file():
-        raise DescriptionError(uri, f"no such file: {path}", "check the package's meshes folder")
+        fix = "check the package's meshes folder" if what == "mesh" else "check the path after the package's name: " \
+            "it is relative to the package's folder (where its package.xml is)"
+        raise DescriptionError(uri, f"no such file: {path}", fix)
     return path.resolve()
 
 
