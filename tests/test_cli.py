@@ -134,3 +134,11 @@ def test_a_key_written_into_a_git_tree_that_does_not_ignore_it_is_warned_of(tmp_
     (tmp_path / ".gitignore").write_text("*.key\n")
     quiet = cli("keys", "new", "arm-2", "--out", str(tmp_path / "arm2.key"), cwd=tmp_path)
     assert quiet.returncode == 0 and quiet.stderr == ""
+
+
+def test_the_link_line_says_why_states_were_dropped():
+    """'117 states refused' read as an attack; most were the host's own stale states."""
+    from rehabkit.cli.run_report import _link
+
+    m = {"states_dropped": 117, "states_dropped_stale": 115, "states_dropped_out_of_order": 2}
+    assert _link(m) == ["  LINK    117 states dropped (115 stale, 2 out of order)"]

@@ -155,3 +155,25 @@ def test_an_unknown_joint_under_robot_limits_is_said_at_its_key_with_a_did_you_m
     assert r.returncode == 2
     assert f"{p}:7:5: robot.limits.j11: robot 'urdf': arm2.urdf has no joint 'j11'; did you mean 'j1'? (its " \
            "joints: j1, j2)" in r.stderr
+
+
+def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
+    """HIT's A in radians: B (A's orientation) was blamed as out of reach for its own units; a posture in radians
+    that breaks a range only in degrees says so beside the limit."""
+    p = tmp_path / "s.yaml"
+    p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\ntask:\n  targets:\n"
+                 "    - {name: A, joints_deg: [0, 1.5708, 1.5708, 0.5236, -1.5708, 1.5708]}\n"
+                 "    - {name: B, position: [-0.45, -0.1, -0.3], orientation_of: A}\n    - {name: C, same_as: A}\n"
+                 "    - {name: D, same_as: B}\n    - {name: E, same_as: A}\n")
+    r = cli("validate", str(p))
+    assert r.returncode == 2 and "task.targets.1.position: " in r.stderr
+    assert "out of reach: no pose solution within the joint limits; its orientation is A's, whose joint values are " \
+           "all within ±2π: written in radians? joints_deg takes degrees (joints_rad takes radians)" in r.stderr
+    urdf = tmp_path / "knee.urdf"  # (a joint that cannot go below 0.5 rad, 28.6°)
+    urdf.write_text((DATA / "arm2.urdf").read_text().replace('lower="-2" upper="2"', 'lower="0.5" upper="2"'))
+    p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nrobot: {{type: urdf, file: {urdf}, ee_frame: l2}}\n"
+                 "planner: {type: multi-cubic, segment_durations: [1.0]}\ntask:\n  targets:\n"
+                 "    - {name: A, joints_deg: [45, 0]}\n    - {name: B, joints_deg: [1.2, 0.4]}\n")
+    r = cli("validate", str(p))
+    assert r.returncode == 2 and "task.targets.1.joints_deg: target 'B': its joint values put j1 beyond its position " \
+        "limit at t+0.000s (1.2°, limit 28.6°); its joint values are all within ±2π: written in radians?" in r.stderr

@@ -69,8 +69,12 @@ def _link(m: dict[str, Any]) -> list[str]:
     if m.get("deadline_misses"):
         said.append(f"{int(m['deadline_misses'])} of {int(m.get('link_ticks') or 0)} ticks late (the latest "
                     f"{m.get('tick_lateness_max_ms', float('nan')):.1f} ms)")
-    if m.get("states_dropped"):
-        said.append(f"{int(m['states_dropped'])} states refused")
+    if m.get("states_dropped"):  # (by why: stale ones are the host's own late reading, not an attack)
+        why = {k[len("states_dropped_"):].replace("_", " "): int(v) for k, v in m.items()
+               if k.startswith("states_dropped_") and v}
+        said.append(f"{int(m['states_dropped'])} states dropped (" + ", ".join(
+            f"{n} {w}" for w, n in sorted(why.items(), key=lambda x: -x[1])) + ")" if why else
+            f"{int(m['states_dropped'])} states dropped")
     if m.get("bridge_stale_holds"):
         said.append(f"the bridge held through {int(m['bridge_stale_holds'])} gaps in the commands")
     if m.get("bridge_hold_at_s") is not None:

@@ -49,6 +49,7 @@ class Target:
     position_only: bool = False
     same_as: str | None = None  # resolved alias: reuse that target's joint solution
     free_axes: str = ""  # tool axes the orientation may turn about (a pointing target: "z")
+    hint: str = ""  # what may be wrong with how it was written (a posture in radians), said with a refusal of it
 
     @property
     def free(self) -> str:

@@ -117,7 +117,8 @@ def check_joint_targets(a: Assembly) -> None:
         breach = first_breach(model.limits, model.joint_names, target.q[None], None, np.zeros(1),
                               revolute=model.revolute)
         if breach is not None:
-            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}", target=name)
+            hint = f"; {target.hint}" if target.hint else ""
+            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}{hint}", target=name)
             raise at_target(a, why, "task") or SetupError(str(why))
 
 

@@ -59,7 +59,8 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
                 raise PlanningError(f"target '{name}' has {len(q)} joint values; robot '{robot.model.name}' has "
                                     f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}",
                                     target=name)
-            tgt = Target(name, q=q, pose=robot.fk(q))
+            hint = radians_hint(spec.joints_deg, robot.model.revolute)
+            tgt = Target(name, q=q, pose=robot.fk(q), hint=f"its joint values {hint}" if hint else "")
         else:
             pose = np.eye(4)
             pose[:3, 3] = spec.position
@@ -70,11 +71,14 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
                     raise PlanningError(f"target '{name}': '{spec.orientation_of}' has no orientation to copy",
                                         target=name)
                 pose[:3, :3] = ref.pose[:3, :3]
+                hint = ref.hint.replace("its joint values", f"its orientation is {spec.orientation_of}'s, whose joint "
+                                        "values", 1)
             elif spec.rpy_deg is not None:
                 pose[:3, :3] = rpy_to_matrix(np.radians(spec.rpy_deg))
             else:
                 position_only = True
-            tgt = Target(name, pose=pose, position_only=position_only, free_axes=spec.free_axes or "")
+            tgt = Target(name, pose=pose, position_only=position_only, free_axes=spec.free_axes or "",
+                         hint=hint if spec.orientation_of else "")
         out[name] = tgt
         return tgt
 
@@ -176,5 +180,19 @@ def unreachable(target: Target, robot: Robot) -> str:
     closest = robot.ik_closest_m
     near = f"; the closest the hand came is {closest * 1000:.0f} mm away" if np.isfinite(closest) and \
         closest > 1e-3 else ""
+    if target.hint:
+        return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
+                f"limits{near}; {target.hint}")
     return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
             f"limits{near} (base frame; check the robot's base and the target's units)")
+
+
+def radians_hint(values_deg, revolute) -> str:
+    """Why a posture given in degrees may be radians (its values "are all within ±2π: ..."; "" where not): every
+    revolute value within ±2π, not all near zero (a posture of a few degrees at most is rare; radians are common)."""
+    if values_deg is None:
+        return ""
+    v = np.abs(np.asarray(values_deg, float)[np.asarray(revolute, bool)])
+    if not len(v) or v.max() > 2 * np.pi or v.max() < 0.2:
+        return ""
+    return "are all within ±2π: written in radians? joints_deg takes degrees (joints_rad takes radians)"
