@@ -163,7 +163,8 @@ def test_hit_runs_on_six_drives_of_each_file_and_tracks_mujoco(tmp_path, mujoco_
     rate = 500 if mode == "cst" else 250
     drives = [{"node_id": k, "eds": str(EDS / name), "mode": mode} for k in range(1, 7)]
     with own_state(tmp_path / "state"):
-        r = run_scenario(HIT, {"rates": {"control_hz": rate}, "duration": 3.0, "backend": {
+        r = run_scenario(HIT, {"rates": {"control_hz": rate}, "duration": 3.0, "expect.task_complete": {"eq": 0},
+                               "backend": {
             "type": "canopen", "clock": "lockstep", "drives": drives, "other_pdos": "disable"}}, out_dir=tmp_path)
     m, notes = r.metrics, [n["text"] for n in r.summary["notes"]]
     assert m["safety_events"] == 0 and m["can_emcy"] == 0 and m["can_missed_tpdos"] == 0

@@ -127,7 +127,7 @@ def test_planning_is_deterministic_across_processes(capaman_run, tmp_path):
     """A fresh process plans what this one did (after whatever it planned before), and the CLI prints the
     validation report."""
     r = subprocess.run([sys.executable, "-m", "rehabkit.cli", "run", str(CAPAMAN), "--out", str(tmp_path),
-                        "--set", "duration=0.5", "--set", "expect={}"], capture_output=True, text=True, cwd=ROOT)
+                        "--set", "duration=0.5", "--set", "expect=null"], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     again = json.loads((tmp_path / "summary.json").read_text())
     assert again["plans"][0]["waypoints_deg"] == capaman_run.summary["plans"][0]["waypoints_deg"]

@@ -14,7 +14,7 @@ from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.setup.errors import SetupError
 from tests.conftest import ROOT, SCENARIOS
 
-SHORT = {"duration": 2.5, "planner.segment_durations": [1, 1], "task.sequence": ["A", "B", "A"], "expect": {}}
+SHORT = {"duration": 2.5, "planner.segment_durations": [1, 1], "task.sequence": ["A", "B", "A"], "expect": None}
 
 
 def _readme_extension() -> types.ModuleType:

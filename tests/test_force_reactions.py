@@ -20,7 +20,7 @@ PUSH = np.array([0.0, 1.0, 0.0])
 
 
 def _run(kind: str, **more):
-    over = {"safety.reactions": {"interaction-force": {"type": kind}}, "safety.stop_after_s": 1.0, "expect": {},
+    over = {"safety.reactions": {"interaction-force": {"type": kind}}, "safety.stop_after_s": 1.0, "expect": None,
             **more}
     runner = Runner(load_scenario(FORCE, over))
     result = runner.run()

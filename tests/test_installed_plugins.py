@@ -30,7 +30,7 @@ def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path):
     assert broken and "rehabkit-exo-driver 1.2.3" in broken[0] and "not_a_real_module_xyz" in broken[0]
     assert "multi-cubic" in listed.stdout
     run = rehabkit(site, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path / "out"),
-                   "--set", "duration=0.5", "--set", "expect={}")
+                   "--set", "duration=0.5", "--set", "expect=null")
     assert run.returncode == 0, run.stderr
     # naming it is a located refusal with its cause, before anything runs
     named = rehabkit(site, "validate", str(SCENARIOS / "hit_roundtrip.yaml"), "--set", "robot.type=exo")

@@ -254,8 +254,9 @@ def test_a_urdf_robot_runs_over_an_authenticated_link_and_validate_checks_its_ke
     scenario.write_text(f"extends: {ROOT}/examples/robots/urdf_arm4.yaml\n"
                         "backend: {type: hardware, clock: lockstep, key_file: keys/arm4.key}\n")
     missing = cli("validate", scenario)
-    assert missing.returncode == 2 and f"{scenario}:2:44: backend.key_file: backend 'hardware': no such file; " \
-        "make one with `rehabkit keys new ROBOT-ID --out FILE`" in missing.stderr
+    assert missing.returncode == 2 and f"{scenario}:2:44: backend.key_file: backend 'hardware': " \
+        f"{tmp_path / 'keys' / 'arm4.key'}: no such file; make one with `rehabkit keys new ROBOT-ID --out FILE`" \
+        in missing.stderr
     key = new_key("arm4-1", tmp_path / "keys" / "arm4.key")
     key.path.chmod(0o640)
     assert f"readable by others (mode 640); chmod 600 {key.path}" in cli("validate", scenario).stderr

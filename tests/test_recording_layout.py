@@ -183,7 +183,7 @@ def test_a_robot_whose_model_has_meshes_is_drawn_with_them(tmp_path):
     (tmp_path / "arm5_mesh.xml").write_text(xml)
     scenario = (robots / "mjcf_arm5.yaml").read_text().replace("file: arm5.xml", "file: arm5_mesh.xml")
     (tmp_path / "arm.yaml").write_text(scenario)
-    _run(tmp_path / "arm.yaml", {"duration": 0.2, "expect": {}}, tmp_path / "out")
+    _run(tmp_path / "arm.yaml", {"duration": 0.2, "expect": None}, tmp_path / "out")
     data = recording(tmp_path / "out" / "run.rrd")
     (path,) = [p for p, c in data.items() if "Mesh3D:vertex_positions" in c]
     from scipy.spatial.transform import Rotation
@@ -277,7 +277,7 @@ def test_a_urdf_robot_whose_link_is_a_mesh_file_is_drawn_with_it(tmp_path):
     (tmp_path / "arm4_mesh.urdf").write_text(urdf.replace(hand, '<geometry><mesh filename="tool.stl"/></geometry>'))
     scenario = (robots / "urdf_arm4.yaml").read_text().replace("file: arm4.urdf", "file: arm4_mesh.urdf")
     (tmp_path / "arm.yaml").write_text(scenario)
-    _run(tmp_path / "arm.yaml", {"duration": 0.2, "expect": {}, "world.objects": []}, tmp_path / "out")
+    _run(tmp_path / "arm.yaml", {"duration": 0.2, "expect": None, "world.objects": []}, tmp_path / "out")
     data = recording(tmp_path / "out" / "run.rrd")
     (path,) = [p for p, c in data.items() if "Mesh3D:vertex_positions" in c]
     assert path.startswith("world/bodies/hand/")

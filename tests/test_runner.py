@@ -62,7 +62,7 @@ def test_rrd_holds_geometry_poses_paths_and_series(hit_run):
 
 
 def test_replan_that_cannot_be_planned_holds_the_robot():
-    r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan", "sequence": ["B", "C"]}], "expect": {}})
+    r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan", "sequence": ["B", "C"]}], "expect": None})
     (ev,) = r.summary["safety"]["events"]
     assert ev["rule"] == "plan" and "need 1 segment durations" in ev["message"] and ev["t"] == 1.0
     assert r.summary["metrics"]["sim_time_s"] == pytest.approx(1.5)  # held for stop_after_s, then ended
@@ -71,7 +71,7 @@ def test_replan_that_cannot_be_planned_holds_the_robot():
 def test_timed_replan_then_stop():
     r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan"}, {"at": 3.5, "action": "stop"}],
                            "planner.start_from_current": True, "planner.segment_durations": [2, 2, 2, 2, 2],
-                           "expect": {}})
+                           "expect": None})
     assert [(e["action"], e["t"]) for e in r.summary["events"]] == [("replan", 1.0), ("stop", 3.5)]
     assert not r.summary["safety"]["events"] and r.summary["metrics"]["sim_time_s"] == pytest.approx(3.5)
     tr = r.trace
@@ -79,7 +79,7 @@ def test_timed_replan_then_stop():
 
 
 def test_reached_event_fires_near_the_target():
-    r = run_scenario(HIT, {"task.events": [{"reached": "B", "tolerance_m": 0.01, "action": "stop"}], "expect": {}})
+    r = run_scenario(HIT, {"task.events": [{"reached": "B", "tolerance_m": 0.01, "action": "stop"}], "expect": None})
     (ev,) = r.summary["events"]
     assert ev["trigger"] == "reached B" and 1.0 < ev["t"] < 2.1
     assert r.summary["metrics"]["sim_time_s"] == pytest.approx(ev["t"], abs=0.002)
@@ -148,7 +148,7 @@ def test_broken_controller_stops_the_robot_and_the_logs_say_why(tmp_path, bad_re
 
 
 def test_no_rrd_when_logging_is_off(tmp_path):
-    r = run_scenario(HIT, {"logging.rrd": False, "duration": 0.5, "expect": {}}, out_dir=tmp_path)
+    r = run_scenario(HIT, {"logging.rrd": False, "duration": 0.5, "expect": None}, out_dir=tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["safety_log.jsonl", "scenario.yaml", "summary.json"]
     assert r.passed
 
@@ -161,7 +161,7 @@ def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):
 
     monkeypatch.setattr(RerunLog, "flush", broken_flush)
     with pytest.raises(OSError, match="disk full"):
-        run_scenario(HIT, {"duration": 0.2, "expect": {}}, out_dir=tmp_path)
+        run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -175,7 +175,7 @@ def test_a_run_whose_backend_fails_at_its_reset_leaves_no_half_written_file(tmp_
 
     monkeypatch.setattr(MujocoBackend, "reset", reset)
     with pytest.raises(type(error)):
-        run_scenario(HIT, {"duration": 0.2, "expect": {}}, out_dir=tmp_path)
+        run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -183,7 +183,7 @@ def test_spawn_without_a_display_still_writes_the_file(tmp_path, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     with pytest.warns(UserWarning, match="no display"):
-        r = run_scenario(HIT, {"duration": 0.2, "expect": {}}, out_dir=tmp_path, spawn=True)
+        r = run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path, spawn=True)
     assert r.passed and (tmp_path / "run.rrd").stat().st_size > 0
 
 
@@ -297,3 +297,26 @@ def test_tracking_is_measured_against_the_plan_and_against_the_controllers_own_r
     assert m["controller_tracking_rms_deg"] < 0.5 < 1.8 < m["tracking_rms_deg"]  # its own: tracked
     assert r.summary["metric_info"]["controller_tracking_rms_deg"]["unit"] == "deg"
     assert "controller_tracking_rms_deg" not in run_scenario(HIT, {"duration": 0.5}).metrics  # joint-pd has none
+
+
+def test_a_plan_that_outlasts_the_run_is_warned_of_and_fails_the_run(tmp_path):
+    """segment_durations in milliseconds by mistake: validate warns at the setting with the numbers; the run says the
+    task did not finish and exits 1 although its other verdicts pass (an arm that barely moved 'reaches' its goal:
+    the last target is the first); a run cut short on purpose says so and passes."""
+    from tests.test_cli import cli
+
+    p = tmp_path / "ms.yaml"
+    p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\n"
+                 "planner: {type: multi-cubic, segment_durations: [3000, 3000, 3000, 3000]}\nduration: 2\n")
+    v = cli("validate", str(p))
+    assert v.returncode == 0
+    assert f"PLAN    planner.segment_durations ({p}:2:30): the plan lasts 1.2e+04 s and the run 2 s (duration at " \
+           f"{p}:3:1): the task cannot finish — 0.0% of it is run" in v.stdout
+    r = cli("run", str(p), "--out", str(tmp_path / "run"))
+    assert r.returncode == 1 and "TASK    incomplete: the plan ends at 1.2e+04 s, the run at 2 s (0.0% of it run)" \
+        in r.stdout
+    assert all(line.startswith("  PASS") for line in r.stdout.splitlines() if "expected" in line)  # (no verdict failed)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["task"]["complete"] is False and summary["metrics"]["task_complete"] == 0
+    p.write_text(p.read_text() + "expect: {task_complete: {eq: 0}}\n")  # (a rehearsal of the first seconds)
+    assert cli("run", str(p)).returncode == 0

@@ -84,7 +84,7 @@ class ComanRobot(Robot, FloatingBase):
     def floating_model(self) -> pin.Model:
         """Pinocchio model with the free-flyer pelvis (q: x, y, z, qx, qy, qz, qw, then the joints)."""
         if self._floating is None:
-            self._floating = pin.buildModelFromMJCF(str(self.model.mjcf_path))
+            self._floating = self.model.mjcf_pin_model()
         return self._floating
 
     def pin_configuration(self, q: np.ndarray, base_position: np.ndarray | None = None,

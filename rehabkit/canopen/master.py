@@ -193,17 +193,25 @@ class DriveMaster:
 
     # -- cycles ---------------------------------------------------------------------------------------------
 
-    def enable(self, cycle: Callable[[np.ndarray], object], fault_reset: bool = False) -> None:
+    def enable(self, cycle: Callable[[np.ndarray], object], fault_reset: bool = False, patience: int = 5) -> None:
         """The 402 walk to OPERATION ENABLED, one controlword a cycle (``cycle``: one, paced as the run paces
-        them), zero torque (a fault reset first only when a person has cleared the latch: ``fault_reset``)."""
+        them), zero torque (a fault reset first only when a person has cleared the latch: ``fault_reset``). Each
+        word is held until every drive reports the state it leads to, up to ``patience`` cycles more (a drive in
+        another process, or a loaded bus, may answer a cycle or two late)."""
         zero = np.zeros(len(self.remotes))
         if fault_reset:
             self.controlword[:] = FAULT_RESET
             cycle(zero)
         # from wherever the last run left them (a quick stop held: QUICK STOP ACTIVE) to SWITCH ON DISABLED first
-        for word in (DISABLE_VOLTAGE_CW, SHUTDOWN, SWITCH_ON_CMD, ENABLE_OPERATION_CMD, ENABLE_OPERATION_CMD):
+        walk = ((DISABLE_VOLTAGE_CW, State.SWITCH_ON_DISABLED), (SHUTDOWN, State.READY_TO_SWITCH_ON),
+                (SWITCH_ON_CMD, State.SWITCHED_ON), (ENABLE_OPERATION_CMD, State.OPERATION_ENABLED))
+        for word, state in walk:
             self.controlword[:] = word
             cycle(zero)
+            for _ in range(patience):
+                if all(s == state.name for s in self.states) or State.FAULT.name in self.states:
+                    break
+                cycle(zero)
         for i, s in enumerate(self.states):
             if s != State.OPERATION_ENABLED.name:
                 code = self.remotes[i].sdo[0x603F].raw

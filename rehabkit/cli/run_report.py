@@ -20,6 +20,10 @@ def run_report(s: dict[str, Any], out: Path) -> str:
         lines.append(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
                      + (f"  — {e['reason']}" if e.get("reason") else ""))
     lines += [f"  PLAN    {w['message']}" for w in s["safety"].get("plan_warnings", [])]
+    if (task := s.get("task")) and not task["complete"]:  # (said whatever the expectations ask)
+        reaches = f": {task['reaches_completed']} of {task['reaches']} reaches completed" if task.get("reaches") else ""
+        lines.append(f"  TASK    incomplete: the plan ends at {task['plan_end_s']:.4g} s, the run at "
+                     f"{task['run_s']:g} s ({task['run_s'] / task['plan_end_s']:.1%} of it run){reaches}")
     lines += [f"  SAFETY  {ev['message']}" for ev in s["safety"]["events"]]
     lines += _interventions(s["safety"].get("interventions", []), s["safety"]["events"])
     lines += _link(m)

@@ -102,8 +102,9 @@ class RobotModel:
     def dof(self) -> int:
         return len(self.joint_names)
 
-    def _pin_from_mjcf(self):
-        """Pinocchio's model of the MJCF: its parser reads files only, so the MJCF goes into a file of its own for
+    def mjcf_pin_model(self):
+        """Pinocchio's model of the MJCF as written (a floating root stays free; :attr:`pin_model` is the robot's own):
+        its parser reads files only, so the MJCF goes into a file of its own for
         the moment it reads it — beside the robot's assets where its mesh paths are relative to them, else in the
         temporary folder — and is removed at once (runs left one per robot variant behind before)."""
         import pinocchio as pin
@@ -126,7 +127,7 @@ class RobotModel:
         """
         import pinocchio as pin
 
-        model = self._pin_from_mjcf()
+        model = self.mjcf_pin_model()
         if self.passive_joints:
             missing = [j for j in self.passive_joints if not model.existJointName(j)]
             if missing:

@@ -113,6 +113,10 @@ CORE_METRICS: tuple[Metric, ...] = (
            "measured, where a joint-space controller exposes one (a compliant controller's yielded reference)"),
     Metric("controller_tracking_max_deg", "deg", description="largest of the same"),
     Metric("sim_time_s", "s", description="simulated time run"),
+    Metric("task_complete", "1", description="1 when the run lasted until its last plan's end, or every reach "
+           "got to its target and stayed, else 0: an unfinished task fails the run unless the scenario's "
+           "expectations name task_complete or safety_events"),
+    Metric("plan_end_s", "s", description="when the run's last plan ends (its start plus its duration)"),
     Metric("wall_time_s", "s", "wall", description="wall time of the loop"),
     Metric("setup_time_s", "s", "wall", description="wall time from loading to the first step"),
     Metric("real_time_factor", "1", "wall", description="simulated time / wall time of the loop"),

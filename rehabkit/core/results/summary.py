@@ -77,6 +77,12 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
         "torque_saturation_steps": a.safety.saturated_steps,
     })
     metrics.update(stop_metrics(a, trace))
+    if r.plans:  # (the task's time: did the run last until its last plan's end?)
+        end = max(p["t"] + p["duration_s"] for p in r.plans if "duration_s" in p) if any(
+            "duration_s" in p for p in r.plans) else None
+        if end is not None:
+            metrics["plan_end_s"] = float(end)
+            metrics["task_complete"] = float(end <= sim_time + a.schedule.control_dt + 1e-9)  # (reaches: below)
     return metrics, per_joint
 
 
@@ -144,6 +150,8 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
             out.update(c.series)
         return out
 
+    if metrics.get("reaches") and metrics.get("reaches_completed") == metrics["reaches"]:
+        metrics["task_complete"] = 1.0  # (every reach got to its target and stayed: the plan's settling tail cut)
     view.finish(interventions, series)
     metrics = {k: _as_count(v) if catalogue.get(k).unit == "count" else v for k, v in metrics.items()}
     verdicts = evaluate(sc.expect, metrics)
@@ -152,19 +160,39 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
         for v in verdicts:
             v.update(passed=False, reason=f"no plan ran ({r.no_plan})")
     unexpected_trip = a.safety.tripped and "safety_events" not in sc.expect
+    task = task_section(metrics)
+    # an unfinished task fails a run that has verdicts (they would judge what did not happen), as a stop does, unless
+    # the scenario says otherwise (a rehearsal of the first seconds: `expect: {task_complete: {eq: 0}}`) or expects a
+    # stop (a safety skill: safety_events ≥ 1)
+    expects_stop = "safety_events" in sc.expect and not evaluate({"safety_events": sc.expect["safety_events"]},
+                                                                  {"safety_events": 0})[0]["passed"]
+    unfinished = task is not None and not task["complete"] and bool(sc.expect) and "task_complete" not in sc.expect \
+        and not expects_stop  # (no expectations at all: nothing is judged, the TASK line says it all the same)
     return {
         "scenario": str(a.loaded.path), "name": sc.name or a.loaded.path.stem,
         "rehabkit_version": __version__, "seed": sc.seed, "plugins": plugin_versions(a),
-        "passed": all(v["passed"] for v in verdicts) and not unexpected_trip,
+        "passed": all(v["passed"] for v in verdicts) and not unexpected_trip and not unfinished,
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
                    "interventions": [e.as_dict() for e in interventions],
                    "plan_warnings": r.plan_warnings, "estop_latched": a.backend.latched_estop()},
         "inputs": run_inputs(a, r),
+        **({"task": task} if task is not None else {}),
         **sections,
         "events": r.fired, "plans": r.plans, "notes": r.notes, "actions": r.acted,
         "reports": {name: text for name, s in a.sensors.items() if (text := s.report(metrics))},
     }
+
+
+def task_section(metrics: dict[str, Any]) -> dict[str, Any] | None:
+    """Whether the task finished, in summary.json's words: its plan's end against the run's, and its reaches."""
+    if "task_complete" not in metrics:
+        return None
+    out = {"complete": bool(metrics["task_complete"]), "plan_end_s": metrics["plan_end_s"],
+           "run_s": metrics["sim_time_s"]}
+    if "reaches" in metrics:
+        out.update(reaches=metrics["reaches"], reaches_completed=metrics.get("reaches_completed", 0))
+    return out
 
 
 def _as_count(value: Any) -> Any:

@@ -47,10 +47,29 @@ def check_first_plan(a: Assembly) -> list[str]:
         raise first_plan_refusal(a, exc) from exc
     if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
         raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
+    warnings = [w for w in (outlasting(a, plan.trajectory.duration),) if w]
     if a.safety.keep_in is None:
-        return []
+        return warnings
     warning = plan_exit(0.0, plan.trajectory, a.space.hand_world, a.safety.keep_in)
-    return [warning["message"]] if warning is not None else []
+    return warnings + ([warning["message"]] if warning is not None else [])
+
+
+def outlasting(a: Assembly, plan_s: float) -> str | None:
+    """The task's first plan lasting longer than the run: said at the planner's timing setting (where the file
+    writes one: segment_durations in milliseconds by mistake) and the run's duration, with the numbers."""
+    run_s = a.sc.duration
+    if plan_s <= run_s + 1e-9:
+        return None
+    source, planner = a.loaded.source, a.sc.planner
+    timing = next((k for k in ("segment_durations", "duration", "durations", "speed", "max_speed_deg_s")
+                   if ("planner", k) in source.key_marks), None)
+    at = source.key_marks.get(("planner", timing) if timing else ("planner", "type"))
+    where = f"planner.{timing}" if timing else "planner"
+    ends = source.key_marks.get(("duration",))
+    return (f"{where}{f' ({at})' if at else ''}: the plan lasts {plan_s:.4g} s and the run {run_s:g} s "
+            f"(duration{f' at {ends}' if ends else ''}): the task cannot finish — {run_s / plan_s:.1%} of it is run "
+            f"(`rehabkit plugins --fields {planner.type}` gives the timing's units; lengthen duration or shorten the "
+            "plan)")
 
 
 def _fix(a: Assembly, breach) -> str:
