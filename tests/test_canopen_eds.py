@@ -125,6 +125,12 @@ def test_a_dcf_for_node_1_given_to_node_2_is_refused_for_its_cob_ids(tmp_path):
     drives = [{"node_id": k} for k in range(1, 7)]
     drives[1]["eds"] = str(EDS / "maxon_EPOS4-Module-50-15_node1.dcf")
     diag = _validate(tmp_path, {"drives": drives})
+    assert diag.path == "backend.drives.1.eds" and "is a DCF commissioned for node 1 (maxon_EPOS4-Module-50-15_node1" \
+        ".dcf:54: NodeID=1): its PDOs' COB-IDs are node 1's, not node 2's" in diag.message
+    text = (EDS / "maxon_EPOS4-Module-50-15_node1.dcf").read_text("latin-1").replace("NodeID=1\n", "NodeID=2\n")
+    (tmp_path / "uncommissioned.dcf").write_text(text, "latin-1")  # (said to be node 2's: its COB-IDs are still 1's)
+    drives[1]["eds"] = str(tmp_path / "uncommissioned.dcf")
+    diag = _validate(tmp_path, {"drives": drives})
     assert diag.path == "backend.drives.1.eds" and "COB-ID 0x201, as node 1's RPDO1 has" in diag.message
 
 

@@ -184,6 +184,8 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         """At the loop's first step (no gap in the SYNC before the loop takes over): the 402 walk to OPERATION ENABLED,
         the simulated plant placed at the start again, held one cycle by gravity; in real time, the bus's clock."""
         q0 = self._q0
+        for text in self.master.watch_host():
+            self._note(0.0, text)
         self.deadline = time.monotonic()
         self.master.enable(self._paced, fault_reset=self._cleared)
         if self.simulated:

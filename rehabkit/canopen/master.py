@@ -155,16 +155,27 @@ class DriveMaster:
         if 0x1006 in r.object_dictionary:
             r.sdo[0x1006].raw = round(period_s * 1e6)
         r.sdo[0x1017].raw = cfg.heartbeat_ms
-        try:
-            r.sdo[0x1016][1].raw = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
-        except canopen.SdoAbortedError as exc:  # (an EDS whose limits say it cannot: Elmo's caps 0x1016sub1 at 65535)
-            self.setup_notes.append(f"node {r.id}: it does not take the host's heartbeat to watch (0x1016sub1 = "
-                                    f"0x{cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms:08X}: SDO abort "
-                                    f"0x{exc.code:08X}): the host's silence reaches it as its SYNC stopping only")
         if r.id not in self._heeded:  # (a second configure, after a reset of the node, adds no second callback)
             self._heeded.add(r.id)
             r.emcy.add_callback(lambda err, node=r.id: self._emcy_new.append((node, err.code)))
             self.network.subscribe(0x700 + r.id, self._on_heartbeat)
+
+    def watch_host(self) -> list[str]:
+        """Each node told to watch the host's heartbeat (0x1016 sub 1), just before the walk enables the drives:
+        the host beats every cycle from then on, whatever the loop does (set up earlier, a drive activated by the
+        reset's first heartbeat lost it while the run made its first plan: EMCY 0x8130 at t = 0). Returns what it
+        had to say: a node that does not take the entry."""
+        cfg, said = self.config, []
+        entry = cfg.master_node_id << 16 | cfg.heartbeat_timeout_ms
+        for r in (*self.remotes, *self.sensors):
+            try:
+                r.sdo[0x1016][1].raw = entry
+            except canopen.SdoAbortedError as exc:  # (an EDS whose limits say it cannot: Elmo's caps it at 65535)
+                said.append(f"node {r.id}: it does not take the host's heartbeat to watch (0x1016sub1 = "
+                            f"0x{entry:08X}: SDO abort 0x{exc.code:08X}): the host's silence reaches it as its SYNC "
+                            "stopping only")
+        self._next_beat = self.now()  # (the first heartbeat with the walk's first cycle: the watch starts there)
+        return said
 
     def _listen(self, tpdos: list[PdoCodec], i: int) -> None:
         self._expect[i] = (1 << len(tpdos)) - 1

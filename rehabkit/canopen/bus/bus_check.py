@@ -48,6 +48,11 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, cont
         d = read_dictionary(path, spec.node_id)
     except Exception as exc:  # noqa: BLE001 (canopen's parser: whatever it refuses, said at the file's setting)
         raise SettingError(where, f"canopen cannot read {path.name} as an EDS/DCF: {exc}") from None
+    if d.commissioned is not None and d.commissioned[0] != spec.node_id:
+        node, line = d.commissioned
+        raise SettingError(where, f"{path.name} is a DCF commissioned for node {node} ({path.name}:{line}: NodeID="
+                           f"{node}): its PDOs' COB-IDs are node {node}'s, not node {spec.node_id}'s; give this drive "
+                           f"node_id: {node}, or commission a DCF for node {spec.node_id}")
     missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in (SENSOR_SET if sensor else SET) if not d.has(x, s)]
     if missing:
         what = "a CiA 404 device's EDS" if sensor else "a CiA 402 drive's EDS"
@@ -163,6 +168,8 @@ def _steps(step: float) -> str:
 
 
 def _fitting(load: BusLoad, step: float) -> str:
-    """The highest control rate the bus carries whose period is a whole number of ``step``s."""
+    """The highest control rate the bus carries whose period is a whole number of ``step``s, written so that it
+    passes as it is (166.6666667, a 6 ms period: '166.667' is a period 12 ns off the plant's step)."""
     k = max(1, math.ceil(1.0 / (load.highest_rate_hz() * step) - 1e-9))
-    return f"{1.0 / (k * step):g}"
+    rate = 1.0 / (k * step)
+    return f"{rate:g}" if abs(rate - round(rate)) < 1e-9 else f"{rate:.10g} (a period of {k * step * 1e3:g} ms)"

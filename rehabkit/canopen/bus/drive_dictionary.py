@@ -59,6 +59,7 @@ class DriveDictionary:
     rpdos: tuple[PdoSlot, ...]
     tpdos: tuple[PdoSlot, ...]
     lines: dict[int, int] = field(default_factory=dict)  # object index → the line of its section in the file
+    commissioned: tuple[int, int] | None = None  # a DCF's [DeviceComissioning] NodeID, and its line
 
     def has(self, index: int, subindex: int = 0) -> bool:
         return (index, subindex) in self.objects
@@ -117,7 +118,28 @@ def from_od(od, path: str = "") -> DriveDictionary:
     rpdos = tuple(_slots(od, values, writable, tx=False))
     tpdos = tuple(_slots(od, values, writable, tx=True))
     return DriveDictionary(path, frozenset(objects), widths, frozenset(mappable), frozenset(writable), values, rpdos,
-                           tpdos, _section_lines(path) if path else {})
+                           tpdos, _section_lines(path) if path else {}, _commissioned(path) if path else None)
+
+
+def _commissioned(path: str) -> tuple[int, int] | None:
+    """A DCF's node id as it was commissioned ([DeviceComissioning] NodeID), with its line: its absolute COB-IDs
+    are that node's."""
+    try:
+        lines = Path(path).read_text(encoding="latin-1").splitlines()
+    except OSError:
+        return None
+    section = ""
+    for number, line in enumerate(lines, start=1):
+        text = line.strip()
+        if text.startswith("["):
+            section = text.lower()
+        elif section == "[devicecomissioning]" and text.lower().startswith("nodeid="):
+            value = text.split("=", 1)[1].strip()
+            try:
+                return int(value, 0), number
+            except ValueError:
+                return None
+    return None
 
 
 # what a master reads from the drive itself where it configures it: the units and modes it declares

@@ -63,13 +63,15 @@ def find_package(name: str, packages: Sequence[Path] = ()) -> tuple[Path | None,
 
 
 def interpreter_prefixes() -> list[Path]:
-    """Where pip puts description packages for the running interpreter: its environment's prefix (``share/NAME``)
-    and cmeel's (``site-packages/cmeel.prefix``: example-robot-data, Pinocchio's own), so a pip-installed package
-    needs no variable."""
+    """Where pip puts description packages for the running interpreter: its environment's prefix and the base
+    interpreter's (``share/NAME``), and cmeel's prefix in every site-packages on its path
+    (``site-packages/cmeel.prefix``: example-robot-data, Pinocchio's own) — a venv made with
+    ``--system-site-packages`` included — so a pip-installed package needs no variable."""
     import sys
-    import sysconfig
 
-    return [p for p in (Path(sys.prefix), Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix") if p.is_dir()]
+    places = [Path(sys.prefix), Path(sys.base_prefix)]
+    places += [Path(p) / "cmeel.prefix" for p in sys.path if p.endswith(("site-packages", "dist-packages"))]
+    return [p for p in dict.fromkeys(places) if p.is_dir()]
 
 
 def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = (), what: str = "mesh") -> Path:
