@@ -9,6 +9,7 @@ import functools
 import canopen
 import pytest
 
+from rehabkit.canopen.deadlines import SYNC_TIMEOUT_MS
 from tests.conformance_bench import FILES, NODE, Bench
 
 IDS = [p.stem for p in FILES]
@@ -184,7 +185,7 @@ def test_nmt_resets_restore_their_objects_and_boot_again(eds):
     assert _in(SWITCH_ON_DISABLED, b.statusword())
 
 
-def _enabled(b: Bench, option: int, consumer_ms: int = 50) -> int:
+def _enabled(b: Bench, option: int, consumer_ms: int = 60) -> int:
     """The drive OPERATIONAL, OPERATION ENABLED through its RPDO, watching the master's heartbeat; its RPDO."""
     b.write(0x6007, 0, "<h", option)
     b.write(0x1016, 1, "<I", 0x7F << 16 | consumer_ms)
@@ -206,7 +207,7 @@ def test_a_master_that_vanishes_meets_the_abort_connection_option_every_time(opt
     b = Bench()
     rpdo = _enabled(b, option)
     for time in range(3):
-        b.t += 0.011  # (11 ms: past the SYNC watchdog's 10 ms, within the heartbeat's 50)
+        b.t += SYNC_TIMEOUT_MS * 1e-3 + 0.001  # (past the SYNC watchdog's default, within the heartbeat's 60 ms)
         b.drive.poll()
         assert [c for c, _ in b.emcys()].count(0x8100) == time + 1
         if option == 1:

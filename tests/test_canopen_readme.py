@@ -6,6 +6,7 @@ import re
 import shlex
 import shutil
 import subprocess
+import sys
 
 import can
 import pytest
@@ -55,17 +56,34 @@ def test_the_lab_robots_wiring_validates_and_its_mistakes_are_located(tmp_path):
 @pytest.mark.xdist_group("realtime")
 def test_simulated_drives_in_another_process_as_the_readme_runs_them(tmp_path):
     """``rehabkit drives`` and the run in a network namespace of their own, over udp_multicast, in real time: the
-    host waits for the drives to answer and runs its cycles against them, and writes its summary. On this 2-core VM
-    busy with the other tests a process is at times stalled longer than the drives' SYNC watchdog (10 ms): the
-    drives then quick stop and say why (EMCY 0x8100), and the run stops with that reason (exit 1), or the holds
-    through late steps cost the tracking its expectation (exit 1): the safety chain working, not the test failing."""
+    host waits for the drives to answer, runs its cycles against them and writes its summary; then the drives it
+    leaves behind are listened to for 0.3 s (tests/listen_can.py, in the same namespace) before they are stopped.
+
+    Only what holds under any load is asserted (this 2-core VM busy with the other tests stalls a process for tens of
+    ms at times): the run ends safe, completed (exit 0, every cycle) or stopped for one of the reasons a stalled
+    host or drives' process gives — the drives' SYNC or heartbeat watch (EMCY 0x8100, 0x8130: a drive's quick stop),
+    TPDOs or a drive's heartbeat that came late (at the start: its statusword late for the 402 walk), the tracking
+    after holds through late steps (velocity, position) — exit 1; and however it ended, the drives raise no EMCY
+    after it (none on the bus afterwards; none sent at all where the run completed), each in pre-operational
+    (heartbeat 0x7F). How often it completes: benchmarks/canopen_two_process.py."""
     command = BLOCKS[2][1].strip()
     assert command.startswith("unshare -n sh -c '") and command.endswith("RC=$?; kill $!; exit $RC'")
     out = tmp_path / "run"
-    done = subprocess.run(command.replace("; RC=$?", f" --out {out}; RC=$?"), shell=True, cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+    listen = f"{sys.executable} {ROOT / 'tests' / 'listen_can.py'} udp_multicast 239.74.163.2 0.3"
+    command = command.replace("; RC=$?; kill $!;", f" --out {out}; RC=$?; {listen}; kill $!; wait $!;")
+    done = subprocess.run(command, shell=True, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode in (0, 1), done.stderr
     summary = json.loads((out / "summary.json").read_text())
     metrics, events = summary["metrics"], summary["safety"]["events"]
     assert metrics["can_cycles"] > 0 and metrics["can_latency_median_ms"] > 0  # (its figures: canopen_loop.py)
-    assert metrics["can_cycles"] == 4250 if not events else events[0]["rule"] in ("backend", "velocity", "position")
+    if done.returncode == 0:
+        assert metrics["can_cycles"] == 4250 and not events
+    else:
+        rule, said = events[0]["rule"], events[0]["message"]
+        assert rule in ("velocity", "position") or rule == "backend" and re.search(
+            r"EMCY: 0x81[03]0|no TPDO|heartbeat is lost|left OPERATION ENABLED: now QUICK_STOP_ACTIVE|did not reach "
+            r"OPERATION ENABLED: (READY_TO_SWITCH_ON|SWITCHED_ON|SWITCH_ON_DISABLED)$", said.split(";")[0]), said
+    after = json.loads(done.stdout.strip().splitlines()[-1])  # (the listener's: from its start, ~0.2 s after)
+    assert after["emcy"] == [] and after["heartbeats"] == {str(n): [0x7F] for n in range(1, 7)}, after
+    drives = re.search(r"drives: \d+ cycles.*", done.stderr)[0]  # (their own figures, as they end)
+    assert "EMCYs sent" not in drives or done.returncode == 1, drives  # (a completed run: none at all, ever)

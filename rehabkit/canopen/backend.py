@@ -184,6 +184,10 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         """At the loop's first step (no gap in the SYNC before the loop takes over): the 402 walk to OPERATION ENABLED,
         the simulated plant placed at the start again, held one cycle by gravity; in real time, the bus's clock."""
         q0 = self._q0
+        if self.realtime:  # the process keeps the cycles' deadlines from before the walk (its power stages on)
+            self._gravity = own_gravity(self.robot)
+            self.clock = CycleClock(self.period, self._cycle, self._hold_torque, lambda: self.master.q)
+            self.clock.keep_deadlines()
         for text in self.master.watch_host():
             self._note(0.0, text)
         self.deadline = time.monotonic()
@@ -192,9 +196,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
             self.master.place(q0)
         self._paced(self.robot.gravity_torque(q0))
         self.notes.restart()
-        if self.realtime:  # enabled drives expect their SYNC every cycle: from now on, whatever the loop does
-            self._gravity = own_gravity(self.robot)
-            self.clock = CycleClock(self.period, self._cycle, self._hold_torque, lambda: self.master.q)
+        if self.clock is not None:  # enabled drives expect their SYNC every cycle: from now on, whatever the loop does
             self.clock.start(self.tau)
 
     def _hold_torque(self, posture: np.ndarray) -> np.ndarray:
@@ -295,10 +297,14 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         run's stop category, the power stages off, the drives' watchdogs of the host disarmed, NMT pre-operational;
         then the bus closed."""
         try:
-            if self.clock is not None:
-                self.clock.close()
-            if self._configured:
-                self._end()
+            if self.clock is not None:  # (its own cycles end; the end's keep their deadlines, then the process is
+                self.clock.stop()  # put back as it was)
+            try:
+                if self._configured:
+                    self._end()
+            finally:
+                if self.clock is not None:
+                    self.clock.close()
             if self.rig is not None:
                 self.rig.stop_watching()
             self.bus.close(keep_trace=self._started)  # (a run refused at its reset leaves no trace file)

@@ -9,6 +9,7 @@ from typing import Literal
 
 from pydantic import Field, computed_field
 
+from rehabkit.canopen.deadlines import SYNC_TIMEOUT_MS
 from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
 from rehabkit.models.strict import FilePath
 
@@ -137,7 +138,9 @@ class CanopenConfig(StrictModel):
 
     bus: Bus | None = Field(None, description="the CAN interface of the robot's drives (none: simulated CiA 402 "
                             "drives on the robot's MuJoCo model, started with the run)")
-    bitrate: int = Field(1_000_000, gt=0, le=1_000_000, description="the bus's bitrate [bit/s]")
+    bitrate: Literal[10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000] = Field(
+        1_000_000, description="the bus's bitrate [bit/s]: one of CiA 301's (10, 20, 50, 125, 250, 500, 800 kbit/s, "
+        "1 Mbit/s)")
     drives: list[DriveSpec] | None = Field(None, description="one per joint, in the robot's joint order (default: "
                                            "node ids 1, 2, ... on the generic servo's EDS)")
     sensors: list[SensorSpec] | None = Field(None, description="one per instrument the run's sensors read, in their "
@@ -152,8 +155,10 @@ class CanopenConfig(StrictModel):
     heartbeat_ms: int = Field(20, ge=1, le=65535, description="heartbeat period of the drives and the host [ms]")
     heartbeat_timeout_ms: int = Field(60, ge=1, le=65535, description="a heartbeat silent this long is lost: the "
                                       "drives fault on the host's, the host stops on a drive's [ms]")
-    sync_timeout_ms: float = Field(10.0, gt=0, description="the simulated drives fault (0x8100) without a SYNC this "
-                                   "long, in real time [ms]")
+    sync_timeout_ms: float = Field(SYNC_TIMEOUT_MS, gt=0, description="the simulated drives quick stop (EMCY 0x8100, "
+                                   "as the run sets 0x6007) without a SYNC this long while powered, in real time [ms] "
+                                   "(default: 3 cycles of 250 Hz + 20 ms, the worst stall of a process measured on a "
+                                   "2-core VM: rehabkit.canopen.deadlines)")
     tpdo_timeout_ms: float = Field(50.0, gt=0, description="a drive whose TPDOs have not come for this long stops "
                                    "the run (a non-real-time host may answer a cycle late now and then) [ms]")
     other_pdos: Literal["keep", "disable"] = Field(

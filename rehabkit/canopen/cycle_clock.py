@@ -6,6 +6,10 @@ after the last — a thread of this clock makes the cycle instead, holding the p
 began as the bridge does (PD to it with gravity compensation), until the next step. A hold a step ended is counted
 (the run's interventions, as the bridge's holds through gaps in the commands); one still open at the end is the run's
 end, not a gap.
+
+While the cycles run the process keeps their deadlines as :mod:`~rehabkit.canopen.deadlines` says (the collector
+held, the loop's, the hold's and the bus readers' threads in the real-time class, the host on CPUs of its own: each
+where permitted), undone at :meth:`CycleClock.close`.
 """
 
 from __future__ import annotations
@@ -17,9 +21,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from rehabkit.canopen import deadlines
+from rehabkit.canopen.deadlines import HOLD_AFTER_CYCLES
 from rehabkit.hardware.link.clock import wait_until
 
-HOLD_AFTER_CYCLES = 2  # a step this late is not coming in time: the drives get their SYNC from the hold
 
 class CycleClock:
     """Cycles every ``period`` [s]: ``cycle(tau)`` runs one; ``hold(q_hold)`` is the torque that holds ``q_hold``
@@ -38,16 +43,36 @@ class CycleClock:
         self.steps = 0
         self.late = 0  # steps that came after their cycle's deadline had passed by a cycle
         self._thread = threading.Thread(target=self._run, name="canopen-cycles", daemon=True)
+        self._started = False
 
-    def start(self, tau: np.ndarray) -> None:
-        """The first cycle now (with ``tau``), then held until the first step."""
+    def keep_deadlines(self) -> None:
+        """This process keeps the cycles' deadlines from now on (:mod:`~rehabkit.canopen.deadlines`; undone at
+        :meth:`close`): at :meth:`start`, or before it — before the drives are enabled, so that the set-up's cycles
+        with their power stages on are kept too."""
+        if self._started:
+            return
+        self._started = True
         # the holding thread must get the interpreter within a cycle, the loop's thread busy or not (Python hands it
         # over every 5 ms by default: longer than a 2 ms cycle)
         self._switch = sys.getswitchinterval()
         sys.setswitchinterval(min(self._switch, self.period / 4))
+        self._cpus = deadlines.pin("host")
+        self._gc_held = deadlines.hold_collector()
+        self._realtime = deadlines.cycle_threads()
+        # the hold and the bus readers above the loop's thread: on one CPU a real-time thread is not preempted by
+        # one of its own priority, and the loop's may compute for long (after its last step, the run's end)
+        self._fifo = deadlines.realtime(self._realtime[:1], deadlines.HOST_PRIORITY) and deadlines.realtime(
+            self._realtime[1:], deadlines.HOST_PRIORITY + 1)
+
+    def start(self, tau: np.ndarray) -> None:
+        """The first cycle now (with ``tau``), then held until the first step."""
+        self.keep_deadlines()
         self.deadline = time.monotonic()
         self.step(tau, count=False)
         self._thread.start()
+        self._realtime.append(self._thread)
+        if self._fifo:
+            deadlines.realtime([self._thread], deadlines.HOST_PRIORITY + 1)
 
     def step(self, tau: np.ndarray, count: bool = True) -> None:
         """The loop's cycle: at its deadline (at once if that has passed)."""
@@ -85,11 +110,22 @@ class CycleClock:
                 self.deadline += self.period
                 self._cycle(self._hold(self._hold_q))
 
-    def close(self) -> None:
+    def stop(self) -> None:
+        """No more cycles of this clock's own (the process still keeps their deadlines: the run's end cycles on)."""
         self._closing.set()
         if self._thread.is_alive():
             self._thread.join()
+
+    def close(self) -> None:
+        """The cycles end: the thread stopped, the process as it was before :meth:`keep_deadlines`."""
+        self.stop()
+        if self._started:
+            self._started = False
             sys.setswitchinterval(self._switch)
+            deadlines.unpin(self._cpus)  # (first: on one CPU, in the ordinary class, its threads wait on each other)
+            deadlines.ordinary(self._realtime)
+            if self._gc_held:
+                deadlines.release_collector()
 
 
 def own_gravity(robot):

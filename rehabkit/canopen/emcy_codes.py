@@ -10,8 +10,10 @@ CIA402 = {
     0x3220: "DC link under-voltage", 0x4210: "excess temperature of the device",
     0x4310: "excess temperature of the drive", 0x5441: "safe torque off active (the drive's own safety input)",
     0x5530: "EEPROM error", 0x6320: "parameter error", 0x7121: "motor blocked", 0x7305: "incremental sensor 1 fault",
-    0x8100: "communication error (a drive's SYNC stopped coming: the host's cycles)", 0x8110: "CAN overrun (messages lost)", 0x8120: "CAN in error passive",
-    0x8130: "life guard error or heartbeat error (the drive no longer hears the host's heartbeat)", 0x8140: "recovered from bus off",
+    0x8100: "communication error (a drive's SYNC stopped coming: the host's cycles)",
+    0x8110: "CAN overrun (messages lost)", 0x8120: "CAN in error passive",
+    0x8130: "life guard error or heartbeat error (the drive no longer hears the host's heartbeat)",
+    0x8140: "recovered from bus off",
     0x8400: "velocity speed controller: beyond the max speed (0x6080)", 0x8611: "following error",
     0x8612: "reference limit: beyond the software position limits (0x607D)", 0xFF00: "device specific",
 }

@@ -182,9 +182,11 @@ class SimulatedDrive(SimulatedNode):
         if self.sync_watchdog.expired(self.nmt.state == "OPERATIONAL" and self.machine.torque_on):
             self.connection_lost(SYNC_LOST)
 
-    def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0) -> None:
-        """A SYNC: the drive samples its joint and sends its TPDOs, takes the RPDOs that came before it and drives the
-        joint with them until the next."""
+    def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0,
+                at: float | None = None) -> None:
+        """A SYNC (arrived ``at``, on its watchdogs' clock: else when its ``arrival`` says, else now): the drive
+        samples its joint and sends its TPDOs, takes the RPDOs that came before it and drives the joint with them
+        until the next."""
         if not self.begin_cycle():
             return
         if SYNC_LOST in self.errors.active:  # (the SYNC is back)
@@ -193,7 +195,9 @@ class SimulatedDrive(SimulatedNode):
         if self._cw_pending:
             self._command(self.values[CONTROLWORD])
         self._cycle()
-        self.sync_watchdog.feed(self._sync_armed())
+        if at is None and self.arrival is not None:
+            at = self.arrival(timestamp)
+        self.sync_watchdog.feed(self._sync_armed(), at)
         self.send_tpdos()
 
     def react(self) -> None:

@@ -61,6 +61,8 @@ class SimulatedNode:
         self._clock_us, self.syncs = 0, 0
         self.now = now or ((lambda: self._clock_us * 1e-6) if clocked else time.monotonic)
         self.silent = False  # (an injected fault: cut off the bus)
+        self.arrival: Callable[[float], float] | None = None  # a frame's timestamp → when it arrived, on ``now``'s
+        # clock (real time: the watchdogs go on arrivals, not on when the reader got round to them; see arrivals.py)
         self.errors = ErrorLog(self.node, lambda: self.nmt.state in ACTIVE and not self.silent)
         self.consumer = HeartbeatConsumer(self.now, self.heartbeat_lost)
         self._consumers: dict[int, int] = {}  # 0x1016 sub-index → the node it watches
@@ -259,7 +261,8 @@ class SimulatedNode:
         return state in ACTIVE
 
     def _on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
-        if not self.silent and self.consumer.heartbeat(can_id - 0x700):
+        at = self.arrival(timestamp) if self.arrival is not None else None
+        if not self.silent and self.consumer.heartbeat(can_id - 0x700, at):
             self.errors.recover(HEARTBEAT_LOST)
 
     def heartbeat_lost(self, node: int) -> None:

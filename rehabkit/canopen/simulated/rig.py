@@ -12,7 +12,11 @@ resets the plant to the start positions written in every drive's 0x5FFE (what a 
 
 The drives' watchdogs (heartbeat consumer, SYNC watchdog) go on their own clocks on a lock-step bus; in real time on
 the wall clock, polled by the rig's watchdog thread (:meth:`DriveRig.watch_sync`), which also runs the drives'
-reactions (a quick stop, a fault reaction) on their own while the SYNC does not come.
+reactions (a quick stop, a fault reaction) on their own while the SYNC does not come. In real time they go on when
+each frame arrived and judge once the reader has caught up (:mod:`~rehabkit.canopen.simulated.arrivals`: this
+process's own stalls are not the host's), and the rig keeps its figures (:meth:`DriveRig.figures`): the SYNCs, the
+largest gap between two as they arrived while a drive was powered, those handled a cycle or more after they arrived,
+the watchdog thread's worst wake-up, how often it waited for the reader and what the watchdogs fired for.
 """
 
 from __future__ import annotations
@@ -26,12 +30,18 @@ import canopen
 import numpy as np
 
 from rehabkit.canopen.config import DriveUnits
+from rehabkit.canopen.deadlines import SYNC_TIMEOUT_MS
+from rehabkit.canopen.simulated.arrivals import Arrivals
 from rehabkit.canopen.simulated.drive import EDS, PLACE, START_POSITION, SYNC_ID, SYNC_LOST, SimulatedDrive
 from rehabkit.canopen.simulated.sensor import SimulatedSensor
 from rehabkit.canopen.simulated.watchdogs import Watchdog
 from rehabkit.hardware.plant import MujocoPlant
 
 __all__ = ["SYNC_LOST", "DriveRig"]
+# a reader behind this long without catching up once (this process can no longer keep up with its bus): the
+# watchdogs judge on what it has had. Not the SYNC timeout: a reader starved by the OS for longer than that (48 ms,
+# measured with one core busy and the drives in the ordinary class) would blame the host for its own stall
+READER_BEHIND_S = 1.0
 
 
 class _PlantJoint:
@@ -56,7 +66,7 @@ class DriveRig:
     def __init__(self, network: canopen.Network, plant: MujocoPlant, nodes: Sequence[int],
                  units: Sequence[DriveUnits], clocked: bool = False, eds: Path | str | Sequence[Path | str] = EDS,
                  sensors: Sequence[int] = ()):
-        self.plant = plant
+        self.plant, self.network = plant, network
         n = plant.joints
         self.q, self.qd, self.tau = np.zeros(n), np.zeros(n), np.zeros(n)
         files = list(eds) if isinstance(eds, (list, tuple)) else [eds] * len(nodes)  # (one for all, or each its own)
@@ -73,10 +83,15 @@ class DriveRig:
         network.subscribe(SYNC_ID, self.on_sync)
         self.substeps, self.period = 1, plant.timestep
         self.cycles = 0
-        self.last_sync: float | None = None  # [s, monotonic] (real time: the SYNC watchdog's)
-        self.sync_timeout_s = 0.010  # the drives' SYNC watchdog (see watch_sync)
+        self.last_sync: float | None = None  # [s, monotonic] when the last SYNC arrived (real time: the watchdog's)
+        self.sync_timeout_s = SYNC_TIMEOUT_MS * 1e-3  # the drives' SYNC watchdog (see watch_sync)
         self._lock = threading.RLock()  # (real time: the bus's thread and the watchdog's)
         self._watchdog: Watchdog | None = None
+        self._arrivals: Arrivals | None = None
+        self._behind_since: float | None = None  # (the reader behind since, as the watchdog found it)
+        self._armed = False  # a drive's power stage was on at the last SYNC (its gap to the next one counts)
+        self.max_gap = self.max_delay = 0.0  # [s] SYNC to SYNC as they arrived, armed; arrival to handling
+        self.late = self.waited = 0  # SYNCs handled a cycle or more after they arrived; watchdog rounds deferred
 
     def _on_write(self, index: int, subindex: int, od, data: bytes) -> None:
         if index == PLACE:
@@ -100,12 +115,19 @@ class DriveRig:
     def on_sync(self, can_id: int = SYNC_ID, data: bytes = b"", timestamp: float = 0.0) -> None:
         """Every drive samples and latches, then the plant runs one cycle with the latched torques."""
         with self._lock:
-            self.last_sync = time.monotonic()
+            now = time.monotonic()
+            at = self._arrivals.at(timestamp) if self._arrivals is not None else now
+            if self._armed and self.last_sync is not None:
+                self.max_gap = max(self.max_gap, at - self.last_sync)
+            self.max_delay = max(self.max_delay, now - at)
+            self.late += now - at >= self.period
+            self.last_sync = at
             for d in self.drives:
                 if d.silent:  # cut off the bus: no SYNC reaches it; its watchdog, then its reaction, on its own clock
                     d.react()
                 else:
-                    d.on_sync(can_id, data, timestamp)
+                    d.on_sync(can_id, data, timestamp, at)
+            self._armed = any(d.machine.torque_on for d in self.drives)
             self._brakes()
             if self.sensors:
                 self._readings[:] = self.plant.read_instruments()
@@ -116,12 +138,15 @@ class DriveRig:
             self._advance()
             self.cycles += 1
 
-    def watch_sync(self, timeout_s: float = 0.010) -> threading.Thread:
+    def watch_sync(self, timeout_s: float = SYNC_TIMEOUT_MS * 1e-3) -> threading.Thread:
         """In real time: a thread polling every drive's watchdogs on the wall clock each plant period — its
         heartbeat consumer, its SYNC watchdog (``timeout_s``: 0x8100, the reaction 0x6007 says) — and, while the
         SYNC does not come and a drive's power stage is on, running the drives' reactions on their own clock (stopped
-        by :meth:`stop_watching`)."""
+        by :meth:`stop_watching`). The watchdogs go on when frames arrived, judged once the reader has caught up."""
         self.sync_timeout_s = timeout_s
+        self._arrivals = Arrivals(self.network)
+        for d in (*self.drives, *self.sensors):
+            d.arrival = self._arrivals.at
         for d in self.drives:
             d.sync_watchdog.timeout_s = timeout_s
         self._watchdog = Watchdog(self._watch, lambda: self.period, "drive-watchdog").start()
@@ -131,7 +156,26 @@ class DriveRig:
         if self._watchdog is not None:
             self._watchdog.stop()
 
+    def figures(self) -> dict[str, float | list]:
+        """The drives' side of the run: SYNCs, the largest gap between two as they arrived while a drive was powered
+        [ms], SYNCs handled a cycle or more after they arrived and the longest such wait [ms], the watchdog thread's
+        worst wake-up past due [ms] and the rounds it waited for the reader, what the watchdogs fired for (per drive:
+        0x8100 SYNC, 0x8130 the host's heartbeat, with the silence [ms])."""
+        fired = [(d.node.id, code, round(s * 1e3, 1)) for d in self.drives
+                 for code, said in ((0x8100, d.sync_watchdog.fired), (0x8130, d.consumer.fired)) for s in said]
+        woke = self._watchdog.woke_late if self._watchdog is not None else 0.0
+        return {"cycles": self.cycles, "max_sync_gap_ms": self.max_gap * 1e3, "late_syncs": self.late,
+                "max_sync_delay_ms": self.max_delay * 1e3, "watchdog_woke_late_ms": woke * 1e3,
+                "watchdog_waited": self.waited, "fired": fired}
+
     def _watch(self) -> None:
+        now = time.monotonic()
+        if self._arrivals is not None and not self._arrivals.caught_up():  # frames came that it has not yet had:
+            self.waited += 1  # judged once it has (the bus is alive meanwhile: its frames wait in the socket)
+            self._behind_since = self._behind_since or now
+            if now - self._behind_since <= READER_BEHIND_S:
+                return
+        self._behind_since = None
         with self._lock:
             for node in (*self.drives, *self.sensors):
                 node.poll()

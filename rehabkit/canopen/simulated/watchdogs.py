@@ -7,13 +7,19 @@ clock given to it (``now`` [s]: the wall clock in real time, the device's own cl
 - SYNC watchdog: armed while the drive takes SYNCs in OPERATIONAL with its power stage on, fed by each such SYNC;
   it reports the SYNC lost once when none came within its timeout, then stays disarmed until the next SYNC arms it.
 
-Neither fires on its own: whoever keeps the clock polls them (:class:`Watchdog`: a thread on the wall clock).
+Neither fires on its own: whoever keeps the clock polls them (:class:`Watchdog`: a thread on the wall clock). Each
+is fed with when a frame *arrived* (``at``; :mod:`~rehabkit.canopen.simulated.arrivals`), the time it is handled
+where none is given, and keeps what it fired for (``fired``: the silence each time [s]).
 """
 
 from __future__ import annotations
 
+import math
 import threading
+import time
 from collections.abc import Callable
+
+from rehabkit.canopen.deadlines import SYNC_TIMEOUT_MS
 
 EPS = 1e-9  # [s] (a clock counted in µs, as floats: 10 ms is not more than 10 ms)
 
@@ -25,6 +31,7 @@ class HeartbeatConsumer:
         self.now, self.on_lost = now, on_lost
         self.limits: dict[int, float] = {}  # producer → its consumer time [s]
         self.heard: dict[int, float] = {}  # an active producer → its last heartbeat [s]; absent: waiting for one
+        self.fired: list[float] = []  # the silence each time one was reported lost [s]
         self._lock = threading.Lock()
 
     def configure(self, node: int, ms: int) -> None:
@@ -41,14 +48,14 @@ class HeartbeatConsumer:
             self.limits.clear()
             self.heard.clear()
 
-    def heartbeat(self, node: int) -> bool:
-        """A heartbeat from ``node``: its consumer active, from now. Returns whether it had been lost (or not yet
-        active) and is now active again."""
+    def heartbeat(self, node: int, at: float | None = None) -> bool:
+        """A heartbeat from ``node`` (arrived ``at``, else now): its consumer active from then. Returns whether it had
+        been lost (or not yet active) and is now active again."""
         with self._lock:
             if node not in self.limits:
                 return False
             back = node not in self.heard
-            self.heard[node] = self.now()
+            self.heard[node] = max(self.heard.get(node, -math.inf), self.now() if at is None else at)
             return back
 
     def poll(self) -> None:
@@ -57,7 +64,7 @@ class HeartbeatConsumer:
         with self._lock:
             lost = [n for n, t in self.heard.items() if now - t > self.limits[n] + EPS]
             for n in lost:
-                del self.heard[n]
+                self.fired.append(now - self.heard.pop(n))
         for n in lost:
             self.on_lost(n)
 
@@ -65,31 +72,37 @@ class HeartbeatConsumer:
 class SyncWatchdog:
     """A drive's SYNC watchdog: ``timeout_s`` without a SYNC while armed, reported once."""
 
-    def __init__(self, now: Callable[[], float], timeout_s: float = 0.010):
+    def __init__(self, now: Callable[[], float], timeout_s: float = SYNC_TIMEOUT_MS * 1e-3):
         self.now, self.timeout_s = now, timeout_s
         self.last: float | None = None  # the last SYNC taken while armed [s]; None: disarmed
+        self.fired: list[float] = []  # the silence each time it fired [s]
 
-    def feed(self, armed: bool) -> None:
-        """A SYNC taken: armed (or not, where the drive's state does not arm it) from now."""
-        self.last = self.now() if armed else None
+    def feed(self, armed: bool, at: float | None = None) -> None:
+        """A SYNC taken (arrived ``at``, else now): armed from then (or not, where the drive's state does not arm
+        it)."""
+        self.last = (self.now() if at is None else at) if armed else None
 
     def expired(self, armed: bool) -> bool:
         """Whether it fires now (once: it is disarmed until the next SYNC arms it); ``armed``: the drive's state
         still arms it."""
         if not armed:
             self.last = None
-        if self.last is None or self.now() - self.last <= self.timeout_s + EPS:
+        now = self.now()
+        if self.last is None or now - self.last <= self.timeout_s + EPS:
             return False
+        self.fired.append(now - self.last)
         self.last = None
         return True
 
 
 class Watchdog:
-    """A thread calling ``step()`` every ``period_s`` of wall time until :meth:`stop`."""
+    """A thread calling ``step()`` every ``period_s`` of wall time until :meth:`stop`; ``woke_late``: the most its
+    wake-up came after it was due [s] (its own process's worst stall, as a sleeping thread sees it)."""
 
     def __init__(self, step: Callable[[], None], period_s: Callable[[], float], name: str = "watchdog"):
         self.step, self.period_s = step, period_s
         self._done = threading.Event()
+        self.woke_late = 0.0
         self.thread = threading.Thread(target=self._run, name=name, daemon=True)
 
     def start(self) -> Watchdog:
@@ -100,5 +113,10 @@ class Watchdog:
         self._done.set()
 
     def _run(self) -> None:
-        while not self._done.wait(self.period_s()):
+        while True:
+            period = self.period_s()
+            due = time.monotonic() + period
+            if self._done.wait(period):
+                return
+            self.woke_late = max(self.woke_late, time.monotonic() - due)
             self.step()
