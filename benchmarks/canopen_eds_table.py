@@ -3,7 +3,7 @@ drives of that file (a DCF written for node 1 on drive 1 only, the others the ge
 and `rehabkit run` as processes (their exit codes, or the refusal verbatim), the run's tracking against MuJoCo's at the
 same rate, and what the set-up wrote into drive 1 by SDO, decoded from the run's CAN trace as any CAN tool reads it.
 
-    python benchmarks/canopen_eds_table.py [--duration 3] [--json benchmarks/results/canopen_eds_table.json]
+    python benchmarks/canopen_eds_table.py [--duration S] [--json benchmarks/results/canopen_eds_table.json]
 """
 
 from __future__ import annotations
@@ -50,7 +50,8 @@ def row(name: str, mode: str, duration: float, work: Path, sims: dict) -> dict:
         drives = [drives[0]] + [{"node_id": k} for k in range(2, 7)]
     scenario = work / f"{name}-{mode}.yaml"
     scenario.write_text(yaml.safe_dump({"extends": str(ROOT / "scenarios" / "hit_roundtrip.yaml"),
-                                        "duration": duration, "rates": {"control_hz": rate},
+                                        **({"duration": duration, "expect": {"task_complete": {"eq": 0}}}
+                                           if duration else {}), "rates": {"control_hz": rate},
                                         "backend": {"type": "canopen", "clock": "lockstep", "drives": drives,
                                                     "other_pdos": "disable"}}))
     env = {**os.environ, "REHABKIT_STATE": str(work / "state")}
@@ -79,7 +80,7 @@ def row(name: str, mode: str, duration: float, work: Path, sims: dict) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=3.0)
+    ap.add_argument("--duration", type=float, default=None, help="cut the HIT short [s] (default: its whole task)")
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "canopen_eds_table.json"))
     args = ap.parse_args()
     from rehabkit.api import run_scenario
@@ -88,8 +89,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         with own_state(work / "sim-state"):
+            cut = {"duration": args.duration} if args.duration else {}
             sims = {rate: run_scenario(ROOT / "scenarios" / "hit_roundtrip.yaml",
-                                       {"rates": {"control_hz": rate}, "duration": args.duration}).trace.q
+                                       {"rates": {"control_hz": rate}, **cut}).trace.q
                     for rate in (250, 500)}
         rows = [row(name, mode, args.duration, work, sims) for name, mode in FILES]
     for r in rows:
