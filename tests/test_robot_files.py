@@ -158,3 +158,34 @@ def test_urdf_limits_written_in_degrees_are_refused_with_their_radians(tmp_path)
     (line,) = [x for x in out.stderr.splitlines() if "URDF limits are radians" in x]
     assert ": robot.file: " in line and "has limits -110 to 110 rad, 17.5 turns" in line
     assert line.endswith('write lower="-1.9199" upper="1.9199"')
+
+
+def test_a_prismatic_joint_is_read_written_and_judged_in_metres(tmp_path):
+    """A revolute joint and a slide (0-0.2 m): a posture gives each joint in its own unit (`joints`: degrees, metres),
+    `joints_deg` refuses the slide with the fix (a finger's 0.02 m was 0.35 mm), and the plans, ROM, per-joint figures,
+    final error and the safety log's limits are in metres for it."""
+    import json
+
+    from tests.test_cli import cli
+
+    p = tmp_path / "s.yaml"
+    p.write_text(f"name: slide2\nrobot: {{type: urdf, file: {DATA / 'slide2.urdf'}, ee_frame: l2, "
+                 "base: {position: [0, 0, 0.5]}}\nplanner: {type: multi-cubic, segment_durations: [2.0]}\n"
+                 "controller: {type: joint-pd, gains: auto, feedforward: inverse-dynamics}\ntask:\n  targets:\n"
+                 "    - {name: A, joints: [0, 0.02]}\n    - {name: B, joints: [30, 0.15]}\nduration: 2.5\n"
+                 "expect: {final_joint_error_m: {lt: 0.001}}\n")
+    r = cli("run", str(p), "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["plans"][0]["waypoints_deg"] == [[0.0, 0.02], [30.0, 0.15]]
+    assert s["metrics"]["rom_deg_j1"] == pytest.approx(30.0, abs=0.01)
+    assert s["metrics"]["rom_m_slide"] == pytest.approx(0.13, abs=1e-4) and "rom_deg_slide" not in s["metrics"]
+    assert s["per_joint"]["slide"]["range_m"] == pytest.approx([0.02, 0.15], abs=1e-4)
+    limits = next(json.loads(x) for x in (tmp_path / "out" / "safety_log.jsonl").read_text().splitlines()
+                  if '"kind": "limits"' in x)["joints"]["slide"]
+    assert (limits["lower_m"], limits["upper_m"], limits["velocity_m_s"], limits["effort_n"]) == (0.0, 0.2, 0.5, 100.0)
+    p.write_text(p.read_text().replace("joints: [30, 0.15]", "joints_deg: [30, 0.15]"))
+    refused = cli("validate", str(p))
+    assert refused.returncode == 2 and "task.targets.1.joints_deg: " in refused.stderr
+    assert "joints_deg gives every joint in degrees, and slide is prismatic (metres): write this posture as " \
+           "`joints: [...]`" in refused.stderr

@@ -28,7 +28,8 @@ METRICS = (
            description="largest force between person and robot: at the hand (from the person's joint torques), or "
                        "an embodied person's largest cuff force (measured)"),
     Metric("safety_interventions", "count", outcome=True, description="trips and clipping episodes"),
-    Metric("rom_deg_*", "deg", outcome=True, description="range of motion of a joint"),
+    Metric("rom_deg_*", "deg", outcome=True, description="range of motion of a revolute joint"),
+    Metric("rom_m_*", "m", outcome=True, description="range of motion of a prismatic joint"),
 )
 
 

@@ -68,7 +68,9 @@ def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, 
         values = [r[key] for r in per_reach if np.isfinite(r[key])]
         return float(np.mean(values)) if values else float("nan")
 
-    rom = np.degrees(range_of_motion(trace.q)) if len(trace.q) else np.zeros(model.dof)
+    rom = range_of_motion(trace.q) if len(trace.q) else np.zeros(model.dof)
+    rom = np.where(model.revolute, np.degrees(rom), rom)  # (degrees for a revolute joint, metres for a prismatic)
+    unit = ["deg" if r else "m" for r in model.revolute]
     person = trace.tau_h is not None and len(trace.t) and np.any(trace.tau_h)
     if person:
         own_weight = robot.gravity_torques(trace.q).reshape(trace.tau.shape)
@@ -88,9 +90,10 @@ def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, 
         "assistance_ratio": assist,
         "peak_interaction_force_n": float(magnitude.max()) if len(magnitude) else 0.0,
         "safety_interventions": float(interventions),
-        **{f"rom_deg_{name}": float(rom[j]) for j, name in enumerate(model.joint_names)},
+        **{f"rom_{unit[j]}_{name}": float(rom[j]) for j, name in enumerate(model.joint_names)},
     }
-    details = {"reaches": per_reach, "rom_deg": dict(zip(model.joint_names, np.round(rom, 4).tolist())),
+    details = {"reaches": per_reach, **{f"rom_{u}": {n: round(float(r), 4) for n, r, v in zip(
+                   model.joint_names, rom, unit, strict=True) if v == u} for u in sorted(set(unit))},
                "interaction_force_n": magnitude}
     return metrics, details
 

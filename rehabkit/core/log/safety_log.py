@@ -78,6 +78,17 @@ def verify(path: Path, key: bytes | None = None) -> tuple[list[dict[str, Any]], 
     return records, problems
 
 
+def joint_limits(lim: Any, j: int, revolute: bool, narrowed_by: dict) -> dict[str, Any]:
+    """Joint ``j``'s limits in its own units: degrees and N·m for a revolute joint, metres and N for a prismatic."""
+    if revolute:
+        return {"lower_deg": round(float(np.degrees(lim.lower[j])), 6), "upper_deg": round(float(np.degrees(
+            lim.upper[j])), 6), "velocity_deg_s": round(float(np.degrees(lim.velocity[j])), 6),
+            "effort_nm": round(float(lim.effort[j]), 6), "narrowed_by": narrowed_by}
+    return {"lower_m": round(float(lim.lower[j]), 6), "upper_m": round(float(lim.upper[j]), 6),
+            "velocity_m_s": round(float(lim.velocity[j]), 6), "effort_n": round(float(lim.effort[j]), 6),
+            "narrowed_by": narrowed_by}
+
+
 def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dict[str, Any]]:
     """The records of a finished run (``a``: its :class:`~rehabkit.core.setup.assembly.Assembly`)."""
     sc, patient = a.sc, summary.get("patient") or {}  # (the rehab layer's section says who the run was for)
@@ -86,11 +97,8 @@ def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dic
     plugins.update({f"sensor:{p['type']}": f"{p['package']} {p['version']}" for p in used["sensors"].values()})
     model, lim = a.robot.model, a.limits
     sources = a.limit_sources.as_dict()
-    joints = {name: {"lower_deg": round(float(np.degrees(lim.lower[j])), 6),
-                     "upper_deg": round(float(np.degrees(lim.upper[j])), 6),
-                     "velocity_deg_s": round(float(np.degrees(lim.velocity[j])), 6),
-                     "effort_nm": round(float(lim.effort[j]), 6),
-                     "narrowed_by": sources.get(name, {})} for j, name in enumerate(model.joint_names)}
+    joints = {name: joint_limits(lim, j, turns, sources.get(name, {}))
+              for j, (name, turns) in enumerate(zip(model.joint_names, model.revolute, strict=True))}
     safety = a.safety.config
     records = [
         {"kind": "run", "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

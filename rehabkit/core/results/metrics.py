@@ -35,20 +35,25 @@ class Trace:
 def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:
     """Scalar metrics and per-joint figures of how the robot followed its reference."""
     robot: RobotModel = robot_plugin.model
-    err = np.degrees(trace.q_ref - trace.q)
+    turns = np.asarray(robot.revolute, bool)  # (each joint in its own unit: degrees, or metres where it slides)
+    scale = np.where(turns, np.degrees(1.0), 1.0)
+    err = (trace.q_ref - trace.q) * scale
+    deg = err[:, turns] if err.size else err
     metrics = {
-        "tracking_rms_deg": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
-        "tracking_max_deg": float(np.abs(err).max()) if err.size else float("nan"),
+        "tracking_rms_deg": float(np.sqrt(np.mean(deg**2))) if deg.size else float("nan"),
+        "tracking_max_deg": float(np.abs(deg).max()) if deg.size else float("nan"),
         "max_velocity_ratio": float(np.max(np.abs(trace.qd) / robot.limits.velocity)) if err.size else 0.0,
         "max_torque_ratio": float(np.max(np.abs(trace.tau) / robot.limits.effort)) if err.size else 0.0,
     }
+    if err.size and not turns.all():
+        metrics["tracking_max_m"] = float(np.abs(err[:, ~turns]).max())
     per_joint = {
         name: {
-            "tracking_rms_deg": float(np.sqrt(np.mean(err[:, j] ** 2))),
-            "tracking_max_deg": float(np.abs(err[:, j]).max()),
-            "range_deg": [float(np.degrees(trace.q[:, j].min())), float(np.degrees(trace.q[:, j].max()))],
+            f"tracking_rms_{u}": float(np.sqrt(np.mean(err[:, j] ** 2))),
+            f"tracking_max_{u}": float(np.abs(err[:, j]).max()),
+            f"range_{u}": [float(trace.q[:, j].min() * scale[j]), float(trace.q[:, j].max() * scale[j])],
         }
-        for j, name in enumerate(robot.joint_names)
+        for j, (name, u) in enumerate(zip(robot.joint_names, ["deg" if t else "m" for t in turns], strict=True))
     } if err.size else {}
     if trace.q_ctrl is not None and (rows := np.isfinite(trace.q_ctrl).all(axis=1)).any():
         own = np.degrees(trace.q_ctrl[rows] - trace.q[rows])  # what the controller meant, e.g. a compliant yield
@@ -57,7 +62,11 @@ def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> t
     metrics["joint_limit_excess_deg"] = joint_limit_excess(trace, robot)
     if goal_q is not None and err.size:
         q_end = trace.q[-1]
-        metrics["final_joint_error_deg"] = float(np.degrees(np.abs(goal_q - q_end)).max())
+        off, turns = np.abs(goal_q - q_end), np.asarray(robot.revolute, bool)
+        if turns.any():
+            metrics["final_joint_error_deg"] = float(np.degrees(off[turns]).max())
+        if not turns.all():  # (a prismatic joint's, in metres)
+            metrics["final_joint_error_m"] = float(off[~turns].max())
         ee = robot_plugin.ee_world(np.vstack([goal_q, q_end]))
         metrics["final_position_error_m"] = float(np.linalg.norm(ee[0] - ee[1]))
     return metrics, per_joint

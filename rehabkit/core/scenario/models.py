@@ -98,8 +98,12 @@ class TargetSpec(StrictModel):
     """A task target: joint values, a Cartesian point (base frame), a random point, or a copy of another."""
 
     name: str
-    joints_deg: list[float] | None = None
-    joints_rad: list[float] | None = None
+    joints_deg: list[float] | None = Field(None, description="a posture, every joint in degrees (a robot with a "
+                                           "prismatic joint: use joints)")
+    joints_rad: list[float] | None = Field(None, description="a posture in SI values: radians for revolute joints, "
+                                           "metres for prismatic ones (as ROS's JointState; what a bag replays)")
+    joints: list[float] | None = Field(None, description="a posture, each joint in its own unit: degrees for a "
+                                       "revolute joint, metres for a prismatic one")
     position: Vec3 | None = Field(None, description="end-effector position in the robot base frame [m]")
     rpy_deg: Vec3 | None = Field(None, description="end-effector orientation; omit with orientation_of")
     orientation_of: str | None = Field(None, description="use the orientation of this (joint-space) target")
@@ -112,7 +116,7 @@ class TargetSpec(StrictModel):
 
     @model_validator(mode="after")
     def _one_kind(self) -> TargetSpec:
-        kinds = ("joints_deg", "joints_rad", "position", "same_as", "sensor", "random")
+        kinds = ("joints_deg", "joints_rad", "joints", "position", "same_as", "sensor", "random")
         given = [k for k in kinds if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(

@@ -130,7 +130,7 @@ def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetup
     if index is None:
         return None
     spec = a.sc.task.targets[index]
-    key = next(k for k in ("position", "joints_deg", "joints_rad", "same_as", "random", "sensor")
+    key = next(k for k in ("position", "joints_deg", "joints_rad", "joints", "same_as", "random", "sensor")
                if getattr(spec, k) is not None)
     prefix = f"planner '{a.sc.planner.type}': " if kind == "planner" else ""
     return PluginSetupError(a.loaded.source, ("task", "targets", index, key), f"{prefix}{exc}")

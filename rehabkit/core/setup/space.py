@@ -22,10 +22,15 @@ class JointSpace:
     """References are joint values [rad]; the hand follows by the robot's forward kinematics."""
 
     name = "joint"
-    waypoint_key, waypoint_scale = "waypoints_deg", np.degrees
+    waypoint_key = "waypoints_deg"  # (degrees for revolute joints, metres for prismatic ones)
 
     def __init__(self, setup):
         self.robot, self.controller = setup.robot, setup.controller
+        self._revolute = np.asarray(setup.robot.model.revolute, bool)
+
+    def waypoint_scale(self, waypoints: np.ndarray) -> np.ndarray:
+        """Waypoints in each joint's unit: degrees for a revolute joint, metres for a prismatic one."""
+        return np.where(self._revolute, np.degrees(waypoints), waypoints)
 
     def point(self, q: np.ndarray) -> np.ndarray:
         """The reference point the joint values ``q`` are at (the start's, a tracking error's)."""

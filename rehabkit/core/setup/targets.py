@@ -52,14 +52,14 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
             pose = np.eye(4)
             pose[:3, 3] = point
             tgt = Target(name, pose=pose, position_only=True)
-        elif spec.joints_deg is not None or spec.joints_rad is not None:
-            q = np.radians(spec.joints_deg) if spec.joints_deg is not None else np.asarray(spec.joints_rad, float)
+        elif spec.joints_deg is not None or spec.joints_rad is not None or spec.joints is not None:
+            q = posture_si(name, spec, robot.model)
             if len(q) != robot.model.dof:
                 names = robot.model.joint_names
                 raise PlanningError(f"target '{name}' has {len(q)} joint values; robot '{robot.model.name}' has "
                                     f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}",
                                     target=name)
-            hint = radians_hint(spec.joints_deg, robot.model.revolute)
+            hint = radians_hint(spec.joints_deg if spec.joints_deg is not None else spec.joints, robot.model.revolute)
             tgt = Target(name, q=q, pose=robot.fk(q), hint=f"its joint values {hint}" if hint else "")
         else:
             pose = np.eye(4)
@@ -185,6 +185,25 @@ def unreachable(target: Target, robot: Robot) -> str:
                 f"limits{near}; {target.hint}")
     return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
             f"limits{near} (base frame; check the robot's base and the target's units)")
+
+
+def posture_si(name: str, spec, model) -> np.ndarray:
+    """A posture target's joint values in SI (radians, metres), from the form it is written in: ``joints`` each in
+    its joint's unit (degrees for revolute, metres for prismatic), ``joints_rad`` SI, ``joints_deg`` degrees — which
+    a prismatic joint cannot take (a finger's 0.02 meant in metres was 0.35 mm)."""
+    revolute = np.asarray(model.revolute, bool)
+    if spec.joints_rad is not None:
+        return np.asarray(spec.joints_rad, float)
+    values = np.asarray(spec.joints if spec.joints is not None else spec.joints_deg, float)
+    if len(values) != len(revolute):
+        return np.radians(values) if spec.joints is None else values  # (the count is said by the caller)
+    if spec.joints is None and not revolute.all():
+        sliding = [n for n, r in zip(model.joint_names, revolute, strict=True) if not r]
+        raise PlanningError(f"target '{name}': joints_deg gives every joint in degrees, and {', '.join(sliding)} "
+                            f"{'is' if len(sliding) == 1 else 'are'} prismatic (metres): write this posture as "
+                            "`joints: [...]`, degrees for the revolute joints and metres for the prismatic ones",
+                            target=name)
+    return np.where(revolute, np.radians(values), values)
 
 
 def radians_hint(values_deg, revolute) -> str:
