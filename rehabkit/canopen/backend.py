@@ -137,9 +137,11 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         return control_dt if config.bus is not None and not config.bus.simulated else config.timestep
 
     @classmethod
-    def check(cls, config: CanopenConfig, context: Context) -> None:
-        """``validate``: the drives against the robot, their EDS files, the bus load at the control rate."""
-        check_bus(config, context)
+    def check(cls, config: CanopenConfig, context: Context) -> list[str]:
+        """``validate``: the drives against the robot, their EDS files, the bus load at the control rate; a load
+        that fits but leaves little room said."""
+        _, _, load = check_bus(config, context)
+        return [crowded] if (crowded := load.crowded()) else []
 
     def _now(self) -> float:
         return time.monotonic() - self.t0 if self.realtime else self.master.cycles * self.period if \

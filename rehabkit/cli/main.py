@@ -97,6 +97,7 @@ def _admission(loaded) -> str:
 
     setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins")
     warned = "".join(f"\n  PLAN    {w}" for w in check_first_plan(setup))  # (as run says them, before it moves)
+    warned += "".join(f"\n  BACKEND {w}" for w in setup.backend_warnings)
     warned += latched_note(setup)
     sc = loaded.model
     if sc.patient is None and not sc.safety.joints:

@@ -79,6 +79,16 @@ class BusLoad:
         """The share of the bitrate used (1.0: the bus is full)."""
         return (self.bits_per_cycle * self.rate_hz + self.heartbeat_bits_s) / self.bitrate
 
+    def crowded(self, above: float = 0.9) -> str | None:
+        """What to say of a load that fits but leaves under a tenth of the bus free (an error frame, a retried one,
+        an SDO mid-run: each late by the cycle's end), or None."""
+        if self.load <= above:
+            return None
+        freed = (f"; the drives' own PDOs the run does not use take {self.others_bits} bits a cycle "
+                 "(backend.other_pdos: disable frees them)") if self.others_bits else ""
+        return (f"the CAN bus is {self.load:.1%} full at {self.rate_hz:g} Hz ({self.bits_per_cycle} bits a cycle, "
+                f"worst-case stuffing): little room for an SDO or a retried frame{freed}")
+
     def highest_rate_hz(self, limit: float = 1.0) -> float:
         """The highest control rate at which the load stays within ``limit``."""
         return (limit * self.bitrate - self.heartbeat_bits_s) / self.bits_per_cycle

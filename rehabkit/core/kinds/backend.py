@@ -167,9 +167,10 @@ class Backend(ABC):
         return config.timestep
 
     @classmethod  # noqa: B027 (optional: most backends have nothing to check)
-    def check(cls, config: object, context: object) -> None:
+    def check(cls, config: object, context: object) -> list[str] | None:
         """Refuse, before anything runs (``rehabkit validate``), the settings known wrong without building the
-        backend — a file it needs, say — as building it would: a ``SettingError`` names the setting."""
+        backend — a file it needs, say — as building it would: a ``SettingError`` names the setting. Returns what
+        ``validate`` should say without refusing (a bus nearly full), if anything."""
 
     def provenance(self) -> dict[str, str]:
         """Who the commands went to and how, for the safety log's run record (a robot link: its address, whether

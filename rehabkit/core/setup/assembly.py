@@ -97,6 +97,7 @@ class Assembly:
     limit_sources: LimitSources = field(default_factory=LimitSources)
     targets: dict[str, Target] = field(default_factory=dict)
     replaced: list[dict] = field(default_factory=list)
+    backend_warnings: list[str] = field(default_factory=list)  # (validate: what the backend's check says, not refuses)
     sections: dict[str, Any] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)  # extensions' own state between their hooks
     sensors: dict[str, Sensor] = field(default_factory=dict)
@@ -223,7 +224,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         if isinstance(a.backend, CompliantGaps):  # (its gaps in the commands bridged yielding, in a yield)
             a.safety.on_yield = a.backend.comply
     else:
-        a.make("backend", sc.backend, ("backend",), check_only=True)
+        a.backend_warnings = list(a.make("backend", sc.backend, ("backend",), check_only=True) or [])
     check_expectations(a)
     a.schedule = _schedule(a)
     return a
