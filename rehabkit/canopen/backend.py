@@ -29,7 +29,7 @@ from rehabkit.canopen.bus_health import METRICS, DriveNotes, bus_metrics, hold_i
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError
 from rehabkit.canopen.cycle_clock import CycleClock, own_gravity
 from rehabkit.canopen.drives.ending import ENDED, bring_to_rest, release
-from rehabkit.canopen.drives.limits import STOP_OPTION, drive_limits
+from rehabkit.canopen.drives.limits import drive_limits
 from rehabkit.canopen.drives.start_checks import check_no_fault, check_start_posture, unanswered
 from rehabkit.canopen.drives.units import units_of
 from rehabkit.canopen.injection import inject
@@ -69,7 +69,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         self.timestep, self.period = self.timestep_for(config, context.control_dt), context.control_dt
         self.loop_delay = self.period  # (synchronous RPDOs: a cycle's torque acts from the next SYNC on)
         self.realtime = config.clock == "realtime"
-        self.simulated = config.bus is None or config.bus.simulated
+        self.simulated = config.simulated
         self.n = robot.model.dof
         self.names = robot.model.joint_names
         effort = robot.model.limits.effort
@@ -84,7 +84,6 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         self.latency: list[float] = []
         self.t0 = self.deadline = 0.0
         self._configured = self._started = False
-        self.ending = ""  # (how the drives ended the run, in words)
         self._fault: DriveFaultError | None = None
         self.clock: CycleClock | None = None  # (real time, from the reset)
         self._note = context.note or (lambda t, text: None)
@@ -316,11 +315,9 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
 
     def _end(self) -> None:
         limits = self._limits
-        category = next(c for c, option in STOP_OPTION.items() if option == limits.quick_stop_option)
         self.deadline = time.monotonic()
         with contextlib.suppress(*ENDED):  # (a bus already down: nothing more reaches the drives)
-            said = bring_to_rest(self.master, self._paced, category, limits.decel, self.period)
-            self.ending = said
+            bring_to_rest(self.master, self._paced, limits.stop_category, limits.decel, self.period)
         release(self.master, "STOPPED" if self.config.end_nmt == "stopped" else "PRE-OPERATIONAL")
 
 

@@ -21,19 +21,19 @@ import numpy as np
 
 from rehabkit.canopen.bus.drive_dictionary import from_od
 from rehabkit.canopen.bus.pdo_codec import PdoCodec
+from rehabkit.canopen.bus.pdo_layout import SENSOR_TPDO
 from rehabkit.canopen.bus.pdo_maps import write_plan
 from rehabkit.canopen.bus.pdo_plan import entry, plan_pdos
-from rehabkit.canopen.cia402 import ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
+from rehabkit.canopen.cia402 import DISABLE_VOLTAGE, ENABLE_OPERATION_CMD, FAULT_RESET, SHUTDOWN, SWITCH_ON_CMD, State
 from rehabkit.canopen.config import CanopenConfig, DriveFaultError, DriveUnits
 from rehabkit.canopen.drives.limits import DriveLimits
 from rehabkit.canopen.drives.setup import set_up_drive
 from rehabkit.canopen.emcy_codes import describe
 
-DISABLE_VOLTAGE_CW = 0x00
 # the process data's (index, subindex), as each node's newest TPDOs and the cycle's RPDOs carry them
 CONTROLWORD, TORQUE, OFFSET, POSITION, VELOCITY = (0x6040, 0), (0x6071, 0), (0x60B2, 0), (0x607A, 0), (0x60FF, 0)
 STATUSWORD, POSITION_ACTUAL, VELOCITY_ACTUAL, TORQUE_ACTUAL_KEY = (0x6041, 0), (0x6064, 0), (0x606C, 0), (0x6077, 0)
-SENSOR_KEYS = ((0x7130, 1), (0x7130, 2), (0x7130, 3))  # a three-axis sensor's inputs (CiA 404)
+SENSOR_KEYS = tuple((index, sub) for index, sub, _ in SENSOR_TPDO)  # a three-axis sensor's inputs (CiA 404)
 LIVE_KEYS = (STATUSWORD, POSITION_ACTUAL, VELOCITY_ACTUAL, TORQUE_ACTUAL_KEY, *SENSOR_KEYS)
 
 
@@ -85,6 +85,7 @@ class DriveMaster:
         self.controlword = np.full(n, SHUTDOWN, int)
         self._sent_cw = np.full(n, -1, int)  # the controlword last written by SDO (drives enabled by SDO)
         self._rpdo: list[list[PdoCodec]] = [[] for _ in range(n)]
+        self._out: dict[tuple[int, int], int] = {}  # a cycle's RPDO values, one drive at a time
         self._tpdo: dict[int, tuple[int, PdoCodec, int]] = {}  # COB-ID → (node, its codec, its bit in the mask)
         self.plans: list = []
         self.setup_notes: list[str] = []
@@ -214,7 +215,7 @@ class DriveMaster:
             self.controlword[:] = FAULT_RESET
             cycle(zero)
         # from wherever the last run left them (a quick stop held: QUICK STOP ACTIVE) to SWITCH ON DISABLED first
-        walk = ((DISABLE_VOLTAGE_CW, State.SWITCH_ON_DISABLED), (SHUTDOWN, State.READY_TO_SWITCH_ON),
+        walk = ((DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED), (SHUTDOWN, State.READY_TO_SWITCH_ON),
                 (SWITCH_ON_CMD, State.SWITCHED_ON), (ENABLE_OPERATION_CMD, State.OPERATION_ENABLED))
         for word, state in walk:
             self.controlword[:] = word
@@ -246,12 +247,13 @@ class DriveMaster:
         self._arrived.clear()
         try:
             self._controlwords_by_sdo()
-            for codecs, follows, cw, target, point in zip(self._rpdo, self._follows, self.controlword, targets,
-                                                          setpoints, strict=True):
-                values = {CONTROLWORD: int(cw), TORQUE: int(target), OFFSET: int(target), POSITION: int(point),
-                          VELOCITY: int(point)} if follows else {CONTROLWORD: int(cw), TORQUE: int(target)}
+            out = self._out  # (each RPDO's codec packs the objects its map carries)
+            for codecs, cw, target, point in zip(self._rpdo, self.controlword, targets, setpoints, strict=True):
+                out[CONTROLWORD], out[TORQUE] = int(cw), int(target)
+                out[OFFSET], out[POSITION] = out[TORQUE], int(point)  # (CSP/CSV: the torque offset, the setpoint)
+                out[VELOCITY] = out[POSITION]
                 for codec in codecs:
-                    self.network.send_message(codec.cob_id, codec.pack(values))
+                    self.network.send_message(codec.cob_id, codec.pack(out))
             if self.now() >= self._next_beat and self.beating:
                 self._next_beat += self.config.heartbeat_ms * 1e-3
                 self.network.send_message(0x700 + self.config.master_node_id, b"\x05")
@@ -320,4 +322,4 @@ class DriveMaster:
 
     def torque_off(self) -> None:
         """From the next cycle on every drive's power stage off (disable voltage)."""
-        self.controlword[:] = DISABLE_VOLTAGE_CW
+        self.controlword[:] = DISABLE_VOLTAGE

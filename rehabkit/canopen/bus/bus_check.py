@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from rehabkit.canopen.bus.drive_dictionary import read_dictionary
-from rehabkit.canopen.bus.pdo_layout import BusLoad, needed, plans_load
+from rehabkit.canopen.bus.pdo_layout import SENSOR_TPDO, BusLoad, needed, plans_load
 from rehabkit.canopen.bus.pdo_plan import PdoPlan, PdoPlanError, entry, plan_pdos
 from rehabkit.canopen.config import DRIVE_EDS, SENSOR_EDS, CanopenConfig, DriveSpec, SensorSpec
 from rehabkit.canopen.drives.setup import unsupported_mode
@@ -20,7 +20,6 @@ from rehabkit.core.kinds.interfaces import Context
 # what the backend writes by SDO, and so every drive must have: (index, subindex)
 SET = ((0x1016, 1), (0x1017, 0), (0x6060, 0))
 SENSOR_SET = ((0x1016, 1), (0x1017, 0), (0x2100, 0))
-SENSOR_TX = ((0x7130, 1, 16), (0x7130, 2, 16), (0x7130, 3, 16))
 
 
 def drive_specs(config: CanopenConfig, dof: int) -> list[DriveSpec]:
@@ -58,7 +57,7 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, cont
         what = "a CiA 404 device's EDS" if sensor else "a CiA 402 drive's EDS"
         raise SettingError(where, f"{path.name} lacks objects the backend sets: {', '.join(missing)} (is it {what}?)")
     if sensor:
-        rx, tx = [], [entry(d, x, s) for x, s, _ in SENSOR_TX]
+        rx, tx = [], [entry(d, x, s) for x, s, _ in SENSOR_TPDO]
     else:
         why = unsupported_mode(d.supported_modes, spec.mode)
         if why:

@@ -16,11 +16,9 @@ from dataclasses import dataclass
 
 # (index, subindex, bits) of each PDO's entries, in order
 RPDO1 = ((0x6040, 0, 16), (0x6071, 0, 16))  # controlword, target torque [‰ of rated] (CST)
-# CSP: controlword, target position [counts], torque offset [‰: the host's gravity compensation]; CSV: the same with
-# the target velocity [counts/s]
+# CSP: controlword, target position [counts], torque offset [‰: the host's gravity compensation] (CSV's the same
+# size, with the target velocity)
 RPDO_CSP = ((0x6040, 0, 16), (0x607A, 0, 32), (0x60B2, 0, 16))
-RPDO_CSV = ((0x6040, 0, 16), (0x60FF, 0, 32), (0x60B2, 0, 16))
-RPDO = {"cst": RPDO1, "csp": RPDO_CSP, "csv": RPDO_CSV}
 TPDO1 = ((0x6041, 0, 16), (0x6064, 0, 32))  # statusword, position actual value [counts]
 TPDO2 = ((0x606C, 0, 32),)  # velocity actual value [counts/s]
 TORQUE_ACTUAL = (0x6077, 0, 16)  # [‰ of rated], in TPDO2 when asked for

@@ -32,38 +32,29 @@ ENDED = (can.CanError, DriveFaultError, canopen.SdoAbortedError, canopen.SdoComm
 
 
 def bring_to_rest(master, cycle: Callable[[np.ndarray], object], category: int, decel: np.ndarray,
-                  period_s: float) -> str:
+                  period_s: float) -> None:
     """Steps 1 and 2 (see the module's doc) with ``cycle`` (one paced cycle of the bus), ``decel`` each joint's
-    quick stop deceleration [rad/s²]. Returns how it went, in words, for the run's notes."""
-    n = len(master.remotes)
-    zero = np.zeros(n)
-    powered = [s in POWERED for s in master.states]
-    if not any(powered):
-        return "the drives' power stages were off"
-    stopped_in = 0
+    quick stop deceleration [rad/s²]."""
+    zero = np.zeros(len(master.remotes))
+    if not any(s in POWERED for s in master.states):
+        return
     if category > 0:
         master.controlword[:] = QUICK_STOP_CMD
         longest = float(np.max(np.abs(master.qd) / np.maximum(decel, 1e-9)))
-        limit = math.ceil((longest + 0.1) / period_s) + 2
-        for stopped_in in range(1, limit + 1):
+        for k in range(math.ceil((longest + 0.1) / period_s) + 2):
             cycle(zero)
             on = [s in POWERED for s in master.states]
-            if stopped_in > 1 and all(not p or abs(v) < AT_REST for p, v in zip(on, master.qd, strict=True)) and \
+            if k and all(not p or abs(v) < AT_REST for p, v in zip(on, master.qd, strict=True)) and \
                     State.FAULT_REACTION_ACTIVE.name not in master.states:
                 break
     for _ in range(OFF_CYCLES):
-        words = [DISABLE_VOLTAGE if s == State.QUICK_STOP_ACTIVE.name else
-                 DISABLE_OPERATION if s == State.OPERATION_ENABLED.name else SHUTDOWN if
-                 s == State.SWITCHED_ON.name else master.controlword[i] for i, s in enumerate(master.states)]
-        master.controlword[:] = words
+        master.controlword[:] = [DISABLE_VOLTAGE if s == State.QUICK_STOP_ACTIVE.name else
+                                 DISABLE_OPERATION if s == State.OPERATION_ENABLED.name else
+                                 SHUTDOWN if s == State.SWITCHED_ON.name else master.controlword[i]
+                                 for i, s in enumerate(master.states)]
         cycle(zero)
         if not any(s in POWERED or s == State.SWITCHED_ON.name for s in master.states):
             break
-    still = [master.names[i] for i, s in enumerate(master.states) if s in POWERED]
-    rest = f"at rest after {stopped_in * period_s * 1e3:.0f} ms of quick stop, " if category > 0 else ""
-    if still:
-        return f"drives ending the run: {rest}still powered: {', '.join(still)}"
-    return f"drives ending the run: {rest}power stages off ({', '.join(sorted(set(master.states)))})"
 
 
 def release(master, nmt: str = "PRE-OPERATIONAL") -> None:

@@ -26,6 +26,11 @@ class DriveLimits:
     quick_stop_option: int
     abort_option: int = 1  # 0x6007: what a drive does when this host falls silent (1 fault, 2 torque off, 3 quick stop)
 
+    @property
+    def stop_category(self) -> int:
+        """The stop category the quick stop option code stands for (what ends a run on these drives)."""
+        return next(c for c, option in STOP_OPTION.items() if option == self.quick_stop_option)
+
 
 def drive_limits(model, safety, q0: np.ndarray) -> DriveLimits:
     """The drives' own limits for robot ``model`` under the run's envelope ``safety`` (or None): its range and speed a

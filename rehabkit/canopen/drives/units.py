@@ -26,7 +26,8 @@ from rehabkit.canopen.config import DriveUnits
 
 # CiA 303-2 unit codes: what one of each is in motor revolutions (numerators) or seconds (denominators)
 # (0xC0: rev/min as one unit, maxon's numerator of rpm/s: 0x60AA = 0x00C00300)
-REVOLUTIONS = {0xB4: 1.0, 0x10: 1 / (2 * math.pi), 0x41: 1 / 360.0, 0xC0: 1 / 60.0}  # rev, rad, degree, rpm
+RPM = 0xC0
+REVOLUTIONS = {0xB4: 1.0, 0x10: 1 / (2 * math.pi), 0x41: 1 / 360.0, RPM: 1 / 60.0}  # rev, rad, degree, rpm
 SECONDS = {0x03: 1.0, 0x47: 60.0, 0x48: 3600.0}  # s, min, h
 UNIT_NAMES = {0xB4: "rev", 0x10: "rad", 0x41: "°", 0xC0: "rpm", 0x03: "s", 0x47: "min", 0x48: "h"}
 
@@ -79,7 +80,7 @@ def declared_units(units: DriveUnits, d: DriveDictionary) -> DriveUnits:
     if declared_accel:
         revs, seconds, accel_words = si_unit(declared_accel, 0x60AA)
         accel = motor_turns / revs * seconds  # (a velocity unit per second: Nanotec's rev/min, maxon's rpm/s)
-        if not accel_words.startswith(("rpm", "0")):
+        if declared_accel >> 16 & 0xFF != RPM:  # (a numerator of rpm and a denominator of s: already per second)
             accel_words += "/s"
     return replace(units, position_per_rad=position, velocity_per_rad_s=velocity, accel_per_rad_s2=accel,
                    motor_speed_per_rad_s=motor_speed, velocity_unit=words, accel_unit=accel_words)

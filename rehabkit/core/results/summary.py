@@ -77,12 +77,10 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
         "torque_saturation_steps": a.safety.saturated_steps,
     })
     metrics.update(stop_metrics(a, trace))
-    if r.plans:  # (the task's time: did the run last until its last plan's end?)
-        end = max(p["t"] + p["duration_s"] for p in r.plans if "duration_s" in p) if any(
-            "duration_s" in p for p in r.plans) else None
-        if end is not None:
-            metrics["plan_end_s"] = float(end)
-            metrics["task_complete"] = float(end <= sim_time + a.schedule.control_dt + 1e-9)  # (reaches: below)
+    ends = [p["t"] + p["duration_s"] for p in r.plans if "duration_s" in p]
+    if ends:  # (the task's time: did the run last until its last plan's end?)
+        metrics["plan_end_s"] = float(max(ends))
+        metrics["task_complete"] = float(max(ends) <= sim_time + a.schedule.control_dt + 1e-9)  # (reaches: below)
     return metrics, per_joint
 
 

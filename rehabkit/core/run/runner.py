@@ -87,7 +87,7 @@ class Runner:
             # renderer sharing the machine
             with threadpool_limits(limits=1, user_api="blas"):
                 loop = run_loop(session, self.progress)
-            return finish(session, loop, loop.started - t_setup, self.out_dir)
+            result = finish(session, loop, loop.started - t_setup, self.out_dir)
         except BaseException:
             if session is not None:
                 release_backend(session.setup.backend)  # (the robot stopped first, however the run ended)
@@ -95,17 +95,18 @@ class Runner:
                 for tap in session.taps:
                     tap.discard()
             raise
+        else:
+            session.setup.backend.close()  # (after the outputs are written; its own error is the run's)
+            return result
         finally:
             if session is not None and session.threads is not None:
                 session.threads.close()
 
 
 def release_backend(backend) -> None:
-    """The backend's end as at a normal finish (a robot brought to rest, its hardware released: its ``close``), once:
-    after an error or Ctrl-C too. A second Ctrl-C meanwhile does not cut the robot's stop short: SIGINT is held
-    off until it is done (in the main thread, where Python takes signals)."""
-    if getattr(backend, "_rehabkit_released", False):
-        return
+    """The backend's end as at a normal finish (a robot brought to rest, its hardware released: its ``close``) after
+    an error or Ctrl-C. A second Ctrl-C meanwhile does not cut the robot's stop short: SIGINT is held off until it
+    is done (in the main thread, where Python takes signals)."""
     held = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if held else None
     try:
@@ -113,7 +114,6 @@ def release_backend(backend) -> None:
     except Exception:  # noqa: BLE001 (the run's own error is what the user needs; the close's is logged)
         logging.getLogger(__name__).exception("closing the backend after the run's error failed")
     finally:
-        backend._rehabkit_released = True
         if held:
             signal.signal(signal.SIGINT, previous)
 
@@ -142,7 +142,8 @@ class _Calls:
 
 def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path | None) -> RunResult:
     """What a run leaves behind: the record → the summary (metrics, verdicts) and, with ``out_dir``, the recording,
-    the scenario as it ran, the safety log and ``summary.json``, each written whole; the backend closed."""
+    the scenario as it ran, the safety log and ``summary.json``, each written whole (:meth:`Runner.run` then closes
+    the backend)."""
     a, k = session.setup, loop.steps
     extra = {}
     if session.threads is not None:  # no reading in flight while the run is summed up
@@ -169,6 +170,4 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
         summary["safety_log_hash"] = safety_log.write(out_dir / safety_log.LOG,
                                                       safety_log.run_records(a, snapshot, summary))
         atomic_write_json(out_dir / "summary.json", summary)
-    a.backend.close()
-    a.backend._rehabkit_released = True
     return RunResult(summary, trace, out_dir, first.located if first is not None else None)
