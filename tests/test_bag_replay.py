@@ -115,9 +115,10 @@ def test_renamed_topics_are_mapped_and_a_gap_is_said_and_bridged(bags, tmp_path)
     args[2] = str(bag)
     done = cli(*args[1:], "--out", tmp_path / "mapped")
     assert done.returncode == 0, done.stderr
-    gaps = [line for line in done.stdout.splitlines() if line.startswith("  GAP")]
-    assert gaps == [f"  GAP  {topic} has no messages for 0.301 s from t = 1.999 s: bridged by interpolation"
+    gaps = [line for line in done.stdout.splitlines() if line.startswith("  BAG")]  # (said before the replay runs)
+    assert gaps == [f"  BAG  {bag}: {topic} has no messages for 0.301 s from t = 1.999 s: bridged by interpolation"
                     for topic in ("/arm/joint_states", "/cuff/wrench")]
+    assert done.stdout.index("  BAG") < done.stdout.index("metric ")
     table = {row.split()[0]: row.split()[1:] for row in done.stdout.splitlines() if row and row[0].isalpha()}
     assert table["reaches_completed"] == ["3", "3"]
     notes = json.loads((tmp_path / "mapped" / "summary.json").read_text())["notes"]

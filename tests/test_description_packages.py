@@ -216,7 +216,7 @@ def test_a_floating_quadruped_stands_on_its_feet(tmp_path, monkeypatch):
     assert foot.header.frame_id == "FL_LOWER_LEG"
     offset = foot.transform.translation
     assert (offset.x, offset.y, offset.z) == pytest.approx((0.0, 0.008, -0.16), abs=1e-12)  # (its URDF joint's)
-    root = moving["base"]
+    root = moving["base_link"]  # (the URDF's root link, under the scene's world)
     assert root.header.frame_id == "world"  # (its last logged pose, 10 ms before the end: settled)
     assert root.transform.translation.z == pytest.approx(position[2], abs=1e-4)
 

@@ -41,8 +41,9 @@ def test_the_hit_round_trip_as_a_bag_holds_the_trace_exactly(hit_bag):
                      "/joint_states": ("sensor_msgs/msg/JointState", n),
                      "/reference/joint_states": ("sensor_msgs/msg/JointState", n),
                      "/tf": ("tf2_msgs/msg/TFMessage", n // 10),  # (the log's 100 Hz)
-                     # each leg's goal as it begins, with the hand's orientation (B takes A's)
-                     "/targets": ("geometry_msgs/msg/PoseStamped", 4),
+                     # each leg's goal as it begins: B with the hand's orientation (A's), A as its posture
+                     "/targets/pose": ("geometry_msgs/msg/PoseStamped", 2),
+                     "/targets/joint_states": ("sensor_msgs/msg/JointState", 2),
                      # the encoders, as a driver publishes joint angles (500 Hz, with their resolution)
                      "/sensors/encoders/joint_states": ("sensor_msgs/msg/JointState", n // 2)}
     said = result.summary["bag"]["topics"]  # (the summary says what the bag holds)
@@ -199,7 +200,8 @@ def test_a_sweeps_runs_each_write_their_bag(tmp_path):
     for row in rows:
         types, messages = read(tmp_path / row["run_dir"] / "run.mcap")
         assert types["/joint_states"] == ("sensor_msgs/msg/JointState", 1500)
-        assert types["/wrench"][1] == 1500 and types["/targets"][1] == 2
+        # (the start posture, then the first position target)
+        assert types["/wrench"][1] == 1500 and types["/targets/joint_states"][1] == types["/targets"][1] == 1
         finals.append(np.array(messages["/joint_states"][-1][1].position))
         ran = yaml.safe_load((tmp_path / row["run_dir"] / "scenario.yaml").read_text())
         assert ran["controller"]["bandwidth_hz"] == row["controller.bandwidth_hz"]  # (a numeric grid: its numbers)

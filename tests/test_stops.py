@@ -107,8 +107,11 @@ def test_an_estop_stays_latched_across_runs_until_a_person_clears_it(where, caps
     assert main(["estop", "clear", name + "x", "--by", "J. Doe"]) == 2  # a misspelt name clears nothing
     assert f"did you mean '{name}'" in capsys.readouterr().err
     assert main(["estop", "clear", name, "--by", "J. Doe"]) == 0  # (the README's command)
+    assert capsys.readouterr().out.startswith(f"{name}: cleared by J. Doe (latched since ")
     record = EStopLatch.named(name).record()
     assert not record["latched"] and record["cleared_by"] == "J. Doe" and record["was"]["reason"]
+    assert main(["estop", "clear", name, "--by", "M. Roe"]) == 0  # again: nothing latched, nothing cleared
+    assert capsys.readouterr().out == f"{name}: not latched\n" and EStopLatch.named(name).record() == record
     cleared = run_scenario(ESTOP, extra)  # the first session after the clear ramps in (at least 1 s)
     assert _ramp_in(cleared) == pytest.approx(1.0)
     assert EStopLatch.named(name).latched() is not None  # (its own e-stop latched it again)
@@ -119,7 +122,7 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     from rehabkit.core.safety.estop import EStopLatch
     from rehabkit.hardware.bridge import Bridge
     from rehabkit.hardware.bridge_clocks import serve
-    from rehabkit.hardware.link.protocol import ESTOPPED, HOLDING
+    from rehabkit.hardware.link.protocol import CLEARED, ESTOPPED, HOLDING
     from rehabkit.hardware.plant import MujocoPlant
 
     latch = EStopLatch(tmp_path / "hit-1.json", "hit-1")
@@ -134,12 +137,32 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
         t0 = time.monotonic()
         status = clear_over_link("127.0.0.1", restarted.port, 1, "Dr. Ana Ruiz")
         assert not status & ESTOPPED and status & HOLDING  # still held: only a reset starts a session
+        assert status & CLEARED  # (a latched e-stop was cleared: `estop clear --bridge` says "cleared")
         assert time.monotonic() - t0 < 1.0
     finally:
         thread.join()
     record = json.loads(latch.path.read_text())  # who cleared it, from where, in which session's key (none here)
     assert record["cleared_by"] == "Dr. Ana Ruiz" and record["via"] == "the link from 127.0.0.1"
     assert record["key_id"].startswith("none")
+
+
+def test_clearing_a_running_bridge_where_nothing_is_latched_says_not_latched(hit, tmp_path, capsys):
+    """`rehabkit estop clear NAME --bridge` on a bridge whose e-stop is not latched: "not latched" (it said "cleared"),
+    exit 0, and the latch file keeps no clear (the bridge's state says whether it cleared a latched one: CLEARED)."""
+    from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.bridge_clocks import serve
+    from rehabkit.hardware.plant import MujocoPlant
+
+    latch = EStopLatch(tmp_path / "hit-1.json", "hit-1")
+    bridge = Bridge(MujocoPlant(hit), latch=latch)
+    thread = threading.Thread(target=serve, args=(bridge, 0.5), daemon=True)
+    thread.start()
+    try:
+        code = main(["estop", "clear", "hit-1", "--by", "J. Doe", "--bridge", f"127.0.0.1:{bridge.port}"])
+    finally:
+        thread.join()
+    assert code == 0 and capsys.readouterr().out == f"hit-1: not latched at the bridge udp://127.0.0.1:{bridge.port}\n"
+    assert latch.record().get("cleared_by") is None and [c["latched"] for c in bridge.clears][:1] == [False]
 
 
 def test_the_keypad_at_the_robot_presses_and_clears_the_estop(tmp_path):

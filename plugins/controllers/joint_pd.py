@@ -23,7 +23,8 @@ class JointPDConfig(StrictModel):
     bandwidth_hz: float = Field(4.0, gt=0, description="gains: auto — each joint's closed-loop natural frequency [Hz]")
     damping_ratio: float = Field(1.0, gt=0, description="gains: auto — each joint's damping ratio (1: critical)")
     feedforward: Literal["gravity", "inverse-dynamics", "none"] = Field(
-        "gravity", description="gravity: RNEA(q, 0, 0); inverse-dynamics: RNEA(q, qd_ref, qdd_ref)"
+        "gravity", description="gravity: RNEA(q, 0, 0); inverse-dynamics: RNEA(q, qd_ref, qdd_ref) with the rotors' "
+                               "armature, plus the joints' declared damping and Coulomb friction at qd_ref"
     )
 
 
@@ -45,10 +46,16 @@ class JointPD(Controller):
                 raise SettingError("bandwidth_hz", f"{config.bandwidth_hz:g} is too high for a control period "
                                  f"of {context.control_dt * 1000:g} ms; at most {most:.0f}")
             self.kp, self.kd = np.full(n, w * w), np.full(n, 2 * config.damping_ratio * w)  # per unit inertia
+            # A joint's own damping d, compensated along the reference by the feedforward, still acts on the error
+            # (d·ė): a light joint with a heavy drive (an xArm7 wrist: 1.4e-4 kg·m² against 2 N·m·s/rad) would
+            # return to its reference with a time constant d / (M ω²), 23 s there. Adding the stiffness ω·d makes
+            # the error's poles -ω and -(ω + d/M): every joint, light or heavy, back at the bandwidth.
+            self.kp_own = w * model.dissipation.damping
         else:
             self.kp = self._gains(config.kp, n, "kp")
             self.kd = self._gains(config.kd, n, "kd")
         self.mode = config.feedforward
+        self._dissipation = model.dissipation if model.dissipation.any else None
         self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
         self._gravity_torque = context.robot.gravity_torque  # the robot's own model (Pinocchio for serial arms)
         if self._inverse_dynamics or self.auto:
@@ -67,10 +74,12 @@ class JointPD(Controller):
     def compute(self, t, q, qd, q_ref, qd_ref, qdd_ref):
         tau = self.kp * (q_ref - q) + self.kd * (qd_ref - qd)
         if self.auto:
-            M = pin.crba(self._model, self._data, q)  # the upper triangle: mirror it
-            tau = (np.triu(M) + np.triu(M, 1).T) @ tau
-        if self._inverse_dynamics:
+            M = pin.crba(self._model, self._data, q)  # the upper triangle: mirror it (its rotors' armature in it)
+            tau = (np.triu(M) + np.triu(M, 1).T) @ tau + self.kp_own * (q_ref - q)
+        if self._inverse_dynamics:  # the rigid bodies', their rotors', and what the joints lose on the way
             tau += pin.rnea(self._model, self._data, q, qd_ref, qdd_ref)
+            if self._dissipation is not None:
+                tau += self._dissipation.torque(qd_ref)
         elif self._gravity:
             tau += self._gravity_torque(q)
         return tau

@@ -42,7 +42,7 @@ class RecordedWrench(Patient):
         try:
             session = read_session(context.resolve(config.bag), topics, roles=("joint_states", "wrench"))
         except BagError as exc:  # the bag's own problem, said at the setting naming it
-            raise SettingError("bag", f"{exc.bag}: {exc.what}") from exc
+            raise SettingError("bag", str(exc.diagnostics[0])) from exc
         w = session.wrench
         if w is None:
             raise SettingError("topic", f"{context.resolve(config.bag)} has no {config.topic} "

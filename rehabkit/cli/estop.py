@@ -16,7 +16,8 @@ from rehabkit.core.safety.estop import EStopLatch, all_latches
 def clear_over_link(host: str, port: int, robot_id: int, by: str, key_file: str | None = None,
                     timeout: float = 2.0) -> int:
     """Tell the bridge ``by`` (a person's name) clears its e-stop, in an authenticated session given the robot's
-    key; wait for a state saying it is no longer latched. Its status."""
+    key; wait for a state saying it is no longer latched. Its status (``CLEARED`` set where a latched e-stop was
+    cleared, unset where nothing was latched)."""
     from rehabkit.hardware.link.clock import wait_readable
     from rehabkit.hardware.link.protocol import CLEAR, ESTOPPED, HEADER, PLAIN, STATE, pack_bytes
     from rehabkit.hardware.security.handshake import handshake, peek_kind, refusal
@@ -76,13 +77,18 @@ def cmd_estop(args: argparse.Namespace) -> int:
                 from rehabkit.hardware.security.keys import check_robot, load_key
 
                 check_robot(load_key(args.key), args.name)
-            clear_over_link(host or "127.0.0.1", int(port), int(rid), args.by, args.key)
+            status = clear_over_link(host or "127.0.0.1", int(port), int(rid), args.by, args.key)
         except (KeyFileError, LinkRefusedError, PermissionError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_INVALID
         except (TimeoutError, OSError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_FAILED
+        from rehabkit.hardware.link.protocol import CLEARED
+
+        if not status & CLEARED:  # (the bridge says whether a latched e-stop was cleared)
+            print(f"{args.name}: not latched at the bridge udp://{args.bridge}")
+            return EXIT_OK
         print(f"{args.name}: cleared at the bridge udp://{args.bridge} (by {args.by}); the next session ramps in")
         return EXIT_OK
     latch = EStopLatch.named(args.name)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from pathlib import Path
 
@@ -18,9 +19,22 @@ def _is_bag(path: Path) -> bool:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    fresh = bool(args.out) and not Path(args.out).exists()  # (made by the check below: gone again on a refusal)
     if args.out and (why := unwritable(Path(args.out))) is not None:
         print(why, file=sys.stderr)
         return EXIT_INVALID
+    try:
+        status = _replay(args)
+    except Exception:  # (refused, or failed: nothing half-written left in a folder of its own)
+        if fresh:
+            shutil.rmtree(args.out, ignore_errors=True)
+        raise
+    if fresh and status == EXIT_INVALID and not any(Path(args.out).iterdir()):  # (refused before anything ran)
+        Path(args.out).rmdir()
+    return status
+
+
+def _replay(args: argparse.Namespace) -> int:
     sets = [*args.set, "ros.bag=true"] if args.bag else args.set
     source = Path(args.source)
     if args.scenario is None and _is_bag(source):
@@ -38,13 +52,18 @@ def cmd_replay(args: argparse.Namespace) -> int:
         from rehabkit.ros.bag_replay import replay_bag
         from rehabkit.ros.session_bag import parse_topics
 
-        rep = replay_bag(source, args.scenario, parse_topics(args.topics), sets, args.out, progress=True)
-        for gap in rep.original.get("gaps", []):
-            print(f"  GAP  {gap}: bridged by interpolation")
+        def say(line: str) -> None:  # (what the replay does without, before it runs)
+            print(f"  BAG  {line}", flush=True)
+
+        rep = replay_bag(source, args.scenario, parse_topics(args.topics), sets, args.out, progress=True, say=say)
     if rep.result.refusal is not None:  # the replayed scenario's first plan cannot be made: bad input, said where
         print(str(rep.result.refusal), file=sys.stderr)
         return EXIT_INVALID
     print(rep.table())
+    if rep.original.get("deviation"):
+        from rehabkit.ros.deviation import said
+
+        print(f"  DEVIATION  the replay's largest from the recorded joints: {said(rep.original['deviation'])}")
     for ev in rep.result.summary["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
     print(wrote(rep.result.summary, rep.result.out_dir))
@@ -59,8 +78,9 @@ def add_parser(sub) -> None:
                                                           "on a robot (a rosbag2 folder, .mcap, .db3 or ROS 1 .bag)")
     rp.add_argument("--scenario", metavar="S.yaml", help="a bag's replay: the scenario to run it on")
     rp.add_argument("--topics", action="append", default=[], metavar="ROLE=TOPIC,...",
-                    help="a bag's topics where not /joint_states, /wrench, /targets "
-                         "(e.g. joint_states=/arm/joint_states,wrench=/cuff/wrench)")
+                    help="a bag's topics where not /joint_states, /wrench, /targets (the targets also read from "
+                         "TOPIC/pose and TOPIC/joint_states where the bag has them; e.g. "
+                         "joint_states=/arm/joint_states,wrench=/cuff/wrench)")
     rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="what to change, e.g. controller.type=assist-as-needed")
     rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>, or "

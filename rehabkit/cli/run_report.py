@@ -24,6 +24,9 @@ def run_report(s: dict[str, Any], out: Path) -> str:
         reaches = f": {task['reaches_completed']} of {task['reaches']} reaches completed" if task.get("reaches") else ""
         lines.append(f"  TASK    incomplete: the plan ends at {task['plan_end_s']:.4g} s, the run at "
                      f"{task['run_s']:g} s ({task['run_s'] / task['plan_end_s']:.1%} of it run){reaches}")
+    if why := s.get("tracking"):  # (said whatever the expectations ask, as the task's end is)
+        lines.append(f"  TRACKING {why['joint']} followed its reference to {why['rms']:.3g} {why['unit']} rms "
+                     f"({why['max']:.3g} {why['unit']} at most, t={why['t_max']:.3f} s): {'; '.join(why['causes'])}")
     lines += [f"  SAFETY  {ev['message']}" for ev in s["safety"]["events"]]
     lines += _interventions(s["safety"].get("interventions", []), s["safety"]["events"])
     lines += _link(m)
@@ -31,8 +34,9 @@ def run_report(s: dict[str, Any], out: Path) -> str:
         lines.append(f"  LATCHED the robot's e-stop ({latch}) stays latched: deal with its cause, then a person clears "
                      f"it (`rehabkit estop clear {latch} --by NAME`) before the next run")
     if contacts := int(m.get("contact_steps") or 0):  # e.g. an arm lying on the floor, which nothing else says
+        first = s["safety"].get("first_contact")
         lines.append(f"  CONTACT the robot touched something in {contacts} control steps (the floor is the "
-                     "plane z = 0)")
+                     "plane z = 0)" + (f"; first {first['text']}" if first else ""))
     for r in (s.get("patient") or {}).get("replaced_targets", []):
         lines.append(f"  PATIENT target '{r['target']}' outside the range of {', '.join(r['joints'])}: replaced by "
                      f"the nearest admissible posture ({r['moved_m'] * 1000:.1f} mm away)")

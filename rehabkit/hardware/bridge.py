@@ -39,6 +39,7 @@ from rehabkit.hardware.keypad import Keypad
 from rehabkit.hardware.link.bridge_end import BridgeLink
 from rehabkit.hardware.link.protocol import (
     CLEAR,
+    CLEARED,
     CMD_BRAKE,
     CMD_COMPLIANT,
     CMD_ESTOP,
@@ -118,12 +119,14 @@ class Bridge:
     def clear_estop(self, by: str, **how: str) -> None:
         """A person (``by``) cleared the e-stop (``how``: over which link, recorded with it): the robot stays held until
         the host's next reset, which then ramps in."""
-        if self.latch is not None:
-            self.latch.clear(by, **how)
+        was = self.latch.clear(by, **how) if self.latch is not None else None
+        latched = bool(self.status & ESTOPPED) or was is not None
         if self.status & ESTOPPED or self.latch is not None:  # (the bridge's own record of who cleared it, how)
             self.clears.append({"at": time.time(), "by": by, "latched": bool(self.status & ESTOPPED), **how})
-            print(f"bridge: e-stop cleared by {by} ({', '.join(f'{k} {v}' for k, v in how.items()) or 'here'})",
-                  file=sys.stderr, flush=True)
+            print(f"bridge: e-stop {'cleared' if latched else 'clear (not latched)'} by {by} "
+                  f"({', '.join(f'{k} {v}' for k, v in how.items()) or 'here'})", file=sys.stderr, flush=True)
+        if latched:  # its states say so until the next reset (a clear where nothing was latched: not latched)
+            self.status |= CLEARED
         if self.status & ESTOPPED:
             self.status = (self.status & ~ESTOPPED) | HOLDING
             self.status &= ~ENABLED

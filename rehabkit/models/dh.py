@@ -57,7 +57,10 @@ class JointSpec(StrictModel):
     effort: float = Field(gt=0, description="torque [N·m] or force [N] limit")
     mass: float = Field(gt=0, description="[kg]")
     radius: float = Field(0.03, gt=0, description="capsule radius [m]")
-    damping: float = Field(0.0, ge=0, description="viscous damping [N·m·s/rad]")
+    damping: float = Field(0.0, ge=0, description="viscous damping [N·m·s/rad, or N·s/m for a prismatic joint]")
+    friction: float = Field(0.0, ge=0, description="Coulomb friction of the drive [N·m, or N for a prismatic joint]: "
+                                                   "simulated as dry friction, compensated by the inverse-dynamics "
+                                                   "feedforward")
     armature: float = Field(0.0, ge=0, description="reflected rotor inertia of the drive [kg·m²]")
     stiffness: float = Field(0.0, ge=0, description="spring toward zero [N·m/rad] (passive joints)")
     brake: float = Field(0.0, ge=0, description="holding brake [N·m or N], engaged when the torque goes off (safety "
@@ -124,7 +127,7 @@ def links_and_limits(joints: list[JointSpec]) -> tuple[list[LinkSpec], JointLimi
     links, rows = [], []
     for j in joints:
         lo, hi, v = j.limits()
-        links.append(LinkSpec(j.name, lo, hi, j.mass, j.radius, j.damping, j.armature, j.stiffness))
+        links.append(LinkSpec(j.name, lo, hi, j.mass, j.radius, j.damping, j.armature, j.stiffness, j.friction))
         rows.append((lo, hi, v, j.effort))
     return links, JointLimits(*(np.array(col) for col in zip(*rows)))
 

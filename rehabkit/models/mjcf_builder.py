@@ -35,6 +35,7 @@ class LinkSpec:
         damping: Viscous joint damping [N·m·s/rad].
         armature: Reflected rotor inertia of the drive [kg·m²] (both MuJoCo and Pinocchio use it).
         stiffness: Spring to zero [N·m/rad], for passive joints.
+        friction: Coulomb friction of the drive [N·m, or N] (MuJoCo's ``frictionloss``; Pinocchio's ``friction``).
     """
 
     name: str
@@ -45,6 +46,7 @@ class LinkSpec:
     damping: float = 0.0
     armature: float = 0.0
     stiffness: float = 0.0
+    friction: float = 0.0
 
 
 def _segment_inertia(p0: np.ndarray, p1: np.ndarray, mass: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -125,7 +127,7 @@ def build_chain_mjcf(
         body.add_joint(
             name=link.name, type=kind, axis=[0, 0, 1], range=[link.lower, link.upper],
             limited=mujoco.mjtLimited.mjLIMITED_TRUE, damping=link.damping,
-            armature=link.armature, stiffness=link.stiffness,
+            armature=link.armature, stiffness=link.stiffness, frictionloss=link.friction,
         )
         tip = chain.fixed[i + 1][:3, 3]
         points = _polyline(tip)

@@ -56,6 +56,35 @@ class JointLimits:
         return JointLimits(**arrays)
 
 
+FRICTION_FADE_DEG_S = 1.0  # a joint's Coulomb friction, as the model gives it, fades in below this speed ...
+FRICTION_FADE_M_S = 0.001  # ... (a sliding joint's): dry friction has no sign at rest
+
+
+@dataclass(frozen=True)
+class JointDissipation:
+    """What a robot's joints lose to their own drives, as its file declares it (a URDF's ``<dynamics damping
+    friction>``, an MJCF joint's ``damping`` and ``frictionloss``), per joint in the order of ``q``.
+
+    Attributes:
+        damping: Viscous damping [N·m·s/rad], or [N·s/m] for a sliding joint.
+        friction: Coulomb friction [N·m], or [N].
+        fade: The speed below which the friction fades in [rad/s, or m/s] (its sign is undefined at rest).
+    """
+
+    damping: np.ndarray
+    friction: np.ndarray
+    fade: np.ndarray
+
+    def torque(self, qd: np.ndarray) -> np.ndarray:
+        """The torque the joints lose at speeds ``qd``: what a feedforward adds to move them at those speeds."""
+        qd = np.asarray(qd, float)
+        return self.damping * qd + self.friction * np.tanh(qd / self.fade)
+
+    @property
+    def any(self) -> bool:
+        return bool(np.any(self.damping > 0) or np.any(self.friction > 0))
+
+
 @dataclass
 class RobotModel:
     """A robot ready to simulate and to compute with.
@@ -147,6 +176,12 @@ class RobotModel:
         if not model.existFrame(name):
             frames = [f.name for f in model.frames]
             raise ValueError(f"{self.name}: end-effector '{name}' is not a frame; frames: {frames}")
+        import pinocchio as pin
+
+        # a joint's frame may share the body's name (SO-100's "gripper"): the body, then a site, is the hand
+        for kind in (pin.FrameType.BODY, pin.FrameType.OP_FRAME):
+            if model.existFrame(name, kind):
+                return model.getFrameId(name, kind)
         return model.getFrameId(name)
 
     @cached_property
@@ -157,6 +192,20 @@ class RobotModel:
 
         kinds = {j.get("name"): j.get("type", "hinge") for j in ET.fromstring(self.mjcf).iter("joint")}
         return np.array([kinds.get(n, "hinge") != "slide" for n in self.joint_names])
+
+    @cached_property
+    def dissipation(self) -> JointDissipation:
+        """The joints' damping and Coulomb friction as the MJCF declares them (its defaults classes applied): what
+        MuJoCo simulates, read by Pinocchio's parser into the model the controllers use (whose inverse dynamics
+        carry the rotor inertia, ``armature``, too). None known (zeros) for a robot Pinocchio cannot model (a
+        parallel mechanism's closed loops)."""
+        fade = np.where(self.revolute, np.radians(FRICTION_FADE_DEG_S), FRICTION_FADE_M_S)
+        try:
+            model = self.pin_model
+        except Exception:  # noqa: BLE001 (no dynamic model: nothing to compensate by it)
+            return JointDissipation(np.zeros(self.dof), np.zeros(self.dof), fade)
+        return JointDissipation(np.array(model.damping[: self.dof], float), np.array(model.friction[: self.dof], float),
+                                fade)
 
     @cached_property
     def batch_fk(self):

@@ -139,14 +139,16 @@ def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robo
             whose = f"patient {profile.id}'s passive range" if who == "patient" else "the safety envelope's range"
             how = "its joint values put" if tgt.q is not None else "the posture the IK finds for it puts"
             high = q[j] > limits.upper[j]
+            turns = bool(robot.model.revolute[j])  # (a prismatic joint's range in metres)
             breach = LimitBreach("position", names[j], float(q[j]), float(limits.upper[j] if high else limits.lower[j]),
-                                 revolute=bool(robot.model.revolute[j]))
+                                 revolute=turns)
             # (nearest is a patient profile's choice: without one, the envelope's range is the one to change)
             fix = ("set patient.outside_rom: nearest to use the nearest admissible point" if profile is not None else
-                   f"widen safety.joints.{names[j]}.range_deg")
+                   f"widen safety.joints.{names[j]}.range_{'deg' if turns else 'm'}")
+            span = (f"[{math.degrees(limits.lower[j]):.1f}, {math.degrees(limits.upper[j]):.1f}]°" if turns else
+                    f"[{limits.lower[j]:.4g}, {limits.upper[j]:.4g}] m")
             problems.append(Diagnostic(mark, ".".join(map(str, path)), (
-                f"target '{spec.name}': {how} {breach.describe()}: {whose} is "
-                f"[{math.degrees(limits.lower[j]):.1f}, {math.degrees(limits.upper[j]):.1f}]°; move the target into "
+                f"target '{spec.name}': {how} {breach.describe()}: {whose} is {span}; move the target into "
                 f"the range, or {fix}")))
     if problems:
         raise ScenarioError(problems)

@@ -1,15 +1,17 @@
 """A run as a ROS 2 bag (MCAP, ROS 2's default storage since Iron; written with the ``mcap`` library's ROS 2 support):
 what Foxglove, PlotJuggler and ``ros2 bag`` open.
 
-Topics: ``/robot_description`` (std_msgs/String, the URDF), ``/tf_static`` (world → base_link) and ``/tf`` (each
-link from its parent, at the log rate: tf2_msgs/TFMessage, as ``robot_state_publisher`` publishes them),
+Topics: ``/robot_description`` (std_msgs/String, the URDF), ``/tf_static`` and ``/tf`` (the description's joint tree
+as ``robot_state_publisher`` publishes it, and where the scenario put the robot: :mod:`rehabkit.ros.tf_tree`),
 ``/joint_states`` (sensor_msgs/JointState: the measured joints and the torque sent, every control step, as the
 trace has them), ``/reference/joint_states`` (the reference), ``/interaction_force`` (std_msgs/Float64, where the run
 measured one), ``/wrench`` (geometry_msgs/WrenchStamped: a person's wrench at the hand, where there is one),
-``/targets`` (geometry_msgs/PointStamped: each movement's goal as it began), every sensor's readings under
-``/sensors/<name>/`` (:mod:`rehabkit.ros.bag_sensors`), ``/rosout`` (rcl_interfaces/Log: the safety layer's events
-and interventions, the run's notes). ``rehabkit replay run.mcap --scenario S.yaml`` replays it as it would a robot's.
-Stamps: the run's start (``start_ns``, the Unix epoch) plus the run's own time.
+``/targets`` (each movement's goal as it began, where it is one for the hand: PointStamped, or PoseStamped where a
+target of the task sets the hand's orientation) and ``/targets/joint_states`` (sensor_msgs/JointState: a posture
+target's joint values, as it began), every sensor's readings under ``/sensors/<name>/``
+(:mod:`rehabkit.ros.bag_sensors`), ``/rosout`` (rcl_interfaces/Log: the safety layer's events and interventions, the
+run's notes). ``rehabkit replay run.mcap --scenario S.yaml`` replays it as it would a robot's.
+Stamps: the run's start (``start_ns``, the Unix epoch; a replay's: the recorded session's) plus the run's own time.
 """
 
 from __future__ import annotations
@@ -24,8 +26,8 @@ from rehabkit.core.kinds.capabilities import BaseState
 from rehabkit.core.plugins.lifecycle import RunTap
 from rehabkit.models.hand_force import least_wrenches
 from rehabkit.ros.bag_sensors import reading_messages
-from rehabkit.ros.description import base_frame, links, relative
 from rehabkit.ros.msgdefs import datatype, msgdef
+from rehabkit.ros.tf_tree import TfTree, Transform
 
 LOG_LEVEL = {"DEBUG": 10, "INFO": 20, "WARN": 30, "ERROR": 40, "FATAL": 50}
 
@@ -38,13 +40,18 @@ def _xyz(v) -> dict:
     return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
 
 
-def _transform(parent: str, child: str, ns: int, m: np.ndarray) -> dict:
+def _quat(r: np.ndarray) -> dict:
     import pinocchio as pin
 
-    quat = pin.Quaternion(m[:3, :3])
-    return {"header": {"stamp": _stamp(ns), "frame_id": parent}, "child_frame_id": child,
-            "transform": {"translation": dict(zip("xyz", map(float, m[:3, 3]), strict=True)),
-                          "rotation": {"x": quat.x, "y": quat.y, "z": quat.z, "w": quat.w}}}
+    q = pin.Quaternion(np.asarray(r, float))
+    q.normalize()
+    return {"x": q.x, "y": q.y, "z": q.z, "w": q.w}
+
+
+def _transform(t: Transform, ns: int) -> dict:
+    m = t.matrix
+    return {"header": {"stamp": _stamp(ns), "frame_id": t.parent}, "child_frame_id": t.child,
+            "transform": {"translation": _xyz(m[:3, 3]), "rotation": _quat(m[:3, :3])}}
 
 
 class _Bag:
@@ -81,34 +88,28 @@ class BagRecorder(RunTap):
     ``run.mcap``); dropped if the run fails."""
 
     def __init__(self, path: Path, setup, start_ns: int, description: str):
-        import pinocchio as pin
-
         self.path, self.start_ns = path, start_ns
         self.part = path.with_name(f".{path.name}.part")
-        self.bag = _Bag(self.part)
         robot = setup.robot.model
-        model = robot.pin_model
-        self.links, self.base = links(model), base_frame(model)
-        self._frames = {name: _ros_frame(s.frame, self.base) for name, s in setup.sensors.items()}
-        self._channels = {name: s.channels for name, s in setup.sensors.items()}
         # a floating robot's root moves: its pose in the world at the log rate, as the backend reports it
         self._root = setup.backend.base_state if robot.floating and isinstance(setup.backend, BaseState) else None
+        hand = robot.pin_model.frames[robot.ee_frame_id].name  # (the frame /wrench is given in)
+        frames = [hand, *(s.frame for s in setup.sensors.values() if isinstance(s.frame, str))]
+        try:
+            self.tree = TfTree(description, robot, frames, floating=self._root is not None)
+        except ValueError:  # (a description whose tree can't be read as one: the model's own, as a URDF)
+            from rehabkit.ros.description import urdf_from_model
+
+            self.tree = TfTree(urdf_from_model(robot.pin_model, robot.name, robot.limits), robot, frames,
+                               floating=self._root is not None)
+        self.base = self.tree.base
+        self.bag = _Bag(self.part)
+        self._frames = {name: _ros_frame(s.frame, self.base) for name, s in setup.sensors.items()}
+        self._channels = {name: s.channels for name, s in setup.sensors.items()}
         self.roots: dict[int, np.ndarray] = {}  # logged control step → the root's pose
         self.bag.put("/robot_description", "std_msgs/String", {"data": description}, start_ns)
-        data = model.createData()
-        pin.framesForwardKinematics(model, data, pin.neutral(model))
-        world = np.asarray(robot.base_pose, float)
-        fixed = [_transform(model.frames[link.parent].name, link.name, start_ns, relative(data, link))
-                 for link in self.links if link.parent is not None and not link.moving]
-        fixed += [_transform("world", link.name, start_ns, world @ relative(data, link)) for link in self.links
-                  if link.parent is None and not link.moving and self._root is None]
-        hand = model.frames[robot.ee_frame_id]
-        if hand.name not in {link.name for link in self.links}:  # (a site: the frame /wrench is given in)
-            body = max(link.frame for link in self.links if link.frame < robot.ee_frame_id
-                       and model.frames[link.frame].parentJoint == hand.parentJoint)
-            fixed.append(_transform(model.frames[body].name, hand.name, start_ns,
-                                    data.oMf[body].actInv(data.oMf[robot.ee_frame_id]).homogeneous))
-        self.bag.put("/tf_static", "tf2_msgs/TFMessage", {"transforms": fixed}, start_ns)
+        self.bag.put("/tf_static", "tf2_msgs/TFMessage",
+                     {"transforms": [_transform(t, start_ns) for t in self.tree.static()]}, start_ns)
 
     def logged(self, t: float, k: int) -> None:
         if self._root is not None:
@@ -122,6 +123,10 @@ class BagRecorder(RunTap):
     def reading(self, t: float, name: str, reading: dict) -> None:
         ns = self.start_ns + round(t * 1e9)
         header = {"stamp": _stamp(ns), "frame_id": ""}
+        seen = reading.get("target_position")
+        if seen is not None and not np.allclose(self.tree.base_to_frame, np.eye(4)):  # (in the bag's base frame)
+            m = self.tree.base_to_frame
+            reading = {**reading, "target_position": m[:3, :3] @ np.asarray(seen, float) + m[:3, 3]}
         for topic, msg_type, message in reading_messages(name, reading, header, self._frames[name],
                                                          self._channels[name], self.base):
             self.bag.put(topic, msg_type, message, ns)
@@ -143,26 +148,47 @@ class BagRecorder(RunTap):
         return {topic: {"type": bag.types[topic], "messages": n} for topic, n in sorted(bag.counts.items())}
 
 
-def _kind(spec, specs) -> str:
-    """What a task target gives: ``joints``, a ``pose`` (a position and an orientation) or a ``point``."""
-    if spec.same_as is not None:
-        return _kind(next(s for s in specs if s.name == spec.same_as), specs)
-    if spec.joints_deg is not None or spec.joints_rad is not None:
-        return "joints"
-    return "pose" if spec.rpy_deg is not None or spec.orientation_of is not None else "point"
+TARGETS = {"point": ("/targets", "geometry_msgs/PointStamped"), "pose": ("/targets/pose", "geometry_msgs/PoseStamped"),
+           "joints": ("/targets/joint_states", "sensor_msgs/JointState")}  # a target's topic and type, by kind
 
 
-def _trace_topics(bag: _Bag, setup, record, start_ns: int, tree: BagRecorder) -> None:
+def _targets(bag: _Bag, setup, record, ns: np.ndarray, tree: TfTree) -> None:
+    """Each movement's goal as it began, by what its target gives (:data:`TARGETS`): a posture's joint values as the
+    task gives them, a hand pose (a position and the orientation the hand must take; as the plan reaches it where
+    some axes are free), or where the hand goes; in the bag's base frame."""
+    tr, robot = record.trace, setup.robot.model
+    names, m = list(robot.joint_names), tree.base_to_frame
+    sensed = {spec.name for spec in setup.sc.task.targets if spec.sensor}  # (their position: the movement's)
+    for mv in record.movements:
+        if mv.k0 >= len(tr.t):
+            continue
+        at = int(ns[mv.k0])
+        header = {"stamp": _stamp(at), "frame_id": tree.base}
+        target = setup.targets.get(mv.name) if mv.name is not None else None
+        if target is not None and target.q is not None:  # (a posture stays one: a replay reaches it, not an IK's)
+            topic, msg_type = TARGETS["joints"]
+            bag.put(topic, msg_type, {"header": {**header, "frame_id": ""}, "name": names,
+                                      "position": [float(v) for v in target.q], "velocity": [], "effort": []}, at)
+        elif target is not None and target.pose is not None and not target.position_only:
+            pose = m @ (target.pose if not target.free_axes else robot.ee_pose(np.asarray(mv.target, float)))
+            topic, msg_type = TARGETS["pose"]
+            bag.put(topic, msg_type, {"header": header, "pose": {"position": _xyz(pose[:3, 3]),
+                                                                 "orientation": _quat(pose[:3, :3])}}, at)
+        else:
+            goal = target.pose[:3, 3] if target is not None and target.pose is not None and mv.name not in sensed \
+                else np.asarray(mv.goal, float)
+            topic, msg_type = TARGETS["point"]
+            bag.put(topic, msg_type, {"header": header, "point": _xyz(m[:3, :3] @ goal + m[:3, 3])}, at)
+
+
+def _trace_topics(bag: _Bag, setup, record, start_ns: int, rec: BagRecorder) -> None:
     """Joint states, reference, the person's wrench and the interaction force every control step, the targets as
     each movement began, tf at the log rate, the safety layer's events and the notes."""
-    import pinocchio as pin
-
     tr, robot = record.trace, setup.robot.model
     names = list(robot.joint_names)
     ns = start_ns + np.rint(tr.t * 1e9).astype(np.int64)
     person = tr.tau_h is not None and len(tr.t) and np.any(tr.tau_h)
-    model = robot.pin_model
-    data, hand = model.createData(), robot.ee_frame_id
+    model, hand = robot.pin_model, robot.ee_frame_id
     # the person's wrench at the hand, in its axes: the least one whose joint torques are theirs
     wrenches = least_wrenches(model, tr.q, tr.tau_h, hand) if person else None
     for k in range(len(tr.t)):
@@ -181,36 +207,11 @@ def _trace_topics(bag: _Bag, setup, record, start_ns: int, tree: BagRecorder) ->
             bag.put("/wrench", "geometry_msgs/WrenchStamped",
                     {"header": {**stamp, "frame_id": model.frames[hand].name},
                      "wrench": {"force": _xyz(w[:3]), "torque": _xyz(w[3:])}}, int(ns[k]))
-    # the targets as the task gave them: joint values where every target is a posture, the hand's pose where one
-    # sets its orientation (as the joint-space plan reaches it), else where the hand goes
-    kinds = {_kind(spec, setup.sc.task.targets) for spec in setup.sc.task.targets}
-    in_joints, oriented = kinds == {"joints"}, "pose" in kinds
-    for mv in record.movements:
-        if mv.k0 >= len(tr.t):
-            continue
-        stamp, at = {"stamp": _stamp(int(ns[mv.k0])), "frame_id": tree.base}, int(ns[mv.k0])
-        if in_joints:
-            bag.put("/targets", "sensor_msgs/JointState", {"header": stamp, "name": names, "position": [
-                float(v) for v in mv.target], "velocity": [], "effort": []}, at)
-        elif oriented and len(mv.target) == robot.dof:
-            pose = robot.ee_pose(np.asarray(mv.target, float))
-            r = pin.Quaternion(pose[:3, :3])
-            bag.put("/targets", "geometry_msgs/PoseStamped", {"header": stamp, "pose": {
-                "position": _xyz(pose[:3, 3]), "orientation": {"x": r.x, "y": r.y, "z": r.z, "w": r.w}}}, at)
-        else:
-            bag.put("/targets", "geometry_msgs/PointStamped", {"header": stamp, "point": _xyz(mv.goal)}, at)
-    world, moving = np.asarray(robot.base_pose, float), [link for link in tree.links if link.moving]
+    _targets(bag, setup, record, ns, rec.tree)
     every = max(1, setup.schedule.log_every)
     for k in range(0, len(tr.t), every):
-        pin.framesForwardKinematics(model, data, tr.q[k])
-        moved = [_transform(model.frames[link.parent].name if link.parent is not None else "world", link.name,
-                            int(ns[k]), relative(data, link) if link.parent is not None else world @ relative(data,
-                                                                                                         link))
-                 for link in moving]
-        if (root := tree.roots.get(k)) is not None:  # (a floating robot's root, at the logged steps)
-            moved += [_transform("world", link.name, int(ns[k]), root @ relative(data, link))
-                      for link in tree.links if link.parent is None]
-        bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": moved}, int(ns[k]))
+        moved = rec.tree.moving(tr.q[k], rec.roots.get(k))
+        bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [_transform(t, int(ns[k])) for t in moved]}, int(ns[k]))
     events = list(setup.safety.events)
     said = [(e.t, "ERROR", f"SAFETY {e.message}") for e in events]
     trips = {(e.t, e.rule) for e in events}  # (each trip is among the interventions too: said once)

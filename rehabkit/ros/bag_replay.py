@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable
+import shutil
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +24,10 @@ from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.rehab.replay import Replay, overrides_label
 from rehabkit.rehab.run_outcomes import run_outcomes
-from rehabkit.ros.bag_scenario import joint_order, shown_targets, write_session_scenario
+from rehabkit.ros.bag_content import BagError, Where
+from rehabkit.ros.bag_scenario import extra_joints, joint_order, shown_targets, write_session_scenario
 from rehabkit.ros.description import links
+from rehabkit.ros.deviation import largest_deviation
 from rehabkit.ros.session_bag import TOPICS, SessionBag, read_session
 
 SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was replayed in, beside the replay's outputs
@@ -70,43 +73,81 @@ def session_reaches(bag: SessionBag, runner: Runner, n: int, dt: float) -> list[
     return out
 
 
+def wrench_frame_refusal(bag: SessionBag, robot) -> BagError | None:
+    """The bag's wrench given in a frame the robot has not (said at its first message), or None."""
+    w = bag.wrench
+    model = robot.model.pin_model
+    if w is None or (w.frame and model.existFrame(w.frame)):
+        return None
+    frames = ", ".join(f.name for f in model.frames if f.name != "universe")
+    return BagError(bag.path, "wrench", f"frame_id '{w.frame}' is not a frame of robot '{robot.model.name}' (its "
+                                        f"frames: {frames}): record the wrench in a frame of the robot, or name the "
+                                        "frame it is given in and acts at: --set patient.model.frame=FRAME",
+                    where=Where(w.topic, float(w.t[0]), bag.t0_ns + round(float(w.t[0]) * 1e9)),
+                    field="header.frame_id")
+
+
 def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str] | None = None,
                overrides: Iterable[str] = (), out_dir: str | Path | None = None,
-               registry: PluginRegistry | None = None, progress: bool = False) -> Replay:
+               registry: PluginRegistry | None = None, progress: bool = False,
+               say: Callable[[str], None] | None = None) -> Replay:
     """Replay the session recorded in ``bag_path`` on ``scenario`` with ``overrides`` (e.g. another controller);
     outputs in ``out_dir`` (default ``<bag>-replay-<values>`` beside the bag): the run's, with the scenario the
     session was replayed in (:data:`SESSION_SCENARIO`) and the session's own measures (:data:`SESSION_MEASURES`).
+    What the replay does without (a gap bridged, joints the robot lacks, a field left out) is given to ``say``
+    before anything is simulated, and kept in the session's ``said``.
 
     Raises:
-        ScenarioError: the bag can't be replayed as asked (a topic missing, joints the robot lacks), or the scenario
-            or overrides are invalid.
+        ScenarioError: the bag can't be replayed as asked (a topic missing, joints the robot lacks, a value that is
+            not finite, a wrench frame the robot has not: a :class:`BagError` at the message), or the scenario or
+            overrides are invalid. Nothing is left of the output folder where it did not exist.
     """
     from rehabkit.core.plugins.lifecycle import default_extensions
     from rehabkit.core.setup.assembly import assemble
 
     bag_path, scenario, overrides = Path(bag_path), Path(scenario), list(overrides)
     registry = registry or default_registry()
+    topics = {**TOPICS, **(topics or {})}
     bag = read_session(bag_path, topics)
     plain = load_scenario(scenario, [], registry)
     robot = assemble(plain, registry, default_extensions(), upto="targets").robot
+    joint_order(bag, list(robot.model.joint_names))  # (the robot's joints, each in the bag: else refused first)
+    framed = any(o.split("=", 1)[0].strip() == "patient.model.frame" for o in overrides)
+    if topics["wrench"] and not framed and (refused := wrench_frame_refusal(bag, robot)) is not None:
+        raise refused
+    said = [str(r) for r in [*bag.remarks, *extra_joints(bag, robot)]]
+    said += [f"{bag_path}: {gap}: bridged by interpolation" for gap in bag.gaps]
+    for line in said:
+        if say is not None:
+            say(line)
     stem = re.sub(r"[^A-Za-z0-9._-]+", "-", bag_path.name.removesuffix(".mcap"))
     label = overrides_label(overrides)
     out = Path(out_dir) if out_dir is not None else bag_path.resolve().parent / f"{stem}-replay-{label}"
+    fresh = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    path = write_session_scenario(out / SESSION_SCENARIO, scenario, bag, robot, base_frames(robot),
-                                  {**TOPICS, **(topics or {})}, plain.model.patient is not None,
-                                  plain.model.planner.model_dump().get("segment_durations") is not None)
-    loaded = load_scenario(path, overrides, registry)
-    runner = Runner(loaded, registry, out, progress=progress)
-    result = runner.run()
-    session = session_summary(bag, runner, result.summary)
-    atomic_write_json(out / SESSION_MEASURES, {k: v for k, v in session.items() if k != "metric_info"})
+    try:
+        path = write_session_scenario(out / SESSION_SCENARIO, scenario, bag, robot, base_frames(robot), topics,
+                                      plain.model.patient is not None,
+                                      plain.model.planner.model_dump().get("segment_durations") is not None)
+        loaded = load_scenario(path, overrides, registry)
+        runner = Runner(loaded, registry, out, progress=progress)
+        result = runner.run()
+        session = session_summary(bag, runner, result.summary, result.trace)
+        session["said"] = said
+        atomic_write_json(out / SESSION_MEASURES, {k: v for k, v in session.items() if k != "metric_info"})
+    except Exception:  # (refused, or failed: no half-written folder left; a folder that was there keeps the rest)
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)
+        else:
+            (out / SESSION_SCENARIO).unlink(missing_ok=True)
+        raise
     # (no inputs to compare: the replay's person is the bag's by construction)
     return Replay(session, result, {}, overrides)
 
 
-def session_summary(bag: SessionBag, runner: Runner, replayed: dict) -> dict:
-    """The recorded session's outcome measures, as a summary's ``metrics`` (beside what ``Replay`` compares)."""
+def session_summary(bag: SessionBag, runner: Runner, replayed: dict, replay: Trace | None = None) -> dict:
+    """The recorded session's outcome measures, as a summary's ``metrics`` (beside what ``Replay`` compares), and
+    the replay's largest deviation from its joints (``deviation``: of the ``replay``'s trace, where given)."""
     a = runner.setup
     dt = a.schedule.control_dt
     trace = session_trace(bag, runner.robot, a.patient, dt)
@@ -118,4 +159,5 @@ def session_summary(bag: SessionBag, runner: Runner, replayed: dict) -> dict:
     return {"label": f"recorded ({bag.path.name})", "bag": str(bag.path), "duration_s": bag.duration_s,
             "metrics": metrics, "metric_info": replayed.get("metric_info", {}),
             "outcomes": {k: v for k, v in details.items() if k != "interaction_force_n"},
-            "gaps": [str(g) for g in bag.gaps]}
+            "gaps": [str(g) for g in bag.gaps],
+            "deviation": None if replay is None else largest_deviation(trace, replay, runner.robot.model)}

@@ -13,20 +13,36 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from rehabkit.ros.session_bag import BagError, SessionBag, ShownTarget
+from rehabkit.ros.bag_content import BagError, Remark, Where
+from rehabkit.ros.session_bag import SessionBag, ShownTarget
 
 WORLD_FRAMES = ("world", "map")
 
 
 def joint_order(bag: SessionBag, robot_joints: list[str], role: str = "joint_states",
-                names: list[str] | None = None) -> np.ndarray:
-    """Indices into the bag's joint names of the robot's joints, in the robot's order."""
+                names: list[str] | None = None, where: Where | None = None) -> np.ndarray:
+    """Indices into the bag's joint names (a message's ``names``, at ``where``: the joint states' by default) of
+    the robot's joints, in the robot's order."""
     names = bag.joints.names if names is None else names
     missing = [j for j in robot_joints if j not in names]
     if missing:
-        raise BagError(bag.path, role, f"no joint(s) {missing} in the bag's joint states ({names}); the robot's "
-                                        f"joints are {robot_joints}: replay on the robot the session was recorded on")
+        what = "the bag's joint states" if role == "joint_states" else "this posture target"
+        raise BagError(bag.path, role, f"no joint(s) {missing} in {what} ({names}); the robot's joints are "
+                                       f"{robot_joints}: replay on the robot the session was recorded on",
+                       where=where, field="name")
     return np.array([names.index(j) for j in robot_joints])
+
+
+def extra_joints(bag: SessionBag, robot) -> list[Remark]:
+    """What the bag gives of joints the robot lacks (its joint states', its posture targets'): said, not replayed."""
+    joints = list(robot.model.joint_names)
+    out = []
+    for where, names in [(bag.joints.topic, bag.joints.names)] + [(t.where, t.names) for t in bag.targets
+                                                                  if t.kind == "joints"]:
+        if extra := [n for n in names if n not in joints]:
+            out.append(Remark(str(bag.path), where, f"joint(s) {extra} not in robot '{robot.model.name}' (its "
+                                                    f"joints: {', '.join(joints)}): not replayed"))
+    return out
 
 
 def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_frames: dict[str, np.ndarray]
@@ -44,9 +60,9 @@ def _in_base(bag: SessionBag, shown: ShownTarget, base_pose: np.ndarray, base_fr
         fixed = base_frames[shown.frame]
         p, rot = fixed[:3, :3] @ p + fixed[:3, 3], None if rot is None else fixed[:3, :3] @ rot
     elif shown.frame:
-        raise BagError(bag.path, "targets", f"a target at t = {shown.t:.3f} s is in frame '{shown.frame}': give "
-                                             f"targets in the robot's base frame ({' or '.join(base_frames)}) or the "
-                                             f"world ({' or '.join(WORLD_FRAMES)})")
+        raise BagError(bag.path, "targets", f"is in frame '{shown.frame}': give targets in the robot's base frame "
+                                            f"({' or '.join(base_frames)}) or the world ({' or '.join(WORLD_FRAMES)})",
+                       where=shown.where, field="header.frame_id")
     return p, rot
 
 
@@ -71,7 +87,7 @@ def session_task(bag: SessionBag, robot, base_frames: dict[str, np.ndarray], tim
     for i, shown in enumerate(shown_all):
         name = f"shown_{i + 1}"
         if shown.kind == "joints":
-            idx = joint_order(bag, list(model.joint_names), "targets", shown.names)
+            idx = joint_order(bag, list(model.joint_names), "targets", shown.names, shown.where)
             targets.append({"name": name, "joints_rad": [float(v) for v in shown.values[idx]]})
         else:
             p, rot = _in_base(bag, shown, np.asarray(model.base_pose, float), base_frames)
@@ -109,7 +125,8 @@ def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, b
         patient = None
     doc = {"extends": str(scenario.resolve()),
            "name": f"replay-of-{bag.path.stem}",
-           "duration": round(bag.duration_s, 9)}
+           "duration": round(bag.duration_s, 9),
+           "ros": {"epoch_ns": int(bag.t0_ns)}}  # (a bag of the replay: stamped on the session's time base)
     if topics["targets"]:  # (none: the scenario's own task, from its own start)
         doc["task"] = session_task(bag, robot, base_frames, timed)
         if timed:

@@ -1,17 +1,15 @@
-"""A run's robot as ROS tools see it: ``/robot_description`` and the link tree ``/tf`` and ``/tf_static`` carry.
+"""A run's robot as ROS tools see it: ``/robot_description``, whose joint tree ``/tf`` and ``/tf_static`` carry
+(:mod:`rehabkit.ros.tf_tree`).
 
-The links are the robot's bodies as Pinocchio's model holds them (a URDF's links, fixed ones too: MuJoCo keeps them
-as bodies), each under its parent body — moved by a joint, or fixed to it — and the root under ``world`` at the
-robot's base pose. ``/robot_description`` is a URDF robot's own file (a ``.xacro`` expanded), else a URDF made from
-the model with the same links (joints, limits, link frames, inertias; no meshes).
+``/robot_description`` is a URDF robot's own file (a ``.xacro`` expanded), else a URDF made from the model with the
+robot's bodies as Pinocchio's model holds them (:func:`links`: each under its parent body — moved by a joint, or fixed
+to it), and its joints, limits, link frames and inertias (no meshes).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
-
-import numpy as np
 
 AXES = {"RX": (1, 0, 0), "RY": (0, 1, 0), "RZ": (0, 0, 1), "PX": (1, 0, 0), "PY": (0, 1, 0), "PZ": (0, 0, 1)}
 
@@ -52,17 +50,6 @@ def links(model) -> list[Link]:
         above = model.frames[parent].parentJoint if parent is not None else 0
         out.append(Link(frame.name, fid, parent, frame.parentJoint if frame.parentJoint != above else 0))
     return out
-
-
-def base_frame(model) -> str:
-    """The name of the robot's base: its first root body."""
-    return next(link.name for link in links(model) if link.parent is None)
-
-
-def relative(data, link: Link) -> np.ndarray:
-    """``link``'s pose in its parent's frame (4x4), from Pinocchio ``data`` after frame kinematics."""
-    child = data.oMf[link.frame]
-    return (data.oMf[link.parent].actInv(child) if link.parent is not None else child).homogeneous
 
 
 def _origin(m) -> str:

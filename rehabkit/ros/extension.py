@@ -20,6 +20,9 @@ class RosSpec(StrictModel):
     bag: bool = Field(False, description="write run.mcap beside run.rrd: a ROS 2 bag of the run (joint states, "
                       "reference, tf, robot description, a person's wrench, targets, sensor readings, safety events "
                       "and notes)")
+    epoch_ns: int | None = Field(None, ge=0, description="the Unix time [ns] the bag stamps the run's start with "
+                                 "(default: when the run starts; a replay of a session's bag: the session's start, "
+                                 "its first joint state's stamp)")
 
 
 @hookimpl
@@ -40,7 +43,8 @@ def rehabkit_run_opened(setup):
     from rehabkit.ros.description import robot_description
 
     description = robot_description(setup.robot, setup.sc.robot, setup.context.resolve)
-    setup.extras[BAG] = recorder = BagRecorder(setup.out_dir / "run.mcap", setup, time.time_ns(), description)
+    start = setup.sc.ros.epoch_ns if setup.sc.ros.epoch_ns is not None else time.time_ns()
+    setup.extras[BAG] = recorder = BagRecorder(setup.out_dir / "run.mcap", setup, start, description)
     return recorder
 
 

@@ -1,9 +1,11 @@
 """A session recorded on a robot, read from its ROS bag: the joints, the person's wrench, the targets as shown.
 
 The bag is read with ``rosbags`` (ROS 2 bags in MCAP or SQLite, a folder with ``metadata.yaml`` or a bare ``.mcap``
-file, and ROS 1 bags). Each role is a topic (``/joint_states``, ``/wrench``, ``/targets`` unless renamed); its times
-are the messages' header stamps (the log time where a stamp is zero), from the first joint state on. A stretch
-without messages much longer than the topic's usual period is a :class:`Gap`: said, and bridged by interpolation.
+file, and ROS 1 bags). Each role is a topic (``/joint_states``, ``/wrench``, ``/targets`` unless renamed; the targets
+also on ``<targets>/pose`` and ``<targets>/joint_states``, as rehabkit's bags have them); its times are the messages'
+header stamps (the log time where a stamp is zero), from the first joint state on. A stretch without messages much
+longer than the topic's usual period is a :class:`Gap`: said, and bridged by interpolation. What the messages hold is
+checked as it is read (:mod:`rehabkit.ros.bag_content`): refused, or said, at the message.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
+from rehabkit.ros.bag_content import BagError, Remark, Where, not_finite, refuse_rows
 
 TOPICS = {"joint_states": "/joint_states", "wrench": "/wrench", "targets": "/targets"}
 TYPES = {"joint_states": ("sensor_msgs/msg/JointState",),
@@ -24,6 +26,8 @@ FIX = {"joint_states": "name the joint states' topic: --topics joint_states=TOPI
                  "the scenario's own patient (if any) in the robot",
        "targets": "name the targets' topic: --topics targets=TOPIC; or --topics targets= to replay without them, "
                   "on the scenario's own task"}
+# the targets' topic's companions (rehabkit's bags: a topic per kind of target), each with its type
+COMPANIONS = {"/pose": "geometry_msgs/msg/PoseStamped", "/joint_states": "sensor_msgs/msg/JointState"}
 GAP_PERIODS = 5.0  # a stretch this many usual periods long without a message is a gap
 GAP_MIN_S = 0.05  # ... and at least this long (a 1 kHz topic missing 6 ms is jitter, not a gap)
 
@@ -65,12 +69,14 @@ class ShownTarget:
     values: np.ndarray
     frame: str = ""
     names: list[str] = field(default_factory=list)
+    where: Where | None = None  # its message
 
 
 @dataclass
 class SessionBag:
     """What the bag holds for a replay; ``joints`` names, ``position``/``velocity``/``effort`` their samples (the
-    last two None where the messages leave them empty)."""
+    last two None where the messages leave them empty, or hold a number that is not finite: a ``remark``);
+    ``t0_ns`` the session's start (the first joint state's stamp, Unix epoch)."""
 
     path: Path
     joints: Series
@@ -79,25 +85,13 @@ class SessionBag:
     wrench: Series | None
     targets: list[ShownTarget]
     gaps: list[Gap]
+    t0_ns: int = 0
+    remarks: list[Remark] = field(default_factory=list)
 
     @property
     def duration_s(self) -> float:
         """How long the session lasted: to its last joint state, and that sample's period."""
         return float(self.joints.t[-1] + np.median(np.diff(self.joints.t)))
-
-
-class BagError(ScenarioError):
-    """A bag that can't be replayed as asked: the ``bag``, the topic ``role`` concerned ('' for the whole bag), and
-    what is wrong with the fix (``what``); said at the bag, naming the ``--topics`` role."""
-
-    def __init__(self, bag: Path | str, role: str, what: str, more: list[tuple[str, str]] = ()):
-        self.bag, self.role, self.what = str(bag), role, what
-        self.problems = [(role, what), *more]  # every role's, said at once
-        super().__init__([Diagnostic(Mark(str(bag), 0, 0), f"--topics {r}" if r else "", w)
-                          for r, w in self.problems])
-
-
-
 
 
 def parse_topics(items: list[str]) -> dict[str, str]:
@@ -137,10 +131,12 @@ def _gaps(topic: str, t: np.ndarray) -> list[Gap]:
 def read_session(path: str | Path, topics: dict[str, str] | None = None,
                  roles: tuple[str, ...] = tuple(TOPICS)) -> SessionBag:
     """The joints, wrench and targets of the bag at ``path`` (topics by role, :data:`TOPICS` unless named; only the
-    ``roles`` asked for are read, the joint states always).
+    ``roles`` asked for are read, the joint states always). The targets are those of the targets' topic and of its
+    companions (:data:`COMPANIONS`: ``<targets>/pose``, ``<targets>/joint_states``), where the bag has them.
 
     Raises:
-        BagError: the bag can't be read, a topic is missing or of another type, or joint states are empty.
+        BagError: the bag can't be read, a topic is missing or of another type, joint states are empty, or a message
+            holds what can't be replayed (at the message).
     """
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
@@ -153,20 +149,13 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             have = {c.topic: c.msgtype for c in reader.connections}
-            listing = ", ".join(f"{t} ({m})" for t, m in sorted(have.items()))
-            problems = []
-            for role, topic in topics.items():
-                if topic not in have:
-                    problems.append((role, f"no topic {topic}; the bag has {listing} ({FIX[role]})"))
-                elif have[topic] not in TYPES[role]:
-                    problems.append((role, f"{topic} is {have[topic]}; {role} must be {' or '.join(TYPES[role])}"))
+            wanted, problems = _wanted(topics, have)
             if problems:
                 raise BagError(path, *problems[0], more=problems[1:])
-            wanted = {topics[r]: r for r in topics if topics[r] in have}
             conns = [c for c in reader.connections if c.topic in wanted]
             for conn, log_ns, data in reader.messages(connections=conns):
                 msg = reader.deserialize(data, conn.msgtype)
-                raw[wanted[conn.topic]].append((_stamp_ns(msg, log_ns), conn.msgtype, msg))
+                raw[wanted[conn.topic]].append((_stamp_ns(msg, log_ns), conn.topic, conn.msgtype, msg))
     except BagError:
         raise
     except Exception as exc:  # rosbags' reader errors: a damaged or unknown file
@@ -174,49 +163,124 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
     return _session(path, topics, raw)
 
 
+def _wanted(topics: dict[str, str], have: dict[str, str]) -> tuple[dict[str, str], list[tuple[str, str]]]:
+    """The topics to read (topic → role), and what is missing or of another type (role, what)."""
+    listing = ", ".join(f"{t} ({m})" for t, m in sorted(have.items()))
+    wanted, problems = {}, []
+    for role, topic in topics.items():
+        companions = {topic + tail: msgtype for tail, msgtype in COMPANIONS.items()} if role == "targets" else {}
+        for name, msgtype in companions.items():
+            if name in have and have[name] != msgtype:
+                problems.append((role, f"{name} is {have[name]}; the targets' {name.removeprefix(topic)} must be "
+                                       f"{msgtype} (name the targets' topic otherwise: --topics targets=TOPIC)"))
+            elif name in have:
+                wanted[name] = role
+        if topic not in have and any(name in have for name in companions):
+            continue
+        if topic not in have:
+            also = f" (nor {', '.join(companions)})" if companions else ""
+            problems.append((role, f"no topic {topic}{also}; the bag has {listing} ({FIX[role]})"))
+        elif have[topic] not in TYPES[role]:
+            problems.append((role, f"{topic} is {have[topic]}; {role} must be {' or '.join(TYPES[role])}"))
+        else:
+            wanted[topic] = role
+    return wanted, problems
+
+
+def _series_rows(path: Path, topic: str, rows: list, t: np.ndarray, names: list[str], wheres: list[Where],
+                 remarks: list[Remark]) -> tuple[Series, Series | None, Series | None]:
+    """The joint states' position, velocity and effort series; a position that is not finite refused, a velocity or
+    effort said and left out."""
+    position = np.array([np.asarray(r[3].position, float) for r in rows])
+    refuse_rows(path, "joint_states", position, wheres, [f"position[{n}]" for n in names],
+                [f"position of '{n}'" for n in names])
+    out = []
+    for attr, instead in (("velocity", "the replay's are the positions' rate of change"),
+                          ("effort", "the session's torques are not known")):
+        if any(len(getattr(r[3], attr)) != len(names) for r in rows):
+            out.append(None)
+            continue
+        values = np.array([np.asarray(getattr(r[3], attr), float) for r in rows])
+        bad = ~np.isfinite(values)
+        if bad.any():
+            row, col = np.argwhere(bad)[0]
+            said = f"{attr} of '{names[col]}' is {not_finite(values[row, col])}"
+            remarks.append(Remark(str(path), wheres[row], f"{said} ({int(bad.sum())} value(s) not finite): {attr} "
+                                                          f"not used ({instead})"))
+            out.append(None)
+            continue
+        out.append(Series(topic, t, values, names=names))
+    return Series(topic, t, position, names=names), out[0], out[1]
+
+
 def _session(path: Path, topics: dict[str, str], raw: dict[str, list]) -> SessionBag:
     js = sorted(raw["joint_states"], key=lambda r: r[0])
     if len(js) < 2:
         raise BagError(path, "joint_states", f"{topics['joint_states']} has {len(js)} message(s); a replay needs the "
                                               "session's joint states")
-    names = list(js[0][2].name)
+    names = list(js[0][3].name)
     t0 = js[0][0]
+
+    def where(r) -> Where:
+        return Where(r[1], (r[0] - t0) * 1e-9, r[0])
+
     t = np.array([(r[0] - t0) * 1e-9 for r in js])
     keep = np.concatenate([[True], np.diff(t) > 0])  # a repeated stamp: the first message counts
     rows = [r for r, k in zip(js, keep) if k]
     t = t[keep]
-    changed = [i for i, r in enumerate(rows) if list(r[2].name) != names]
+    changed = [r for r in rows if list(r[3].name) != names]
     if changed:
-        raise BagError(path, "joint_states", f"message {changed[0]} names joints {list(rows[changed[0]][2].name)}, "
-                                              f"the first {names}: a replay needs one joint order")
-
-    def field_series(attr: str) -> Series | None:
-        if any(len(getattr(r[2], attr)) != len(names) for r in rows):
-            return None
-        return Series(topics["joint_states"], t, np.array([np.asarray(getattr(r[2], attr), float) for r in rows]),
-                      names=names)
-
-    joints = field_series("position")
-    if joints is None:
-        raise BagError(path, "joint_states", f"{topics['joint_states']} gives no position for every joint {names}")
+        raise BagError(path, "joint_states", f"names joints {list(changed[0][3].name)}, the first message {names}: "
+                                              "a replay needs one joint order", where=where(changed[0]), field="name")
+    short = [r for r in rows if len(r[3].position) != len(names)]
+    if short:
+        raise BagError(path, "joint_states", f"gives {len(short[0][3].position)} positions for the joints {names}: "
+                                              "a replay needs every joint's position in every message",
+                       where=where(short[0]), field="position")
+    remarks: list[Remark] = []
+    joints, velocity, effort = _series_rows(path, topics["joint_states"], rows, t, names, [where(r) for r in rows],
+                                            remarks)
     gaps = _gaps(topics["joint_states"], t)
     wrench = None
     if raw["wrench"]:
         ws = sorted(raw["wrench"], key=lambda r: r[0])
+        values = np.array([_vec(r[3].wrench.force) + _vec(r[3].wrench.torque) for r in ws])
+        refuse_rows(path, "wrench", values, [where(r) for r in ws],
+                    [f"wrench.{a}.{x}" for a in ("force", "torque") for x in "xyz"])
+        frame = ws[0][3].header.frame_id
+        other = next((r for r in ws if r[3].header.frame_id != frame), None)
+        if other is not None:
+            raise BagError(path, "wrench", f"is in frame '{other[3].header.frame_id}', the first message in '{frame}': "
+                                           "the recorded wrench is replayed in one frame (name it with the "
+                                           "recorded-wrench patient's frame, or record one frame)",
+                           where=where(other), field="header.frame_id")
         tw = np.array([(r[0] - t0) * 1e-9 for r in ws])
-        values = np.array([_vec(r[2].wrench.force) + _vec(r[2].wrench.torque) for r in ws])
-        wrench = Series(topics["wrench"], tw, values, frame=ws[0][2].header.frame_id)
+        wrench = Series(topics["wrench"], tw, values, frame=frame)
         gaps += _gaps(topics["wrench"], tw)
-    targets = []
-    for ns, msgtype, msg in sorted(raw["targets"], key=lambda r: r[0]):
-        frame = getattr(getattr(msg, "header", None), "frame_id", "")
-        if msgtype.endswith("PointStamped"):
-            shown = ShownTarget((ns - t0) * 1e-9, "point", np.array(_vec(msg.point)), frame)
-        elif msgtype.endswith("PoseStamped"):
-            o = msg.pose.orientation
-            shown = ShownTarget((ns - t0) * 1e-9, "pose", np.array(_vec(msg.pose.position) + [o.x, o.y, o.z, o.w]),
-                                frame)
-        else:
-            shown = ShownTarget((ns - t0) * 1e-9, "joints", np.asarray(msg.position, float), frame, list(msg.name))
-        targets.append(shown)
-    return SessionBag(path, joints, field_series("velocity"), field_series("effort"), wrench, targets, gaps)
+    targets = [_shown(path, r, where(r), t0) for r in sorted(raw["targets"], key=lambda r: r[0])]
+    return SessionBag(path, joints, velocity, effort, wrench, targets, gaps, t0, remarks)
+
+
+def _shown(path: Path, r: tuple, at: Where, t0: int) -> ShownTarget:
+    """A target message as shown: refused where a number is not finite, or a pose's orientation is no rotation."""
+    ns, _, msgtype, msg = r
+    frame = getattr(getattr(msg, "header", None), "frame_id", "")
+    if msgtype.endswith("PointStamped"):
+        kind, values, fields = "point", np.array(_vec(msg.point)), [f"point.{x}" for x in "xyz"]
+    elif msgtype.endswith("PoseStamped"):
+        o = msg.pose.orientation
+        kind, values = "pose", np.array(_vec(msg.pose.position) + [o.x, o.y, o.z, o.w])
+        fields = [f"pose.position.{x}" for x in "xyz"] + [f"pose.orientation.{x}" for x in "xyzw"]
+    else:
+        kind, values = "joints", np.asarray(msg.position, float)
+        fields = [f"position[{n}]" for n in msg.name]
+        if len(values) != len(msg.name):
+            raise BagError(path, "targets", f"gives {len(values)} positions for the joints {list(msg.name)}: a "
+                                            "posture target needs one per joint", where=at, field="position")
+    words = [f"position of '{n}'" for n in msg.name] if kind == "joints" else None
+    refuse_rows(path, "targets", values[None], [at], fields, words)
+    if kind == "pose" and not 0.5 < np.linalg.norm(values[3:]) < 1.5:
+        raise BagError(path, "targets", f"pose.orientation {values[3:].tolist()} is no rotation (a unit quaternion "
+                                        "x, y, z, w): give the hand's orientation, or send a PointStamped for a "
+                                        "position alone", where=at, field="pose.orientation")
+    return ShownTarget((ns - t0) * 1e-9, kind, values, frame, list(getattr(msg, "name", [])), at)

@@ -205,8 +205,14 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
             self._support[geoms[:, 1]] & self._floor[geoms[:, 0]])
         hits = np.flatnonzero((robot[:, 0] != robot[:, 1]) & ~support)
         self._quiet_pairs = b"" if len(hits) else pairs
-        return [Contact(m.geom(int(geoms[i, 0])).name, m.geom(int(geoms[i, 1])).name,
+        first = np.where(robot[:, 0], 0, 1)  # (the robot's geom first)
+        return [Contact(self._geom_label(int(geoms[i, first[i]])), self._geom_label(int(geoms[i, 1 - first[i]])),
                         d.contact.pos[i].copy(), float(-d.contact.dist[i])) for i in hits]
+
+    def _geom_label(self, g: int) -> str:
+        """A geom's name, or its body's where it has none (a URDF's collision shapes are unnamed)."""
+        m = self.model
+        return m.geom(g).name or m.body(int(m.geom_bodyid[g])).name
 
     def base_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         if self._root_joint is None:

@@ -99,6 +99,28 @@ def engage_brakes(model: mujoco.MjModel, dofs, torque: np.ndarray) -> None:
     model.dof_solimp[dofs, :3] = [0.99, 0.999, 0.001]
 
 
+DEFAULT_SOLREF = (0.02, 1.0)  # MuJoCo's own, which a file that chose no softness for its joints' friction has
+DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
+DRY = (0.9999, 0.9999, 0.001, 0.5, 2.0)  # MuJoCo's hardest impedance
+
+
+def dry_friction(spec: mujoco.MjSpec, timestep: float) -> list[str]:
+    """Make each joint's declared Coulomb friction (MuJoCo's ``frictionloss``, a URDF's ``<dynamics friction>``)
+    dry, as declared: under MuJoCo's default softness a joint held by less torque than its friction creeps at
+    ``r·τ / (m·b)`` (r = 0.11, b = 105 /s), about 7 rad/s on the 1.4e-4 kg·m² wrist of an xArm7 that declares 1 N·m
+    — friction a light joint then barely has, while the controllers' model says it has all of it. At the hardest
+    impedance and a two-step time constant it creeps at 0.04 °/s. A joint whose file chose its own softness
+    (``solreffriction``/``solimpfriction``) keeps it. Returns the joints changed."""
+    changed = []
+    for joint in spec.joints:
+        if joint.frictionloss > 0 and np.allclose(joint.solref_friction, DEFAULT_SOLREF) \
+                and np.allclose(joint.solimp_friction, DEFAULT_SOLIMP):
+            joint.solref_friction = [2 * timestep, 1.0]
+            joint.solimp_friction = list(DRY)
+            changed.append(joint.name)
+    return changed
+
+
 def build_scene(robot: RobotModel, world: World, timestep: float, integrator: str = "implicitfast") -> mujoco.MjSpec:
     """An MjSpec with the robot (torque-driven: its own actuators removed) and the world objects.
 
@@ -114,6 +136,7 @@ def build_scene(robot: RobotModel, world: World, timestep: float, integrator: st
     spec.option.timestep = timestep
     spec.option.integrator = INTEGRATORS[integrator]
     spec.option.gravity = robot.gravity
+    dry_friction(spec, timestep)
     spec.visual.global_.offwidth, spec.visual.global_.offheight = 1920, 1440  # room for camera sensors
     # a 1024² shadow map instead of MuJoCo's 4096²: the same frames to 0.02 grey levels on average, at less than
     # half the cost on a CPU renderer, where the shadow pass is most of a frame

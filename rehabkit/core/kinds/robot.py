@@ -84,6 +84,16 @@ class Robot(ABC):
             raise ValueError(f"robot '{self.model.name}' has no body or site '{name}'{suggest(name, frames)}")
         return m.getFrameId(name)
 
+    def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """Joint torques moving the robot at ``q``, ``qd``, ``qdd``: its rigid bodies and rotors (Pinocchio's RNEA,
+        with the ``armature`` the file declares) and what its joints lose (the declared damping and Coulomb
+        friction, :attr:`RobotModel.dissipation`). Default: Pinocchio."""
+        import pinocchio as pin
+
+        q, qd = np.asarray(q, float), np.asarray(qd, float)
+        return pin.rnea(self.model.pin_model, self._data(), q, qd, np.asarray(qdd, float)) \
+            + self.model.dissipation.torque(qd)
+
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """Joint torques holding the robot still against gravity at ``q``. Default: Pinocchio's RNEA at rest
         (``computeGeneralizedGravity``: its velocity and acceleration terms left out, not added as zeros)."""

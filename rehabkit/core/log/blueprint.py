@@ -2,8 +2,9 @@
 
 Built from what the recording holds, in a fixed order, so the same file opens the same way every time: the 3-D
 scene framed on the robot, the person and the targets (not the whole floor); the events, notes and verdicts as a
-text log; a panel per joint with its measured and reference angles and its limits; the joints' speeds, torques
-and tracking errors; a panel per sensor reading; and a panel per group of the plugins' own series (a series
+text log; a panel per joint with its measured and reference positions and its limits (a revolute joint's in degrees,
+a prismatic joint's in metres); the joints' speeds, torques (a prismatic joint's forces) and tracking errors, a panel
+per unit; a panel per sensor reading; and a panel per group of the plugins' own series (a series
 ``patient/cuff_force_n/upper_arm`` lands with the other ``patient/cuff_force_n/*``, ``controller/...`` in the
 controller's) — which is how a plugin contributes a panel: by the names of the series it returns.
 """
@@ -59,6 +60,7 @@ class Contents:
     """What a recording holds, gathered as it is written (entity paths in the order they first came)."""
 
     joints: list[str]
+    units: list[str] | None = None  # each joint's unit: deg (revolute) or m (prismatic); None: all deg
     scene_points: list[np.ndarray] = field(default_factory=list)  # world points the 3-D view must hold
     sensors: dict[str, dict[str, bool]] = field(default_factory=dict)  # sensor -> reading key -> is an image
     series: list[str] = field(default_factory=list)  # the plugins' series, by path
@@ -90,12 +92,21 @@ def blueprint(contents: Contents) -> rrb.Blueprint:
     left = [scene, rrb.TextLogView(name="events, notes and verdicts", origin="events")]
     # (a humanoid's 29 panels leave no room for legends: the title names the joint, the colours say the rest)
     legend = rrb.PlotLegend(corner=rrb.Corner2D.LeftTop, visible=len(contents.joints) <= LEGENDS_UP_TO)
-    tabs = [rrb.Grid(*[rrb.TimeSeriesView(name=f"{j} [deg]", origin=f"joints/{j}", plot_legend=legend)
-                       for j in contents.joints], name="joint angles")]
-    tabs.append(rrb.Grid(rrb.TimeSeriesView(name="joint speeds [deg/s]", origin="joint_velocity_deg_s"),
-                         rrb.TimeSeriesView(name="joint torques [N·m]", origin="joint_torque_nm"),
-                         rrb.TimeSeriesView(name="tracking errors [deg]", origin="tracking_error_deg"),
-                         name="speeds, torques, errors"))
+    units = contents.units or ["deg"] * len(contents.joints)  # (a prismatic joint's panels in metres)
+    tabs = [rrb.Grid(*[rrb.TimeSeriesView(name=f"{j} [{u}]", origin=f"joints/{j}", plot_legend=legend)
+                       for j, u in zip(contents.joints, units)],
+                     name="joint angles" if "m" not in units else "joint positions")]
+    shared = []
+    if "deg" in units:
+        shared += [rrb.TimeSeriesView(name="joint speeds [deg/s]", origin="joint_velocity_deg_s"),
+                   rrb.TimeSeriesView(name="joint torques [N·m]", origin="joint_torque_nm"),
+                   rrb.TimeSeriesView(name="tracking errors [deg]", origin="tracking_error_deg")]
+    if "m" in units:
+        shared += [rrb.TimeSeriesView(name="joint speeds [m/s]", origin="joint_velocity_m_s"),
+                   rrb.TimeSeriesView(name="joint forces [N]", origin="joint_force_n"),
+                   rrb.TimeSeriesView(name="tracking errors [m]", origin="tracking_error_m")]
+    efforts = ", ".join(w for w, u in (("torques", "deg"), ("forces", "m")) if u in units)
+    tabs.append(rrb.Grid(*shared, name=f"speeds, {efforts}, errors"))
     for top, groups in _by_top(series_groups(contents.series)).items():
         tabs.append(rrb.Grid(*[rrb.TimeSeriesView(name=labelled(parent.split("/")[-1]) if parent != top else top,
                                                   origin=parent, contents=members)

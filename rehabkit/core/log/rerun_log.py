@@ -24,11 +24,19 @@ from rehabkit.core.log.archetypes import LIMIT_RGB, PALETTE, entity_part, paler,
 from rehabkit.core.log.blueprint import Contents, blueprint, labelled
 from rehabkit.core.log.buffers import TIMELINE, Drawings, SensorSeries
 
+# the joints' shared series: entity → (what it shows, its unit, whether it holds the revolute joints or the prismatic
+# ones)
+JOINT_SERIES = {"joint_velocity_deg_s": ("speed", "deg/s", True), "joint_torque_nm": ("effort", "N·m", True),
+                "tracking_error_deg": ("error", "deg", True), "joint_velocity_m_s": ("speed", "m/s", False),
+                "joint_force_n": ("effort", "N", False), "tracking_error_m": ("error", "m", False)}
+
 
 class RerunLog:
     """Buffers a run's data and writes it to ``path`` (optionally also to a spawned viewer)."""
 
-    def __init__(self, path: Path, application_id: str, joint_names: list[str], spawn: bool = False):
+    def __init__(self, path: Path, application_id: str, joint_names: list[str], spawn: bool = False,
+                 revolute: list[bool] | np.ndarray | None = None):
+        """``revolute``: which joints turn (their panels in degrees), the others slide (in metres); default all."""
         self.path = Path(path)
         self.tmp = self.path.with_name(self.path.name + ".tmp")
         self.rec = rr.RecordingStream(application_id)
@@ -45,7 +53,11 @@ class RerunLog:
                               stacklevel=2)
         self.joint_names = joint_names
         self.joint_parts = [entity_part(j) for j in joint_names]
-        self.contents = Contents(self.joint_parts)
+        self.revolute = np.ones(len(joint_names), bool) if revolute is None else np.asarray(revolute, bool)
+        # each joint in its own unit: a revolute joint's angle in degrees, a prismatic joint's position in metres
+        self.units = ["deg" if r else "m" for r in self.revolute]
+        self._scale = np.where(self.revolute, np.degrees(1.0), 1.0)
+        self.contents = Contents(self.joint_parts, self.units)
         # in wall-clock runs the column sends are queued and sent one per tick (:meth:`send_one`): a whole
         # flush (~6-8 ms here) in one tick would outlast a robot link's command watchdog
         self.deferred = False
@@ -55,19 +67,20 @@ class RerunLog:
         rec = self.rec
         self._drawings, self._sensors = Drawings(), SensorSeries(rec, self.contents)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        for i, (name, part) in enumerate(zip(joint_names, self.joint_parts)):
+        for i, (name, part, u) in enumerate(zip(joint_names, self.joint_parts, self.units)):
             rgb = PALETTE[i % len(PALETTE)]
-            rec.log(f"joints/{part}/measured_deg", rr.SeriesLines(names=[f"{name} measured [deg]"], colors=[rgb],
+            rec.log(f"joints/{part}/measured_{u}", rr.SeriesLines(names=[f"{name} measured [{u}]"], colors=[rgb],
                                                                   widths=[2.0]), static=True)
-            rec.log(f"joints/{part}/reference_deg", rr.SeriesLines(names=[f"{name} reference [deg]"],
+            rec.log(f"joints/{part}/reference_{u}", rr.SeriesLines(names=[f"{name} reference [{u}]"],
                                                                    colors=[paler(rgb)], widths=[1.25]), static=True)
-            rec.log(f"joints/{part}/limits_deg", rr.SeriesLines(
-                names=[f"{name} lower limit [deg]", f"{name} upper limit [deg]"], colors=[LIMIT_RGB] * 2,
+            rec.log(f"joints/{part}/limits_{u}", rr.SeriesLines(
+                names=[f"{name} lower limit [{u}]", f"{name} upper limit [{u}]"], colors=[LIMIT_RGB] * 2,
                 widths=[1.0, 1.0]), static=True)
-        colors = [PALETTE[i % len(PALETTE)] for i in range(len(joint_names))]
-        for series, unit in (("joint_velocity_deg_s", "deg/s"), ("joint_torque_nm", "N·m"),
-                             ("tracking_error_deg", "deg")):
-            rec.log(series, rr.SeriesLines(names=[f"{j} [{unit}]" for j in joint_names], colors=colors), static=True)
+        for series, (_, unit, turns) in JOINT_SERIES.items():
+            which = [i for i, r in enumerate(self.revolute) if r == turns]
+            if which:
+                rec.log(series, rr.SeriesLines(names=[f"{joint_names[i]} [{unit}]" for i in which],
+                                               colors=[PALETTE[i % len(PALETTE)] for i in which]), static=True)
 
     # -- static content -----------------------------------------------------
 
@@ -143,25 +156,29 @@ class RerunLog:
         return len(self._rows)
 
     def joint_series(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, q_ref: np.ndarray) -> None:
-        """Joint time series, sent as columns (rows at times ``t``)."""
+        """Joint time series, sent as columns (rows at times ``t``): each joint in its own unit (a revolute joint's
+        in degrees and N·m, a prismatic joint's in metres and N)."""
         if not len(t):
             return
-        t, deg = np.array(t), np.degrees
-        q_deg, ref_deg = deg(q), deg(q_ref)
-        for i, part in enumerate(self.joint_parts):
-            self._send(f"joints/{part}/measured_deg", t, lambda v=q_deg[:, i]: rr.Scalars.columns(scalars=v))
-            self._send(f"joints/{part}/reference_deg", t, lambda v=ref_deg[:, i]: rr.Scalars.columns(scalars=v))
-        for series, values in (("joint_velocity_deg_s", deg(qd)), ("joint_torque_nm", np.array(tau)),
-                               ("tracking_error_deg", ref_deg - q_deg)):
-            self._send(series, t, lambda v=values: rr.Scalars.columns(scalars=v))
+        t, scale = np.array(t), self._scale
+        q_own, ref_own = np.asarray(q) * scale, np.asarray(q_ref) * scale
+        for i, (part, u) in enumerate(zip(self.joint_parts, self.units)):
+            self._send(f"joints/{part}/measured_{u}", t, lambda v=q_own[:, i]: rr.Scalars.columns(scalars=v))
+            self._send(f"joints/{part}/reference_{u}", t, lambda v=ref_own[:, i]: rr.Scalars.columns(scalars=v))
+        values = {"speed": np.asarray(qd) * scale, "effort": np.array(tau), "error": ref_own - q_own}
+        for series, (what, _, turns) in JOINT_SERIES.items():
+            which = self.revolute == turns
+            if which.any():
+                part = values[what] if which.all() else values[what][:, which]
+                self._send(series, t, lambda v=part: rr.Scalars.columns(scalars=v))
 
     def joint_limits(self, t_end: float, lower: np.ndarray, upper: np.ndarray) -> None:
-        """Each joint's range as two flat lines over the run, in its angle panel."""
+        """Each joint's range as two flat lines over the run, in its position panel (in its own unit)."""
         t = np.array([0.0, max(t_end, 1e-3)])
-        for i, part in enumerate(self.joint_parts):
-            both = np.degrees([[lower[i], upper[i]]] * 2)
+        for i, (part, u) in enumerate(zip(self.joint_parts, self.units)):
+            both = np.array([[lower[i], upper[i]]] * 2) * self._scale[i]
             if np.all(np.isfinite(both)):
-                self._send(f"joints/{part}/limits_deg", t, lambda v=both: rr.Scalars.columns(scalars=v))
+                self._send(f"joints/{part}/limits_{u}", t, lambda v=both: rr.Scalars.columns(scalars=v))
 
     def frame_on(self, points_world: np.ndarray) -> None:
         """Points the 3-D view must hold (the robot's bodies, the person, the targets)."""

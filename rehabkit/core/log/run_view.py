@@ -51,7 +51,8 @@ class RunView:
         self._joint_space = False
         sc, out = setup.sc, setup.out_dir
         model = setup.robot.model
-        log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn)
+        log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn,
+                       revolute=model.revolute)
         if self._drawn:
             log.scene(setup.backend.visual_geoms())
         named = [(n, t) for n, t in setup.targets.items() if t.pose is not None]

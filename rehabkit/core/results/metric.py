@@ -102,7 +102,8 @@ CORE_METRICS: tuple[Metric, ...] = (
     Metric("tracking_max_deg", "deg", description="largest joint tracking error"),
     Metric("max_velocity_ratio", description="largest |joint speed| / speed limit"),
     Metric("max_torque_ratio", description="largest |torque| / effort limit"),
-    Metric("joint_limit_excess_deg", "deg", description="largest excursion beyond a joint's range"),
+    Metric("joint_limit_excess_deg", "deg", description="largest excursion beyond a revolute joint's range"),
+    Metric("joint_limit_excess_m", "m", description="largest excursion beyond a prismatic joint's range"),
     Metric("final_joint_error_deg", "deg", description="last posture against the last plan's goal (revolute joints)"),
     Metric("final_joint_error_m", "m", description="the same for prismatic joints"),
     Metric("tracking_max_m", "m", description="largest tracking error of a prismatic joint"),
@@ -113,7 +114,8 @@ CORE_METRICS: tuple[Metric, ...] = (
            "(where the controller makes the joint reference — Cartesian references, an HMI — its own)"),
     Metric("controller_tracking_rms_deg", "deg", description="RMS of the controller's own joint reference minus "
            "measured, where a joint-space controller exposes one (a compliant controller's yielded reference)"),
-    Metric("controller_tracking_max_deg", "deg", description="largest of the same"),
+    Metric("controller_tracking_max_deg", "deg", description="largest of the same (revolute joints)"),
+    Metric("controller_tracking_max_m", "m", description="the same for prismatic joints"),
     Metric("sim_time_s", "s", description="simulated time run"),
     Metric("task_complete", "1", description="1 when the run lasted until its last plan's end, or every reach "
            "got to its target and stayed, else 0: an unfinished task fails the run unless the scenario's "

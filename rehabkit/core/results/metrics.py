@@ -56,10 +56,15 @@ def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> t
         for j, (name, u) in enumerate(zip(robot.joint_names, ["deg" if t else "m" for t in turns], strict=True))
     } if err.size else {}
     if trace.q_ctrl is not None and (rows := np.isfinite(trace.q_ctrl).all(axis=1)).any():
-        own = np.degrees(trace.q_ctrl[rows] - trace.q[rows])  # what the controller meant, e.g. a compliant yield
-        metrics["controller_tracking_rms_deg"] = float(np.sqrt(np.mean(own**2)))
-        metrics["controller_tracking_max_deg"] = float(np.abs(own).max())
+        own = (trace.q_ctrl[rows] - trace.q[rows]) * scale  # what the controller meant, e.g. a compliant yield
+        if turns.any():
+            metrics["controller_tracking_rms_deg"] = float(np.sqrt(np.mean(own[:, turns] ** 2)))
+            metrics["controller_tracking_max_deg"] = float(np.abs(own[:, turns]).max())
+        if not turns.all():
+            metrics["controller_tracking_max_m"] = float(np.abs(own[:, ~turns]).max())
     metrics["joint_limit_excess_deg"] = joint_limit_excess(trace, robot)
+    if not turns.all():
+        metrics["joint_limit_excess_m"] = joint_limit_excess(trace, robot, revolute=False)
     if goal_q is not None and err.size:
         q_end = trace.q[-1]
         off, turns = np.abs(goal_q - q_end), np.asarray(robot.revolute, bool)
@@ -84,12 +89,15 @@ def cartesian_metrics(trace: Trace) -> dict[str, float]:
     }
 
 
-def joint_limit_excess(trace: Trace, robot: RobotModel) -> float:
-    """Largest excursion of any joint beyond its range over the run [deg] (0 if none)."""
-    if not len(trace.q):
+def joint_limit_excess(trace: Trace, robot: RobotModel, revolute: bool = True) -> float:
+    """Largest excursion of any revolute joint beyond its range over the run [deg] (0 if none); with ``revolute``
+    False, of any prismatic joint [m]."""
+    which = np.asarray(robot.revolute, bool) == revolute
+    if not len(trace.q) or not which.any():
         return 0.0
-    over = np.maximum(trace.q - robot.limits.upper, robot.limits.lower - trace.q)
-    return float(np.degrees(max(0.0, over.max())))
+    over = np.maximum(trace.q - robot.limits.upper, robot.limits.lower - trace.q)[:, which]
+    worst = max(0.0, float(over.max()))
+    return float(np.degrees(worst)) if revolute else worst
 
 
 def evaluate(expect: dict[str, Bound], metrics: dict[str, float]) -> list[dict]:

@@ -13,12 +13,14 @@ from rehabkit.core.results.metrics import Trace
 @dataclass
 class Movement:
     """One planned movement (a reach, for the outcome measures): control-step indices ``[k0, k1)``, the hand's
-    goal (robot base frame) and the goal in the planner's space (joint values, or the same position)."""
+    goal (robot base frame), the goal in the planner's space (joint values, or the same position) and the task target
+    it goes to (``name``; None where the plan's targets were not named, e.g. a controller's own plan)."""
 
     k0: int
     k1: int
     goal: np.ndarray
     target: np.ndarray
+    name: str | None = None
 
 
 @dataclass
@@ -54,4 +56,5 @@ class RunRecord:
     extra_metrics: dict[str, float] = field(default_factory=dict)  # the loop's own (sensor-thread overruns)
     no_plan: str | None = None  # why the first plan was refused or failed: the robot never moved
     interventions: list[Any] = field(default_factory=list)  # the safety layer's and the robot side's, in time order
+    first_contact: dict[str, Any] | None = None  # when, what and where the robot first touched something
 

@@ -20,7 +20,8 @@ from rehabkit.core.plugins.lifecycle import Contribution
 from rehabkit.core.results.metric import MetricCatalogue
 from rehabkit.core.results.metrics import Trace, evaluate, tracking_metrics
 from rehabkit.core.results.record import RunRecord
-from rehabkit.core.safety.stopping import stop_figures
+from rehabkit.core.results.tracking_causes import tracking_causes
+from rehabkit.core.safety.stopping import joint_inertia, stop_figures
 from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.version import __version__
 
@@ -82,6 +83,19 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
         metrics["plan_end_s"] = float(max(ends))
         metrics["task_complete"] = float(max(ends) <= sim_time + a.schedule.control_dt + 1e-9)  # (reaches: below)
     return metrics, per_joint
+
+
+def _tracking_why(a: Assembly, r: RunRecord) -> dict[str, Any] | None:
+    """Why the worst joint tracked badly, where it did (:func:`tracking_causes`)."""
+    trace, safety = r.trace, a.safety
+    if not len(trace.t):
+        return None
+    trip = (safety.tripped_at, safety.events[0].rule) if safety.tripped_at is not None and safety.events else None
+    try:
+        inertia = joint_inertia(a.robot.model, trace.q[0])
+    except Exception:  # noqa: BLE001 (no dynamics model to judge by)
+        inertia = None
+    return tracking_causes(trace, a.robot.model, trip, r.first_contact, inertia)
 
 
 def stop_metrics(a: Assembly, trace) -> dict[str, float]:
@@ -173,9 +187,11 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
                    "interventions": [e.as_dict() for e in interventions],
-                   "plan_warnings": r.plan_warnings, "estop_latched": a.backend.latched_estop()},
+                   "plan_warnings": r.plan_warnings, "estop_latched": a.backend.latched_estop(),
+                   **({"first_contact": r.first_contact} if r.first_contact else {})},
         "inputs": run_inputs(a, r),
         **({"task": task} if task is not None else {}),
+        **({"tracking": why} if (why := _tracking_why(a, r)) is not None else {}),
         **sections,
         "events": r.fired, "plans": r.plans, "notes": r.notes, "actions": r.acted,
         "reports": {name: text for name, s in a.sensors.items() if (text := s.report(metrics))},

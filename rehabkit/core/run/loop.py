@@ -58,6 +58,15 @@ def _stopped(st, safety, backend, t: float, dt: float, stop_after: float) -> boo
     return st.stopped
 
 
+def first_contact(t: float, c) -> dict:
+    """The first contact of a run, for its summary: when, which geoms (the robot's first), where, how deep."""
+    where = [round(float(v), 4) for v in c.position]
+    return {"t": round(t, 6), "robot": c.geom1, "other": c.geom2, "position_m": where,
+            "depth_mm": round(c.depth * 1000, 2),
+            "text": f"t={t:.3f}s: contact: {c.geom1} touched {c.geom2} at ({', '.join(f'{v:.3f}' for v in where)}) m, "
+                    f"{c.depth * 1000:.1f} mm deep"}
+
+
 def _idle(dof: int):
     zero = np.zeros(dof)
     return lambda *args: zero
@@ -144,7 +153,10 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                     k += 1
                     st.stopped = True
                     break
-            if contacts():
+            if touching := contacts():
+                if not contact_steps:  # the first one kept and said: what touched what, and where (a count alone
+                    st.first_contact = first_contact(t, touching[0])  # left a speed trip after a hit unexplained)
+                    view.event(t, st.first_contact["text"], level="WARN")
                 contact_steps += 1
             if k == next_log:
                 next_log += log_every

@@ -9,7 +9,7 @@ stretch between its waypoints, or the whole plan — whose goals are what a
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -42,16 +42,19 @@ class ReferenceBuffer:
         """The plan's positions at the control rate from step ``k0`` to the end of the run."""
         return plan.trajectory.sample(np.arange(len(self.pos) - k0) * self.dt)[0]
 
-    def install(self, k0: int, plan: Plan) -> np.ndarray:
-        """Follow ``plan`` from step ``k0``; returns its positions sampled from there."""
+    def install(self, k0: int, plan: Plan, names: Sequence[str] = ()) -> np.ndarray:
+        """Follow ``plan`` (through the targets ``names``) from step ``k0``; returns its positions sampled from
+        there."""
         x, xd, xdd = plan.trajectory.sample(np.arange(len(self.pos) - k0) * self.dt)
         self.pos[k0:], self.vel[k0:], self.acc[k0:] = x, xd, xdd
         self.goal = x[-1].copy()
-        self.add_movements(k0, plan, x)
+        self.add_movements(k0, plan, x, names)
         return x
 
-    def add_movements(self, k0: int, plan: Plan, x: np.ndarray) -> None:
-        """The plan's movements (a replan cuts the one under way); their goals from their start on."""
+    def add_movements(self, k0: int, plan: Plan, x: np.ndarray, names: Sequence[str] = ()) -> None:
+        """The plan's movements (a replan cuts the one under way); their goals from their start on. Each is named
+        after the target it goes to, the last ones after the last ``names`` (a plan's own start point comes
+        first, as the timeline counts them)."""
         self.movements = [m for m in self.movements if m.k0 < k0]
         if self.movements:
             self.movements[-1].k1 = min(self.movements[-1].k1, k0)
@@ -63,6 +66,8 @@ class ReferenceBuffer:
             new[-1].k1 = self.steps  # the last one may settle after its end
         else:
             new = [Movement(k0, self.steps, self._hand(x[-1]), x[-1].copy())]
+        for m, name in zip(reversed(new), reversed(names)):
+            m.name = name
         for m in new:
             self.goal_at[m.k0 :] = m.target
         self.movements += new

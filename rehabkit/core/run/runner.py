@@ -157,7 +157,8 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                        session.plans, session.gate.metrics, tl.fired, tl.acted, session.notes, session.gate.warnings,
                        extra, no_plan=first.reason if first is not None else None,
                        # the host's interventions and the robot side's (a bridge's held commands), in time order
-                       interventions=sorted(a.safety.interventions + a.backend.interventions(), key=lambda e: e.t))
+                       interventions=sorted(a.safety.interventions + a.backend.interventions(), key=lambda e: e.t),
+                       first_contact=session.loop.first_contact)
     summary = summarize(a, record, session.catalogue, session.view)
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:

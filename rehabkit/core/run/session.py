@@ -59,6 +59,7 @@ class LoopState:
     k: int = 0  # the next step to run
     due: int = 0  # the next step with something due besides the control (events, sensors)
     contact_steps: int = 0
+    first_contact: dict | None = None  # when, what and where the robot first touched something
     failed: bool = False  # the controller raised: the safety layer drives from then on
     stopped: bool = False  # ended for good: a stop event, a backend fault, or the safety stop has run its course
     braked: bool = False  # the torque went off after a trip and the brakes (if any) were applied
@@ -125,7 +126,7 @@ class RunSession:
             return
         if (warning := self.gate.warn_box(t, plan)) is not None:  # (the terminal's PLAN line, said in the recording)
             self.view.event(t, f"PLAN {warning}", level="WARN")
-        self._announce(k, self.gate.account(plan), self.ref.install(k, plan))
+        self._announce(k, self.gate.account(plan), self.ref.install(k, plan, request.names))
         self.timeline.following(request.names, t, plan.waypoint_times)
 
     def _refuse(self, refusal: PlanRefusal, q: np.ndarray, then: str = "") -> None:
@@ -149,7 +150,7 @@ class RunSession:
             raise PlanningError(problem)
         k0 = int(round(t / self.setup.schedule.control_dt))
         x = self.ref.sample(plan, k0)
-        self.ref.add_movements(k0, plan, x)
+        self.ref.add_movements(k0, plan, x, [t.name for t in targets])
         self._announce(k0, self.gate.account(plan), x)
         return plan
 

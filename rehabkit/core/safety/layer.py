@@ -43,7 +43,8 @@ class SafetyLayer:
     def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None,
                  hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):
         lim = robot.limits
-        margin = math.radians(config.position_margin_deg)
+        # (a revolute joint's margin in degrees, a prismatic joint's in metres)
+        margin = np.where(robot.revolute, math.radians(config.position_margin_deg), config.position_margin_m)
         self.names = robot.joint_names
         self._revolute = robot.revolute
         self.limits = lim  # the ranges, speeds and torques the run keeps to (the envelope's where narrower)
@@ -183,8 +184,8 @@ class SafetyLayer:
                         tau[:] = self.stopping.torque(t, q, qd)
                     return tau
                 j = int(np.argmax(over))
-                self._breach(t, q, LimitBreach("torque", self.names[j], float(tau[j]), float(self.effort[j])),
-                             "commanded", qd)
+                self._breach(t, q, LimitBreach("torque", self.names[j], float(tau[j]), float(self.effort[j]),
+                                               revolute=bool(self._revolute[j])), "commanded", qd)
             else:
                 self._diagnose(t, q, qd, tau)
         elif (breach := self._breaches.during_stop(q, qd)) is not None:  # a limit the stop did not hold: said

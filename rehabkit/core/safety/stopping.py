@@ -99,14 +99,18 @@ def joint_inertia(robot, q: np.ndarray) -> np.ndarray | None:
 
 
 def stable_gains(kp: float | np.ndarray, kd: float | np.ndarray, inertia: np.ndarray | None,
-                 dt: float) -> tuple[np.ndarray, np.ndarray]:
+                 dt: float, damping: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """PD gains per joint that a control period ``dt`` can apply stably: damping at most half the inertia / dt (a
     joint's speed decays without changing sign within a period, with a margin for the state's delay), the stiffness
     then at most critical for it (kd² / 4 m). A light joint (a small wrist) cannot take a heavy one's gains: at
-    kd·dt/m above 2 the hold oscillates and grows."""
+    kd·dt/m above 2 the hold oscillates and grows. A joint's own viscous ``damping`` d weighs as d·dt of inertia
+    over a period (the speed it takes away within one): a light wrist in a heavily damped drive bears stiffer
+    gains than its inertia alone."""
     kp, kd = np.asarray(kp, float), np.asarray(kd, float)
     if inertia is None:
         return kp, kd
+    if damping is not None:
+        inertia = inertia + np.asarray(damping, float) * dt
     cap = 0.5 * inertia / dt
     capped = kd > cap
     kd_eff = np.where(capped, cap, kd)
@@ -185,7 +189,8 @@ class Stopping:
         to each joint's inertia (taken where the robot first needs holding)."""
         if self._gains is None:
             inertia = joint_inertia(self.robot, np.where(np.isfinite(q), q, 0.0))
-            self._gains = stable_gains(self.config.hold_kp, self.config.hold_kd, inertia, self.gain_dt)
+            self._gains = stable_gains(self.config.hold_kp, self.config.hold_kd, inertia, self.gain_dt,
+                                       self.robot.dissipation.damping)
         return self._gains
 
     def hold_torque(self, posture: np.ndarray, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
@@ -217,8 +222,8 @@ class Stopping:
                 q_r, qd_r = stop.reference(t)
                 kp, kd = self.gains(q)
                 tau = kp * (q_r - q) + kd * (qd_r - qd)
-                if stop.feedforward is not None:
-                    tau += stop.feedforward
+                if stop.feedforward is not None:  # the ramp's deceleration, and what the joints lose at its speed
+                    tau += stop.feedforward + self.robot.dissipation.torque(qd_r)
                 if self.gravity is not None:
                     tau += self.gravity(q)
                 return np.clip(tau, -self.effort, self.effort)

@@ -14,17 +14,30 @@ Vec3 = tuple[float, float, float]
 
 
 class JointEnvelope(StrictModel):
-    """Limits of one joint, tighter than the robot's (a wider value changes nothing: the robot's own limits hold)."""
+    """Limits of one joint, tighter than the robot's (a wider value changes nothing: the robot's own limits hold). A
+    revolute joint's are in degrees and N·m (``range_deg``, ``velocity_deg_s``, ``torque_nm``), a prismatic joint's in
+    metres and newtons (``range_m``, ``velocity_m_s``, ``force_n``); the other kind's key is refused at its line."""
 
-    range_deg: tuple[float, float] | None = Field(None, description="[lowest, highest] position")
-    velocity_deg_s: float | None = Field(None, gt=0, description="largest speed")
-    torque_nm: float | None = Field(None, gt=0, description="largest torque")
+    range_deg: tuple[float, float] | None = Field(None, description="[lowest, highest] position of a revolute joint "
+                                                  "[deg]")
+    velocity_deg_s: float | None = Field(None, gt=0, description="largest speed of a revolute joint [deg/s]")
+    torque_nm: float | None = Field(None, gt=0, description="largest torque of a revolute joint [N·m]")
+    range_m: tuple[float, float] | None = Field(None, description="[lowest, highest] position of a prismatic joint "
+                                                "[m]")
+    velocity_m_s: float | None = Field(None, gt=0, description="largest speed of a prismatic joint [m/s]")
+    force_n: float | None = Field(None, gt=0, description="largest force of a prismatic joint [N]")
 
     @model_validator(mode="after")
     def _ordered(self) -> JointEnvelope:
-        if self.range_deg is not None and self.range_deg[0] >= self.range_deg[1]:
-            raise ValueError(f"range_deg must be [lowest, highest], got {list(self.range_deg)}")
+        for key in ("range_deg", "range_m"):
+            value = getattr(self, key)
+            if value is not None and value[0] >= value[1]:
+                raise ValueError(f"{key} must be [lowest, highest], got {list(value)}")
         return self
+
+    def given(self) -> list[str]:
+        """The keys this envelope sets."""
+        return [k for k in type(self).model_fields if getattr(self, k) is not None]
 
 
 class KeepInBox(StrictModel):
@@ -93,7 +106,10 @@ class ForceReaction(StrictModel):
 class SafetyConfig(StrictModel):
     """Safety-layer settings of a scenario: the envelope every command passes."""
 
-    position_margin_deg: float = Field(0.5, ge=0, description="tolerance beyond a joint's range before tripping")
+    position_margin_deg: float = Field(0.5, ge=0, description="tolerance beyond a revolute joint's range before "
+                                       "tripping")
+    position_margin_m: float = Field(0.005, ge=0, description="tolerance beyond a prismatic joint's range before "
+                                     "tripping [m]")
     velocity_factor: float = Field(1.0, gt=0, description="trip above this multiple of the velocity limit")
     torque_policy: Literal["clip", "stop"] = "clip"
     stop_category: dict[Literal[STOP_RULES], Literal[0, 1, 2]] = Field(  # type: ignore[valid-type]
@@ -106,7 +122,8 @@ class SafetyConfig(StrictModel):
     hold_kp: float = Field(60.0, gt=0, description="hold stiffness after a trip [N·m/rad]")
     hold_kd: float = Field(6.0, gt=0, description="hold damping after a trip [N·m·s/rad]")
     stop_after_s: float = Field(0.5, ge=0, description="keep simulating this long after a trip, then end the run")
-    joints: dict[str, JointEnvelope] = Field({}, description="per-joint limits tighter than the robot's")
+    joints: dict[str, JointEnvelope] = Field({}, description="per-joint limits tighter than the robot's: a revolute "
+                                             "joint's in degrees, a prismatic joint's in metres")
     keep_in: KeepInBox | None = Field(None, description="box the hand must stay in")
     interaction_force_n: float | None = Field(None, gt=0, description="largest force between person and robot "
                                                                        "at the hand")

@@ -55,7 +55,7 @@ from rehabkit.core.setup.checks import (
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from rehabkit.core.setup.force_source import ForceSource, LastForce
-from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint
+from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint, wrong_unit_keys
 from rehabkit.core.setup.person_safety import patient_slot, person_and_safety
 from rehabkit.core.setup.space import JointSpace, reference_space
 from rehabkit.core.setup.targets import resolve_targets
@@ -235,6 +235,12 @@ def _narrow_limits(a: Assembly) -> None:
     sc, model, source = a.sc, a.robot.model, a.loaded.source
     problems = [Diagnostic(source.key_marks.get(("safety", "joints", n), source.value_marks[()]),
                            f"safety.joints.{n}", msg) for n in sc.safety.joints if (msg := unknown_joint(n, model))]
+    # a revolute joint's limits in degrees, a prismatic joint's in metres: the other kind's key refused where written
+    problems += [Diagnostic(source.key_marks.get(("safety", "joints", w.joint, w.key),
+                                                 source.key_marks.get(("safety", "joints", w.joint),
+                                                                      source.value_marks[()])),
+                            f"safety.joints.{w.joint}.{w.key}", w.describe())
+                 for w in wrong_unit_keys({n: env.given() for n, env in sc.safety.joints.items()}, model)]
     try:
         asked = [nw for found in a.extensions.hook.rehabkit_narrow_limits(setup=a) for nw in found or ()]
     except ScenarioError as exc:  # every misnamed joint at once, the extensions' and the envelope's

@@ -9,6 +9,7 @@ from rehabkit.core.kinds.interfaces import PlanningError, PlanRequest
 from rehabkit.core.safety.keep_in import plan_exit
 from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.setup.checks import at_target
+from rehabkit.core.setup.dynamics_check import missing_inertia, plan_torque
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 
 
@@ -47,7 +48,9 @@ def check_first_plan(a: Assembly) -> list[str]:
         raise first_plan_refusal(a, exc) from exc
     if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
         raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
-    warnings = [w for w in (outlasting(a, plan.trajectory.duration),) if w]
+    warnings = [w for w in (outlasting(a, plan.trajectory.duration),) if w] + missing_inertia(a.robot, q0)
+    if a.planner.space == "joint":  # (what the joints need to follow it: a Cartesian plan's joints are the run's)
+        warnings += plan_torque(a.robot, plan.trajectory)
     if a.safety.keep_in is None:
         return warnings
     warning = plan_exit(0.0, plan.trajectory, a.space.hand_world, a.safety.keep_in)

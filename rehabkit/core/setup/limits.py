@@ -80,17 +80,81 @@ def narrow(robot: RobotModel, narrowings: Iterable[Narrowing]) -> tuple[JointLim
     return JointLimits(**arrays), sources
 
 
+# a joint envelope's keys by the kind of joint they are for, each with its counterpart on the other kind
+REVOLUTE_KEYS = {"range_deg": "range_m", "velocity_deg_s": "velocity_m_s", "torque_nm": "force_n"}
+PRISMATIC_KEYS = {v: k for k, v in REVOLUTE_KEYS.items()}
+KEY_UNITS = {"range_deg": "deg", "velocity_deg_s": "deg/s", "torque_nm": "N·m", "range_m": "m", "velocity_m_s": "m/s",
+             "force_n": "N"}
+
+
+@dataclass(frozen=True)
+class WrongUnitKey:
+    """A per-joint setting written in the other kind of joint's unit (``range_deg`` on a prismatic joint).
+
+    Attributes:
+        joint: The joint's name.
+        key: The key as written.
+        fix: The key its joint takes (``range_m``).
+        revolute: Whether the joint is revolute.
+        robot_value: The robot's own limit that key sets, in the joint's unit (``[0, 0.04] m``).
+    """
+
+    joint: str
+    key: str
+    fix: str
+    revolute: bool
+    robot_value: str
+
+    def describe(self) -> str:
+        """``finger is a prismatic joint: range_deg [deg] is for a revolute joint; write range_m instead, in m (the
+        robot's own: [0, 0.04] m)``."""
+        kind, other = ("revolute", "prismatic") if self.revolute else ("prismatic", "revolute")
+        return (f"{self.joint} is a {kind} joint: {self.key} [{KEY_UNITS[self.key]}] is for a {other} joint; write "
+                f"{self.fix} instead, in {KEY_UNITS[self.fix]} (the robot's own: {self.robot_value})")
+
+
+def wrong_unit_keys(given: dict[str, list[str]], model: RobotModel) -> list[WrongUnitKey]:
+    """The per-joint keys (joint name → keys written) that are for the other kind of joint than the robot's: a
+    degrees key on a prismatic joint, a metres one on a revolute joint. Joints the robot lacks are skipped (said
+    elsewhere)."""
+    out = []
+    for name, keys in given.items():
+        if name not in model.joint_names:
+            continue
+        j = model.joint_names.index(name)
+        revolute = bool(model.revolute[j])
+        wrong = PRISMATIC_KEYS if revolute else REVOLUTE_KEYS
+        lim, scale = model.limits, math.degrees(1.0) if revolute else 1.0
+        for key in keys:
+            if key not in wrong:
+                continue
+            fix = wrong[key]
+            own = {"range": f"[{lim.lower[j] * scale:.4g}, {lim.upper[j] * scale:.4g}]",
+                   "velocity": f"{lim.velocity[j] * scale:.4g}"}.get(fix.split("_")[0], f"{lim.effort[j]:.4g}")
+            out.append(WrongUnitKey(name, key, fix, revolute, f"{own} {KEY_UNITS[fix]}"))
+    return out
+
+
 def envelope_narrowings(safety) -> list[Narrowing]:
-    """The safety envelope's per-joint limits (``safety.joints``) as narrowings, source ``"safety"``."""
+    """The safety envelope's per-joint limits (``safety.joints``) as narrowings, source ``"safety"``: a revolute
+    joint's from degrees and N·m, a prismatic joint's from metres and N (which key fits which joint is checked
+    where the limits are narrowed: :func:`wrong_unit_keys`)."""
     out = []
     for name, env in safety.joints.items():
         if env.range_deg is not None:
             out += [Narrowing(name, "lower", math.radians(env.range_deg[0]), "safety"),
                     Narrowing(name, "upper", math.radians(env.range_deg[1]), "safety")]
+        if env.range_m is not None:
+            out += [Narrowing(name, "lower", float(env.range_m[0]), "safety"),
+                    Narrowing(name, "upper", float(env.range_m[1]), "safety")]
         if env.velocity_deg_s is not None:
             out.append(Narrowing(name, "velocity", math.radians(env.velocity_deg_s), "safety"))
+        if env.velocity_m_s is not None:
+            out.append(Narrowing(name, "velocity", float(env.velocity_m_s), "safety"))
         if env.torque_nm is not None:
             out.append(Narrowing(name, "effort", env.torque_nm, "safety"))
+        if env.force_n is not None:
+            out.append(Narrowing(name, "effort", env.force_n, "safety"))
     return out
 
 
@@ -104,7 +168,7 @@ class LimitBreach:
         value: What it was (SI units; a speed or torque as a magnitude when compared with one).
         limit: The limit it broke (the bound on the side it crossed).
         at_s: When, in seconds from the start of what was checked (a plan), if known.
-        revolute: Report in degrees (positions and speeds) rather than metres.
+        revolute: Report in degrees and N·m rather than metres and N (a prismatic joint's).
     """
 
     quantity: Quantity
@@ -116,8 +180,10 @@ class LimitBreach:
 
     def describe(self) -> str:
         """``elbow beyond its position limit at t+0.250s (131.2°, limit 120.0°)``: the one wording of a breach."""
-        if self.quantity == "torque":
-            v, lim, unit = self.value, self.limit, " N·m"
+        what = self.quantity
+        if self.quantity == "torque":  # (a prismatic joint's is a force)
+            v, lim, unit = self.value, self.limit, " N·m" if self.revolute else " N"
+            what = "torque" if self.revolute else "force"
         elif self.revolute:
             v, lim = math.degrees(self.value), math.degrees(self.limit)
             unit = "°" if self.quantity == "position" else " °/s"
@@ -125,7 +191,7 @@ class LimitBreach:
             v, lim, unit = self.value, self.limit, " m" if self.quantity == "position" else " m/s"
         when = f" at t+{self.at_s:.3f}s" if self.at_s is not None else ""
         d = next((d for d in range(1, 7) if f"{abs(v):.{d}f}" != f"{abs(lim):.{d}f}"), 6)  # (never "3.0, limit 3.0")
-        return f"{self.joint} beyond its {self.quantity} limit{when} ({v:.{d}f}{unit}, limit {lim:.{d}f}{unit})"
+        return f"{self.joint} beyond its {what} limit{when} ({v:.{d}f}{unit}, limit {lim:.{d}f}{unit})"
 
 
 def first_breach(limits: JointLimits, names: list[str], q: np.ndarray, qd: np.ndarray | None = None,

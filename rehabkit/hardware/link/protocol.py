@@ -69,6 +69,9 @@ STALE = 16
 LIMIT = 32
 # the first session after a latched e-stop was cleared: the host must ramp in
 RAMP_IN = 64
+# a person cleared a latched e-stop since the last reset (a CLEAR where nothing was latched leaves it unset: "not
+# latched")
+CLEARED = 128
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
 # (8 was v6's e-stop clear: now a CLEAR datagram, with the person's name)

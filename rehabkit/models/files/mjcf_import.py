@@ -34,7 +34,8 @@ class LimitOverride(StrictModel):
     range_m: tuple[float, float] | None = None
     velocity_deg_s: float | None = Field(None, gt=0)
     velocity_m_s: float | None = Field(None, gt=0)
-    effort: float | None = Field(None, gt=0)
+    effort: float | None = Field(None, gt=0, description="torque [N·m] of a revolute joint, force [N] of a "
+                                 "prismatic one")
 
 
 class ModelFileConfig(StrictModel):
@@ -178,6 +179,12 @@ def robot_from_file(
     for j, name in zip(joints, names):
         revolute = _MOVABLE[int(model.jnt_type[j])] == "revolute"
         o = config.limits.get(name, LimitOverride())
+        pairs = (("range_deg", "range_m"), ("velocity_deg_s", "velocity_m_s"))  # (each joint in its own unit)
+        if wrong := [(m, deg) if revolute else (deg, m) for deg, m in pairs
+                     if getattr(o, m if revolute else deg) is not None]:
+            kind, other = ("revolute (degrees)", "prismatic") if revolute else ("prismatic (metres)", "revolute")
+            raise ModelFileError(f"joint '{name}' is {kind}: {wrong[0][0]} is for a {other} joint; write "
+                                 f"{wrong[0][1]} instead", setting=("limits", name, wrong[0][0]))
         rng = o.range_deg if revolute else o.range_m
         if rng is not None:
             lo, hi = np.radians(rng) if revolute else rng

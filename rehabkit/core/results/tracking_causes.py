@@ -1,0 +1,62 @@
+"""Why a run tracked badly, from its own record: when the worst joint's error is over a degree (a millimetre for a
+sliding joint) rms, what the trace and the safety layer show happened to it — its torque at the limit, a safety stop,
+a contact, a model with no inertia there — so a failed ``tracking_*`` verdict comes with its reason."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rehabkit.core.results.metrics import Trace
+
+POOR_DEG, POOR_M = 1.0, 0.001  # rms tracking error above which the run says why
+AT_LIMIT = 0.999  # a torque this close to its effort limit was clipped
+
+
+def tracking_causes(trace: Trace, model, trip: tuple[float, str] | None, first_contact: dict | None,
+                    inertia: np.ndarray | None) -> dict[str, Any] | None:
+    """The worst-tracked joint (rms over its own unit's threshold) and what the record says of it, or None.
+
+    Args:
+        trace: The run's control-rate record.
+        model: The robot's :class:`~rehabkit.models.robot_model.RobotModel`.
+        trip: When the safety layer tripped and by which rule, if it did.
+        first_contact: The run's first contact (``safety.first_contact`` of the summary), if any.
+        inertia: Each joint's inertia as its own torque meets it at the start, if the model has dynamics.
+    """
+    if not len(trace.t):
+        return None
+    turns = np.asarray(model.revolute, bool)
+    err = trace.q_ref - trace.q
+    kept = np.isfinite(err).all(axis=1)  # (steps with a joint reference: none where a controller makes its own)
+    if not kept.any():
+        return None
+    scaled = np.where(turns, np.degrees(err[kept]) / POOR_DEG, err[kept] / POOR_M)  # (1.0: the threshold, any unit)
+    rms = np.sqrt(np.mean(scaled**2, axis=0))
+    j = int(np.argmax(rms))
+    if not rms[j] > 1.0:
+        return None
+    err = np.where(kept[:, None], err, 0.0)
+    unit, scale = ("°", np.degrees(1.0)) if turns[j] else ("m", 1.0)
+    k = int(np.nanargmax(np.abs(err[:, j])))
+    t_max = float(trace.t[k])
+    causes: list[str] = []
+    if trip is not None and trip[0] <= t_max:
+        causes.append(f"the safety layer stopped the robot at t={trip[0]:.3f} s ({trip[1]}): the reference went on "
+                      "without it")
+    if first_contact is not None and first_contact["t"] <= t_max:
+        causes.append(f"the robot touched something first at t={first_contact['t']:.3f} s ({first_contact['robot']} "
+                      f"against {first_contact['other']})")
+    effort = model.limits.effort[j]
+    clipped = int(np.count_nonzero(np.abs(trace.tau[:, j]) >= AT_LIMIT * effort))
+    if clipped:
+        causes.append(f"its torque was at its {effort:g} {'N·m' if turns[j] else 'N'} limit in {clipped} control steps")
+    if inertia is not None and inertia[j] < 1e-6:
+        causes.append(f"the model gives it {inertia[j]:.2g} {'kg·m²' if turns[j] else 'kg'} of inertia: gains scaled "
+                      "by the inertia have no stiffness there")
+    if not causes:
+        causes.append("no clipped torque, stop or contact: the controller's gains are low for this joint's load "
+                      "(stiffer gains, a higher bandwidth_hz, or the inverse-dynamics feedforward)")
+    return {"joint": model.joint_names[j], "unit": unit, "rms": float(rms[j] * (POOR_DEG if turns[j] else POOR_M)),
+            "max": float(abs(err[k, j]) * scale), "t_max": t_max, "causes": causes}
