@@ -206,3 +206,29 @@ def test_a_sweeps_runs_each_write_their_bag(tmp_path):
         ran = yaml.safe_load((tmp_path / row["run_dir"] / "scenario.yaml").read_text())
         assert ran["controller"]["bandwidth_hz"] == row["controller.bandwidth_hz"]  # (a numeric grid: its numbers)
     assert np.abs(finals[0] - finals[1]).max() > 1e-3
+
+
+def test_a_one_joint_robots_wrench_is_the_least_one_with_its_torque():
+    """A one-joint robot's Jacobian comes from Pinocchio as a vector; the bag's /wrench is still the least wrench
+    whose joint torque is the person's (the elbow dynamometer's bag failed on it)."""
+    from rehabkit.models.hand_force import least_wrenches
+
+    model = pin.Model()
+    joint = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "elbow")
+    model.appendBodyToJoint(joint, pin.Inertia.FromSphere(1.0, 0.05), pin.SE3.Identity())
+    hand = model.addFrame(pin.Frame("hand", joint, 0, pin.SE3(np.eye(3), np.array([0.3, 0.0, 0.0])),
+                                    pin.FrameType.OP_FRAME))
+    w = least_wrenches(model, np.array([[0.2], [0.4]]), np.array([1.5, -3.0]), hand)
+    # τ = 1.5 N·m about z, 0.3 m from the axis: the least wrench splits it between a force along y and a moment
+    # about z, in the ratio of the Jacobian's column (0.3, 1)
+    assert w.shape == (2, 6)
+    assert w[0, 1] == pytest.approx(1.5 * 0.3 / (0.3**2 + 1)) and w[0, 5] == pytest.approx(1.5 / (0.3**2 + 1))
+    assert w[1, 5] == pytest.approx(-3.0 / (0.3**2 + 1))
+
+
+def test_a_bag_of_a_robot_with_closed_loops_is_refused_by_validate_at_its_setting(capsys):
+    from rehabkit.cli.main import main
+
+    assert main(["validate", str(ROOT / "scenarios" / "capaman_obstacle.yaml"), "--set", "ros.bag=true"]) == 2
+    said = capsys.readouterr().err
+    assert "ros.bag: robot 'capaman' has no tree model" in said and "without --bag" in said

@@ -30,9 +30,10 @@ def least_wrenches(model, qs: np.ndarray, taus: np.ndarray, frame: int) -> np.nd
     import pinocchio as pin
 
     data = model.createData()
+    taus = np.asarray(taus, float).reshape(len(qs), -1)
     out = np.zeros((len(qs), 6))
-    for k in range(len(qs)):
-        J = pin.computeFrameJacobian(model, data, qs[k], frame, pin.LOCAL)
+    for k in range(len(qs)):  # (a one-joint robot's Jacobian comes from Pinocchio as a vector: a 6×1 column here)
+        J = pin.computeFrameJacobian(model, data, qs[k], frame, pin.LOCAL).reshape(6, -1)
         out[k] = J @ np.linalg.lstsq(J.T @ J, taus[k], rcond=None)[0]
     return out
 

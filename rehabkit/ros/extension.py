@@ -36,6 +36,27 @@ def _wanted(setup) -> bool:
 
 
 @hookimpl
+def rehabkit_narrow_limits(setup) -> list:
+    """No limits of its own: the robot built, a bag is refused (``validate`` says so, at the setting) for a robot
+    without a tree model — a parallel mechanism's closed loops, which neither a URDF nor /tf can hold — instead of
+    failing when the run opens it."""
+    spec = getattr(setup.sc, "ros", None)
+    if spec is None or not spec.bag:
+        return []
+    try:
+        setup.robot.model.pin_model
+    except Exception as exc:  # noqa: BLE001 (what Pinocchio says of it is the reason)
+        from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
+
+        source = setup.loaded.source
+        mark = source.key_marks.get(("ros", "bag")) or source.value_marks.get(("ros", "bag")) or source.value_marks[()]
+        raise ScenarioError([Diagnostic(mark, "ros.bag", f"robot '{setup.robot.model.name}' has no tree model for a "
+                                        f"bag's /robot_description and /tf (a closed kinematic loop: {exc}); run it "
+                                        "without --bag / ros.bag")]) from None
+    return []
+
+
+@hookimpl
 def rehabkit_run_opened(setup):
     if not _wanted(setup):
         return None

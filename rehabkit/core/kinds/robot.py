@@ -66,7 +66,7 @@ class Robot(ABC):
 
         fid = self.model.ee_frame_id if frame is None else self._frame_id(frame)
         return pin.computeFrameJacobian(self.model.pin_model, self._data(), np.asarray(q, float), fid,
-                                        pin.LOCAL_WORLD_ALIGNED).copy()
+                                        pin.LOCAL_WORLD_ALIGNED).reshape(6, -1)  # (a one-joint robot's: a column)
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """The joint-space inertia matrix M(q) (dof×dof, symmetric). Default: Pinocchio's CRBA."""
