@@ -299,24 +299,23 @@ def test_tracking_is_measured_against_the_plan_and_against_the_controllers_own_r
     assert "controller_tracking_rms_deg" not in run_scenario(HIT, {"duration": 0.5}).metrics  # joint-pd has none
 
 
-def test_a_plan_that_outlasts_the_run_is_warned_of_and_fails_the_run(tmp_path):
+def test_a_plan_that_outlasts_the_run_is_warned_of_and_fails_the_run(tmp_path, capsys):
     """segment_durations in milliseconds by mistake: validate warns at the setting with the numbers; the run says the
     task did not finish and exits 1 although its other verdicts pass (an arm that barely moved 'reaches' its goal:
     the last target is the first); a run cut short on purpose says so and passes."""
-    from tests.test_cli import cli
+    from rehabkit.cli.main import main
 
     p = tmp_path / "ms.yaml"
     p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\n"
                  "planner: {type: multi-cubic, segment_durations: [3000, 3000, 3000, 3000]}\nduration: 2\n")
-    v = cli("validate", str(p))
-    assert v.returncode == 0
+    assert main(["validate", str(p)]) == 0
     assert f"PLAN    planner.segment_durations ({p}:2:30): the plan lasts 1.2e+04 s and the run 2 s (duration at " \
-           f"{p}:3:1): the task cannot finish — 0.0% of it is run" in v.stdout
-    r = cli("run", str(p), "--out", str(tmp_path / "run"))
-    assert r.returncode == 1 and "TASK    incomplete: the plan ends at 1.2e+04 s, the run at 2 s (0.0% of it run)" \
-        in r.stdout
-    assert all(line.startswith("  PASS") for line in r.stdout.splitlines() if "expected" in line)  # (no verdict failed)
+           f"{p}:3:1): the task cannot finish — 0.0% of it is run" in capsys.readouterr().out
+    assert main(["run", str(p), "--out", str(tmp_path / "run")]) == 1
+    said = capsys.readouterr().out
+    assert "TASK    incomplete: the plan ends at 1.2e+04 s, the run at 2 s (0.0% of it run)" in said
+    assert all(line.startswith("  PASS") for line in said.splitlines() if "expected" in line)  # (no verdict failed)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["task"]["complete"] is False and summary["metrics"]["task_complete"] == 0
     p.write_text(p.read_text() + "expect: {task_complete: {eq: 0}}\n")  # (a rehearsal of the first seconds)
-    assert cli("run", str(p)).returncode == 0
+    assert main(["run", str(p)]) == 0

@@ -44,7 +44,7 @@ def rehabkit_narrow_limits(setup) -> list:
     if spec is None or not spec.bag:
         return []
     try:
-        setup.robot.model.pin_model
+        _ = setup.robot.model.pin_model  # (built here, or why not)
     except Exception as exc:  # noqa: BLE001 (what Pinocchio says of it is the reason)
         from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 

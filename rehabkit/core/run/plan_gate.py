@@ -14,7 +14,7 @@ from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
 from rehabkit.core.results.metric import MetricCatalogue, combine
 from rehabkit.core.safety.keep_in import plan_exit
-from rehabkit.core.setup.limits import LimitBreach
+from rehabkit.core.setup.limits import CHECK_DT, LimitBreach
 from rehabkit.core.setup.space import JointSpace
 
 
@@ -25,6 +25,7 @@ class PlanGate:
         self.planner, self.robot, self.safety, self.space = setup.planner, setup.robot, setup.safety, space
         self.scene_actions = tuple(scene_actions(setup.backend))
         self.catalogue = catalogue
+        self.duration = setup.sc.duration  # (what of a plan can run: up to the run's end)
         self.metrics: dict[str, float] = {}
         self.warnings: list[dict] = []
 
@@ -33,10 +34,10 @@ class PlanGate:
         settings make another); its ``PlanningError`` passes through."""
         return (planner or self.planner).plan(PlanRequest(t, q.copy(), qd.copy(), targets, self.robot))
 
-    def problem(self, plan: Plan) -> tuple[str | None, LimitBreach | None, tuple[str, ...]]:
-        """Why the plan must not run, with the limit breach or the scene actions the backend can't do when that is
-        why; ``(None, None, ())`` when it may run."""
-        breach = self.space.limit_breach(plan)
+    def problem(self, plan: Plan, t: float = 0.0) -> tuple[str | None, LimitBreach | None, tuple[str, ...]]:
+        """Why the plan made at ``t`` must not run, with the limit breach (up to the run's end) or the scene actions
+        the backend can't do when that is why; ``(None, None, ())`` when it may run."""
+        breach = self.space.limit_breach(plan, self.duration - t + CHECK_DT)
         if breach is not None:
             return f"planned trajectory: {breach.describe()}", breach, ()
         bad = tuple(sorted({kind for _, kind, _ in plan.actions if kind not in self.scene_actions}))

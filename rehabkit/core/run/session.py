@@ -120,7 +120,7 @@ class RunSession:
         except PlanningError as exc:
             self._refuse(PlanRefusal(t, f"planner failed: {exc}", error=exc, first=first), q)
             return
-        problem, breach, actions = self.gate.problem(plan)
+        problem, breach, actions = self.gate.problem(plan, t)
         if problem:
             self._refuse(PlanRefusal(t, problem, breach=breach, actions=actions, first=first), q, "; not executed")
             return
@@ -145,7 +145,7 @@ class RunSession:
         Raises :class:`PlanningError` with the reason when there is none.
         """
         plan = self.gate.ask(t, q, qd, targets)
-        problem, _, _ = self.gate.problem(plan)
+        problem, _, _ = self.gate.problem(plan, t)
         if problem:
             raise PlanningError(problem)
         k0 = int(round(t / self.setup.schedule.control_dt))

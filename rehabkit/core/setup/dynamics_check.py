@@ -20,13 +20,14 @@ def _own_dynamics(robot: Robot) -> bool:
     return kind.inverse_dynamics is Robot.inverse_dynamics and kind.gravity_torque is Robot.gravity_torque
 
 
-def plan_torque(robot: Robot, trajectory, start_s: float = 0.0) -> list[str]:
-    """Each joint whose torque along ``trajectory`` comes within 10 % of its effort limit or beyond: how much, when,
-    and the fix."""
+def plan_torque(robot: Robot, trajectory, within: float | None = None) -> list[str]:
+    """Each joint whose torque along ``trajectory`` (its first ``within`` seconds, where only they run) comes within
+    10 % of its effort limit or beyond: how much, when, and the fix."""
     if not _own_dynamics(robot):
         return []
     model = robot.model
-    t = np.linspace(0.0, float(trajectory.duration), SAMPLES)
+    span = float(trajectory.duration) if within is None else min(float(trajectory.duration), within)
+    t = np.linspace(0.0, span, SAMPLES)
     q, qd, qdd = trajectory.sample(t)
     try:
         tau = np.array([robot.inverse_dynamics(q[i], qd[i], qdd[i]) for i in range(len(t))])
@@ -43,7 +44,7 @@ def plan_torque(robot: Robot, trajectory, start_s: float = 0.0) -> list[str]:
         fix = (f"holding that posture alone takes {still:.4g} {unit}: a posture the joint cannot hold against "
                "gravity (other targets, or a higher limit if the drive has it)" if still > NEAR_LIMIT * limit
                else "a slower plan: longer segment durations")
-        said.append(f"{model.joint_names[j]}: the first plan needs {tau[k, j]:+.4g} {unit} at t={start_s + t[k]:.2f} "
+        said.append(f"{model.joint_names[j]}: the first plan needs {tau[k, j]:+.4g} {unit} at t={t[k]:.2f} "
                     f"s, {over} its {limit:g} {unit} effort limit ({share[k, j]:.0%}): its torque will be clipped and "
                     f"it will lag; {fix}")
     return said

@@ -11,6 +11,7 @@ from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.setup.checks import at_target
 from rehabkit.core.setup.dynamics_check import missing_inertia, plan_torque
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.core.setup.limits import CHECK_DT
 
 
 def start_posture(a: Assembly) -> np.ndarray:
@@ -46,11 +47,11 @@ def check_first_plan(a: Assembly) -> list[str]:
         plan = a.planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), [a.targets[n] for n in names], a.robot))
     except PlanningError as exc:
         raise first_plan_refusal(a, exc) from exc
-    if (breach := a.space.limit_breach(plan)) is not None:  # as the run's plan gate checks it
+    if (breach := a.space.limit_breach(plan, a.sc.duration + CHECK_DT)) is not None:  # as the run's plan gate does
         raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
     warnings = [w for w in (outlasting(a, plan.trajectory.duration),) if w] + missing_inertia(a.robot, q0)
     if a.planner.space == "joint":  # (what the joints need to follow it: a Cartesian plan's joints are the run's)
-        warnings += plan_torque(a.robot, plan.trajectory)
+        warnings += plan_torque(a.robot, plan.trajectory, a.sc.duration)
     if a.safety.keep_in is None:
         return warnings
     warning = plan_exit(0.0, plan.trajectory, a.space.hand_world, a.safety.keep_in)

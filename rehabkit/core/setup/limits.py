@@ -135,6 +135,37 @@ def wrong_unit_keys(given: dict[str, list[str]], model: RobotModel) -> list[Wron
     return out
 
 
+# the envelope's settings for every joint of one kind (safety.*, safety.reactions.*), each with its counterpart
+KIND_SETTINGS = {"position_margin_deg": "position_margin_m", "stop_decel_deg_s2": "stop_decel_m_s2",
+                 "yield_speed_deg_s": "yield_speed_m_s", "max_speed_deg_s": "max_speed_m_s", "wall_deg": "wall_m",
+                 "retreat_speed_deg_s": "retreat_speed_m_s"}
+SETTING_UNITS = {"position_margin_deg": "deg", "stop_decel_deg_s2": "deg/s²", "yield_speed_deg_s": "deg/s",
+                 "max_speed_deg_s": "deg/s", "wall_deg": "deg", "retreat_speed_deg_s": "deg/s",
+                 "position_margin_m": "m", "stop_decel_m_s2": "m/s²", "yield_speed_m_s": "m/s", "max_speed_m_s": "m/s",
+                 "wall_m": "m", "retreat_speed_m_s": "m/s"}
+
+
+def wrong_kind_settings(given: Iterable[str], model: RobotModel) -> dict[str, str]:
+    """The settings among ``given`` (keys written) that hold for a kind of joint the robot has none of — a degrees
+    one on a robot whose joints all slide, a metres one on a robot whose joints all turn — each with its message:
+    ``robot 'hit' has no prismatic joint: wall_m [m] is for prismatic joints; write wall_deg instead, in deg, for
+    its revolute joints``."""
+    metres = {v: k for k, v in KIND_SETTINGS.items()}
+    has = {True: bool(np.any(model.revolute)), False: not bool(np.all(model.revolute))}
+    out = {}
+    for key in given:
+        if key not in KIND_SETTINGS and key not in metres:
+            continue
+        turns = key in KIND_SETTINGS
+        if has[turns]:
+            continue
+        fix = KIND_SETTINGS[key] if turns else metres[key]
+        kind, other = ("revolute", "prismatic") if turns else ("prismatic", "revolute")
+        out[key] = (f"robot '{model.name}' has no {kind} joint: {key} [{SETTING_UNITS[key]}] is for {kind} joints; "
+                    f"write {fix} instead, in {SETTING_UNITS[fix]}, for its {other} joints")
+    return out
+
+
 def envelope_narrowings(safety) -> list[Narrowing]:
     """The safety envelope's per-joint limits (``safety.joints``) as narrowings, source ``"safety"``: a revolute
     joint's from degrees and N·m, a prismatic joint's from metres and N (which key fits which joint is checked
@@ -231,10 +262,12 @@ def outside(q: np.ndarray, limits: JointLimits, tol: float = 1e-9) -> list[int]:
 CHECK_DT = 0.005  # plans are checked at this resolution [s]
 
 
-def plan_breach(plan, model) -> LimitBreach | None:
+def plan_breach(plan, model, within: float | None = None) -> LimitBreach | None:
     """The first joint limit of ``model`` a joint-space plan (:class:`~rehabkit.core.kinds.interfaces.Plan`) breaks,
-    sampled every ``CHECK_DT``."""
-    ts = np.arange(0.0, plan.trajectory.duration + 1e-9, CHECK_DT)
+    sampled every ``CHECK_DT`` — over the first ``within`` seconds where only they can run (the run ends: a plan of
+    12,000 s, segment durations in milliseconds by mistake, took 2.8 s to check in a 2-s run)."""
+    span = plan.trajectory.duration if within is None else min(plan.trajectory.duration, max(within, 0.0))
+    ts = np.arange(0.0, span + 1e-9, CHECK_DT)
     qs, qds, _ = plan.trajectory.sample(ts)
     # a plan starts where the robot is: a joint resting a hair past its range (a simulated limit gives a little, a
     # target exactly at the limit) may stay there, not go further

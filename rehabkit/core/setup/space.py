@@ -52,9 +52,9 @@ class JointSpace:
         """Where reference points (rows) put the hand, in the world."""
         return self.robot.ee_world(xs)
 
-    def limit_breach(self, plan: Plan) -> LimitBreach | None:
-        """The first joint limit of the run a plan breaks."""
-        return plan_breach(plan, self.robot.model)
+    def limit_breach(self, plan: Plan, within: float | None = None) -> LimitBreach | None:
+        """The first joint limit of the run a plan breaks (in its first ``within`` seconds, where only they run)."""
+        return plan_breach(plan, self.robot.model, within)
 
     def allocate(self, trace: Trace, ref_q: np.ndarray, ref_qd: np.ndarray) -> None:
         """The trace's reference columns: the planned reference, or the controller's own where it makes one; and,
@@ -110,7 +110,7 @@ class CartesianSpace(JointSpace):
     def hand_world(self, xs: np.ndarray) -> np.ndarray:
         return self.robot.model.to_world(np.asarray(xs)[:, :3])
 
-    def limit_breach(self, plan: Plan) -> LimitBreach | None:
+    def limit_breach(self, plan: Plan, within: float | None = None) -> LimitBreach | None:
         return None  # mapped to the joints by the controller, which the safety layer checks step by step
 
     def allocate(self, trace: Trace, ref_q: np.ndarray, ref_qd: np.ndarray) -> None:
