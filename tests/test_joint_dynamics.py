@@ -75,7 +75,7 @@ def test_gains_auto_with_the_inverse_dynamics_feedforward_tracks_a_robot_with_it
     lagging = run_scenario(_scenario(tmp_path, controller={"type": "joint-pd", "gains": "auto"}))
     why = lagging.summary["tracking"]
     assert lagging.metrics["tracking_rms_deg"] > 1.0
-    assert why["joint"] == "roll" and why["unit"] == "°" and 2.0 < why["rms"] < 6.0
+    assert why["joint"] == "roll" and why["unit"] == "deg" and 2.0 < why["rms"] < 6.0
     assert len(why["causes"]) == 1 and "gains are low" in why["causes"][0]
 
 

@@ -101,6 +101,9 @@ def test_yaml_syntax_error_is_located(tmp_path):
      "the key above it"),
     ("name: x\nrobot:\n  type: hit\n ee: 1\n", "4:2", "this line's indentation does not match its section's"),
     ("name: x\nrobot: {type: hit\n", "3:1", "a mapping in {braces} not closed"),
+    # (PyYAML notices a missing ': ' on the line after: said at the line missing it)
+    ("name: x\nrobot:\n  type: dh\n  name:arm3\n  convention: standard\n", "4:3",
+     "a ':' missing, or the space after it"),
 ])
 def test_yaml_syntax_is_said_in_plain_words_with_its_usual_cause(tmp_path, text, where, says):
     """PyYAML's own words ('mapping values are not allowed in this context') stay, in parentheses, after them."""

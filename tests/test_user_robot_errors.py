@@ -168,7 +168,8 @@ def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
     r = cli("validate", str(p))
     assert r.returncode == 2 and "task.targets.1.position: " in r.stderr
     assert "out of reach: no pose solution within the joint limits; its orientation is A's, whose joint values are " \
-           "all within ±2π: written in radians? joints_deg takes degrees (joints_rad takes radians)" in r.stderr
+           "all within ±2π: written in radians? joints_deg takes degrees (joints_rad takes SI: radians, and " \
+           "metres)" in r.stderr
     urdf = tmp_path / "knee.urdf"  # (a joint that cannot go below 0.5 rad, 28.6°)
     urdf.write_text((DATA / "arm2.urdf").read_text().replace('lower="-2" upper="2"', 'lower="0.5" upper="2"'))
     p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nrobot: {{type: urdf, file: {urdf}, ee_frame: l2}}\n"

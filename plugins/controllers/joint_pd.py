@@ -54,6 +54,8 @@ class JointPD(Controller):
         else:
             self.kp = self._gains(config.kp, n, "kp")
             self.kd = self._gains(config.kd, n, "kd")
+            if context.note is not None and (said := self._ringing(context)):
+                context.note(0.0, said)
         self.mode = config.feedforward
         self._dissipation = model.dissipation if model.dissipation.any else None
         self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
@@ -61,6 +63,28 @@ class JointPD(Controller):
         if self._inverse_dynamics or self.auto:
             self._model = model.pin_model
             self._data = self._model.createData()
+
+    def _ringing(self, context: Context) -> str:
+        """The joints whose damping gain a control period cannot apply to their inertia (taken mid-range): kd·dt/I
+        above 2 — the drive's own damping d counted as d·dt of inertia — rings and trips the speed limit at once
+        (an SO-100's gripper at the default kd: 833). Said at the setting, with the most it can take."""
+        robot, dt = context.robot, context.control_dt
+        model = robot.model
+        try:
+            inertia = 1.0 / np.diag(np.linalg.inv(robot.mass_matrix((model.limits.lower + model.limits.upper) / 2)))
+        except Exception:  # noqa: BLE001 (a robot without a dynamic model: nothing to judge by)
+            return ""
+        inertia = inertia + model.dissipation.damping * dt
+        ratio = self.kd * dt / inertia
+        bad = [j for j in range(model.dof) if ratio[j] > 2.0]
+        if not bad:
+            return ""
+        unit = {True: ("N·m·s/rad", "kg·m²"), False: ("N·s/m", "kg")}
+        each = "; ".join(f"{model.joint_names[j]}: kd {self.kd[j]:g} {unit[bool(model.revolute[j])][0]} against "
+                         f"{inertia[j]:.2g} {unit[bool(model.revolute[j])][1]} (kd·dt/I = {ratio[j]:.3g}; at most "
+                         f"{2 * inertia[j] / dt:.3g})" for j in bad)
+        return (f"controller.kd: more damping than a {dt * 1000:g}-ms period can apply to the joint's inertia — it "
+                f"rings and trips the speed limit: {each}; lower kd there (and kp with it), or gains: auto")
 
     @staticmethod
     def _gains(value: float | list[float], n: int, name: str) -> np.ndarray:

@@ -24,7 +24,7 @@ def cmd_assess(args: argparse.Namespace) -> int:
     except ScenarioError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_INVALID
-    except ValueError as exc:  # a --set or --stretch that is not key=value
+    except ValueError as exc:  # a --set or --stretch that is not key=value, a --joints the robot cannot assess
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INVALID
     except SetupError as exc:

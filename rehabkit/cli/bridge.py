@@ -73,7 +73,8 @@ def cmd_bridge(args: argparse.Namespace) -> int:
         except (ValueError, KeyError, TypeError) as exc:
             _err(f"error: --limits needs lower, upper and velocity per joint: {exc}")
             return EXIT_INVALID
-    backstop = BridgeLimits(lower, upper, velocity, margin=np.radians(args.limit_margin_deg))
+    backstop = BridgeLimits(lower, upper, velocity, margin=np.radians(args.limit_margin_deg),
+                            margin_m=args.limit_margin_m, revolute=robot.model.revolute)
     from rehabkit.hardware.config import HardwareConfig  # its defaults are the host's: a bridge by hand agrees
 
     defaults = HardwareConfig.model_fields
@@ -162,8 +163,13 @@ def add_parser(sub) -> None:
     b.add_argument("--limits", default=None, metavar="JSON",
                    help="the run's joint limits {lower, upper, velocity} (default: the robot's); beyond them by the "
                         "margin, or 25%% too fast, the bridge holds the robot on its own")
+    # (the defaults are bridge_limits.MARGIN_DEG and MARGIN_M, not imported here: numpy would come with them)
     b.add_argument("--limit-margin-deg", type=float, default=2.0,
-                   help="how far beyond a joint's range the bridge's own check trips (the host's trips at 0.5°)")
+                   help="how far beyond a revolute joint's range the bridge's own check trips (the host's trips at "
+                        "0.5°)")
+    b.add_argument("--limit-margin-m", type=float, default=0.01,
+                   help="how far beyond a prismatic joint's range the bridge's own check trips, in metres (the "
+                        "host's trips at 5 mm)")
     b.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: never)")
     b.add_argument("--lockstep", action="store_true",
                    help="tick once per host tick, on the host's clock (backend.clock: lockstep), not the wall's")

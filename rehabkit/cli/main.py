@@ -95,8 +95,11 @@ def _admission(loaded) -> str:
     from rehabkit.core.setup.assembly import assemble
     from rehabkit.core.setup.first_plan import check_first_plan
 
-    setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins")
-    warned = "".join(f"\n  PLAN    {w}" for w in check_first_plan(setup))  # (as run says them, before it moves)
+    notes: list[str] = []  # (what the plugins say as they are built: the run keeps them in its notes)
+    setup = assemble(loaded, default_registry(), default_extensions(), upto="plugins",
+                     note=lambda t, text: notes.append(text))
+    warned = "".join(f"\n  NOTE    {w}" for w in notes)
+    warned += "".join(f"\n  PLAN    {w}" for w in check_first_plan(setup))  # (as run says them, before it moves)
     warned += "".join(f"\n  BACKEND {w}" for w in setup.backend_warnings)
     warned += latched_note(setup)
     sc = loaded.model

@@ -21,7 +21,9 @@ def run_report(s: dict[str, Any], out: Path) -> str:
                      + (f"  — {e['reason']}" if e.get("reason") else ""))
     lines += [f"  PLAN    {w['message']}" for w in s["safety"].get("plan_warnings", [])]
     if (task := s.get("task")) and not task["complete"]:  # (said whatever the expectations ask)
-        reaches = f": {task['reaches_completed']} of {task['reaches']} reaches completed" if task.get("reaches") else ""
+        planned = task.get("reaches_planned", task.get("reaches"))
+        begun = f", {task['reaches']} begun" if planned and task.get("reaches") != planned else ""
+        reaches = f": {task['reaches_completed']} of {planned} reaches completed{begun}" if planned else ""
         lines.append(f"  TASK    incomplete: the plan ends at {task['plan_end_s']:.4g} s, the run at "
                      f"{task['run_s']:g} s ({task['run_s'] / task['plan_end_s']:.1%} of it run){reaches}")
     if why := s.get("tracking"):  # (said whatever the expectations ask, as the task's end is)

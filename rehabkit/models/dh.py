@@ -13,7 +13,8 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationError, model_validator
+from pydantic_core import InitErrorDetails
 
 from rehabkit.models.chain import DHRow, KinematicChain, pose
 from rehabkit.models.mjcf_builder import LinkSpec, build_chain_mjcf
@@ -72,6 +73,10 @@ class JointSpec(StrictModel):
             raise ValueError(f"joint '{self.name}': give range_deg (revolute) or range_m (prismatic)")
         if (self.velocity_deg_s is None) == (self.velocity_m_s is None):
             raise ValueError(f"joint '{self.name}': give velocity_deg_s (revolute) or velocity_m_s (prismatic)")
+        if (self.range_deg is None) != (self.velocity_deg_s is None):  # (a crash in the robot's build before)
+            given, fix = ("range_m", "velocity_m_s") if self.range_m is not None else ("range_deg", "velocity_deg_s")
+            raise ValueError(f"joint '{self.name}': {given} with a speed of the other kind: write {fix}, in the "
+                             "same kind of unit as its range (degrees for a revolute joint, metres for a prismatic)")
         return self
 
     @property
@@ -104,9 +109,20 @@ class DHRobotSpec(StrictModel):
         if len(self.table) != len(self.joints):
             raise ValueError(f"the table has {len(self.table)} rows but {len(self.joints)} joints are described")
         table_kinds = [r.joint for r in (reversed(self.table) if self.reverse else self.table)]
-        for j, kind in zip(self.joints, table_kinds):
+        wrong = []  # each key of the other kind, at its own place in the file
+        for i, (j, kind) in enumerate(zip(self.joints, table_kinds)):
             if j.revolute != (kind == "revolute"):
-                raise ValueError(f"joint '{j.name}' is {kind} in the table but its limits are for the other kind")
+                keys = ("range_deg", "velocity_deg_s") if kind == "prismatic" else ("range_m", "velocity_m_s")
+                for key in keys:
+                    fix = key.replace("_deg_s", "_m_s").replace("_deg", "_m") if kind == "prismatic" else \
+                        key.replace("_m_s", "_deg_s").replace("range_m", "range_deg")
+                    unit = "metres" if kind == "prismatic" else "degrees"
+                    wrong.append(InitErrorDetails(type="value_error", loc=("joints", i, key), input=getattr(j, key),
+                                                  ctx={"error": ValueError(
+                                                      f"joint '{j.name}' is {kind} in the table: write {fix} "
+                                                      f"instead, in {unit}")}))
+        if wrong:
+            raise ValidationError.from_exception_data(type(self).__name__, wrong)
         return self
 
     def table_chain(self) -> KinematicChain:

@@ -90,7 +90,13 @@ class NumericIK:
         task.set_target(pin.SE3(np.asarray(pose, float)))
         conf = pink.Configuration(self.model, self.data, np.array(q0, float))
         limits = [ConfigurationLimit(self.model, 0.5)]  # half the way to a range's end per step: no overshoot
+        position_only = free == "xyz"
+        goal = np.asarray(pose, float)[:3, 3]
         for _ in range(self.max_iter):
+            if position_only:  # the target turned as the tool is: pink's 6-D error (the log of the relative pose)
+                # mixes rotation into its position part, and breaks where the tool is turned half a turn from the
+                # target's axes (a SCARA's tool pointing down at an identity-oriented point target)
+                task.set_target(pin.SE3(conf.get_transform_frame_to_world(self.frame).rotation, goal))
             err = task.compute_error(conf)
             pos, rot = float(np.linalg.norm(err[:3])), float(np.abs(err[3:] * weight).max())
             self.closest_m = min(self.closest_m, pos)

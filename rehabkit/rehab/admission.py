@@ -42,12 +42,23 @@ def adapt_segments(robot_cfg: StrictModel, profile: PatientBase | None, source) 
     return robot_cfg.model_copy(update=update), notes
 
 
+def sliding_rom(name: str, model: RobotModel) -> str | None:
+    """The message for a range of motion given for a prismatic joint (a person's is in degrees), else None."""
+    j = model.joint_names.index(name)
+    if model.revolute[j]:
+        return None
+    lo, hi = model.limits.lower[j], model.limits.upper[j]
+    return (f"{name} is a prismatic joint: a range of motion (passive_deg, active_deg, max_speed_deg_s) is a revolute "
+            f"joint's, in degrees; limit a prismatic joint in the safety envelope instead, in metres (safety.joints."
+            f"{name}: {{range_m: [{lo:.4g}, {hi:.4g}], velocity_m_s: ...}}: the robot's own range)")
+
+
 def profile_narrowings(model: RobotModel, profile: PatientBase, source) -> list[Narrowing]:
     """The profile's tighter limits; joint names the robot lacks are refused where they are written
     (:class:`ScenarioError`)."""
     problems = []
     for name in profile.joints:
-        msg = unknown_joint(name, model)
+        msg = unknown_joint(name, model) or sliding_rom(name, model)
         if msg is not None:
             path = ("patient", "joints", name)
             problems.append(Diagnostic(source.key_marks.get(path, source.value_marks[()]), ".".join(path), msg))

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import date
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -30,6 +30,10 @@ from rehabkit.core.plugins.registry import default_registry
 from rehabkit.core.scenario.loader import LoadedScenario, load_scenario
 from rehabkit.core.scenario.source import parse_override
 from rehabkit.core.setup.errors import SetupError
+
+if TYPE_CHECKING:
+    from rehabkit.models.robot_model import RobotModel
+    from rehabkit.rehab.profile import PatientBase
 
 CUE_S = 3.0  # each cue (a joint to one end, to the other, back) [s]
 CUE_MARGINS = (0.08, 0.12, 0.16, 0.2, 0.25)  # cues this share of a joint's range inside the robot's limits, the
@@ -115,12 +119,12 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     base = _merge(given, _sessions_base(loaded))
     sessions = _assembled(path, base)  # the profile's ranges out of the limits
     model = sessions.robot.model
-    names = joints or [j for j in model.joint_names if j in profile.joints] or model.joint_names
+    names = assessed_joints(model, profile, joints)
     idx = [model.joint_names.index(j) for j in names]
     lo, hi = model.limits.lower, model.limits.upper
 
     # 1. active: cued to each end of each joint in turn, the robot transparent
-    start = {"name": "start", "joints_deg": np.degrees(q0).round(6).tolist()}
+    start = posture_target("start", q0)
     cues = _cues(sessions, q0, idx, lo, hi, cue_s)
     active_over = _merge(base, {
         "planner": {"type": "multi-cubic", "segment_durations": [cue_s] * len(cues)},
@@ -196,6 +200,34 @@ def _passive_ends(run, names: list[str], idx: list[int]) -> tuple[dict, dict]:
     return passive, stopped
 
 
+def posture_target(name: str, q: np.ndarray) -> dict[str, Any]:
+    """A session's target at posture ``q`` in SI values (``joints_rad``: radians, metres for a prismatic joint), so
+    that a robot with a slide is cued as one without."""
+    return {"name": name, "joints_rad": np.asarray(q, float).round(9).tolist()}
+
+
+def assessed_joints(model: RobotModel, profile: PatientBase, joints: list[str] | None = None) -> list[str]:
+    """The joints an assessment measures: ``joints`` as named, else the profile's, else every revolute joint of
+    ``model`` (a person's range of motion is an angle: a prismatic joint is not assessed).
+
+    Raises:
+        ValueError: a named joint the robot lacks, or a prismatic one (said as ``--joints: ...``).
+    """
+    turning = [n for n, turns in zip(model.joint_names, model.revolute, strict=True) if turns]
+    if not joints:
+        return [j for j in turning if j in profile.joints] or turning
+    from rehabkit.core.setup.limits import unknown_joint
+
+    for name in joints:
+        if (msg := unknown_joint(name, model)) is not None:
+            raise ValueError(f"--joints: {msg}")
+        if name not in turning:
+            raise ValueError(f"--joints: {name} is a prismatic joint: an assessment measures a person's range of "
+                             f"motion on revolute joints (in degrees); leave it out (its revolute joints: "
+                             f"{','.join(turning)})")
+    return list(joints)
+
+
 def run_scenario(path: Path, overrides: dict, out_dir: Path):
     """One session of the assessment."""
     from rehabkit.core.run.runner import Runner
@@ -223,7 +255,7 @@ def _cues(a, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray, cue
         targets = [Target("start", q=q0), *(Target(f"cue{i}", q=p) for i, p in enumerate(points))]
         plan = planner.plan(PlanRequest(0.0, q0, np.zeros_like(q0), targets, a.robot))
         if plan_breach(plan, a.robot.model) is None:
-            return [{"name": f"cue{i}", "joints_deg": np.degrees(p).round(6).tolist()} for i, p in enumerate(points)]
+            return [posture_target(f"cue{i}", p) for i, p in enumerate(points)]
     raise SetupError("no cue plan within the robot's limits (its joints' ranges are too narrow to cue)")
 
 

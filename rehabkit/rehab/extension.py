@@ -19,6 +19,7 @@ from rehabkit.models.strict import StrictModel
 
 METRICS = (
     Metric("reaches", "count", outcome=True, description="planned movements counted as reaches"),
+    Metric("reaches_planned", "count", description="movements the task's plans hold, begun within the run or not"),
     Metric("reaches_completed", "count", outcome=True, description="reaches that got to their target and stayed"),
     Metric("sparc", outcome=True, description="smoothness: spectral arc length of the hand's speed (mean)"),
     Metric("path_length_ratio", outcome=True, description="hand path length / straight line (mean)"),

@@ -22,18 +22,23 @@ __all__ = ["Comfort", "JointRom", "PatientBase", "effective_limits", "interactio
 
 
 def patient_narrowings(robot: RobotModel, patient: PatientBase) -> list[Narrowing]:
-    """The profile's limits for the robot's joints, source ``"patient"`` (joints the robot lacks are skipped:
-    the extension refuses them where they are written)."""
+    """The profile's limits for the robot's joints, source ``"patient"``: a revolute joint's range and comfortable
+    speed from degrees, the comfortable speed of every revolute joint (``comfort.max_speed_deg_s``) and of every
+    prismatic one (``comfort.max_speed_m_s``). Joints the robot lacks are skipped, and a range of motion given for a
+    prismatic joint (in degrees: a person's joint turns): the extension refuses them where they are written."""
     out = []
-    for name in robot.joint_names:
+    comfort = patient.comfort
+    for name, turns in zip(robot.joint_names, robot.revolute, strict=True):
         rom = patient.joints.get(name)
-        if rom is not None:
+        if rom is not None and turns:
             out += [Narrowing(name, "lower", math.radians(rom.passive_deg[0]), "patient"),
                     Narrowing(name, "upper", math.radians(rom.passive_deg[1]), "patient")]
             if rom.max_speed_deg_s is not None:
                 out.append(Narrowing(name, "velocity", math.radians(rom.max_speed_deg_s), "patient"))
-        if patient.comfort.max_speed_deg_s is not None:
-            out.append(Narrowing(name, "velocity", math.radians(patient.comfort.max_speed_deg_s), "patient"))
+        if turns and comfort.max_speed_deg_s is not None:
+            out.append(Narrowing(name, "velocity", math.radians(comfort.max_speed_deg_s), "patient"))
+        if not turns and comfort.max_speed_m_s is not None:
+            out.append(Narrowing(name, "velocity", comfort.max_speed_m_s, "patient"))
     return out
 
 

@@ -21,7 +21,8 @@ Range = tuple[float, float]
 
 
 class JointRom(StrictModel):
-    """Range of motion of one joint [deg] and its comfortable speed."""
+    """Range of motion of one revolute joint [deg] and its comfortable speed [deg/s] (a prismatic joint has none: its
+    limits are the safety envelope's, in metres)."""
 
     passive_deg: Range = Field(description="range the joint can be moved through (a hard limit)")
     active_deg: Range | None = Field(None, description="range the person reaches on their own")
@@ -43,7 +44,9 @@ class JointRom(StrictModel):
 class Comfort(StrictModel):
     """Limits for the whole arm."""
 
-    max_speed_deg_s: float | None = Field(None, gt=0, description="comfortable speed of every joint")
+    max_speed_deg_s: float | None = Field(None, gt=0, description="comfortable speed of every revolute joint "
+                                          "[deg/s]")
+    max_speed_m_s: float | None = Field(None, gt=0, description="comfortable speed of every prismatic joint [m/s]")
     max_interaction_force_n: float | None = Field(None, gt=0, description="largest force at the hand")
 
 

@@ -85,6 +85,7 @@ def run_outcomes(trace: Trace, robot, reaches: list[Movement], dt: float, spec, 
         magnitude = np.zeros(len(trace.t))
     metrics = {
         "reaches": float(len(per_reach)), "reaches_completed": float(sum(r["reached"] for r in per_reach)),
+        "reaches_planned": float(len(reaches)),
         "sparc": mean("sparc"), "path_length_ratio": mean("path_length_ratio"),
         "time_to_target_s": mean("time_to_target_s"),
         "assistance_ratio": assist,

@@ -157,6 +157,7 @@ def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun
             notes.append(f"cleared, then ramped in over {ramp[0]:g} s" if ramp else "cleared, no ramp-in")
     m = result.summary["metrics"]
     figures = {k: m[k] for k in ("stop_time_s", "stop_distance_deg", "stop_distance_m", "stop_peak_speed_deg_s",
+                                 "stop_joint_travel_m", "stop_joint_peak_speed_m_s",
                                  "ft_peak_force_n", "peak_interaction_force_n", "ft_bias_n", "ft_noise_n",
                                  "ft_noise_filtered_n", "force_after_trip_peak_n", "force_above_limit_s",
                                  "joints_in_range") if m.get(k) is not None}

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabkit.core.safety.stopping import joint_inertia
+from rehabkit.core.safety.stopping import joint_inertia, stop_decel
 from rehabkit.hardware.bridge_limits import BridgeLimits
 
 STOP_OPTION = {0: 0, 1: 2, 2: 6}  # stop category → quick stop option code (0x605A): off at once; ramp, then off; held
@@ -37,12 +37,12 @@ def drive_limits(model, safety, q0: np.ndarray) -> DriveLimits:
     margin wider than the safety layer's (a backstop, as the bridge's), its torques, the stop's deceleration (the
     envelope's, else half what each drive can give its joint at ``q0``, as the safety layer's) and category."""
     lim = model.limits
-    wide = BridgeLimits(lim.lower, lim.upper, lim.velocity)
-    if safety is not None and safety.stop_decel_deg_s2 is not None:
-        decel = np.full(model.dof, math.radians(safety.stop_decel_deg_s2))
-    else:
+    wide = BridgeLimits(lim.lower, lim.upper, lim.velocity, revolute=model.revolute)
+    decel = stop_decel(safety, model.revolute) if safety is not None else None  # (NaN: its kind's not set)
+    if decel is None or np.isnan(decel).any():
         inertia = joint_inertia(model, q0)
-        decel = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
+        own = 0.5 * lim.effort / inertia if inertia is not None else lim.velocity * 4.0
+        decel = own if decel is None else np.where(np.isnan(decel), own, decel)
     category = safety.category_of("e-stop") if safety is not None else 2
     return DriveLimits(wide._low, wide._high, wide._fast, lim.effort, decel, STOP_OPTION[category],
                        ABORT_OPTION[category])

@@ -119,8 +119,10 @@ def blueprint(contents: Contents) -> rrb.Blueprint:
                 views.append(rrb.Spatial2DView(name=f"{sensor}: {key}", origin=path) if image else
                              rrb.TimeSeriesView(name=f"{sensor}: {labelled(key)}", origin=path))
         tabs.append(rrb.Grid(*views, name="sensors"))
-    if contents.joint_space:
-        tabs.append(rrb.Spatial3DView(name="joint space [deg]", origin="joint_space"))
+    if contents.joint_space:  # (its axes the first joints', each in its own unit)
+        axes = units[:3]
+        tabs.append(rrb.Spatial3DView(name=f"joint space [{axes[0] if len(set(axes)) == 1 else ', '.join(axes)}]",
+                                      origin="joint_space"))
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*left, row_shares=[3, 1]), rrb.Tabs(*tabs), column_shares=[1, 1]),
         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),

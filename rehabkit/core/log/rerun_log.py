@@ -172,6 +172,11 @@ class RerunLog:
                 part = values[what] if which.all() else values[what][:, which]
                 self._send(series, t, lambda v=part: rr.Scalars.columns(scalars=v))
 
+    def in_own_units(self, q: np.ndarray) -> np.ndarray:
+        """Joint values [rad, m] (rows of ``dof``) in each joint's own unit, as the log shows them: a revolute
+        joint's in degrees, a prismatic joint's in metres."""
+        return np.asarray(q, float) * self._scale
+
     def joint_limits(self, t_end: float, lower: np.ndarray, upper: np.ndarray) -> None:
         """Each joint's range as two flat lines over the run, in its position panel (in its own unit)."""
         t = np.array([0.0, max(t_end, 1e-3)])

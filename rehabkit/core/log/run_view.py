@@ -7,7 +7,7 @@ The joint series are sent in columns at the scenario's log rate, ``flush_samples
 at a time (a send costs ~0.5 ms whatever its length: a file takes big batches, a
 live viewer ones small enough to follow the run); a planner whose joint space is worth looking at (it returns
 ``joint_space_visuals``: a 3-DoF robot's collision map) gets that space drawn too,
-with every plan and the executed path in it.
+with every plan and the executed path in it (each axis in its joint's own unit: degrees, metres for a slide).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ class RunView:
             log.frame_on(np.array(box))
         for name, points in setup.planner.joint_space_visuals().items():
             self._joint_space = log.contents.joint_space = True
-            log.points(f"joint_space/{name}", np.degrees(points), (200, 80, 80), 0.4)
+            log.points(f"joint_space/{name}", log.in_own_units(points), (200, 80, 80), 0.4)
         self.log = log
         self._framed = False
         if spawn:  # a live viewer lays the run out as it comes (the file gets the final layout at the end)
@@ -120,9 +120,9 @@ class RunView:
         path = self.space.hand_world(x[::every])
         way_w = self.space.hand_world(way) if way is not None else np.zeros((0, 3))
         if self._joint_space:  # (a joint-space planner's own drawing)
-            self.log.line("joint_space/plan", np.degrees(x[::every]), (60, 160, 255), 0.3, t)
+            self.log.line("joint_space/plan", self.log.in_own_units(x[::every]), (60, 160, 255), 0.3, t)
             if way is not None:
-                self.log.points("joint_space/task_points", np.degrees(way), (60, 160, 255), 1.0, t)
+                self.log.points("joint_space/task_points", self.log.in_own_units(way), (60, 160, 255), 1.0, t)
         self.log.plan(t, path, way_w)
 
     def flush(self, trace: Trace, upto: int) -> None:
@@ -139,7 +139,7 @@ class RunView:
         limits = self.setup.safety.limits  # the ranges the run kept to (the envelope's, where narrower)
         self.log.joint_limits(float(trace.t[k - 1]) if k else 0.0, limits.lower, limits.upper)
         if self._joint_space and k:
-            self.log.line("joint_space/executed", np.degrees(trace.q[:k:10]), (250, 180, 40), 0.3)
+            self.log.line("joint_space/executed", self.log.in_own_units(trace.q[:k:10]), (250, 180, 40), 0.3)
 
     def finish(self, interventions: list, series: Callable[[], dict[str, tuple[np.ndarray, np.ndarray]]]) -> None:
         """The safety layer's interventions as events, and the run's series (backend, plugins, extensions)."""

@@ -89,6 +89,18 @@ def joint_limits(lim: Any, j: int, revolute: bool, narrowed_by: dict) -> dict[st
             "narrowed_by": narrowed_by}
 
 
+def kind_settings(safety: Any, revolute: np.ndarray) -> dict[str, Any]:
+    """The envelope's settings for every joint of a kind, for the kinds the robot has: how far beyond its range a
+    joint trips and a controlled stop's deceleration bound (None: each drive's own) — a revolute joint's in degrees,
+    a prismatic joint's in metres."""
+    out: dict[str, Any] = {}
+    if np.any(revolute):
+        out.update(position_margin_deg=safety.position_margin_deg, stop_decel_deg_s2=safety.stop_decel_deg_s2)
+    if not np.all(revolute):
+        out.update(position_margin_m=safety.position_margin_m, stop_decel_m_s2=safety.stop_decel_m_s2)
+    return out
+
+
 def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dict[str, Any]]:
     """The records of a finished run (``a``: its :class:`~rehabkit.core.setup.assembly.Assembly`)."""
     sc, patient = a.sc, summary.get("patient") or {}  # (the rehab layer's section says who the run was for)
@@ -107,9 +119,10 @@ def run_records(a: Any, scenario_text: str, summary: dict[str, Any]) -> list[dic
          "plugins": plugins, "patient": patient.get("id"), "backend": sc.backend.type,
          **({"link": link} if (link := a.backend.provenance()) else {}),
          "seed": sc.seed, "keyed": audit_key() is not None},
-        {"kind": "limits", "joints": joints, "interaction_force_n": safety.interaction_force_n,
+        {"kind": "limits", "joints": joints, **kind_settings(safety, model.revolute),
+         "interaction_force_n": safety.interaction_force_n,
          "keep_in": safety.keep_in.model_dump(mode="json") if safety.keep_in is not None else None,
-         "stop": model.safe_stop, "stop_category": a.safety.categories, "stop_decel_deg_s2": safety.stop_decel_deg_s2,
+         "stop": model.safe_stop, "stop_category": a.safety.categories,
          "brakes_nm": model.brakes.tolist() if model.brakes is not None else None,
          "stop_after_s": safety.stop_after_s},
         *({"kind": "intervention", **event} for event in summary["safety"]["interventions"]),

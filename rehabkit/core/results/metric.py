@@ -134,11 +134,14 @@ CORE_METRICS: tuple[Metric, ...] = (
            "first trip"),
     Metric("joints_in_range", "1", description="1 when every joint stayed in its range (the run's, without the "
            "trip margin) after the first trip, else 0"),
-    Metric("stop_time_s", "s", description="from the trip to standstill (every joint < 1°/s for 50 ms; NaN: not "
-           "at rest by the run's end)"),
-    Metric("stop_distance_deg", "deg", description="the largest joint travel from the trip to standstill"),
+    Metric("stop_time_s", "s", description="from the trip to standstill (every revolute joint < 1°/s and every "
+           "prismatic one < 1 mm/s for 50 ms; NaN: not at rest by the run's end)"),
+    Metric("stop_distance_deg", "deg", description="the largest revolute joint's travel from the trip to standstill"),
     Metric("stop_distance_m", "m", description="the hand's path from the trip to standstill"),
-    Metric("stop_peak_speed_deg_s", "deg/s", description="the fastest joint speed after the trip"),
+    Metric("stop_peak_speed_deg_s", "deg/s", description="the fastest revolute joint's speed after the trip"),
+    Metric("stop_joint_travel_m", "m", description="the largest prismatic joint's travel from the trip to "
+           "standstill"),
+    Metric("stop_joint_peak_speed_m_s", "m/s", description="the fastest prismatic joint's speed after the trip"),
     Metric("sensor_overruns_*", "count", clock="wall", description="readings skipped while a sensor thread was busy"),
     Metric("*_ms", "ms", "wall", description="timings"),
 )

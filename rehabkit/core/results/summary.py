@@ -206,6 +206,8 @@ def task_section(metrics: dict[str, Any]) -> dict[str, Any] | None:
            "run_s": metrics["sim_time_s"]}
     if "reaches" in metrics:
         out.update(reaches=metrics["reaches"], reaches_completed=metrics.get("reaches_completed", 0))
+        if "reaches_planned" in metrics:  # (a run cut short began fewer than its plans hold)
+            out["reaches_planned"] = metrics["reaches_planned"]
     return out
 
 

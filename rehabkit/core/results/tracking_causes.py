@@ -38,25 +38,38 @@ def tracking_causes(trace: Trace, model, trip: tuple[float, str] | None, first_c
     if not rms[j] > 1.0:
         return None
     err = np.where(kept[:, None], err, 0.0)
-    unit, scale = ("°", np.degrees(1.0)) if turns[j] else ("m", 1.0)
+    unit, scale = ("deg", np.degrees(1.0)) if turns[j] else ("m", 1.0)
     k = int(np.nanargmax(np.abs(err[:, j])))
     t_max = float(trace.t[k])
-    causes: list[str] = []
+    causes: list[tuple[float, str]] = []  # (when, what): said in the order they happened
     if trip is not None and trip[0] <= t_max:
-        causes.append(f"the safety layer stopped the robot at t={trip[0]:.3f} s ({trip[1]}): the reference went on "
-                      "without it")
+        causes.append((trip[0], f"the safety layer stopped the robot at t={trip[0]:.3f} s ({trip[1]}): the reference "
+                                "went on without it"))
     if first_contact is not None and first_contact["t"] <= t_max:
-        causes.append(f"the robot touched something first at t={first_contact['t']:.3f} s ({first_contact['robot']} "
-                      f"against {first_contact['other']})")
-    effort = model.limits.effort[j]
-    clipped = int(np.count_nonzero(np.abs(trace.tau[:, j]) >= AT_LIMIT * effort))
-    if clipped:
-        causes.append(f"its torque was at its {effort:g} {'N·m' if turns[j] else 'N'} limit in {clipped} control steps")
+        causes.append((first_contact["t"], f"the robot touched something first at t={first_contact['t']:.3f} s "
+                                           f"({first_contact['robot']} against {first_contact['other']})"))
+    # a torque at its limit: this joint's, and the joints' whose limit came first (a shoulder that can't hold the
+    # arm drags the others along: their errors are its)
+    effort = model.limits.effort
+    at_limit = np.abs(trace.tau) >= AT_LIMIT * effort
+    before = at_limit[: k + 1]
+    if before.any():
+        first_k = int(np.argmax(before.any(axis=1)))
+        for i in np.flatnonzero(before[first_k]):
+            if i != j:
+                causes.append((float(trace.t[first_k]), f"{model.joint_names[i]}'s torque was at its {effort[i]:g} "
+                               f"{'N·m' if turns[i] else 'N'} limit from t={trace.t[first_k]:.3f} s "
+                               f"({int(at_limit[:, i].sum())} control steps)"))
+    if clipped := int(at_limit[:, j].sum()):
+        first = float(trace.t[int(np.argmax(at_limit[:, j]))])
+        causes.append((first, f"its torque was at its {effort[j]:g} {'N·m' if turns[j] else 'N'} limit in {clipped} "
+                              f"control steps, from t={first:.3f} s"))
     if inertia is not None and inertia[j] < 1e-6:
-        causes.append(f"the model gives it {inertia[j]:.2g} {'kg·m²' if turns[j] else 'kg'} of inertia: gains scaled "
-                      "by the inertia have no stiffness there")
+        causes.append((np.inf, f"the model gives it {inertia[j]:.2g} {'kg·m²' if turns[j] else 'kg'} of inertia: "
+                               "gains scaled by the inertia have no stiffness there"))
     if not causes:
-        causes.append("no clipped torque, stop or contact: the controller's gains are low for this joint's load "
-                      "(stiffer gains, a higher bandwidth_hz, or the inverse-dynamics feedforward)")
+        causes.append((np.inf, "no clipped torque, stop or contact: the controller's gains are low for this joint's "
+                               "load (stiffer gains, a higher bandwidth_hz, or the inverse-dynamics feedforward)"))
+    causes.sort(key=lambda c: c[0])
     return {"joint": model.joint_names[j], "unit": unit, "rms": float(rms[j] * (POOR_DEG if turns[j] else POOR_M)),
-            "max": float(abs(err[k, j]) * scale), "t_max": t_max, "causes": causes}
+            "max": float(abs(err[k, j]) * scale), "t_max": t_max, "causes": [text for _, text in causes]}

@@ -7,16 +7,17 @@ by giving way (Bessler et al. 2021 frame the skill as limiting the force; admitt
 
 - **yield**: the robot becomes compliant — gravity and the joints' friction compensated, damped, no stiffness
   toward the old posture — so the person's force moves it; each joint's damping is what holds it to
-  ``yield_speed_deg_s`` under the force at its limit, pushing where it acts in the worst direction (Jᵀ at the
-  trip). A soft wall ``wall_deg`` inside each joint's range stops a joint arriving at the speed bound within the wall's
-  width; beyond the range (and its margin) the position rule stops the robot, and faster than ``max_speed_deg_s``
-  the velocity rule does, each in its own stop category. Suits a person who must not be resisted (spasticity, a
-  patient pushing out of a posture): the force stays at what moving the damped arm takes.
+  ``yield_speed_deg_s`` (a prismatic joint: ``yield_speed_m_s``) under the force at its limit, pushing where it
+  acts in the worst direction (Jᵀ at the trip). A soft wall ``wall_deg`` (``wall_m``) inside each joint's range
+  stops a joint arriving at the speed bound within the wall's width; beyond the range (and its margin) the position
+  rule stops the robot, and faster than ``max_speed_deg_s`` (``max_speed_m_s``) the velocity rule does, each in its
+  own stop category. Suits a person who must not be resisted (spasticity, a patient pushing out of a posture): the
+  force stays at what moving the damped arm takes.
 - **retreat**: the robot moves away along the force — its reference runs in the direction the force would move the
-  joints (M⁻¹ Jᵀ F), the fastest joint at ``retreat_speed_deg_s`` — until the force is below ``release_n``, then
-  holds there (the hold gains), and retreats again if the force passes its limit again; at a soft wall it cannot go
-  further and stops. Suits a pinch or a squeeze the robot itself caused (moving into the person or an obstacle):
-  it gives back the space it took.
+  joints (M⁻¹ Jᵀ F), the fastest joint at ``retreat_speed_deg_s`` (``retreat_speed_m_s``) — until the force is
+  below ``release_n``, then holds there (the hold gains), and retreats again if the force passes its limit again; at
+  a soft wall it cannot go further and stops. Suits a pinch or a squeeze the robot itself caused (moving into the
+  person or an obstacle): it gives back the space it took.
 
 Both keep every other rule of the envelope: the layer still checks the state each control step. A joint too light for
 the damping a yield needs at the control rate (damping · dt above half its inertia: a small wrist) is held where it was
@@ -36,6 +37,11 @@ from rehabkit.core.scenario.safety import ForceReaction
 SPEED_GRACE_S = 0.1  # how fast the allowance for the robot's own speed at the trip decays (time constant)
 
 
+def per_kind(revolute: np.ndarray, degrees: float, metres: float) -> np.ndarray:
+    """A setting per joint in SI: ``degrees`` (as radians) for a revolute joint, ``metres`` for a prismatic one."""
+    return np.where(revolute, math.radians(degrees), metres)
+
+
 class Compliance:
     """A force-limiting reaction under way (``yield`` or ``retreat``), from the trip at ``t0`` in state ``q0``.
 
@@ -53,12 +59,12 @@ class Compliance:
                  dt: float = 1e-3, joint_mass: np.ndarray | None = None):
         self.kind, self.limit = reaction.type, limit_n
         self.release = reaction.release_n if reaction.release_n is not None else 0.6 * limit_n
-        unit = np.where(revolute, math.pi / 180.0, 1e-3)  # deg → rad, mm → m (sliding joints)
-        self.vmax = reaction.max_speed_deg_s * unit
-        self.vretreat = reaction.retreat_speed_deg_s * unit
+        r = reaction  # (each joint's own: a revolute joint's from degrees, a prismatic joint's in metres)
+        self.vmax = per_kind(revolute, r.max_speed_deg_s, r.max_speed_m_s)
+        self.vretreat = per_kind(revolute, r.retreat_speed_deg_s, r.retreat_speed_m_s)
         span = hi - lo
         # (a joint without limits, a continuous one, has no wall)
-        wall = np.where(np.isfinite(span), np.minimum(reaction.wall_deg * unit, span / 4), 0.0)
+        wall = np.where(np.isfinite(span), np.minimum(per_kind(revolute, r.wall_deg, r.wall_m), span / 4), 0.0)
         self.wall_lo, self.wall_hi = lo + wall, hi - wall
         mass = joint_mass if joint_mass is not None else (
             np.diag(inertia) if inertia is not None else np.full(len(q0), hold_kd * 0.1))
@@ -70,7 +76,8 @@ class Compliance:
             if all(r is not None for r in rows):
                 reach = np.linalg.norm(np.array(rows), axis=0)
         if reach is not None:
-            damping = np.maximum(reach * limit_n / (reaction.yield_speed_deg_s * unit), mass / 0.1)
+            damping = np.maximum(reach * limit_n / per_kind(revolute, r.yield_speed_deg_s, r.yield_speed_m_s),
+                                 mass / 0.1)
         else:  # where the force acts is unknown: a tenth of a second to damp a joint's own motion
             damping = mass / 0.1
         # damping applied once a control period keeps a joint's motion decaying only up to ~m/2dt; a joint that would

@@ -2,8 +2,8 @@
 
 - **0**: torque off at once and the robot's brakes on (an uncontrolled stop: without brakes it coasts, or falls).
 - **1**: a controlled stop — every joint's speed brought to zero along a ramp whose deceleration is bounded
-  (``safety.stop_decel_deg_s2``, by default half what each drive can give its joint), all joints reaching zero
-  together — then torque off and the robot's brakes (if it has any) on.
+  (``safety.stop_decel_deg_s2``; a prismatic joint's ``stop_decel_m_s2``; by default half what each drive can
+  give its joint), all joints reaching zero together — then torque off and the robot's brakes (if it has any) on.
 - **2**: the same controlled stop, then the posture held (PD to it plus gravity compensation).
 
 The ramp is a reference the hold gains track with gravity compensation, within the effort limits. What
@@ -46,14 +46,16 @@ class ControlledStop:
     @classmethod
     def start(cls, category: int, t: float, q: np.ndarray, qd: np.ndarray | None, decel: np.ndarray | None,
               effort: np.ndarray, robot, dt: float, delay: float = 0.0) -> ControlledStop:
-        """The ramp from the state at the trip; ``decel`` [rad/s²] per joint, or None: half what each drive can give
-        its joint at this posture (effort / inertia), the quickest stop that keeps a margin for gravity. With the
-        backend's loop ``delay`` the ramp lasts at least ``STOP_DELAYS`` of it: its decelerating torque, acting that
-        late, would else still push a joint that has stopped (a stop of two cycles on a bus overshoots backwards)."""
+        """The ramp from the state at the trip; ``decel`` [rad/s², or m/s²] per joint, or None (NaN for a joint):
+        half what each drive can give its joint at this posture (effort / inertia), the quickest stop that keeps a
+        margin for gravity. With the backend's loop ``delay`` the ramp lasts at least ``STOP_DELAYS`` of it: its
+        decelerating torque, acting that late, would else still push a joint that has stopped (a stop of two cycles
+        on a bus overshoots backwards)."""
         v0 = np.zeros_like(q) if qd is None else np.where(np.isfinite(qd), qd, 0.0)
         inertia = mass_matrix(robot, q)
-        if decel is None:
-            decel = 0.5 * effort / np.diag(inertia) if inertia is not None else np.full(len(q), np.radians(360.0))
+        if decel is None or np.isnan(decel).any():  # (NaN: a joint whose kind has no bound set)
+            own = 0.5 * effort / np.diag(inertia) if inertia is not None else np.full(len(q), np.radians(360.0))
+            decel = own if decel is None else np.where(np.isnan(decel), own, decel)
         duration = max(float(np.max(np.abs(v0) / decel)) if len(v0) else 0.0, dt, STOP_DELAYS * delay)
         stop = cls(category, t, q.copy(), v0, duration)
         if inertia is not None:
@@ -119,14 +121,18 @@ def stable_gains(kp: float | np.ndarray, kd: float | np.ndarray, inertia: np.nda
 
 def stop_figures(t: np.ndarray, q: np.ndarray, qd: np.ndarray, hand: np.ndarray | None, trip_t: float,
                  revolute: np.ndarray) -> dict[str, float]:
-    """Time from the trigger to standstill [s], the largest joint travel [deg, or mm for a sliding joint] and the
-    hand's path [m] meanwhile (up to the end of the record when it never came to rest: ``stop_time_s`` is then
-    NaN), and the peak speed after the trigger."""
+    """What a stop took, from the trace: the time from the trigger to standstill [s] (every revolute joint below
+    1°/s and every prismatic one below 1 mm/s for 50 ms; up to the end of the record when it never came to rest,
+    ``stop_time_s`` then NaN), and meanwhile each kind of joint's largest travel and peak speed in its own unit —
+    ``stop_distance_deg`` and ``stop_peak_speed_deg_s`` over the revolute joints, ``stop_joint_travel_m`` and
+    ``stop_joint_peak_speed_m_s`` over the prismatic ones (a kind the robot lacks has none) — and the hand's path
+    ``stop_distance_m`` [m]."""
     k0 = int(np.searchsorted(t, trip_t - 1e-12))
     if k0 >= len(t):
         return {}
-    scale = np.where(revolute, np.degrees(1.0), 1e3)
-    speed = np.abs(qd[k0:]) * scale
+    revolute = np.asarray(revolute, bool)
+    # (the standstill test in deg/s and mm/s alike; the figures in each joint's own unit below)
+    speed = np.abs(qd[k0:]) * np.where(revolute, np.degrees(1.0), 1e3)
     still = (speed < STANDSTILL_DEG_S).all(axis=1)
     dt = float(t[1] - t[0]) if len(t) > 1 else 1e-3
     need = max(1, math.ceil(STANDSTILL_FOR_S / dt - 1e-9))
@@ -134,11 +140,27 @@ def stop_figures(t: np.ndarray, q: np.ndarray, qd: np.ndarray, hand: np.ndarray 
     runs = np.convolve(still.astype(int), np.ones(need, int), mode="valid") == need
     hits = np.flatnonzero(runs)
     k1 = k0 + int(hits[0]) if len(hits) else len(t) - 1
-    travel = np.abs(q[k0 : k1 + 1] - q[k0]).max(axis=0) * scale
+    travel = np.abs(q[k0 : k1 + 1] - q[k0]).max(axis=0)  # [rad, or m]
+    peak = np.abs(qd[k0:]).max(axis=0)  # [rad/s, or m/s]
     path = float(np.linalg.norm(np.diff(hand[k0 : k1 + 1], axis=0), axis=1).sum()) if hand is not None else math.nan
-    return {"stop_time_s": float(t[k1] - trip_t) if len(hits) else math.nan,
-            "stop_distance_deg": float(travel.max()), "stop_distance_m": path,
-            "stop_peak_speed_deg_s": float(speed.max())}
+    out = {"stop_time_s": float(t[k1] - trip_t) if len(hits) else math.nan, "stop_distance_m": path}
+    if revolute.any():
+        out.update(stop_distance_deg=float(np.degrees(travel[revolute].max())),
+                   stop_peak_speed_deg_s=float(np.degrees(peak[revolute].max())))
+    if not revolute.all():
+        out.update(stop_joint_travel_m=float(travel[~revolute].max()),
+                   stop_joint_peak_speed_m_s=float(peak[~revolute].max()))
+    return out
+
+
+def stop_decel(config, revolute: np.ndarray) -> np.ndarray | None:
+    """The envelope's (``config``, a ``SafetyConfig``) deceleration bound per joint [rad/s², or m/s²]:
+    ``stop_decel_deg_s2`` on a revolute joint, ``stop_decel_m_s2`` on a prismatic one; NaN where its kind's is not
+    set, None where neither is (each drive's own: :meth:`ControlledStop.start`)."""
+    turn, slide = config.stop_decel_deg_s2, config.stop_decel_m_s2
+    if turn is None and slide is None:
+        return None
+    return np.where(revolute, math.nan if turn is None else math.radians(turn), math.nan if slide is None else slide)
 
 
 class Stopping:
@@ -152,8 +174,7 @@ class Stopping:
         self.robot, self.effort, self.zero = robot, robot.limits.effort, np.zeros(robot.dof)
         default = 2 if robot.safe_stop == "hold" else 0
         self.by_rule = {r: config.category_of(r, default) for r in STOP_RULES}
-        a = config.stop_decel_deg_s2
-        self.decel = None if a is None else np.where(robot.revolute, np.radians(a), a / 1e3)
+        self.decel = stop_decel(config, robot.revolute)
         self.category: int | None = None  # the stop under way's
         self.ramp: ControlledStop | None = None
         self.limp = False  # category 1 at standstill: the torque is off

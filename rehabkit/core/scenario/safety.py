@@ -81,25 +81,35 @@ class ForceReaction(StrictModel):
     """What the robot does when the interaction force passes its limit (:mod:`rehabkit.core.safety.compliance`):
     ``stop`` in the rule's stop category (as every other rule), ``yield`` (compliant: gravity and friction
     compensated, damped, soft walls inside the joint ranges) or ``retreat`` (away along the force until it falls
-    below ``release_n``, then hold)."""
+    below ``release_n``, then hold). Its speeds and walls are a revolute joint's in degrees (``*_deg_s``,
+    ``wall_deg``) and a prismatic joint's in metres (``*_m_s``, ``wall_m``): each applies to the joints of its kind
+    (a key for a kind of joint the robot lacks is refused where written, with the key to write)."""
 
     type: Literal["stop", "yield", "retreat"] = Field(description="stop (its category), yield or retreat")
     yield_speed_deg_s: float = Field(30.0, gt=0, description="yield: the speed the force at its limit moves a "
-                                     "joint at, at most (sets each joint's damping) [deg/s; mm/s]")
-    max_speed_deg_s: float = Field(60.0, gt=0, description="speed bound while yielding or retreating; faster is a "
-                                   "velocity stop [deg/s; mm/s for a sliding joint]")
-    wall_deg: float = Field(10.0, gt=0, description="soft walls this far inside each joint's range: a joint at the "
-                            "speed bound stops within it [deg; mm]")
+                                     "revolute joint at, at most (sets each joint's damping) [deg/s]")
+    max_speed_deg_s: float = Field(60.0, gt=0, description="a revolute joint's speed bound while yielding or "
+                                   "retreating; faster is a velocity stop [deg/s]")
+    wall_deg: float = Field(10.0, gt=0, description="soft walls this far inside each revolute joint's range: a joint "
+                            "at the speed bound stops within it [deg]")
     release_n: float | None = Field(None, gt=0, description="retreat: hold once the force is below this (default: "
                                     "60 % of the limit)")
-    retreat_speed_deg_s: float = Field(20.0, gt=0, description="retreat: the fastest joint's speed [deg/s; mm/s]")
+    retreat_speed_deg_s: float = Field(20.0, gt=0, description="retreat: the fastest revolute joint's speed [deg/s]")
+    yield_speed_m_s: float = Field(0.03, gt=0, description="yield: the speed the force at its limit moves a "
+                                   "prismatic joint at, at most [m/s]")
+    max_speed_m_s: float = Field(0.06, gt=0, description="a prismatic joint's speed bound while yielding or "
+                                 "retreating; faster is a velocity stop [m/s]")
+    wall_m: float = Field(0.01, gt=0, description="soft walls this far inside each prismatic joint's range [m]")
+    retreat_speed_m_s: float = Field(0.02, gt=0, description="retreat: the fastest prismatic joint's speed [m/s]")
 
     @model_validator(mode="after")
     def _within(self) -> ForceReaction:
-        for name in ("retreat_speed_deg_s", "yield_speed_deg_s"):
-            if getattr(self, name) >= self.max_speed_deg_s:
-                raise ValueError(f"{name} ({getattr(self, name):g}) must be below max_speed_deg_s "
-                                 f"({self.max_speed_deg_s:g}): moving at the speed bound would stop the robot")
+        for bound, names in (("max_speed_deg_s", ("retreat_speed_deg_s", "yield_speed_deg_s")),
+                             ("max_speed_m_s", ("retreat_speed_m_s", "yield_speed_m_s"))):
+            for name in names:
+                if getattr(self, name) >= getattr(self, bound):
+                    raise ValueError(f"{name} ({getattr(self, name):g}) must be below {bound} "
+                                     f"({getattr(self, bound):g}): moving at the speed bound would stop the robot")
         return self
 
 
@@ -117,10 +127,15 @@ class SafetyConfig(StrictModel):
         "controlled stop then hold; 'default' for the rules not named (default: 2, or 0 for a robot whose "
         "safe_stop is zero-torque)")
     stop_decel_deg_s2: float | None = Field(None, gt=0, description="a controlled stop's deceleration bound, each "
-                                            "joint [deg/s²; mm/s² for a sliding joint] (default: half what each "
-                                            "drive can give its joint at the trip)")
-    hold_kp: float = Field(60.0, gt=0, description="hold stiffness after a trip [N·m/rad]")
-    hold_kd: float = Field(6.0, gt=0, description="hold damping after a trip [N·m·s/rad]")
+                                            "revolute joint [deg/s²] (default: half what each drive can give its "
+                                            "joint at the trip)")
+    stop_decel_m_s2: float | None = Field(None, gt=0, description="a controlled stop's deceleration bound, each "
+                                          "prismatic joint [m/s²] (default: half what each drive can give its "
+                                          "joint at the trip)")
+    hold_kp: float = Field(60.0, gt=0, description="hold stiffness after a trip, the same SI value for every joint "
+                           "[N·m/rad; N/m for a prismatic joint]")
+    hold_kd: float = Field(6.0, gt=0, description="hold damping after a trip, the same SI value for every joint "
+                           "[N·m·s/rad; N·s/m for a prismatic joint]")
     stop_after_s: float = Field(0.5, ge=0, description="keep simulating this long after a trip, then end the run")
     joints: dict[str, JointEnvelope] = Field({}, description="per-joint limits tighter than the robot's: a revolute "
                                              "joint's in degrees, a prismatic joint's in metres")

@@ -84,6 +84,8 @@ def read_yaml(path: Path) -> Source:
         data = loader.construct_document(node)
     except yaml.MarkedYAMLError as exc:
         mark = _mark(name, exc.problem_mark) if exc.problem_mark else Mark(name, 0, 0)
+        if (exc.problem or "").startswith("could not find expected ':'") and exc.context_mark is not None:
+            mark = _mark(name, exc.context_mark)  # (the line missing its ':'; PyYAML notices it on the next one)
         raise ScenarioError([Diagnostic(mark, "", f"YAML syntax: {yaml_words(exc, text)}")]) from None
     finally:
         loader.dispose()

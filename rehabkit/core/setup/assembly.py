@@ -55,7 +55,14 @@ from rehabkit.core.setup.checks import (
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from rehabkit.core.setup.force_source import ForceSource, LastForce
-from rehabkit.core.setup.limits import LimitSources, envelope_narrowings, narrow, unknown_joint, wrong_unit_keys
+from rehabkit.core.setup.limits import (
+    LimitSources,
+    envelope_narrowings,
+    narrow,
+    unknown_joint,
+    wrong_kind_settings,
+    wrong_unit_keys,
+)
 from rehabkit.core.setup.person_safety import patient_slot, person_and_safety
 from rehabkit.core.setup.space import JointSpace, reference_space
 from rehabkit.core.setup.targets import resolve_targets
@@ -241,6 +248,12 @@ def _narrow_limits(a: Assembly) -> None:
                                                                       source.value_marks[()])),
                             f"safety.joints.{w.joint}.{w.key}", w.describe())
                  for w in wrong_unit_keys({n: env.given() for n, env in sc.safety.joints.items()}, model)]
+    # a setting for every joint of a kind the robot lacks (wall_m on a robot whose joints all turn), where written
+    written = {("safety",): _written(sc.safety),
+               **{("safety", "reactions", rule): _written(r) for rule, r in sc.safety.reactions.items()}}
+    for path, keys in written.items():
+        problems += [Diagnostic(_nearest_mark(source, (*path, key)), ".".join((*path, key)), msg)
+                     for key, msg in wrong_kind_settings(keys, model).items()]
     try:
         asked = [nw for found in a.extensions.hook.rehabkit_narrow_limits(setup=a) for nw in found or ()]
     except ScenarioError as exc:  # every misnamed joint at once, the extensions' and the envelope's
@@ -253,6 +266,19 @@ def _narrow_limits(a: Assembly) -> None:
     except ValueError as exc:
         raise SetupError(str(exc)) from exc
     model.limits = a.limits
+
+
+def _nearest_mark(source, path: tuple):
+    """Where ``path`` was written, else its nearest written ancestor (a ``--set`` of the mapping holding it)."""
+    for n in range(len(path), 0, -1):
+        if path[:n] in source.key_marks:
+            return source.key_marks[path[:n]]
+    return source.value_marks[()]
+
+
+def _written(section) -> list[str]:
+    """The keys a section's file set, in the order its model declares them."""
+    return [k for k in type(section).model_fields if k in section.model_fields_set]
 
 
 def _schedule(a: Assembly) -> Schedule:

@@ -41,9 +41,14 @@ def plan_torque(robot: Robot, trajectory, within: float | None = None) -> list[s
         over = "over" if share[k, j] > 1 else "within 10 % of"
         still = abs(float(robot.gravity_torque(q[k])[j]))  # (what holding that posture alone takes)
         limit = model.limits.effort[j]
-        fix = (f"holding that posture alone takes {still:.4g} {unit}: a posture the joint cannot hold against "
-               "gravity (other targets, or a higher limit if the drive has it)" if still > NEAR_LIMIT * limit
-               else "a slower plan: longer segment durations")
+        if still > limit:
+            fix = (f"holding that posture alone takes {still:.4g} {unit}: a posture the joint cannot hold against "
+                   "gravity (other targets, or a higher limit if the drive has it)")
+        elif still > NEAR_LIMIT * limit:
+            fix = (f"holding that posture alone takes {still:.4g} {unit} ({still / limit:.0%} of the limit): little is "
+                   "left to move it with (other targets, or a higher limit if the drive has it)")
+        else:
+            fix = "a slower plan: longer segment durations"
         said.append(f"{model.joint_names[j]}: the first plan needs {tau[k, j]:+.4g} {unit} at t={t[k]:.2f} "
                     f"s, {over} its {limit:g} {unit} effort limit ({share[k, j]:.0%}): its torque will be clipped and "
                     f"it will lag; {fix}")

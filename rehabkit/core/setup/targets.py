@@ -56,10 +56,13 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
             q = posture_si(name, spec, robot.model)
             if len(q) != robot.model.dof:
                 names = robot.model.joint_names
+                sliding = spec.joints_deg is not None and not np.all(robot.model.revolute)  # (then: joints)
                 raise PlanningError(f"target '{name}' has {len(q)} joint values; robot '{robot.model.name}' has "
-                                    f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}",
-                                    target=name)
-            hint = radians_hint(spec.joints_deg if spec.joints_deg is not None else spec.joints, robot.model.revolute)
+                                    f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}"
+                                    + ("; with a prismatic joint among them, as `joints: [...]` (degrees for the "
+                                       "revolute ones, metres for the prismatic)" if sliding else ""), target=name)
+            hint = radians_hint(spec.joints_deg if spec.joints_deg is not None else spec.joints, robot.model.revolute,
+                                "joints_deg" if spec.joints_deg is not None else "joints")
             tgt = Target(name, q=q, pose=robot.fk(q), hint=f"its joint values {hint}" if hint else "")
         else:
             pose = np.eye(4)
@@ -199,19 +202,22 @@ def posture_si(name: str, spec, model) -> np.ndarray:
         return np.radians(values) if spec.joints is None else values  # (the count is said by the caller)
     if spec.joints is None and not revolute.all():
         sliding = [n for n, r in zip(model.joint_names, revolute, strict=True) if not r]
+        hint = radians_hint(values, revolute, "joints")
         raise PlanningError(f"target '{name}': joints_deg gives every joint in degrees, and {', '.join(sliding)} "
                             f"{'is' if len(sliding) == 1 else 'are'} prismatic (metres): write this posture as "
-                            "`joints: [...]`, degrees for the revolute joints and metres for the prismatic ones",
-                            target=name)
+                            "`joints: [...]`, degrees for the revolute joints and metres for the prismatic ones"
+                            + (f"; its revolute values {hint}" if hint else ""), target=name)
     return np.where(revolute, np.radians(values), values)
 
 
-def radians_hint(values_deg, revolute) -> str:
+def radians_hint(values_deg, revolute, key: str = "joints_deg") -> str:
     """Why a posture given in degrees may be radians (its values "are all within ±2π: ..."; "" where not): every
-    revolute value within ±2π, not all near zero (a posture of a few degrees at most is rare; radians are common)."""
+    revolute value within ±2π, not all near zero (a posture of a few degrees at most is rare; radians are common).
+    ``key``: the form the fix names (``joints_deg``, or ``joints``, which takes degrees for the revolute joints)."""
     if values_deg is None:
         return ""
     v = np.abs(np.asarray(values_deg, float)[np.asarray(revolute, bool)])
     if not len(v) or v.max() > 2 * np.pi or v.max() < 0.2:
         return ""
-    return "are all within ±2π: written in radians? joints_deg takes degrees (joints_rad takes radians)"
+    takes = "joints_deg takes degrees" if key == "joints_deg" else "joints takes degrees for a revolute joint"
+    return f"are all within ±2π: written in radians? {takes} (joints_rad takes SI: radians, and metres)"
