@@ -138,7 +138,7 @@ def test_a_scara_s_quill_is_given_planned_limited_and_judged_in_metres(tmp_path)
     result = Runner(load_scenario(SCARA), out_dir=tmp_path).run()
     assert result.passed, result.failures
     s, m = result.summary, result.metrics
-    assert s["plans"][0]["waypoints_deg"][:2] == [[30.0, 60.0, 0.02, 0.0], [-20.0, 90.0, 0.15, 45.0]]
+    assert s["plans"][0]["waypoints"][:2] == [[30.0, 60.0, 0.02, 0.0], [-20.0, 90.0, 0.15, 45.0]]
     quill = s["per_joint"]["quill"]["range_m"]
     assert quill[0] == pytest.approx(0.02, abs=1e-4) and 0.15 <= quill[1] < 0.155  # (the spline's swing past 0.15)
     assert m["rom_m_quill"] == pytest.approx(quill[1] - quill[0], abs=1e-6) and "rom_deg_quill" not in m
@@ -186,7 +186,7 @@ def test_a_prismatic_joint_s_breaches_are_said_in_metres_and_newtons_and_its_mar
     assert "slide beyond its position limit (0.207 m, limit 0.205 m)" in beyond.message
     assert step(0.207, 10.0, position_margin_m=0.01) == []
     (fast,) = step(0.1, 10.0, speed=0.6)
-    assert "slide beyond its velocity limit (0.6 m/s, limit 0.5 m/s)" in fast.message
+    assert "slide beyond its velocity limit (0.600 m/s, limit 0.500 m/s)" in fast.message
     (pushed,) = step(0.1, 120.0, torque_policy="stop")
     assert pushed.rule == "torque" and "slide beyond its force limit (120.0 N, limit 100.0 N)" in pushed.message
 

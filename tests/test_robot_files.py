@@ -177,7 +177,7 @@ def test_a_prismatic_joint_is_read_written_and_judged_in_metres(tmp_path):
     r = cli("run", str(p), "--out", str(tmp_path / "out"))
     assert r.returncode == 0, r.stdout + r.stderr
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert s["plans"][0]["waypoints_deg"] == [[0.0, 0.02], [30.0, 0.15]]
+    assert s["plans"][0]["waypoints"] == [[0.0, 0.02], [30.0, 0.15]]
     assert s["metrics"]["rom_deg_j1"] == pytest.approx(30.0, abs=0.01)
     assert s["metrics"]["rom_m_slide"] == pytest.approx(0.13, abs=1e-4) and "rom_deg_slide" not in s["metrics"]
     assert s["per_joint"]["slide"]["range_m"] == pytest.approx([0.02, 0.15], abs=1e-4)
@@ -189,3 +189,15 @@ def test_a_prismatic_joint_is_read_written_and_judged_in_metres(tmp_path):
     assert refused.returncode == 2 and "task.targets.1.joints_deg: " in refused.stderr
     assert "joints_deg gives every joint in degrees, and slide is prismatic (metres): write this posture as " \
            "`joints: [...]`" in refused.stderr
+
+
+def test_a_misspelt_end_effector_is_said_at_its_setting_with_the_names_nearest(tmp_path, capsys):
+    from rehabkit.cli.main import main
+
+    p = tmp_path / "s.yaml"
+    p.write_text(f"name: s\nrobot: {{type: urdf, file: {DATA / 'slide2.urdf'}, ee_frame: l2_e}}\n"
+                 "planner: {type: multi-cubic, segment_durations: [1]}\ncontroller: {type: joint-pd}\n"
+                 "task: {targets: [{name: A, joints: [0, 0.1]}]}\nduration: 1\n")
+    assert main(["validate", str(p)]) == 2
+    said = capsys.readouterr().err
+    assert f"{p}:2:" in said and "robot.ee_frame: " in said and "did you mean 'l2'" in said

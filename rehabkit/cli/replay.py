@@ -48,6 +48,8 @@ def _replay(args: argparse.Namespace) -> int:
         from rehabkit.rehab.replay import replay
 
         rep = replay(source, sets, args.out, progress=True)
+        if rep.result.refusal is None:
+            rep.original["deviation"] = _run_deviation(source, rep.result)
     else:
         from rehabkit.ros.bag_replay import replay_bag
         from rehabkit.ros.session_bag import parse_topics
@@ -60,14 +62,40 @@ def _replay(args: argparse.Namespace) -> int:
         print(str(rep.result.refusal), file=sys.stderr)
         return EXIT_INVALID
     print(rep.table())
-    if rep.original.get("deviation"):
-        from rehabkit.ros.deviation import said
+    deviation = rep.original.get("deviation")
+    if isinstance(deviation, str):  # (a run's folder without its joints: said why)
+        print(f"  DEVIATION  {deviation}")
+    elif deviation:
+        from rehabkit.ros.deviation import RUN_BAG, said
 
-        print(f"  DEVIATION  the replay's largest from the recorded joints: {said(rep.original['deviation'])}")
+        whose = "the recorded joints" if args.scenario is not None else f"the run's joints ({source / RUN_BAG})"
+        print(f"  DEVIATION  the replay's largest from {whose}: {said(deviation)}")
     for ev in rep.result.summary["safety"]["events"]:
         print(f"  SAFETY  {ev['message']}")
     print(wrote(rep.result.summary, rep.result.out_dir))
     return EXIT_OK if rep.result.passed else EXIT_FAILED
+
+
+def _run_deviation(run_dir: Path, result) -> list[dict] | str:
+    """The replay's largest deviation from the joints of the run it replays (its bag, where the run wrote one), or
+    why it is not known."""
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
+    from rehabkit.core.run.runner import SNAPSHOT
+    from rehabkit.core.scenario.loader import load_scenario
+    from rehabkit.core.setup.assembly import assemble
+    from rehabkit.ros.bag_content import BagError
+    from rehabkit.ros.deviation import RUN_BAG, run_deviation
+
+    if not (run_dir / RUN_BAG).exists():
+        return f"not known: {run_dir} holds no {RUN_BAG} (the run's joints are kept with rehabkit run --bag)"
+    registry = default_registry()
+    robot = assemble(load_scenario(result.out_dir / SNAPSHOT, [], registry), registry, default_extensions(),
+                     upto="targets").robot
+    try:
+        return run_deviation(run_dir, result.trace, robot) or []
+    except BagError as exc:
+        return f"not known: {exc}"
 
 
 def add_parser(sub) -> None:

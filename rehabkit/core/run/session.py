@@ -28,7 +28,7 @@ from rehabkit.core.run.timeline import Replan, Timeline
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.setup.assembly import Assembly, SetupError
 from rehabkit.core.setup.checks import metric_catalogue
-from rehabkit.core.setup.first_plan import first_plan_refusal, start_posture
+from rehabkit.core.setup.first_plan import breach_refusal, first_plan_refusal, start_posture
 from rehabkit.core.setup.limits import LimitBreach
 
 
@@ -234,6 +234,8 @@ def _first_plan(s: RunSession) -> None:
         s.refusal = PlanRefusal(0.0, "stopped before it moved", first=True)
     if a.safety.tripped and a.limit_sources.by_joint:
         # refused before it runs (not stopped at t=0): the limits in force were narrowed, and said where
+        if s.refusal.breach is not None:
+            raise breach_refusal(a, s.refusal.breach)
         raise SetupError(f"{s.refusal.reason} (joint limits narrowed by the patient's profile or the safety "
                          "envelope)", s.refusal.breach)
     s.view.planner_drawings()

@@ -48,7 +48,7 @@ def check_first_plan(a: Assembly) -> list[str]:
     except PlanningError as exc:
         raise first_plan_refusal(a, exc) from exc
     if (breach := a.space.limit_breach(plan, a.sc.duration + CHECK_DT)) is not None:  # as the run's plan gate does
-        raise first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
+        raise breach_refusal(a, breach)
     warnings = [w for w in (outlasting(a, plan.trajectory.duration),) if w] + missing_inertia(a.robot, q0)
     if a.planner.space == "joint":  # (what the joints need to follow it: a Cartesian plan's joints are the run's)
         warnings += plan_torque(a.robot, plan.trajectory, a.sc.duration)
@@ -86,6 +86,14 @@ def _fix(a: Assembly, breach) -> str:
         return (f"; the limit is {where}: give the plan more time (the planner's timing settings, `rehabkit plugins "
                 f"--fields {a.sc.planner.type}`) or the joint a higher speed limit there")
     return f"; the limit is {where}: plan through postures inside it (other targets or via points) or widen it there"
+
+
+def breach_refusal(a: Assembly, breach) -> PluginSetupError:
+    """The first plan breaking a limit in force, located and with its fix: the same words from ``validate`` and
+    from a run (which said it unlocated, blaming a patient's profile where there was none)."""
+    refusal = first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
+    refusal.breach = breach  # (what it says, as fields)
+    return refusal
 
 
 def first_plan_refusal(a: Assembly, why: Exception | str) -> PluginSetupError:

@@ -221,7 +221,8 @@ class LimitBreach:
         else:
             v, lim, unit = self.value, self.limit, " m" if self.quantity == "position" else " m/s"
         when = f" at t+{self.at_s:.3f}s" if self.at_s is not None else ""
-        d = next((d for d in range(1, 7) if f"{abs(v):.{d}f}" != f"{abs(lim):.{d}f}"), 6)  # (never "3.0, limit 3.0")
+        first = 1 if self.revolute or self.quantity == "torque" else 3  # (metres to the millimetre: 0.12 was "0.1")
+        d = next((d for d in range(first, 7) if f"{abs(v):.{d}f}" != f"{abs(lim):.{d}f}"), 6)  # (never "3, limit 3")
         return f"{self.joint} beyond its {what} limit{when} ({v:.{d}f}{unit}, limit {lim:.{d}f}{unit})"
 
 

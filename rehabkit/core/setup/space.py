@@ -22,11 +22,13 @@ class JointSpace:
     """References are joint values [rad]; the hand follows by the robot's forward kinematics."""
 
     name = "joint"
-    waypoint_key = "waypoints_deg"  # (degrees for revolute joints, metres for prismatic ones)
 
     def __init__(self, setup):
         self.robot, self.controller = setup.robot, setup.controller
         self._revolute = np.asarray(setup.robot.model.revolute, bool)
+        # a plan's waypoints in the summary: degrees where every joint turns; with a slide among them, each joint in
+        # its own unit under a key that does not say degrees (a SCARA's quill in metres under waypoints_deg misled)
+        self.waypoint_key = "waypoints_deg" if self._revolute.all() else "waypoints"
 
     def waypoint_scale(self, waypoints: np.ndarray) -> np.ndarray:
         """Waypoints in each joint's unit: degrees for a revolute joint, metres for a prismatic one."""

@@ -114,7 +114,10 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str, floating:
         body = next((b for b in root.iter("body") if b.get("name") == ee_frame), None)
         if body is None:
             names = sorted(n for n in sites | {b.get("name") for b in root.iter("body")} if n)
-            raise ValueError(f"ee_frame '{ee_frame}' is neither a site nor a body; choices: {', '.join(names)}")
+            close = difflib.get_close_matches(ee_frame, names, n=3, cutoff=0.5)
+            mean = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            raise ModelFileError(f"ee_frame '{ee_frame}' is neither a site nor a body of the file{mean} (its sites and "
+                                 f"bodies: {', '.join(names)})", "ee_frame")
         ET.SubElement(body, "site", {"name": f"{ee_frame}_ee", "size": "0.01"})
     return ET.tostring(root, encoding="unicode"), free, support
 
