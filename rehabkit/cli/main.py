@@ -178,7 +178,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
 def parser() -> argparse.ArgumentParser:
     from rehabkit.core.version import __version__
 
-    p = argparse.ArgumentParser(prog="rehabkit", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="rehabkit", description=" ".join(__doc__.split("\n\n")[0].split()))
     p.add_argument("--version", action="version", version=f"rehabkit {__version__}")
     p.add_argument("--debug", action="store_true",
                    help="print the traceback behind an error, a plugin's own code included (as REHABKIT_DEBUG=1)")

@@ -79,8 +79,9 @@ class Registrar:
         if not callable(factory):
             raise PluginError(f"{self.kind} '{name}': factory {factory!r} is not callable")
         if description is None:
-            lines = (getattr(factory, "__doc__", None) or "").strip().splitlines()
-            description = lines[0] if lines else ""
+            # the docstring's first paragraph, its lines joined (its first line alone stopped mid-sentence)
+            paragraph = (getattr(factory, "__doc__", None) or "").strip().split("\n\n")[0]
+            description = " ".join(line.strip() for line in paragraph.splitlines())
         typed = create_model(
             f"{config.__name__}",
             __base__=config,
