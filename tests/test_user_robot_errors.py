@@ -178,3 +178,19 @@ def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
     r = cli("validate", str(p))
     assert r.returncode == 2 and "task.targets.1.joints_deg: target 'B': its joint values put j1 beyond its position " \
         "limit at t+0.000s (1.2°, limit 28.6°); its joint values are all within ±2π: written in radians?" in r.stderr
+
+
+def test_a_task_whose_postures_all_look_like_radians_is_said_where_they_fit_the_ranges(tmp_path, capsys):
+    """Radians under joints_deg that fit the ranges are refused nowhere: the arm barely moves. validate says so at
+    the posture that moves most."""
+    from rehabkit.cli.main import main
+
+    p = tmp_path / "rad.yaml"
+    p.write_text(ARM3.replace("joints_deg: [0, 30, 60]", "joints_deg: [0, 0.52, 1.05]")
+                 .replace("joints_deg: [40, 60, 20]", "joints_deg: [0.7, 1.05, 0.35]"))
+    assert main(["validate", str(p)]) == 0
+    said = capsys.readouterr().out
+    assert f"PLAN    task.targets.0.joints_deg ({p}:" in said and "within ±2π (the largest 1.05): written in " \
+        "radians?" in said
+    p.write_text(ARM3)  # (the file as written: degrees, not said)
+    assert main(["validate", str(p)]) == 0 and "radians" not in capsys.readouterr().out

@@ -49,13 +49,34 @@ def check_first_plan(a: Assembly) -> list[str]:
         raise first_plan_refusal(a, exc) from exc
     if (breach := a.space.limit_breach(plan, a.sc.duration + CHECK_DT)) is not None:  # as the run's plan gate does
         raise breach_refusal(a, breach)
-    warnings = [w for w in (outlasting(a, plan.trajectory.duration),) if w] + missing_inertia(a.robot, q0)
+    warnings = [w for w in (outlasting(a, plan.trajectory.duration), all_small(a)) if w] + missing_inertia(a.robot, q0)
     if a.planner.space == "joint":  # (what the joints need to follow it: a Cartesian plan's joints are the run's)
         warnings += plan_torque(a.robot, plan.trajectory, a.sc.duration)
     if a.safety.keep_in is None:
         return warnings
     warning = plan_exit(0.0, plan.trajectory, a.space.hand_world, a.safety.keep_in)
     return warnings + ([warning["message"]] if warning is not None else [])
+
+
+def all_small(a: Assembly) -> str | None:
+    """Every posture of the task given in degrees within ±2π on its revolute joints: radians, most likely — refused
+    nowhere where they fit the ranges (the arm barely moves), so said at the first of them."""
+    revolute = np.asarray(a.robot.model.revolute, bool)
+    given = [(i, t, "joints_deg" if t.joints_deg is not None else "joints") for i, t in enumerate(a.sc.task.targets)
+             if t.joints_deg is not None or t.joints is not None]
+    if len(given) < 2:  # (one small posture is a posture)
+        return None
+    values = [np.abs(np.asarray(getattr(t, key), float)) for _, t, key in given]
+    if any(len(v) != len(revolute) for v in values):
+        return None
+    turning = np.concatenate([v[revolute] for v in values])
+    if not len(turning) or turning.max() > 2 * np.pi or turning.max() < 0.2:
+        return None
+    i, _, key = given[int(np.argmax([v[revolute].max() for v in values]))]  # (at the posture that moves most)
+    at = a.loaded.source.key_marks.get(("task", "targets", i, key))
+    return (f"task.targets.{i}.{key}{f' ({at})' if at else ''}: every posture's revolute values are within ±2π "
+            f"(the largest {turning.max():.3g}): written in radians? {key} takes degrees for a revolute joint; "
+            "joints_rad takes SI (radians, and metres)")
 
 
 def outlasting(a: Assembly, plan_s: float) -> str | None:
