@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from rehabkit.api import load_scenario
-from rehabkit.ros.bag_replay import replay_bag
-from rehabkit.ros.session_bag import BagError, read_session
+from rehabkit.ros.replay.bag_replay import replay_bag
+from rehabkit.ros.replay.session_bag import BagError, read_session
 from tests.conftest import ROOT
 from tests.test_cli import cli
 
@@ -173,22 +173,3 @@ def test_a_role_left_unmapped_is_said_and_one_left_out_on_purpose_keeps_the_scen
     assert table["peak_interaction_force_n"][0] == "—" and float(table["peak_interaction_force_n"][1]) > 10
     assert table["reaches_completed"] == ["3", "3"]
     assert json.loads((tmp_path / "summary.json").read_text())["plugins"]["patient"]["type"] == "simulated-arm"
-
-
-def test_a_timed_joint_space_planners_run_replays_from_its_bag(tmp_path):
-    """HIT's round trip (multi-cubic, timed by segment_durations; B a hand pose with A's orientation): its bag's
-    targets are poses, the replay gives each the time until the next and starts each from the one before — the
-    same postures reached (each joint's range of motion within 0.01°), every reach completed."""
-    from rehabkit.api import run_scenario
-
-    hit = ROOT / "scenarios" / "hit_roundtrip.yaml"
-    run_scenario(hit, {"ros": {"bag": True}}, out_dir=tmp_path / "run")
-    rep = replay_bag(tmp_path / "run" / "run.mcap", hit, {"wrench": ""}, out_dir=tmp_path / "replay")
-    rows = {k: (a, b) for k, a, b in rep.rows()}
-    assert rows["reaches_completed"] == (4.0, 4.0) and rep.result.summary["safety"]["events"] == []
-    for joint in ("shoulder_1", "shoulder_2", "elbow_1", "elbow_2", "wrist_1", "wrist_2"):
-        a, b = rows[f"rom_deg_{joint}"]
-        assert abs(a - b) < 0.01, joint
-    replayed = load_scenario(tmp_path / "replay" / "replayed_session.yaml").model
-    assert replayed.planner.segment_durations == [2.0]  # (the first plan: start to the first target)
-    assert [e.planner["segment_durations"] for e in replayed.task.events] == [[2.0], [2.0], [2.5]]

@@ -1,7 +1,9 @@
 """Bags a ROS user can trust. A Panda session with a mixed task: its posture targets stay postures
 (``/targets/joint_states``), and its replay with the same controller reaches the same postures on the session's time
-base. ``/tf`` is the URDF's own tree (checked against the file's joints, parsed here): the Panda's mimic finger under
-its own parent, the xArm's own ``world → link_base`` with the scenario's placement. A bag's bad content, written by
+base. An SO-101 session, one plan through via points, replays as that plan (told from its reference; without it,
+from the measured joints), without a person where its bag has none; its run folder's replay says its deviation too.
+``/tf`` is the URDF's own tree (checked against the file's joints, parsed here): the Panda's mimic finger under its
+own parent, the xArm's own ``world → link_base`` with the scenario's placement. A bag's bad content, written by
 rosbags' own writer (NaN, inf, a joint or a wrench frame the robot lacks), is refused at the bag, topic and stamp
 before anything runs, leaving no folder, or said — and the replay says its largest deviation from the session."""
 
@@ -15,9 +17,9 @@ import pinocchio as pin
 import pytest
 import yaml
 
-from rehabkit.api import run_scenario
-from rehabkit.ros.bag_content import BagError
-from rehabkit.ros.bag_replay import replay_bag
+from rehabkit.api import load_scenario, run_scenario
+from rehabkit.ros.replay.bag_content import BagError
+from rehabkit.ros.replay.bag_replay import replay_bag
 from tests.conftest import ROOT
 from tests.test_cli import cli
 from tests.test_ros_bag import read
@@ -25,6 +27,10 @@ from tests.test_ros_bag import read
 PANDA = ROOT / "tests" / "data" / "panda_mixed_session.yaml"
 ERD = Path(__import__("cmeel").__file__).parent.parent / "cmeel.prefix" / "share" / "example-robot-data" / "robots"
 EPOCH = 1_700_000_000 * 1_000_000_000  # the bad bags' session start (Unix time, as a robot stamps it)
+NO_REFERENCE = ("no joints' reference (rehabkit's bags: /reference/joint_states): plans told apart by the measured "
+                "joints' speed (a target shown while they moved: a via point of the plan under way): ")
+ENDS = ("; each plan's last movement given until the next plan began, or the session's end (one that ended sooner is "
+        "replayed slower)")
 
 
 def urdf_joints(path: Path) -> dict[str, tuple[str, str, ET.Element]]:
@@ -261,7 +267,7 @@ def test_what_the_replay_does_without_is_said_first_and_its_largest_deviation_la
     assert said == [f"  BAG  {bag}: /joint_states at t=0.200 s (stamp 1700000000.200000000): effort of 'j1' is NaN "
                     "(1 value(s) not finite): effort not used (the session's torques are not known)",
                     f"  BAG  {bag}: /joint_states: joint(s) ['gripper'] not in robot 'slide2' (its joints: j1, slide): "
-                    "not replayed"]
+                    "not replayed", f"  BAG  {bag}: --topics reference: {NO_REFERENCE}a plan to each target{ENDS}"]
     assert lines.index(said[-1]) < next(i for i, line in enumerate(lines) if line.startswith("metric"))
     session = json.loads((slide / "extra-out" / "session.json").read_text())
     assert session["said"] == [s.removeprefix("  BAG  ") for s in said]
@@ -272,3 +278,66 @@ def test_what_the_replay_does_without_is_said_first_and_its_largest_deviation_la
                          f"j1 by {arm['value']:.3g}° at t = {arm['t_s']:.3f} s; "
                          f"slide by {sliding['value']:.3g} m at t = {sliding['t_s']:.3f} s")
     assert 0 < arm["value"] < 20 and 0 < sliding["value"] < 0.08  # (a made-up session: not what the controller does)
+
+
+# -- one plan through via points: an SO-101 session (multi-cubic A → B → C → D, 1.5 s a segment; 4.7 s at 500 Hz) --
+
+SO101 = {
+    "name": "so101-reach",
+    "robot": {"type": "urdf", "file": "package://example-robot-data/robots/so_arm_description/urdf/so101.urdf",
+              "ee_frame": "gripper_frame_link", "base": {"position": [0, 0, 0.5]}},
+    "planner": {"type": "multi-cubic", "segment_durations": [1.5, 1.5, 1.5]},
+    "controller": {"type": "joint-pd", "gains": "auto", "feedforward": "inverse-dynamics"},
+    "task": {"targets": [{"name": "A", "joints_deg": [0, 0, 0, 0, 0, 0]},
+                         {"name": "B", "joints_deg": [30, -30, 45, 30, 0, 20]},
+                         {"name": "C", "position": [0.2, 0.0, 0.15]}, {"name": "D", "same_as": "A"}]},
+    "duration": 4.7, "rates": {"control_hz": 500}}
+
+
+def test_a_plan_through_via_points_replays_as_that_plan(tmp_path):
+    """The SO-101's run, replayed from its own bag as the README says (no --topics: its bag has no person's wrench,
+    said), is the run again: the targets shown while the reference moved are one plan through them, its last
+    movement ending where the reference stopped (4.5 s, not the run's 4.7 s) — within 1e-6° (measured 6e-14°; was
+    23° in a 5-s run: a replan stopping at each target, the last stretched to the run's end). Without the reference
+    (a ROS user's bag) the measured joints' speed finds the same plan, but not its end: stretched, said (a 5-s run's
+    replay: 20.9° off). A wrench topic named and missing is still refused. The run folder's replay says its
+    deviation from the run's own bag, or why it is not known."""
+    from rehabkit.cli.replay import _run_deviation
+    from rehabkit.ros.replay.bag_plans import session_plans
+    from rehabkit.ros.replay.bag_scenario import plans_said, shown_targets
+    from rehabkit.ros.replay.session_bag import read_session
+
+    (tmp_path / "so101.yaml").write_text(yaml.safe_dump(SO101, sort_keys=False))
+    run = run_scenario(tmp_path / "so101.yaml", {"ros": {"bag": True}}, out_dir=tmp_path / "run")
+    bag = tmp_path / "run" / "run.mcap"
+    done = cli("replay", bag, "--scenario", tmp_path / "so101.yaml", "--out", tmp_path / "replay")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert [line for line in lines if line.startswith("  BAG")] == [
+        f"  BAG  {bag}: --topics wrench: no topic /wrench, nor another geometry_msgs/msg/WrenchStamped: no person's "
+        "wrench recorded; replayed without one (the scenario's own patient, if it has one; name their wrench's topic: "
+        "--topics wrench=TOPIC)"]
+    task = yaml.safe_load((tmp_path / "replay" / "replayed_session.yaml").read_text())["task"]
+    assert (task["sequence"], task["events"]) == (["start", "shown_1", "shown_2", "shown_3"], [])
+    replayed = load_scenario(tmp_path / "replay" / "replayed_session.yaml").model
+    assert replayed.planner.segment_durations == [1.5, 1.5, 1.5] and replayed.patient is None
+    (deviation,) = json.loads((tmp_path / "replay" / "session.json").read_text())["deviation"]
+    assert deviation["value"] < 1e-6 and f"by {deviation['value']:.3g}°" in lines[-2]
+    # a ROS user's bag: no reference
+    session = read_session(bag, {"reference": ""})
+    (plan,) = session_plans(session, shown_targets(session))
+    assert (plan.first, plan.last, plan.t, plan.end_known) == (0, 2, 0.0, False)
+    assert plan.durations == pytest.approx([1.5, 1.5, 1.7], abs=1e-9)
+    assert [str(r) for r in plans_said(session, timed=True)] == [
+        f"{bag}: --topics reference: {NO_REFERENCE}one plan through shown_1..shown_3{ENDS}"]
+    named = cli("replay", bag, "--scenario", tmp_path / "so101.yaml", "--topics", "wrench=/wrench")
+    assert named.returncode == 2 and f"{bag}: --topics wrench: no topic /wrench; the bag has" in named.stderr
+    # the run folder's replay: the scenario again (its first second), against the joints its bag kept
+    again = cli("replay", tmp_path / "run", "--set", "duration=1", "--set", "ros.bag=false", "--out",
+                tmp_path / "again")
+    assert again.returncode == 0, again.stderr
+    (line,) = [line for line in again.stdout.splitlines() if line.startswith("  DEVIATION")]
+    assert line.startswith(f"  DEVIATION  the replay's largest from the run's joints ({bag}): ")
+    assert float(line.split(" by ")[1].split("°")[0]) < 1e-6 and run.metrics["reaches_completed"] == 3
+    assert _run_deviation(tmp_path / "replay", None) == (f"not known: {tmp_path / 'replay'} holds no run.mcap (the "
+                                                         "run's joints are kept with rehabkit run --bag)")

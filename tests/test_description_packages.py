@@ -268,9 +268,9 @@ def test_the_robot_file_itself_may_be_a_package_uri(tmp_path, monkeypatch):
 def test_a_target_in_a_frame_fixed_to_the_base_is_taken_through_that_frames_pose(tmp_path, monkeypatch):
     """UR5's ``base`` link is its ``base_link`` turned half a turn about z (ROS-Industrial's convention): a target a
     session showed in ``base`` is replayed where that frame puts it, not read as if it were in ``base_link``."""
-    from rehabkit.ros.bag_replay import base_frames
-    from rehabkit.ros.bag_scenario import _in_base
-    from rehabkit.ros.session_bag import SessionBag, ShownTarget
+    from rehabkit.ros.replay.bag_replay import base_frames
+    from rehabkit.ros.replay.bag_scenario import _in_base
+    from rehabkit.ros.replay.session_bag import SessionBag, ShownTarget
 
     monkeypatch.setenv("AMENT_PREFIX_PATH", str(ERD))
     urdf = ERD / "share" / "example-robot-data" / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"

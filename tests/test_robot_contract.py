@@ -11,6 +11,7 @@ import pytest
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.plugin import PassiveJoints
+from rehabkit.sim.scene import couple_joints
 from tests.conftest import SCENARIOS
 
 ROBOTS = {"hit": "hit_roundtrip.yaml", "lexos": "lexos_reaching.yaml", "arm": "arm_replay.yaml",
@@ -82,10 +83,17 @@ def test_the_mass_matrix_is_mujocos(robot):
             adr = mj.jnt_qposadr[mj.joint(name).id]
             d.qpos[adr:adr + len(value)] = value
         if not isinstance(robot, PassiveJoints):
+            couple_joints(mj, d)  # (a follower — ARM's second finger — where its leader puts it)
             mujoco.mj_forward(mj, d)
             full = np.zeros((mj.nv, mj.nv))
             mujoco.mj_fullM(mj, d, full)
-            np.testing.assert_allclose(M, full[np.ix_(dofs, dofs)], atol=1e-9)
+            # the joints' inertia as they move: a follower moves with its leader (q_f = offset + scale·q_l), so
+            # its inertia is its leader's to carry: Gᵀ M G, G the velocities of every dof per joint's speed
+            G = np.zeros((mj.nv, len(names)))
+            G[dofs, range(len(names))] = 1.0
+            for follower, (leader, _, scale) in robot.model.couplings.items():
+                G[mj.jnt_dofadr[mj.joint(follower).id], names.index(leader)] = scale
+            np.testing.assert_allclose(M, G.T @ full @ G, atol=1e-9)
             continue
         tau = np.array([0.01, -0.02, 0.015])
         d.qfrc_applied[dofs] = tau

@@ -16,7 +16,7 @@ from pydantic import Field
 
 from rehabkit import hookimpl
 from rehabkit.plugin import Context, Patient, SettingError, StrictModel
-from rehabkit.ros.session_bag import BagError, read_session
+from rehabkit.ros.replay.session_bag import BagError, read_session
 
 
 class RecordedWrenchConfig(StrictModel):

@@ -1,5 +1,6 @@
 """``rehabkit replay``: a recorded session run again with another controller or planner — a run's folder
-(:mod:`rehabkit.rehab.replay`), or a session recorded on a robot as a ROS bag (:mod:`rehabkit.ros.bag_replay`)."""
+(:mod:`rehabkit.rehab.replay`), or a session recorded on a robot as a ROS bag
+(:mod:`rehabkit.ros.replay.bag_replay`)."""
 
 from __future__ import annotations
 
@@ -51,8 +52,8 @@ def _replay(args: argparse.Namespace) -> int:
         if rep.result.refusal is None:
             rep.original["deviation"] = _run_deviation(source, rep.result)
     else:
-        from rehabkit.ros.bag_replay import replay_bag
-        from rehabkit.ros.session_bag import parse_topics
+        from rehabkit.ros.replay.bag_replay import replay_bag
+        from rehabkit.ros.replay.session_bag import parse_topics
 
         def say(line: str) -> None:  # (what the replay does without, before it runs)
             print(f"  BAG  {line}", flush=True)
@@ -66,7 +67,7 @@ def _replay(args: argparse.Namespace) -> int:
     if isinstance(deviation, str):  # (a run's folder without its joints: said why)
         print(f"  DEVIATION  {deviation}")
     elif deviation:
-        from rehabkit.ros.deviation import RUN_BAG, said
+        from rehabkit.ros.replay.deviation import RUN_BAG, said
 
         whose = "the recorded joints" if args.scenario is not None else f"the run's joints ({source / RUN_BAG})"
         print(f"  DEVIATION  the replay's largest from {whose}: {said(deviation)}")
@@ -79,21 +80,13 @@ def _replay(args: argparse.Namespace) -> int:
 def _run_deviation(run_dir: Path, result) -> list[dict] | str:
     """The replay's largest deviation from the joints of the run it replays (its bag, where the run wrote one), or
     why it is not known."""
-    from rehabkit.core.plugins.lifecycle import default_extensions
-    from rehabkit.core.plugins.registry import default_registry
-    from rehabkit.core.run.runner import SNAPSHOT
-    from rehabkit.core.scenario.loader import load_scenario
-    from rehabkit.core.setup.assembly import assemble
-    from rehabkit.ros.bag_content import BagError
-    from rehabkit.ros.deviation import RUN_BAG, run_deviation
+    from rehabkit.ros.replay.bag_content import BagError
+    from rehabkit.ros.replay.deviation import RUN_BAG, run_deviation
 
     if not (run_dir / RUN_BAG).exists():
         return f"not known: {run_dir} holds no {RUN_BAG} (the run's joints are kept with rehabkit run --bag)"
-    registry = default_registry()
-    robot = assemble(load_scenario(result.out_dir / SNAPSHOT, [], registry), registry, default_extensions(),
-                     upto="targets").robot
     try:
-        return run_deviation(run_dir, result.trace, robot) or []
+        return run_deviation(run_dir, result.trace, result.summary.get("per_joint", {})) or []
     except BagError as exc:
         return f"not known: {exc}"
 
@@ -106,9 +99,9 @@ def add_parser(sub) -> None:
                                                           "on a robot (a rosbag2 folder, .mcap, .db3 or ROS 1 .bag)")
     rp.add_argument("--scenario", metavar="S.yaml", help="a bag's replay: the scenario to run it on")
     rp.add_argument("--topics", action="append", default=[], metavar="ROLE=TOPIC,...",
-                    help="a bag's topics where not /joint_states, /wrench, /targets (the targets also read from "
-                         "TOPIC/pose and TOPIC/joint_states where the bag has them; e.g. "
-                         "joint_states=/arm/joint_states,wrench=/cuff/wrench)")
+                    help="a bag's topics where not /joint_states, /wrench, /targets, /reference/joint_states (the "
+                         "targets also read from TOPIC/pose and TOPIC/joint_states where the bag has them; e.g. "
+                         "joint_states=/arm/joint_states,wrench=/cuff/wrench; ROLE= for none)")
     rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="what to change, e.g. controller.type=assist-as-needed")
     rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>, or "

@@ -161,13 +161,42 @@ class RobotModel:
             missing = [j for j in self.passive_joints if not model.existJointName(j)]
             if missing:
                 raise ValueError(f"{self.name}: passive joint(s) {missing} are not in the model")
-            locked = [model.getJointId(j) for j in self.passive_joints]
-            model = pin.buildReducedModel(model, locked, pin.neutral(model))
-        names = [model.names[i] for i in range(1, model.njoints)]
+            coupled = self.couplings
+            locked = [model.getJointId(j) for j in self.passive_joints if j not in coupled]
+            if locked:
+                model = pin.buildReducedModel(model, locked, pin.neutral(model))
+            for follower, (leader, offset, scale) in coupled.items():
+                # a joint coupled to another (a URDF's <mimic>: Panda's second finger) moves with it in the model
+                # too, its mass and its drive's losses its leader's to carry (locked, the leader's model had half
+                # the fingers: the Panda's finger settled 5 mm short)
+                lead, follow = model.getJointId(leader), model.getJointId(follower)
+                at, own = model.joints[lead].idx_v, model.joints[follow].idx_v
+                damping, friction = float(model.damping[own]), float(model.friction[own])
+                model = pin.transformJointIntoMimic(model, lead, follow, scale, offset)
+                model.damping[at] += scale * scale * damping
+                model.friction[at] += abs(scale) * friction
+        names = [model.names[i] for i in range(1, model.njoints) if model.joints[i].shortname() != "JointModelMimic"]
         if names != self.joint_names:
             raise ValueError(f"{self.name}: Pinocchio joint order {names} differs from {self.joint_names}")
         model.gravity.linear = self.base_pose[:3, :3].T @ self.gravity
         return model
+
+    @cached_property
+    def couplings(self) -> dict[str, tuple[str, float, float]]:
+        """Passive joints that follow another (the MJCF's joint equalities, a URDF's ``<mimic>``): follower →
+        (leader, offset, scale), ``q_follower = offset + scale·q_leader``; a polynomial coupling is left out (the
+        follower is then locked in Pinocchio's model)."""
+        import xml.etree.ElementTree as ET
+
+        out = {}
+        for eq in ET.fromstring(self.mjcf).iter("joint"):
+            if eq.get("joint1") is None or eq.get("joint2") is None:
+                continue  # (a joint element, not an equality)
+            coef = [float(c) for c in (eq.get("polycoef") or "0 1 0 0 0").split()]
+            follower, leader = eq.get("joint1"), eq.get("joint2")
+            if follower in self.passive_joints and leader in self.joint_names and not any(coef[2:]):
+                out[follower] = (leader, coef[0], coef[1])
+        return out
 
     @cached_property
     def ee_frame_id(self) -> int:

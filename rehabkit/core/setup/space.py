@@ -95,7 +95,11 @@ class CartesianSpace(JointSpace):
     """References are hand positions [m] in the robot's base frame; a controller maps them to the joints."""
 
     name = "cartesian"
-    waypoint_key, waypoint_scale = "waypoints_m", staticmethod(lambda w: w)
+    waypoint_scale = staticmethod(lambda w: w)
+
+    def __init__(self, setup):
+        super().__init__(setup)
+        self.waypoint_key = "waypoints_m"  # (hand positions)
 
     def point(self, q: np.ndarray) -> np.ndarray:
         return self.robot.fk(q)[:3, 3]

@@ -24,11 +24,17 @@ from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.rehab.replay import Replay, overrides_label
 from rehabkit.rehab.run_outcomes import run_outcomes
-from rehabkit.ros.bag_content import BagError, Where
-from rehabkit.ros.bag_scenario import extra_joints, joint_order, shown_targets, write_session_scenario
 from rehabkit.ros.description import links
-from rehabkit.ros.deviation import largest_deviation
-from rehabkit.ros.session_bag import TOPICS, SessionBag, read_session
+from rehabkit.ros.replay.bag_content import BagError, Where
+from rehabkit.ros.replay.bag_scenario import (
+    extra_joints,
+    joint_order,
+    plans_said,
+    shown_targets,
+    write_session_scenario,
+)
+from rehabkit.ros.replay.deviation import largest_deviation
+from rehabkit.ros.replay.session_bag import SessionBag, read_session
 
 SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was replayed in, beside the replay's outputs
 SESSION_MEASURES = "session.json"  # the recorded session's own outcome measures, the table's first column
@@ -91,11 +97,13 @@ def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str
                overrides: Iterable[str] = (), out_dir: str | Path | None = None,
                registry: PluginRegistry | None = None, progress: bool = False,
                say: Callable[[str], None] | None = None) -> Replay:
-    """Replay the session recorded in ``bag_path`` on ``scenario`` with ``overrides`` (e.g. another controller);
+    """Replay the session recorded in ``bag_path`` on ``scenario`` with ``overrides`` (e.g. another controller), its
+    ``topics`` by role where named (:func:`rehabkit.ros.replay.session_bag.parse_topics`; the others at their defaults);
     outputs in ``out_dir`` (default ``<bag>-replay-<values>`` beside the bag): the run's, with the scenario the
     session was replayed in (:data:`SESSION_SCENARIO`) and the session's own measures (:data:`SESSION_MEASURES`).
-    What the replay does without (a gap bridged, joints the robot lacks, a field left out) is given to ``say``
-    before anything is simulated, and kept in the session's ``said``.
+    What the replay does without (a gap bridged, joints the robot lacks, a field left out, a person's wrench or a
+    reference the bag has none of) is given to ``say`` before anything is simulated, and kept in the session's
+    ``said``.
 
     Raises:
         ScenarioError: the bag can't be replayed as asked (a topic missing, joints the robot lacks, a value that is
@@ -107,15 +115,17 @@ def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str
 
     bag_path, scenario, overrides = Path(bag_path), Path(scenario), list(overrides)
     registry = registry or default_registry()
-    topics = {**TOPICS, **(topics or {})}
     bag = read_session(bag_path, topics)
+    topics = bag.topics  # (those read: a wrench not named and not in the bag is none)
     plain = load_scenario(scenario, [], registry)
     robot = assemble(plain, registry, default_extensions(), upto="targets").robot
     joint_order(bag, list(robot.model.joint_names))  # (the robot's joints, each in the bag: else refused first)
     framed = any(o.split("=", 1)[0].strip() == "patient.model.frame" for o in overrides)
     if topics["wrench"] and not framed and (refused := wrench_frame_refusal(bag, robot)) is not None:
         raise refused
-    said = [str(r) for r in [*bag.remarks, *extra_joints(bag, robot)]]
+    timed = plain.model.planner.model_dump().get("segment_durations") is not None
+    said = [str(r) for r in [*bag.remarks, *extra_joints(bag, robot), *(plans_said(bag, timed) if topics["targets"]
+                                                                        else [])]]
     said += [f"{bag_path}: {gap}: bridged by interpolation" for gap in bag.gaps]
     for line in said:
         if say is not None:
@@ -127,8 +137,7 @@ def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str
     out.mkdir(parents=True, exist_ok=True)
     try:
         path = write_session_scenario(out / SESSION_SCENARIO, scenario, bag, robot, base_frames(robot), topics,
-                                      plain.model.patient is not None,
-                                      plain.model.planner.model_dump().get("segment_durations") is not None)
+                                      plain.model.patient is not None, timed)
         loaded = load_scenario(path, overrides, registry)
         runner = Runner(loaded, registry, out, progress=progress)
         result = runner.run()

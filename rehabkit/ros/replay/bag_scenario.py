@@ -1,5 +1,7 @@
 """The scenario a recorded session is replayed in: the user's scenario, with the session's start posture, duration,
-targets as they were shown (each at its time, a replan to it) and its person (their recorded wrench) put in.
+targets as they were shown (each plan at its time, a replan through its targets:
+:mod:`rehabkit.ros.replay.bag_plans`) and
+its person (their recorded wrench) put in.
 
 It is written as a file that ``extends:`` the user's (``replayed_session.yaml`` in the replay's folder), so what ran
 can be read, validated and run again, and an error in it is located like any other.
@@ -13,8 +15,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from rehabkit.ros.bag_content import BagError, Remark, Where
-from rehabkit.ros.session_bag import SessionBag, ShownTarget
+from rehabkit.ros.replay.bag_content import BagError, Remark, Where
+from rehabkit.ros.replay.bag_plans import session_plans
+from rehabkit.ros.replay.session_bag import TOPICS, SessionBag, ShownTarget
 
 WORLD_FRAMES = ("world", "map")
 
@@ -72,18 +75,17 @@ def shown_targets(bag: SessionBag) -> list[ShownTarget]:
 
 
 def session_task(bag: SessionBag, robot, base_frames: dict[str, np.ndarray], timed: bool = False) -> dict:
-    """The ``task:`` section: start where the session started, then a replan to each target when it was shown
-    (``timed``: the planner is timed by ``segment_durations``, one per target: each replan's is the time until the
-    next target was shown, or the session's end)."""
+    """The ``task:`` section: start where the session started, then each plan as it was (:func:`session_plans`: the
+    targets shown while the robot moved on to them in one plan, a new one where it stood), a replan through its
+    targets when its first was shown (``timed``: the planner is timed by ``segment_durations`` and plans from its
+    first target, as multi-cubic does: each replan from the target before, with its segments' durations)."""
     import pinocchio as pin
 
     model = robot.model
     order = joint_order(bag, list(model.joint_names))
     start = bag.joints.values[0, order]
     targets: list[dict] = [{"name": "start", "joints_rad": [float(v) for v in start]}]
-    events = []
     shown_all = shown_targets(bag)
-    until = [t.t for t in shown_all[1:]] + [bag.duration_s]
     for i, shown in enumerate(shown_all):
         name = f"shown_{i + 1}"
         if shown.kind == "joints":
@@ -95,11 +97,14 @@ def session_task(bag: SessionBag, robot, base_frames: dict[str, np.ndarray], tim
             if rot is not None:
                 spec["rpy_deg"] = [float(v) for v in np.degrees(pin.rpy.matrixToRpy(rot))]
             targets.append(spec)
+    events = []
+    for plan in session_plans(bag, shown_all):
+        names = [f"shown_{i + 1}" for i in range(plan.first, plan.last + 1)]
         # (a timed planner plans through its via points: from the target before, where the robot should be)
-        event = {"at": round(float(shown.t), 9), "action": "replan",
-                 "sequence": [f"shown_{i}" if i else "start", name] if timed else [name]}
+        event = {"at": round(float(plan.t), 9), "action": "replan",
+                 "sequence": [f"shown_{plan.first}" if plan.first else "start", *names] if timed else names}
         if timed:
-            event["planner"] = {"segment_durations": [round(max(until[i] - shown.t, 1e-3), 9)]}
+            event["planner"] = {"segment_durations": [round(d, 9) for d in plan.durations]}
         events.append(event)
     task = {"targets": targets, "start": "start", "sequence": ["start"], "events": events}
     if timed:  # (a timed planner's first plan has a segment: to the first target shown at once, or held till one is)
@@ -112,6 +117,26 @@ def session_task(bag: SessionBag, robot, base_frames: dict[str, np.ndarray], tim
             durations = [round(shown_all[0].t if shown_all else bag.duration_s, 9)]
         task["segment_durations"] = durations  # (taken out by the caller: the planner's setting)
     return task
+
+
+def plans_said(bag: SessionBag, timed: bool) -> list[Remark]:
+    """What the replay's plans do without, where it matters: a bag without the joints' reference has its plans told
+    apart by the measured joints' speed — an estimate, said where a plan is through several targets or the planner is
+    timed (each plan's last movement then given until the next plan began, or the session's end)."""
+    shown = shown_targets(bag)
+    if bag.reference is not None or not shown:
+        return []
+    plans = session_plans(bag, shown)
+    if not timed and all(p.first == p.last for p in plans):
+        return []
+    through = [f"shown_{p.first + 1}..shown_{p.last + 1}" for p in plans if p.last > p.first]
+    said = f"one plan through {', '.join(through)}" if through else "a plan to each target"
+    ends = ("; each plan's last movement given until the next plan began, or the session's end (one that ended "
+            "sooner is replayed slower)") if timed else ""
+    return [Remark(str(bag.path), "--topics reference", f"no joints' reference (rehabkit's bags: "
+                                                        f"{TOPICS['reference']}): plans told apart by the measured "
+                                                        f"joints' speed (a target shown while they moved: a via "
+                                                        f"point of the plan under way): {said}{ends}")]
 
 
 def write_session_scenario(path: Path, scenario: Path, bag: SessionBag, robot, base_frames: dict[str, np.ndarray],
