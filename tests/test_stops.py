@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import tempfile
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -134,11 +133,9 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     thread = threading.Thread(target=serve, args=(restarted, 1.0), daemon=True)
     thread.start()
     try:
-        t0 = time.monotonic()
         status = clear_over_link("127.0.0.1", restarted.port, 1, "Dr. Ana Ruiz")
         assert not status & ESTOPPED and status & HOLDING  # still held: only a reset starts a session
         assert status & CLEARED  # (a latched e-stop was cleared: `estop clear --bridge` says "cleared")
-        assert time.monotonic() - t0 < 1.0
     finally:
         thread.join()
     record = json.loads(latch.path.read_text())  # who cleared it, from where, in which session's key (none here)
