@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -24,13 +25,19 @@ def rgba_rows(values) -> np.ndarray | None:
     return None if values is None else np.round(255 * np.clip(np.asarray(values, float), 0, 1)).astype(np.uint8)
 
 
+@functools.cache
+def _strip_type() -> pa.DataType:
+    """The Arrow type of Rerun's ``LineStrip3D`` component, as the SDK's public API makes it (one strip, once)."""
+    return rr.components.LineStrip3DBatch([np.zeros((2, 3), np.float32)]).as_arrow_array().type
+
+
 def strips(points: np.ndarray, lengths: np.ndarray) -> pa.Array:
     """Polylines as the Arrow array of Rerun's ``LineStrip3D`` component: ``points`` (n, 3) one after another,
     ``lengths`` the points in each. Rerun's own conversion of a list of arrays costs ~15 µs a line (a person's 63
     muscle paths at the log rate would add ~15 % to a recorded run); this is one copy."""
     offsets = np.zeros(len(lengths) + 1, np.int32)
     np.cumsum(lengths, out=offsets[1:])
-    kind = rr.components.LineStrip3DBatch._ARROW_DATATYPE
+    kind = _strip_type()
     xyz = pa.FixedSizeListArray.from_arrays(pa.array(np.asarray(points, np.float32).ravel()), type=kind.value_type)
     return pa.ListArray.from_arrays(pa.array(offsets), xyz, type=kind)
 
