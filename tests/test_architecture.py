@@ -112,3 +112,12 @@ def test_no_secret_is_tracked():
     assert keys == []
     for path in ("keys/hit-1.key", "robots/lab/arm.key"):  # (the README's `keys new ... --out keys/hit-1.key`)
         assert subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT).returncode == 0, path
+
+
+def test_the_public_api_imports_no_simulator_robotics_library_or_viewer():
+    """A third party's plugin module imports rehabkit.plugin: it must not pull in MuJoCo (it did, through the DH
+    description's MJCF builder: 0.48 s), Pinocchio, Rerun or the planners' libraries."""
+    heavy = ("mujoco", "pinocchio", "rerun", "pink", "ompl", "cv2", "ray", "pyarrow", "scipy")
+    code = f"import sys, rehabkit.plugin; print(','.join(m for m in {heavy!r} if m in sys.modules))"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == ""

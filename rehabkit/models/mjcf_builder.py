@@ -13,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
 
 from rehabkit.models.chain import KinematicChain, matrix_to_quat_wxyz
@@ -108,6 +107,8 @@ def build_chain_mjcf(
         ee_site: Name of the site placed at the chain tip.
         rgba: Link colour.
     """
+    import mujoco  # (here, not at the top: the DH description, and rehabkit.plugin with it, import no simulator)
+
     if chain.dof != len(links):
         raise ValueError(f"{name}: {chain.dof} joints in the chain but {len(links)} links")
     spec = mujoco.MjSpec()
