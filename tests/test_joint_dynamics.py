@@ -72,11 +72,13 @@ def test_gains_auto_with_the_inverse_dynamics_feedforward_tracks_a_robot_with_it
     assert result.metrics["tracking_rms_deg"] < 0.1 and result.metrics["task_complete"] == 1.0
     assert "tracking" not in result.summary
     # gravity alone leaves the drag to the gains: the wrist lags, and the run says which joint and why
-    lagging = run_scenario(_scenario(tmp_path, controller={"type": "joint-pd", "gains": "auto"}))
+    lagging = run_scenario(_scenario(tmp_path, controller={"type": "joint-pd", "gains": "auto",
+                                                           "feedforward": "gravity"}))
     why = lagging.summary["tracking"]
     assert lagging.metrics["tracking_rms_deg"] > 1.0
     assert why["joint"] == "roll" and why["unit"] == "deg" and 2.0 < why["rms"] < 6.0
     assert len(why["causes"]) == 1 and "gains are low" in why["causes"][0]
+    assert "its drive declares friction 1 N·m and damping 2 N·m·s/rad, left to the gains" in why["causes"][0]
 
 
 def test_a_run_that_clips_a_joints_torque_says_so_and_validate_says_it_first(tmp_path, capsys):
@@ -97,3 +99,14 @@ def test_a_joints_own_damping_lets_the_hold_be_stiffer_on_a_light_joint():
     assert kd[0] == pytest.approx(0.07)
     kp2, kd2 = stable_gains(np.array([400.0]), np.array([40.0]), np.array([1.4e-4]), 1e-3, np.array([2.0]))
     assert kd2[0] == pytest.approx(0.5 * (1.4e-4 + 2e-3) / 1e-3) and kp2[0] > 10 * kp[0]
+
+
+def test_a_stop_that_could_not_hold_the_robot_is_said():
+    """An arm whose drives can't hold its weight falls through a 'held' stop: the terminal says what the stop did."""
+    from rehabkit.cli.run_report import _stop_outcome
+
+    held = {"stop_category": 2.0, "stop_time_s": 0.12, "joints_in_range": 1.0, "stop_distance_deg": 0.4}
+    assert _stop_outcome(held) == [] and _stop_outcome({}) == []
+    fell = {"stop_category": 2.0, "stop_time_s": None, "joints_in_range": 0.0, "stop_distance_deg": 68.5}
+    (line,) = _stop_outcome(fell)
+    assert line.startswith("  STOP    the robot did not come to rest and left the joints' ranges") and "68.5°" in line

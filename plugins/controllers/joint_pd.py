@@ -22,9 +22,10 @@ class JointPDConfig(StrictModel):
     kd: float | list[float] = Field(10.0, description="damping [N·m·s/rad] (gains: manual)")
     bandwidth_hz: float = Field(4.0, gt=0, description="gains: auto — each joint's closed-loop natural frequency [Hz]")
     damping_ratio: float = Field(1.0, gt=0, description="gains: auto — each joint's damping ratio (1: critical)")
-    feedforward: Literal["gravity", "inverse-dynamics", "none"] = Field(
-        "gravity", description="gravity: RNEA(q, 0, 0); inverse-dynamics: RNEA(q, qd_ref, qdd_ref) with the rotors' "
-                               "armature, plus the joints' declared damping and Coulomb friction at qd_ref"
+    feedforward: Literal["gravity", "inverse-dynamics", "none"] | None = Field(
+        None, description="gravity: RNEA(q, 0, 0); inverse-dynamics: RNEA(q, qd_ref, qdd_ref) with the rotors' "
+                          "armature, plus the joints' declared damping and Coulomb friction at qd_ref; default: "
+                          "inverse-dynamics with gains: auto (both from the model), gravity with manual gains"
     )
 
 
@@ -56,7 +57,9 @@ class JointPD(Controller):
             self.kd = self._gains(config.kd, n, "kd")
             if context.note is not None and (said := self._ringing(context)):
                 context.note(0.0, said)
-        self.mode = config.feedforward
+        # gains from the model come with the model's feedforward: a robot's declared friction (the Z1's 1-2 N·m)
+        # left to auto gains alone held it 2.2° off its postures
+        self.mode = config.feedforward or ("inverse-dynamics" if self.auto else "gravity")
         self._dissipation = model.dissipation if model.dissipation.any else None
         self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
         self._gravity_torque = context.robot.gravity_torque  # the robot's own model (Pinocchio for serial arms)

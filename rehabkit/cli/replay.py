@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, unwritable
-from rehabkit.cli.run_report import wrote
+from rehabkit.cli.run_report import verdict_lines, wrote
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 
@@ -71,8 +71,8 @@ def _replay(args: argparse.Namespace) -> int:
 
         whose = "the recorded joints" if args.scenario is not None else f"the run's joints ({source / RUN_BAG})"
         print(f"  DEVIATION  the replay's largest from {whose}: {said(deviation)}")
-    for ev in rep.result.summary["safety"]["events"]:
-        print(f"  SAFETY  {ev['message']}")
+    for line in verdict_lines(rep.result.summary):  # (why it exits as it does, as a run says it)
+        print(line)
     print(wrote(rep.result.summary, rep.result.out_dir))
     return EXIT_OK if rep.result.passed else EXIT_FAILED
 

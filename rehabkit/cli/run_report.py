@@ -14,7 +14,20 @@ def run_report(s: dict[str, Any], out: Path) -> str:
     """The lines for a run whose ``summary.json`` holds ``s``, written to ``out``."""
     m = s["metrics"]
     lines = [f"{s['name']}: {m['sim_time_s']:.3f} s simulated in {m['wall_time_s']:.3f} s "
-             f"(real-time factor {m['real_time_factor']:.1f})"]
+             f"(real-time factor {m['real_time_factor']:.1f})", *verdict_lines(s)]
+    if m.get("reaches"):
+        lines.append("  outcomes: " + ", ".join(f"{k} {m[k]:.3g}" for k in OUTCOMES if m.get(k) is not None))
+    lines += [f"{name}:\n{text}" for name, text in s.get("reports", {}).items()]
+    lines.append(wrote(s, out))
+    return "\n".join(lines)
+
+
+def verdict_lines(s: dict[str, Any]) -> list[str]:
+    """What decides a run's exit code and why, from its summary: the verdicts, the task's end, tracking, safety
+    events and what the stop achieved, interventions, the link, a latched e-stop, contacts, replaced targets (a
+    replay says them as a run does)."""
+    m = s["metrics"]
+    lines: list[str] = []
     for e in s["expectations"]:
         value = "missing" if e["value"] is None else f"{e['value']:.6g}"
         lines.append(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"
@@ -30,6 +43,7 @@ def run_report(s: dict[str, Any], out: Path) -> str:
         lines.append(f"  TRACKING {why['joint']} followed its reference to {why['rms']:.3g} {why['unit']} rms "
                      f"({why['max']:.3g} {why['unit']} at most, t={why['t_max']:.3f} s): {'; '.join(why['causes'])}")
     lines += [f"  SAFETY  {ev['message']}" for ev in s["safety"]["events"]]
+    lines += _stop_outcome(m)
     lines += _interventions(s["safety"].get("interventions", []), s["safety"]["events"])
     lines += _link(m)
     if latch := s["safety"].get("estop_latched"):  # (a run that latched it says so: the next one is refused)
@@ -42,11 +56,25 @@ def run_report(s: dict[str, Any], out: Path) -> str:
     for r in (s.get("patient") or {}).get("replaced_targets", []):
         lines.append(f"  PATIENT target '{r['target']}' outside the range of {', '.join(r['joints'])}: replaced by "
                      f"the nearest admissible posture ({r['moved_m'] * 1000:.1f} mm away)")
-    if m.get("reaches"):
-        lines.append("  outcomes: " + ", ".join(f"{k} {m[k]:.3g}" for k in OUTCOMES if m.get(k) is not None))
-    lines += [f"{name}:\n{text}" for name, text in s.get("reports", {}).items()]
-    lines.append(wrote(s, out))
-    return "\n".join(lines)
+    return lines
+
+
+def _stop_outcome(m: dict) -> list[str]:
+    """What the stop achieved, where it did not do what its words promise: the robot never at rest, or outside its
+    ranges after the trigger (an arm whose drives can't hold it falls through a 'held' stop)."""
+    if m.get("stop_category") is None:
+        return []
+    never = m.get("stop_time_s") is None or m["stop_time_s"] != m["stop_time_s"]  # (NaN, or null in JSON)
+    out = m.get("joints_in_range") == 0
+    if not (never or out):
+        return []
+    said = ["did not come to rest" if never else f"came to rest after {m['stop_time_s']:.3g} s"]
+    if out:
+        said.append("left the joints' ranges")
+    travel = m.get("stop_distance_deg")
+    return [f"  STOP    the robot {' and '.join(said)} after the trigger"
+            + (f" (a joint travelled {travel:.3g}° since)" if travel is not None else "")
+            + ": the stop could not hold it (its drives' limits against its weight, or a push)"]
 
 
 def wrote(summary: dict, out: Path) -> str:

@@ -68,8 +68,15 @@ def tracking_causes(trace: Trace, model, trip: tuple[float, str] | None, first_c
         causes.append((np.inf, f"the model gives it {inertia[j]:.2g} {'kg·m²' if turns[j] else 'kg'} of inertia: "
                                "gains scaled by the inertia have no stiffness there"))
     if not causes:
-        causes.append((np.inf, "no clipped torque, stop or contact: the controller's gains are low for this joint's "
-                               "load (stiffer gains, a higher bandwidth_hz, or the inverse-dynamics feedforward)"))
+        losses = model.dissipation
+        units = ("N·m", "N·m·s/rad") if turns[j] else ("N", "N·s/m")
+        declared = [f"{what} {v:g} {u}" for what, v, u in (("friction", losses.friction[j], units[0]),
+                                                            ("damping", losses.damping[j], units[1])) if v > 0]
+        fix = (f"its drive declares {' and '.join(declared)}, left to the gains: a feedforward that compensates them "
+               "(joint-pd's inverse-dynamics), or stiffer gains" if declared else
+               "stiffer gains, a higher bandwidth_hz, or the inverse-dynamics feedforward")
+        causes.append((np.inf, f"no clipped torque, stop or contact: the controller's gains are low for this joint's "
+                               f"load ({fix})"))
     causes.sort(key=lambda c: c[0])
     return {"joint": model.joint_names[j], "unit": unit, "rms": float(rms[j] * (POOR_DEG if turns[j] else POOR_M)),
             "max": float(abs(err[k, j]) * scale), "t_max": t_max, "causes": [text for _, text in causes]}

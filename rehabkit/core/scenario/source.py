@@ -46,6 +46,9 @@ _USUAL = (
 )
 
 
+NO_SPACE = re.compile(r"^[A-Za-z_][\w.-]*:[^\s:/]")  # a key glued to its value (`type:hit`; not a URI's `://`)
+
+
 def yaml_words(exc: yaml.MarkedYAMLError, text: str) -> str:
     """PyYAML's problem in words a person can act on (its own words after them, in parentheses)."""
     problem = exc.problem or str(exc)
@@ -109,6 +112,11 @@ def read_yaml(path: Path) -> Source:
                         )
                     )
                 seen.add(key)
+                if isinstance(key, str) and NO_SPACE.match(key) and isinstance(v, yaml.ScalarNode) and v.value == "" \
+                        and v.tag.endswith(":null"):  # `{type:hit}`: YAML reads one key, no value
+                    left, right = key.split(":", 1)
+                    problems.append(Diagnostic(_mark(name, k.start_mark), _dotted(sub), f"'{key}' is one key with no "
+                                               f"value: a ':' needs a space after it (`{left}: {right}`)"))
                 key_marks[sub] = _mark(name, k.start_mark)
                 value_marks[sub] = _mark(name, v.start_mark)
                 walk(v, sub)

@@ -112,7 +112,9 @@ def _fix(a: Assembly, breach) -> str:
 def breach_refusal(a: Assembly, breach) -> PluginSetupError:
     """The first plan breaking a limit in force, located and with its fix: the same words from ``validate`` and
     from a run (which said it unlocated, blaming a patient's profile where there was none)."""
-    refusal = first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}")
+    small = all_small(a)  # (radians under joints_deg break a range of 0° by a hair: the units are the cause)
+    refusal = first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}"
+                                    + (f"; but {small}" if small else ""))
     refusal.breach = breach  # (what it says, as fields)
     return refusal
 
