@@ -1,9 +1,9 @@
 """How well the arms example-robot-data ships track at default settings, with their own dynamics as the URDF
 declares them (damping, Coulomb friction): a slow posture-to-posture move, 40 % → 60 % of each joint's range (a
-continuous joint gets ±180° from the scenario), a 3-s cubic, a joint PD at ``gains: auto`` with the
-inverse-dynamics feedforward, nothing else set. Each run goes through the CLI as a user's would (``validate``, then
-``run``); the table gives the joints (prismatic ones counted), the dynamics the file declares, the tracking rms/max
-over the revolute joints, the expectations' verdicts and the run's notes on tracking.
+continuous joint gets ±180° from the scenario), a 3-s cubic, a joint PD at ``gains: auto`` (with the
+inverse-dynamics feedforward, its default there), nothing else set. Each run goes through the CLI as a user's
+would (``validate``, then ``run``); the table gives the joints (prismatic ones counted), the dynamics the file
+declares, the tracking rms/max over the revolute joints, the expectations' verdicts and what the run said.
 
     python benchmarks/robots_tracking.py [--only xArm7]
 """
@@ -89,7 +89,7 @@ def run_one(name: str, rel: str, ee: str, keep: Path | None) -> str:
     scenario.write_text(yaml.safe_dump({
         "name": scenario.stem, "robot": robot,
         "planner": {"type": "multi-cubic", "segment_durations": [3.0]},
-        "controller": {"type": "joint-pd", "gains": "auto", "feedforward": "inverse-dynamics"},
+        "controller": {"type": "joint-pd", "gains": "auto"},  # (its feedforward: inverse-dynamics, the default)
         "task": {"targets": [{"name": "A", "joints": posture(model, 0.4)},
                              {"name": "B", "joints": posture(model, 0.6)}]},
         "duration": 4.0, "expect": EXPECT}, sort_keys=False))

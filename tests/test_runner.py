@@ -9,7 +9,7 @@ import pytest
 
 from rehabkit.api import run_scenario
 from rehabkit.core.kinds.interfaces import Controller, StrictModel
-from rehabkit.core.run.runner import Runner
+from rehabkit.core.run.runner import Runner, SetupError
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.plugin import SensorName
@@ -85,13 +85,14 @@ def test_reached_event_fires_near_the_target():
     assert r.summary["metrics"]["sim_time_s"] == pytest.approx(ev["t"], abs=0.002)
 
 
-def test_too_fast_plan_is_rejected_before_the_robot_moves():
-    r = run_scenario(HIT, {"planner.segment_durations": [0.2, 0.2, 0.2, 0.2]})
-    (ev,) = r.summary["safety"]["events"]
-    assert ev["rule"] == "plan" and ev["data"]["quantity"] == "velocity" and ev["value"] > ev["limit"] > 0
-    assert ev["joint"] in r.summary["per_joint"] and ev["data"]["at_s"] is not None
-    assert not r.passed
-    assert np.abs(r.trace.q - r.trace.q[0]).max() < np.radians(1.0)  # held at A
+def test_too_fast_plan_is_rejected_before_the_robot_moves(tmp_path):
+    """A first plan breaking the robot's own limit is refused before anything runs, as one breaking a narrowed limit
+    is, and as validate refuses it: located at the planner, the breach as fields, no run folder."""
+    with pytest.raises(SetupError) as err:
+        run_scenario(HIT, {"planner.segment_durations": [0.2, 0.2, 0.2, 0.2]}, tmp_path / "out")
+    breach = err.value.breach
+    assert breach.quantity == "velocity" and breach.value > breach.limit > 0 and breach.at_s is not None
+    assert err.value.diagnostics[0].path.startswith("planner") and not (tmp_path / "out" / "summary.json").exists()
 
 
 def test_obstacle_in_the_way_is_reported_as_contact():

@@ -31,11 +31,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     from rehabkit.cli.run_report import run_report
 
     out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
+    made = not out.exists()
     if (why := unwritable(out)) is not None:
         _err(why)
         return EXIT_INVALID
     sets = [*args.set, "ros.bag=true"] if args.bag else args.set
-    result = run_scenario(args.scenario, overrides=sets, out_dir=out, spawn=args.spawn, progress=True)
+    try:
+        result = run_scenario(args.scenario, overrides=sets, out_dir=out, spawn=args.spawn, progress=True)
+    except Exception:
+        if made and out.is_dir() and not any(out.iterdir()):  # refused before it ran: no empty folder left behind
+            out.rmdir()
+        raise
     print(run_report(result.summary, out))
     if result.refusal is not None:  # the scenario as written could not be planned: bad input, said where
         _err(str(result.refusal))

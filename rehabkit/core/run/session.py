@@ -232,10 +232,12 @@ def _first_plan(s: RunSession) -> None:
     s.replan(0, 0.0, s.q0, np.zeros(a.robot.model.dof), s.timeline.request(a.sc.task.order()), first=True)
     if a.safety.tripped and s.refusal is None:  # (an e-stop still latched, say)
         s.refusal = PlanRefusal(0.0, "stopped before it moved", first=True)
+    if a.safety.tripped and s.refusal is not None and s.refusal.breach is not None:
+        # a first plan breaking a limit in force — the robot's own or narrowed — is refused before anything runs,
+        # as validate refuses it (it ran 0.5 s and wrote its files where the limit was the robot's own)
+        raise breach_refusal(a, s.refusal.breach)
     if a.safety.tripped and a.limit_sources.by_joint:
         # refused before it runs (not stopped at t=0): the limits in force were narrowed, and said where
-        if s.refusal.breach is not None:
-            raise breach_refusal(a, s.refusal.breach)
         raise SetupError(f"{s.refusal.reason} (joint limits narrowed by the patient's profile or the safety "
                          "envelope)", s.refusal.breach)
     s.view.planner_drawings()
