@@ -232,3 +232,15 @@ def test_a_bag_of_a_robot_with_closed_loops_is_refused_by_validate_at_its_settin
     assert main(["validate", str(ROOT / "scenarios" / "capaman_obstacle.yaml"), "--set", "ros.bag=true"]) == 2
     said = capsys.readouterr().err
     assert "ros.bag: robot 'capaman' has no tree model" in said and "without --bag" in said
+
+
+def test_a_joint_encoders_revolute_and_prismatic_joints_are_one_joint_state_in_si():
+    """A slide's position_m beside the revolute joints' position_rad: one JointState, radians and metres as ROS has
+    them (the slide went out as a Float64MultiArray)."""
+    from rehabkit.ros.bag_sensors import reading_messages
+
+    names = {"position_rad": ["j1"], "position_m": ["slide"]}
+    out = list(reading_messages("enc", {"position_rad": np.array([0.5]), "position_m": np.array([0.125])},
+                                {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": ""}, "l1", lambda k, n: names[k]))
+    assert [(topic, kind) for topic, kind, _ in out] == [("/sensors/enc/joint_states", "sensor_msgs/JointState")]
+    assert out[0][2]["name"] == ["j1", "slide"] and out[0][2]["position"] == [0.5, 0.125]

@@ -22,6 +22,28 @@ def _image(rgb: np.ndarray) -> bool:
     return isinstance(rgb, np.ndarray) and rgb.ndim == 3 and rgb.shape[2] == 3 and rgb.dtype == np.uint8
 
 
+JOINT_KEYS = ("position_rad", "position_m")  # a joint encoder's: SI by joint type, as JointState holds them
+
+
+def _joint_state(reading: dict[str, Any], channels) -> dict | None:
+    """A joint encoder's reading as one JointState's names and positions (radians and metres, as ROS has them), or
+    None where the sensor does not name its joints."""
+    if channels is None:
+        return None
+    names: list[str] = []
+    values: list[float] = []
+    for key in JOINT_KEYS:
+        if (value := reading.get(key)) is None:
+            continue
+        data = np.ravel(np.asarray(value, float))
+        joints = channels(key, data.size)
+        if not joints:
+            return None
+        names += joints
+        values += data.tolist()
+    return {"name": names, "position": values, "velocity": [], "effort": []} if names else None
+
+
 def reading_messages(name: str, reading: dict[str, Any], header: dict, frame: str,
                      channels: Callable[[str, int], list[str] | None] | None = None,
                      base_link: str = "base_link") -> Iterator[Message]:
@@ -33,8 +55,11 @@ def reading_messages(name: str, reading: dict[str, Any], header: dict, frame: st
         yield (f"{base}/wrench", "geometry_msgs/WrenchStamped",
                {"header": {**header, "frame_id": frame}, "wrench": {"force": _vec(reading["force_n"]),
                                                                    "torque": _vec(reading["torque_nm"])}})
+    joints = _joint_state(reading, channels)  # (revolute joints in radians and prismatic in metres: one JointState)
+    if joints is not None:
+        yield f"{base}/joint_states", "sensor_msgs/JointState", {"header": header, **joints}
     for key, value in reading.items():
-        if value is None or (wrench and key in ("force_n", "torque_nm")):
+        if value is None or (wrench and key in ("force_n", "torque_nm")) or (joints and key in JOINT_KEYS):
             continue
         topic = f"{base}/{key}"
         if _image(value):
@@ -46,10 +71,6 @@ def reading_messages(name: str, reading: dict[str, Any], header: dict, frame: st
         elif key == "target_position":
             yield topic, "geometry_msgs/PointStamped", {"header": {**header, "frame_id": base_link},
                                                         "point": _vec(value)}
-        elif key == "position_rad" and channels is not None and (joints := channels(key, np.size(value))):
-            yield (f"{base}/joint_states", "sensor_msgs/JointState",
-                   {"header": header, "name": joints, "position": np.ravel(np.asarray(value, float)).tolist(),
-                    "velocity": [], "effort": []})
         elif np.ndim(value) == 0:
             yield topic, "std_msgs/Float64", {"data": float(value)}
         else:
