@@ -150,7 +150,7 @@ def test_every_command_the_readme_names_is_executed():
 
 
 def test_the_musculoskeletal_commands_compare_controllers_and_severities(tmp_path):
-    """The section's three commands, shortened (6 s sessions, a 3 s serial sweep): PD and assist-as-needed side
+    """The section's three commands, shortened (6 s sessions, a 2 s serial sweep): PD and assist-as-needed side
     by side on the same person; the severities in order of the help the robot gives."""
     run, replay, sweep = [line.split("#")[0].strip() for line in _block_after("## A musculoskeletal patient",
                                                                               "bash").strip().splitlines()]
@@ -167,7 +167,7 @@ def test_the_musculoskeletal_commands_compare_controllers_and_severities(tmp_pat
     learned = cli(*_POLICY_REPLAY.replace("out/lexos_myoarm", out).split()[1:])  # the learned policy, same session
     assert learned.returncode in (0, 1), learned.stderr
     assert "policy" in learned.stdout and "patient_noise same" in learned.stdout
-    done, args = _run(sweep + " --grid duration=3 --serial --out sev", tmp_path)
+    done, args = _run(sweep + " --grid duration=2 --serial --out sev", tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
     with open(Path(args[args.index("--out") + 1]) / "aggregate.csv") as f:
         rows = list(csv.DictReader(f))
