@@ -52,13 +52,14 @@ from rehabkit.core.kinds.interfaces import (
     Target,
     Trajectory,
 )
+from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.names import suggest
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, RunTap, Section
-from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.types import Declared
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.safety.limit_breach import LimitBreach
 from rehabkit.core.setup.errors import SetupError
-from rehabkit.core.setup.limits import LimitBreach, Narrowing
+from rehabkit.core.setup.limits import Narrowing
 from rehabkit.core.setup.targets import JointWaypoints, angle_axis, angular_distance, joint_waypoints, unreachable
 from rehabkit.models.dh import PoseSpec
 from rehabkit.models.robot_model import JointLimits, RobotModel

@@ -70,6 +70,37 @@ def test_no_import_cycles_anywhere():
     assert _cycles(graph) == []
 
 
+class _Folders:
+    """The import graph between the core's folders (its stages: kinds, plugins, scenario, safety, setup, run,
+    results, log): an edge where any module of one imports any module of the other."""
+
+    def __init__(self, graph):
+        def stage(module: str) -> str | None:
+            parts = module.split(".")
+            return ".".join(parts[:3]) if len(parts) > 3 and parts[1] == "core" else None
+
+        self.edges: dict[str, set[str]] = {}
+        for m in graph.modules:
+            if (a := stage(m)) is None:
+                continue
+            self.edges.setdefault(a, set())
+            for n in graph.find_modules_directly_imported_by(m):
+                if (b := stage(n)) is not None and b != a:
+                    self.edges[a].add(b)
+                    self.edges.setdefault(b, set())
+        self.modules = set(self.edges)
+
+    def find_modules_directly_imported_by(self, folder: str) -> set[str]:
+        return self.edges[folder]
+
+
+def test_the_cores_stages_import_in_one_direction():
+    """No cycle between the core's folders either (setup and safety, scenario and safety, plugins and results each
+    imported the other: a shared type moved below both)."""
+    graph = grimp.build_graph("rehabkit", cache_dir=None)
+    assert _cycles(_Folders(graph)) == []
+
+
 def test_the_cycle_finder_finds_a_cycle():
     class Graph:
         modules = {"a", "b", "c", "d"}

@@ -74,7 +74,7 @@ def test_a_plan_from_a_joint_resting_a_hair_past_its_range_may_stay_there_not_go
     """A joint resting at its limit (a target exactly there, a simulated limit giving a little) starts its plan a
     hair past the range: the plan is refused only if it goes further out — not for where the robot already is."""
     from rehabkit.core.kinds.interfaces import Plan
-    from rehabkit.core.setup.limits import plan_breach
+    from rehabkit.core.safety.limit_breach import plan_breach
     from rehabkit.cspace.timing import RestToRestPath
 
     runner = Runner(load_scenario(EXAMPLES / "urdf_arm4.yaml"))

@@ -195,7 +195,7 @@ def test_a_stop_s_figures_give_each_kind_of_joint_in_its_own_unit():
     """stop_figures on a revolute joint and a slide: the revolute joint's travel and peak speed in deg and deg/s, the
     slide's in m and m/s (they were one figure, the slide's read as mm), the hand's path in m; a robot without a
     slide has no metres figures; the catalogue gives each its unit."""
-    from rehabkit.core.results.metric import CORE_METRICS
+    from rehabkit.core.kinds.metric import CORE_METRICS
     from rehabkit.core.safety.stopping import stop_figures
 
     t = np.arange(0.0, 0.5, 0.001)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from rehabkit.canopen.emcy_codes import describe
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.safety.event import SafetyEvent
 
 METRICS = (

@@ -93,7 +93,7 @@ def cmd_estop(args: argparse.Namespace) -> int:
         return EXIT_OK
     latch = EStopLatch.named(args.name)
     if not latch.path.exists():  # (a misspelt name must not pass for a cleared e-stop)
-        from rehabkit.core.plugins.names import suggest
+        from rehabkit.core.kinds.names import suggest
 
         known = [x.name for x in all_latches()]
         print(f"error: no e-stop latch named '{args.name}' on this machine{suggest(args.name, known)} (latches: "

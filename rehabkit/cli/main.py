@@ -123,8 +123,8 @@ def cmd_plugins(args: argparse.Namespace) -> int:
     reg = default_registry()
     if args.fields:
         from rehabkit.cli.plugin_reference import plugin_reference
+        from rehabkit.core.kinds.names import suggest
         from rehabkit.core.plugins.hookspecs import KINDS
-        from rehabkit.core.plugins.names import suggest
 
         found = [p for p in (reg.find(kind, args.fields) for kind in KINDS) if p is not None]
         if not found:

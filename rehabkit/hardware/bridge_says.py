@@ -3,7 +3,7 @@ e-stop (in the words of the run's refusal and its stop)."""
 
 from __future__ import annotations
 
-from rehabkit.core.setup.limits import first_breach
+from rehabkit.core.safety.limit_breach import first_breach
 from rehabkit.hardware.link.protocol import ESTOPPED, LIMIT, WATCHDOG
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.hardware.link.protocol import STALE
 

@@ -16,9 +16,10 @@ from contextlib import contextmanager
 import numpy as np
 
 from rehabkit.core.kinds.interfaces import Robot, StrictModel, Target
+from rehabkit.core.safety.limit_breach import LimitBreach, outside
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.models import TaskSpec
-from rehabkit.core.setup.limits import LimitBreach, LimitSources, Narrowing, outside, unknown_joint
+from rehabkit.core.setup.limits import LimitSources, Narrowing, unknown_joint
 from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.rehab.patient import patient_narrowings
 from rehabkit.rehab.profile import PatientBase

@@ -239,7 +239,7 @@ def _cues(a, q0: np.ndarray, idx: list[int], lo: np.ndarray, hi: np.ndarray, cue
     """Joint-space cues to each end of each joint and back, as far out as the cue plan (a C2 spline through them,
     which swings past its via points) stays within the robot's limits."""
     from rehabkit.core.kinds.interfaces import PlanRequest, Target
-    from rehabkit.core.setup.limits import plan_breach
+    from rehabkit.core.safety.limit_breach import plan_breach
 
     info = default_registry().get("planner", "multi-cubic")
     for share in CUE_MARGINS:

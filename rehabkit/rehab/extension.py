@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from pydantic import Field
 
+from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, Section
-from rehabkit.core.results.metric import Metric
 from rehabkit.models.strict import StrictModel
 
 METRICS = (

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabkit.core.results.metrics import Trace
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.results.record import Movement
 from rehabkit.models.hand_force import HandForce
 from rehabkit.models.robot_model import RobotModel

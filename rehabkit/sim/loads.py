@@ -6,7 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from rehabkit.core.plugins.names import suggest
+from rehabkit.core.kinds.names import suggest
 
 
 class LoadApplier:

@@ -14,7 +14,7 @@ import weakref
 from pathlib import Path
 from typing import Any
 
-from rehabkit.core.results.metric import wall_clock
+from rehabkit.core.kinds.metric import wall_clock
 
 
 # figures that measure the machine, not the run: they differ between any two executions

@@ -19,7 +19,7 @@ from pydantic import Field
 from scipy.spatial import ConvexHull
 
 from rehabkit.core.kinds.interfaces import StrictModel
-from rehabkit.core.plugins.names import suggest
+from rehabkit.core.kinds.names import suggest
 from rehabkit.wholebody.stack import Inequalities
 
 AXIS = {"x": 0, "y": 1, "z": 2}

@@ -21,7 +21,7 @@ from pydantic import Field
 
 from rehabkit.core.kinds.capabilities import WorkspaceTable
 from rehabkit.core.kinds.interfaces import Context, Plan, Planner, PlanningError, PlanRequest, StrictModel
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 from rehabkit.workspace.grid import BOUNDARY, INNER, VoxelWorkspace
 from rehabkit.workspace.search import SearchFailedError, astar, decimate, path_length
 from rehabkit.workspace.trajectory import Junction, Sequence, TimedPath, resample, smooth_path

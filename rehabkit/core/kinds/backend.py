@@ -8,7 +8,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 
 
 @dataclass

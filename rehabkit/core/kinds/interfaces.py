@@ -14,10 +14,10 @@ import numpy as np
 from rehabkit.core.kinds.backend import Backend, BackendFaultError, BodyPoses, Contact, Drawing, GeomVisual
 from rehabkit.core.kinds.context import Context, ReferenceSpace
 from rehabkit.core.kinds.errors import PlanningError, SettingError
+from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
 from rehabkit.core.kinds.robot import IKUnavailableError, Robot
 from rehabkit.core.kinds.sensor import Instrument, InteractionForceSensor, Reading, Sensor, SensorConfig
-from rehabkit.core.results.metric import Metric
 from rehabkit.models.strict import StrictModel
 
 

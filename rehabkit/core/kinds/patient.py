@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from rehabkit.core.kinds.backend import Drawing
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 
 
 class Patient(ABC):

@@ -78,7 +78,7 @@ class Robot(ABC):
     def _frame_id(self, name: str) -> int:
         m = self.model.pin_model
         if not m.existFrame(name):
-            from rehabkit.core.plugins.names import suggest
+            from rehabkit.core.kinds.names import suggest
 
             frames = sorted({f.name for f in m.frames if f.name != "universe"})
             raise ValueError(f"robot '{self.model.name}' has no body or site '{name}'{suggest(name, frames)}")

@@ -9,7 +9,7 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 from pydantic import Field
 
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 from rehabkit.models.strict import StrictModel
 
 

@@ -18,8 +18,8 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import SceneGeometry
 from rehabkit.core.kinds.interfaces import BodyPoses, Patient, Plan
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.log.rerun_log import RerunLog
-from rehabkit.core.results.metrics import Trace
 from rehabkit.core.setup.assembly import Assembly
 
 NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))

@@ -36,7 +36,7 @@ from typing import Any
 
 import pluggy
 
-from rehabkit.core.results.metric import Metric
+from rehabkit.core.kinds.metric import Metric
 
 # The hooks' arguments: ``setup`` is the run's :class:`rehabkit.core.setup.assembly.Assembly`, ``record`` its
 # :class:`rehabkit.core.results.record.RunRecord`, narrowings :class:`rehabkit.core.setup.limits.Narrowing`

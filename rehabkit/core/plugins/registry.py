@@ -20,10 +20,10 @@ from typing import Any, Literal
 import pluggy
 from pydantic import BaseModel, ConfigDict, create_model
 
+from rehabkit.core.kinds.names import suggest
 from rehabkit.core.plugins import hookspecs
 from rehabkit.core.plugins.discovery import Entry, installed_entries
 from rehabkit.core.plugins.hookspecs import KINDS
-from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.types import (
     BrokenPlugin,
     Declared,

@@ -10,7 +10,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from rehabkit.core.plugins.names import suggest
+from rehabkit.core.kinds.names import suggest
 
 
 class PluginError(Exception):

@@ -2,34 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from rehabkit.core.plugins.names import suggest
+from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.scenario.models import Bound
 from rehabkit.models.robot_model import RobotModel
-
-
-@dataclass
-class Trace:
-    """Everything recorded at the control rate, trimmed to the steps actually run."""
-
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    tau: np.ndarray
-    q_ref: np.ndarray
-    qd_ref: np.ndarray
-    x: np.ndarray | None = None  # end effector, robot base frame (Cartesian runs)
-    x_ref: np.ndarray | None = None
-    tau_h: np.ndarray | None = None  # torques a (simulated) person applied at the joints
-    f_h: np.ndarray | None = None  # interaction force measured [N] (a force-torque sensor, an embodied person's cuffs)
-    q_ctrl: np.ndarray | None = None  # the controller's own joint reference where it exposes one (NaN elsewhere)
-
-    def trimmed(self, n: int) -> Trace:
-        return Trace(*(None if getattr(self, f) is None else getattr(self, f)[:n]
-                       for f in ("t", "q", "qd", "tau", "q_ref", "qd_ref", "x", "x_ref", "tau_h", "f_h", "q_ctrl")))
 
 
 def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> tuple[dict, dict]:
@@ -75,18 +53,6 @@ def tracking_metrics(trace: Trace, robot_plugin, goal_q: np.ndarray | None) -> t
         ee = robot_plugin.ee_world(np.vstack([goal_q, q_end]))
         metrics["final_position_error_m"] = float(np.linalg.norm(ee[0] - ee[1]))
     return metrics, per_joint
-
-
-def cartesian_metrics(trace: Trace) -> dict[str, float]:
-    """How the end effector followed a Cartesian reference."""
-    if trace.x is None or not len(trace.x):
-        return {}
-    err = np.linalg.norm(trace.x_ref - trace.x, axis=1)
-    return {
-        "cartesian_tracking_rms_mm": float(np.sqrt(np.mean(err**2)) * 1e3),
-        "cartesian_tracking_max_mm": float(err.max() * 1e3),
-        "final_position_error_m": float(err[-1]),
-    }
 
 
 def joint_limit_excess(trace: Trace, robot: RobotModel, revolute: bool = True) -> float:

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabkit.core.results.metrics import Trace
+from rehabkit.core.kinds.trace import Trace
 
 
 @dataclass

@@ -16,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from rehabkit.core.kinds.metric import MetricCatalogue
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.plugins.lifecycle import Contribution
-from rehabkit.core.results.metric import MetricCatalogue
-from rehabkit.core.results.metrics import Trace, evaluate, tracking_metrics
+from rehabkit.core.results.metrics import evaluate, tracking_metrics
 from rehabkit.core.results.record import RunRecord
 from rehabkit.core.results.tracking_causes import tracking_causes
 from rehabkit.core.safety.stopping import joint_inertia, stop_figures

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabkit.core.results.metrics import Trace
+from rehabkit.core.kinds.trace import Trace
 
 POOR_DEG, POOR_M = 1.0, 0.001  # rms tracking error above which the run says why
 AT_LIMIT = 0.999  # a torque this close to its effort limit was clipped

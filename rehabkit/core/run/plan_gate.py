@@ -12,9 +12,9 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.interfaces import Plan, PlanRequest, Target
-from rehabkit.core.results.metric import MetricCatalogue, combine
+from rehabkit.core.kinds.metric import MetricCatalogue, combine
 from rehabkit.core.safety.keep_in import plan_exit
-from rehabkit.core.setup.limits import CHECK_DT, LimitBreach
+from rehabkit.core.safety.limit_breach import CHECK_DT, LimitBreach
 from rehabkit.core.setup.space import JointSpace
 
 

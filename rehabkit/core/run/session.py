@@ -16,20 +16,20 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import NamedJoints, PassiveJoints
 from rehabkit.core.kinds.interfaces import BackendFaultError, Plan, PlanningError, Target
+from rehabkit.core.kinds.metric import MetricCatalogue
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.log.archetypes import encode_images
 from rehabkit.core.log.run_view import NullView, RunView, open_view
-from rehabkit.core.results.metric import MetricCatalogue
-from rehabkit.core.results.metrics import Trace
 from rehabkit.core.run.plan_gate import PlanGate
 from rehabkit.core.run.plugin_fault import plugin_fault
 from rehabkit.core.run.reference import ReferenceBuffer
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.run.timeline import Replan, Timeline
+from rehabkit.core.safety.limit_breach import LimitBreach
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.setup.assembly import Assembly, SetupError
 from rehabkit.core.setup.checks import metric_catalogue
 from rehabkit.core.setup.first_plan import breach_refusal, first_plan_refusal, start_posture
-from rehabkit.core.setup.limits import LimitBreach
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabkit.core.setup.limits import LimitBreach, first_breach
+from rehabkit.core.safety.limit_breach import LimitBreach, first_breach
 from rehabkit.models.robot_model import JointLimits
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabkit.core.setup.limits import CHECK_DT
+from rehabkit.core.safety.limit_breach import CHECK_DT
 
 AXES = "xyz"
 

@@ -24,10 +24,10 @@ from rehabkit.core.safety.breaches import Breaches
 from rehabkit.core.safety.compliance import Compliance
 from rehabkit.core.safety.event import Clipping, SafetyEvent
 from rehabkit.core.safety.keep_in import KeepIn
+from rehabkit.core.safety.limit_breach import LimitBreach
 from rehabkit.core.safety.ramps import Ramps
 from rehabkit.core.safety.stopping import WORDS, Stopping
 from rehabkit.core.scenario.safety import SafetyConfig
-from rehabkit.core.setup.limits import LimitBreach
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)

@@ -19,9 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rehabkit.core.safety.event import SafetyEvent
+from rehabkit.core.scenario.safety import STOP_RULES
 
-STOP_RULES = ("default", "position", "velocity", "torque", "non-finite", "keep-in", "interaction-force", "e-stop",
-              "plan", "plugin-error", "backend")
 STANDSTILL_DEG_S = 1.0  # every joint slower than this ...
 STANDSTILL_FOR_S = 0.05  # ... for this long: at standstill
 WORDS = {0: "torque off (category 0)", 1: "controlled stop, then torque off (category 1)",

@@ -7,10 +7,12 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from rehabkit.core.safety.stopping import STOP_RULES
 from rehabkit.models.strict import StrictModel
 
 Vec3 = tuple[float, float, float]
+# the rules a safety stop is made by, each with its stop category (IEC 60204-1) in ``stop_category``
+STOP_RULES = ("default", "position", "velocity", "torque", "non-finite", "keep-in", "interaction-force", "e-stop",
+              "plan", "plugin-error", "backend")
 
 
 class JointEnvelope(StrictModel):

@@ -13,8 +13,8 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from rehabkit.core.kinds.names import suggest
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
-from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.registry import PluginError, PluginRegistry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
 from rehabkit.core.scenario.models import DEFAULT_BACKEND, PLUGIN_SECTIONS, ScenarioBase, scenario_model

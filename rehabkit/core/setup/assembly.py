@@ -36,8 +36,8 @@ from rehabkit.core.kinds.interfaces import (
     Sensor,
     Target,
 )
+from rehabkit.core.kinds.names import suggest
 from rehabkit.core.plugins.lifecycle import Extensions
-from rehabkit.core.plugins.names import suggest
 from rehabkit.core.plugins.registry import PluginRegistry
 from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError

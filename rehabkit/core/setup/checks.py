@@ -11,8 +11,8 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
 from rehabkit.core.kinds.interfaces import PlanningError
-from rehabkit.core.plugins.names import suggest
-from rehabkit.core.results.metric import CORE_METRICS, MetricCatalogue
+from rehabkit.core.kinds.metric import CORE_METRICS, MetricCatalogue
+from rehabkit.core.kinds.names import suggest
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from rehabkit.models.robot_model import RobotModel
@@ -108,7 +108,7 @@ def has(backend: Any, capability: type) -> bool:
 
 def check_joint_targets(a: Assembly) -> None:
     """Joint values a target gives within the joint ranges in force (after a patient's admission)."""
-    from rehabkit.core.setup.limits import first_breach
+    from rehabkit.core.safety.limit_breach import first_breach
 
     model = a.robot.model
     for name, target in a.targets.items():

@@ -7,11 +7,11 @@ import numpy as np
 
 from rehabkit.core.kinds.interfaces import PlanningError, PlanRequest
 from rehabkit.core.safety.keep_in import plan_exit
+from rehabkit.core.safety.limit_breach import CHECK_DT
 from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.setup.checks import at_target
 from rehabkit.core.setup.dynamics_check import missing_inertia, plan_torque
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
-from rehabkit.core.setup.limits import CHECK_DT
 
 
 def start_posture(a: Assembly) -> np.ndarray:

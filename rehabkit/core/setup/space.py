@@ -14,8 +14,8 @@ import numpy as np
 
 from rehabkit.core.kinds.capabilities import SceneGeometry
 from rehabkit.core.kinds.interfaces import Plan
-from rehabkit.core.results.metrics import Trace, cartesian_metrics
-from rehabkit.core.setup.limits import LimitBreach, plan_breach
+from rehabkit.core.kinds.trace import Trace
+from rehabkit.core.safety.limit_breach import LimitBreach, plan_breach
 
 
 class JointSpace:
@@ -155,3 +155,15 @@ class CartesianSpace(JointSpace):
 def reference_space(setup) -> JointSpace:
     """The space of the scenario's planner (its controller takes the same: checked at setup)."""
     return CartesianSpace(setup) if setup.planner.space == "cartesian" else JointSpace(setup)
+
+
+def cartesian_metrics(trace: Trace) -> dict[str, float]:
+    """How the end effector followed a Cartesian reference."""
+    if trace.x is None or not len(trace.x):
+        return {}
+    err = np.linalg.norm(trace.x_ref - trace.x, axis=1)
+    return {
+        "cartesian_tracking_rms_mm": float(np.sqrt(np.mean(err**2)) * 1e3),
+        "cartesian_tracking_max_mm": float(err.max() * 1e3),
+        "final_position_error_m": float(err[-1]),
+    }

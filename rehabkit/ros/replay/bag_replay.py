@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from rehabkit.core.io import atomic_write_json
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.plugins.registry import PluginRegistry, default_registry
-from rehabkit.core.results.metrics import Trace
 from rehabkit.core.results.record import Movement
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario

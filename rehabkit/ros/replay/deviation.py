@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.core.results.metrics import Trace
+from rehabkit.core.kinds.trace import Trace
 
 RUN_BAG = "run.mcap"  # a run's own bag in its folder: its joints as they were
 
