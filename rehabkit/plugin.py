@@ -54,6 +54,7 @@ from rehabkit.core.kinds.interfaces import (
 )
 from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, RunTap, Section
 from rehabkit.core.plugins.types import Declared
@@ -74,6 +75,8 @@ __all__ = [
     "ReferenceSpace", "Controller", "ControllerReference", "Sensor", "SensorConfig", "Instrument",
     "InteractionForceSensor", "Backend", "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient",
     "Context", "StrictModel", "FilePath", "SensorName", "Reading", "Wearable", "Strap",
+    # what every kind's run_metrics(trace) reads: the run's record at the control rate
+    "Trace",
     # what a plugin draws in the recording
     "Drawing",
     # joint values for a plan's targets (IK where Cartesian, nearest branch, limits checked), and their geometry

@@ -91,9 +91,9 @@ def test_fatigue_lowers_the_maximal_torque_under_a_sustained_effort_and_it_recov
     sustained = bench.run(3.0, request=lambda t: MVC, lever=hold)["tau"]
     fresh, tired = sustained[25:50].mean(), sustained[-25:].mean()
     assert tired / fresh < 0.7
-    assert bench.person.run_metrics()["muscle_capacity_min"] < 0.5
+    assert bench.person.run_metrics(None)["muscle_capacity_min"] < 0.5
     bench.run(10.0, request=lambda t: np.zeros(1), lever=hold)  # rest
-    assert bench.person.run_metrics()["muscle_capacity_min"] > 0.9
+    assert bench.person.run_metrics(None)["muscle_capacity_min"] > 0.9
     again = bench.run(0.3, request=lambda t: MVC, lever=hold)["tau"][-25:].mean()
     assert again / fresh > 0.9
 

@@ -135,7 +135,7 @@ class AssistAsNeeded(Controller):
         self.step += 1
         return tau
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         return {"aan_stiffness_mean": self._k_sum / max(1, self.step),
                 "aan_stiffness_max": float(max(self._k, default=0.0))}
 

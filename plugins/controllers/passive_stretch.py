@@ -199,7 +199,7 @@ class PassiveStretch(Controller):
         self.ended[f"passive_stop_{side}_{self.names[j]}"] = float(why)
         self._phase, self._back_s = "back", 0.0  # (from where the reference is: a jump back would jerk the limb)
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         return {**self.found, **self.ended}
 
 

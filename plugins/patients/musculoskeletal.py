@@ -268,7 +268,7 @@ class Musculoskeletal(EmbodiedPatient):
 
     # -- the record -----------------------------------------------------------------------------------
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         n = max(1, self.steps)
         return {"peak_cuff_force_n": self.peak, "mean_cuff_force_n": self.force_sum / n,
                 "muscle_effort": self.effort_sum / n, "drive_saturated_fraction": self.saturated / n,

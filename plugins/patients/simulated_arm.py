@@ -203,7 +203,7 @@ class SimulatedArm(Patient):
         """The remaining voluntary capacity (fatigue)."""
         return np.array([self.capacity])
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         return {"patient_capacity_final": self.capacity, "patient_voluntary_work_j": self.voluntary_work}
 
     def inputs(self) -> dict[str, str]:

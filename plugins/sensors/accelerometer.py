@@ -176,7 +176,7 @@ class AccelerometerArraySensor(Sensor):
         covs = np.einsum("ij,tj,kj->tik", M, np.array(self.variances), M)  # M⁺ diag(var) M⁺ᵀ per sample
         return z[:, :3], AngularVelocityEKF().run(z, covs, self.dt)
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         if not self.times:
             return {}
         a_s, w_s = self.smoothed()

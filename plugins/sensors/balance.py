@@ -80,7 +80,7 @@ class Balance(Sensor):
         self.slip_max, self.tilt_max = max(self.slip_max, slip), max(self.tilt_max, tilt)
         return {"com_margin_m": margin, "feet_slip_mm": slip * 1e3, "pelvis_tilt_deg": tilt}
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         if self._polygon is None:
             return {}
         return {"com_margin_min_m": self.margin_min, "feet_slip_max_mm": self.slip_max * 1e3,

@@ -100,7 +100,7 @@ class BallTracker(Sensor):
                         "release_speed_m_s": float(np.linalg.norm(v0)), "flight_s": float(ts[k])})
         return out
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         flights = self.flights()
         crossed = [f for f in flights if f["crossed"]]
         out = {"throws_released": float(len(flights)), "throws_crossed": float(len(crossed))}

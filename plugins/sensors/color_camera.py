@@ -156,7 +156,7 @@ class ColorCamera(Sensor):
             out["error_m"] = err
         return out
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         out = {"camera_misses": float(self.misses), "camera_occluded": float(self.occluded)}
         if self.errors:
             e = np.array(self.errors) * 1e3

@@ -214,7 +214,7 @@ class ForceTorqueSensor(InteractionForceSensor):
         value = self.sample(t, backend) if not self.interaction else self.value  # (sampled by the loop already)
         return {"force_n": value[:3].copy(), "torque_nm": value[3:].copy(), "raw_force_n": self.raw[:3].copy()}
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         if len(self._tare) < 2:
             return {}
         tare = np.array(self._tare)

@@ -283,7 +283,7 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
         return {"bus": f"{bus.interface}:{bus.channel}" if bus else "simulated CiA 402 drives (virtual CAN bus)",
                 "drives": ", ".join(str(r.id) for r in self.master.remotes)}
 
-    def run_metrics(self) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         return bus_metrics(self)
 
     def outputs(self) -> dict[str, str]:

@@ -279,7 +279,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
     def holding(self) -> bool:
         return bool(self.status & HOLDING)
 
-    def run_metrics(self) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         return link_metrics(self)
 
     def series(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -30,7 +30,7 @@ class HandPosition(Sensor):
         self.errors.append(float(np.linalg.norm(noisy - hand)))
         return {"hand_world_m": noisy}
 
-    def run_metrics(self, trace=None) -> dict[str, float]:
+    def run_metrics(self, trace) -> dict[str, float]:
         return {"hand_marker_error_rms_mm": 1000 * float(np.sqrt(np.mean(np.square(self.errors or [0.0]))))}
 
 

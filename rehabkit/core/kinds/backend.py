@@ -9,6 +9,7 @@ from typing import ClassVar
 import numpy as np
 
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.trace import Trace
 
 
 @dataclass
@@ -131,7 +132,7 @@ class Backend(ABC):
     def step(self, n: int = 1) -> None:
         """Advance ``n`` timesteps."""
 
-    def run_metrics(self) -> dict[str, float]:
+    def run_metrics(self, trace: Trace) -> dict[str, float]:
         """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""
         return {}
 

@@ -18,6 +18,7 @@ from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
 from rehabkit.core.kinds.robot import IKUnavailableError, Robot
 from rehabkit.core.kinds.sensor import Instrument, InteractionForceSensor, Reading, Sensor, SensorConfig
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.models.strict import StrictModel
 
 
@@ -109,7 +110,7 @@ class Planner(ABC):
     def plan(self, request: PlanRequest) -> Plan:
         """Plan from ``request.q`` through ``request.targets``."""
 
-    def run_metrics(self, trace: Any) -> dict[str, float]:
+    def run_metrics(self, trace: Trace) -> dict[str, float]:
         """Figures about the executed run only this planner can judge (default none)."""
         return {}
 
@@ -137,7 +138,7 @@ class Controller(ABC):
     metrics: ClassVar[tuple[Metric, ...]] = ()  # descriptions of what run_metrics reports
     requires: ClassVar[tuple[type, ...]] = ()  # capabilities needed of the robot or backend (core.kinds.capabilities)
 
-    def run_metrics(self, trace: Any) -> dict[str, float]:
+    def run_metrics(self, trace: Trace) -> dict[str, float]:
         """Figures about the executed run only this controller can judge (default none)."""
         return {}
 

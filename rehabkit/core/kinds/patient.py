@@ -11,6 +11,7 @@ import numpy as np
 
 from rehabkit.core.kinds.backend import Drawing
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.trace import Trace
 
 
 class Patient(ABC):
@@ -31,7 +32,7 @@ class Patient(ABC):
     def torque(self, t: float, q: np.ndarray, qd: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """Joint torques [N·m] the person applies to the robot now (positive along each joint's axis)."""
 
-    def run_metrics(self, trace: Any) -> dict[str, float]:
+    def run_metrics(self, trace: Trace) -> dict[str, float]:
         """Figures about the person over the run (e.g. fatigue); default none."""
         return {}
 

@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.trace import Trace
 from rehabkit.models.strict import StrictModel
 
 
@@ -84,7 +85,7 @@ class Sensor(ABC):
         (robot base frame, [m]); ``None`` when it sees nothing.
         """
 
-    def run_metrics(self, trace: Any = None) -> dict[str, float]:
+    def run_metrics(self, trace: Trace) -> dict[str, float]:
         """Figures about the whole run (e.g. estimation error), given the run's trace; default none."""
         return {}
 

@@ -66,7 +66,7 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
     metrics.update(r.plan_metrics)
     metrics.update(a.planner.run_metrics(trace))
     metrics.update(a.controller.run_metrics(trace))
-    metrics.update(a.backend.run_metrics())
+    metrics.update(a.backend.run_metrics(trace))
     for sensor in a.sensors.values():
         metrics.update(sensor.run_metrics(trace))
     if a.patient is not None:
