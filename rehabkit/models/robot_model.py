@@ -75,9 +75,14 @@ class JointDissipation:
     friction: np.ndarray
     fade: np.ndarray
 
+    def __post_init__(self) -> None:  # (the control loop's: a robot declaring no friction pays no tanh per step)
+        object.__setattr__(self, "_dry", bool(np.any(self.friction > 0)))
+
     def torque(self, qd: np.ndarray) -> np.ndarray:
         """The torque the joints lose at speeds ``qd``: what a feedforward adds to move them at those speeds."""
         qd = np.asarray(qd, float)
+        if not self._dry:
+            return self.damping * qd
         return self.damping * qd + self.friction * np.tanh(qd / self.fade)
 
     @property
