@@ -60,7 +60,9 @@ class JointPD(Controller):
         # gains from the model come with the model's feedforward: a robot's declared friction (the Z1's 1-2 N·m)
         # left to auto gains alone held it 2.2° off its postures
         self.mode = config.feedforward or ("inverse-dynamics" if self.auto else "gravity")
-        self._dissipation = model.dissipation if model.dissipation.any else None
+        losses = model.dissipation  # (its arrays held here: the loop pays two products a step, not a call)
+        self._damping = losses.damping if np.any(losses.damping) else None
+        self._friction = (losses.friction, losses.fade) if np.any(losses.friction) else None
         self._inverse_dynamics, self._gravity = self.mode == "inverse-dynamics", self.mode == "gravity"
         self._gravity_torque = context.robot.gravity_torque  # the robot's own model (Pinocchio for serial arms)
         if self._inverse_dynamics or self.auto:
@@ -105,8 +107,10 @@ class JointPD(Controller):
             tau = (np.triu(M) + np.triu(M, 1).T) @ tau + self.kp_own * (q_ref - q)
         if self._inverse_dynamics:  # the rigid bodies', their rotors', and what the joints lose on the way
             tau += pin.rnea(self._model, self._data, q, qd_ref, qdd_ref)
-            if self._dissipation is not None:
-                tau += self._dissipation.torque(qd_ref)
+            if self._damping is not None:
+                tau += self._damping * qd_ref
+            if self._friction is not None:
+                tau += self._friction[0] * np.tanh(qd_ref / self._friction[1])
         elif self._gravity:
             tau += self._gravity_torque(q)
         return tau
