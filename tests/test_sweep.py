@@ -106,6 +106,7 @@ def running_ray():
     ray.shutdown()
 
 
+@pytest.mark.realtime  # (a wall-clock timeout, and its bound: what only real time shows)
 @pytest.mark.parametrize("mode", ["serial", "ray"])
 def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode, request):
     if mode == "ray":
