@@ -85,6 +85,9 @@ class RunSession:
     plans: list[dict] = field(default_factory=list)
     notes: list[dict] = field(default_factory=list)
     refusal: PlanRefusal | None = None  # the last plan that did not run, and why (the first plan's, if it did not)
+    # the task's targets as the run knows them: the admitted ones, a sensed one where it was last seen (the Assembly
+    # keeps what was admitted; a run writes here)
+    targets: dict[str, Target] = field(default_factory=dict)
 
     @property
     def first_refusal(self) -> PlanRefusal | None:
@@ -114,9 +117,10 @@ class RunSession:
         for name, pos in request.sensed.items():  # sensor-driven targets at their latest sensed position
             pose = np.eye(4)
             pose[:3, 3] = pos
-            a.targets[name] = Target(name, pose=pose, position_only=True)
+            self.targets[name] = Target(name, pose=pose, position_only=True)
         try:
-            plan = self.gate.ask(t, q, qd, [a.targets[n] for n in request.names], a.event_planners.get(request.event))
+            plan = self.gate.ask(t, q, qd, [self.targets[n] for n in request.names],
+                                 a.event_planners.get(request.event))
         except PlanningError as exc:
             self._refuse(PlanRefusal(t, f"planner failed: {exc}", error=exc, first=first), q)
             return
@@ -209,7 +213,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     a.space.allocate(trace, ref_q, ref_qd)
     catalogue = metric_catalogue(a)
     session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0,
-                         notes=list(notes or []))
+                         notes=list(notes or []), targets=dict(a.targets))
     session.taps = [tap for tap in a.extensions.hook.rehabkit_run_opened(setup=a) if tap is not None]
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
@@ -217,7 +221,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
         threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
                                 prepare=encode_images if view.active and not session.taps else None)
     session.threads = threads
-    session.timeline = Timeline(a, view, threads, session.taps)
+    session.timeline = Timeline(a, view, threads, session.taps, session.targets)
     try:
         _first_plan(session)
     except BaseException:

@@ -37,9 +37,11 @@ class Replan:
 class Timeline:
     """Events, scene actions, sensors and the stop of one run; ``view`` records events and readings."""
 
-    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list | None = None):
+    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list | None = None,
+                 targets: dict | None = None):
         sc, sch = setup.sc, setup.schedule
         self.setup, self.view, self.threads, self.taps = setup, view, threads, taps or []
+        self.targets = setup.targets if targets is None else targets  # (the session's: a sensed one where last seen)
         self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
@@ -118,7 +120,7 @@ class Timeline:
                 ee = a.robot.fk(q)[:3, 3]  # base frame, as target poses are
                 for i in list(self._waiting):
                     ev = self.events[i]
-                    if np.linalg.norm(ee - a.targets[ev.reached].pose[:3, 3]) <= ev.tolerance_m:
+                    if np.linalg.norm(ee - self.targets[ev.reached].pose[:3, 3]) <= ev.tolerance_m:
                         self._waiting.remove(i)
                         self._fire(i, k, t, q, qd)
             if self._ramp_out_at is not None and k >= self._ramp_out_at:
