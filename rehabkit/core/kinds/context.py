@@ -35,7 +35,8 @@ class Context:
             at the last control step [N] (a force-torque sensor's, a strapped person's, or estimated from a simulated
             person's torques), or None where the run has no source of it.
         plugins: The run's plugin registry, for :meth:`build`.
-        readings: The sensors' latest readings by name, for :meth:`reading` (the run fills it as they read).
+        latest: ``latest(sensor)``: the run session's latest reading of a sensor, for :meth:`reading` (None outside
+            a run: what changes while a run goes is the session's, not the context's).
     """
 
     scenario_dir: Path
@@ -56,13 +57,13 @@ class Context:
     bodies: tuple[Any, ...] = ()  # simulated bodies the backend composes into its scene (an embodied patient)
     interaction_force: Callable[[], np.ndarray | None] | None = None
     plugins: Any = None  # the run's plugin registry (``build`` makes others from it)
-    readings: dict[str, Reading] = field(default_factory=dict)  # the sensors' latest, by name (see ``reading``)
+    latest: Callable[[str], Reading | None] | None = None  # the session's latest reading of a sensor (``reading``)
 
     def reading(self, sensor: str) -> Reading | None:
         """The latest reading of the scenario's sensor named ``sensor`` (its values, time and frame), or None
         before its first. Name the sensor in a :data:`~rehabkit.models.strict.SensorName` setting: the setup then
         checks that the scenario has it, located at that setting."""
-        return self.readings.get(sensor)
+        return self.latest(sensor) if self.latest is not None else None
 
     def build(self, kind: str, section: dict[str, Any]) -> Any:
         """Another plugin of the run's from its section (``type`` and settings), built with this context: a

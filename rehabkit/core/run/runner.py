@@ -65,7 +65,7 @@ class Runner:
             raise SetupError("; ".join(f"extension '{b.name}' failed to load: {b.error}" for b in broken)
                              + " (fix or uninstall it)")
         self.setup = assemble(self.loaded, self.registry, self.extensions, self.out_dir,
-                              plan=self._calls.plan, note=self._calls.note)
+                              plan=self._calls.plan, note=self._calls.note, latest=self._calls.latest)
         return self.setup
 
     def start(self) -> RunSession:
@@ -134,6 +134,11 @@ class _Calls:
             session.note(t, text)
         else:
             self.notes.append({"t": round(t, 6), "text": text})
+
+    def latest(self, sensor: str):
+        # Context.reading: the session's latest reading of a sensor (None before the session, or its first)
+        session = self.session() if self.session is not None else None
+        return session.timeline.readings.get(sensor) if session is not None and session.timeline else None
 
     def plan(self, t, q, qd, targets):
         # Context.plan: a controller's own plan, made by the session (controllers ask only while it runs)

@@ -45,7 +45,7 @@ class Timeline:
         self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
-        self.readings = setup.context.readings  # the sensors' latest, by name: what plugins read (Context.reading)
+        self.readings: dict = {}  # the sensors' latest, by name: what plugins read (Context.reading, through the run)
         self._frames = {name: sensor.frame for name, sensor in setup.sensors.items()}
         self.fired: list[dict] = []
         self._following: tuple[list[str], float, np.ndarray | None] = ([], 0.0, None)

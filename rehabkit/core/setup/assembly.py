@@ -152,7 +152,7 @@ class Assembly:
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
              upto: Literal["targets", "plugins", "run"] = "run", plan: Callable | None = None,
-             note: Callable[[float, str], None] | None = None) -> Assembly:
+             note: Callable[[float, str], None] | None = None, latest: Callable | None = None) -> Assembly:
     """Build the run of ``loaded`` (see the module docstring); ``plan``/``note`` go to the controllers' context.
 
     Raises:
@@ -163,7 +163,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     slot = patient_slot(sc, registry, extensions)
     ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
                   out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=slot.section if slot else None, plan=plan,
-                  note=note, dry_run=upto != "run", plugins=registry, readings={})
+                  note=note, dry_run=upto != "run", plugins=registry, latest=latest)
     a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx, patient_slot=slot)
     extensions.hook.rehabkit_configure_robot(setup=a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
