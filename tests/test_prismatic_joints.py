@@ -369,3 +369,14 @@ def test_the_bridge_s_and_the_drives_backstop_is_a_metres_margin_on_a_slide(slid
     assert backstop.breach(np.array([2.0 + np.radians(2.1), 0.1]), np.zeros(2)).startswith("joint 0 beyond its upper")
     drives = drive_limits(slide2.model, SafetyConfig(stop_decel_deg_s2=360, stop_decel_m_s2=2.0), np.zeros(2))
     assert np.allclose(drives.upper, [2.0 + np.radians(2.0), 0.21]) and np.allclose(drives.decel, [2 * np.pi, 2.0])
+
+
+def test_validate_lists_the_joints_in_the_order_a_posture_gives_them(capsys):
+    """What a user writing `joints: [...]` needs: each joint, its kind and the limits in force, in its own unit."""
+    from rehabkit.cli.main import main
+
+    assert main(["validate", str(ROOT / "examples" / "robots" / "dh_scara.yaml"), "--joints"]) == 0
+    rows = [x.strip() for x in capsys.readouterr().out.splitlines() if x.strip().startswith("JOINT")]
+    assert [r.split(". ")[1].split(":")[0] for r in rows] == ["shoulder", "elbow", "quill", "roll"]
+    quill = next(r for r in rows if "prismatic" in r)
+    assert " m, " in quill and " m/s, " in quill and quill.endswith(" N")

@@ -82,7 +82,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     for path in args.scenarios:
         try:
             loaded = load_scenario(path, args.set)
-            print(f"{path}: ok{_admission(loaded)}")
+            print(f"{path}: ok{_admission(loaded, args.joints)}")
         except ScenarioError as exc:
             _debug_cause(exc)
             _err(str(exc))
@@ -93,9 +93,26 @@ def cmd_validate(args: argparse.Namespace) -> int:
     return status
 
 
-def _admission(loaded) -> str:
+def _joint_table(setup) -> str:
+    """The robot's joints in the order a posture lists them, each with its kind and the limits in force, in its own
+    unit (what a user writing ``joints: [...]`` needs: the SO-101's order was found only from a wrong count)."""
+    import math
+
+    model, lim = setup.robot.model, setup.limits
+    rows = []
+    for j, name in enumerate(model.joint_names):
+        turns = bool(model.revolute[j])
+        k, unit, speed, force = (math.degrees(1.0), "°", "°/s", "N·m") if turns else (1.0, " m", " m/s", "N")
+        rows.append(f"\n  JOINT   {j + 1}. {name}: {'revolute' if turns else 'prismatic'}, "
+                    f"[{lim.lower[j] * k:.4g}, {lim.upper[j] * k:.4g}]{unit}, {lim.velocity[j] * k:.4g}{speed}, "
+                    f"{lim.effort[j]:.4g} {force}")
+    return "".join(rows)
+
+
+def _admission(loaded, joints: bool = False) -> str:
     """The run's setup but its backend (robot, narrowed limits, capabilities, admitted targets, plugins) and its
-    first plan, as `run` makes them; with a patient or envelope ranges, what became of the fixed targets."""
+    first plan, as `run` makes them; with a patient or envelope ranges, what became of the fixed targets; with
+    ``joints``, the robot's joints in order."""
     from rehabkit.cli.estop import latched_note
     from rehabkit.core.plugins.lifecycle import default_extensions
     from rehabkit.core.setup.assembly import assemble
@@ -108,6 +125,8 @@ def _admission(loaded) -> str:
     warned += "".join(f"\n  PLAN    {w}" for w in check_first_plan(setup))  # (as run says them, before it moves)
     warned += "".join(f"\n  BACKEND {w}" for w in setup.backend_warnings)
     warned += latched_note(setup)
+    if joints:
+        warned = _joint_table(setup) + warned
     sc = loaded.model
     if sc.patient is None and not sc.safety.joints:
         return warned
@@ -220,6 +239,8 @@ def parser() -> argparse.ArgumentParser:
                                          "against a patient's ranges)")
     v.add_argument("scenarios", nargs="+")
     v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    v.add_argument("--joints", action="store_true", help="list the robot's joints in the order a posture gives "
+                                                          "them, each with its kind and limits in force")
     v.set_defaults(func=cmd_validate)
     pl = sub.add_parser("plugins", help="list installed plugins and their settings")
     pl.add_argument("--json", action="store_true")
