@@ -28,7 +28,6 @@ from rehabkit.core.run.timeline import Replan, Timeline
 from rehabkit.core.safety.limit_breach import LimitBreach
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.setup.assembly import Assembly, SetupError
-from rehabkit.core.setup.checks import metric_catalogue
 from rehabkit.core.setup.first_plan import breach_refusal, first_plan_refusal, start_posture
 
 
@@ -211,7 +210,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     ref = ReferenceBuffer(n, a.space.point(q0), a.schedule.control_dt, a.space.hand)
     ref_q, ref_qd, _ = ref.views()
     a.space.allocate(trace, ref_q, ref_qd)
-    catalogue = metric_catalogue(a)
+    catalogue = a.catalogue  # (made once, at assembly: validate's and the run's are one)
     session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0,
                          notes=list(notes or []), targets=dict(a.targets))
     session.taps = [tap for tap in a.extensions.hook.rehabkit_run_opened(setup=a) if tap is not None]

@@ -52,6 +52,7 @@ from rehabkit.core.setup.checks import (
     check_robot_model,
     check_scene_names,
     check_sensor_settings,
+    metric_catalogue,
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from rehabkit.core.setup.force_source import ForceSource, LastForce
@@ -105,6 +106,7 @@ class Assembly:
     targets: dict[str, Target] = field(default_factory=dict)
     replaced: list[dict] = field(default_factory=list)
     backend_warnings: list[str] = field(default_factory=list)  # (validate: what the backend's check says, not refuses)
+    catalogue: Any = None  # every metric the run can report, described (a MetricCatalogue), made once at assembly
     sections: dict[str, Any] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)  # extensions' own state between their hooks
     sensors: dict[str, Sensor] = field(default_factory=dict)
@@ -232,6 +234,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
             a.safety.on_yield = a.backend.comply
     else:
         a.backend_warnings = list(a.make("backend", sc.backend, ("backend",), check_only=True) or [])
+    a.catalogue = metric_catalogue(a)
     check_expectations(a)
     a.schedule = _schedule(a)
     return a

@@ -162,7 +162,7 @@ def metric_catalogue(a: Assembly) -> MetricCatalogue:
 
 def check_expectations(a: Assembly) -> None:
     """An ``expect:`` on a metric nothing in this run reports could never be met: refused, with the nearest."""
-    catalogue = metric_catalogue(a)
+    catalogue = a.catalogue if a.catalogue is not None else metric_catalogue(a)
     for name in a.sc.expect:
         if not catalogue.known(name):
             raise PluginSetupError(a.loaded.source, ("expect", name),
