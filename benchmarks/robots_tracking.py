@@ -109,12 +109,11 @@ def run_one(name: str, rel: str, ee: str, keep: Path | None) -> str:
     said = [x.strip() for x in (check.stdout + check.stderr).splitlines() if x.strip().startswith("PLAN")]
     if why := s.get("tracking"):  # (the run's own account of its worst joint, where it tracked badly)
         said.append(f"TRACKING {why['joint']}: {'; '.join(why['causes'])}")
-    notes: list[str] = []
     safety = "; ".join(e["message"][:110] for e in s["safety"]["events"]) or "none"
     contact = m.get("contact_steps") or 0
     saturated = m.get("torque_saturation_steps") or 0
     return (row + f"{m['tracking_rms_deg']:.3f} / {m['tracking_max_deg']:.2f} | {verdicts} | "
-            f"{safety} | {contact} / {saturated} | {'; '.join(said + notes)[:300]} |")
+            f"{safety} | {contact} / {saturated} | {'; '.join(said)[:300]} |")
 
 
 def main() -> None:

@@ -85,10 +85,6 @@ class JointDissipation:
             return self.damping * qd
         return self.damping * qd + self.friction * np.tanh(qd / self.fade)
 
-    @property
-    def any(self) -> bool:
-        return bool(np.any(self.damping > 0) or np.any(self.friction > 0))
-
 
 @dataclass
 class RobotModel:

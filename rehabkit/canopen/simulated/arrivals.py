@@ -39,7 +39,7 @@ class Arrivals:
         self._queue = getattr(bus, "queue", None)  # (python-can's virtual bus)
         try:
             self._fd = bus.fileno()
-        except (NotImplementedError, AttributeError, OSError):
+        except (NotImplementedError, AttributeError, OSError):  # (a bus with no socket: python-can's virtual one)
             self._fd = -1
         notifier = getattr(network, "notifier", None)
         if self._fd >= 0 and notifier is not None:

@@ -37,11 +37,10 @@ class Replan:
 class Timeline:
     """Events, scene actions, sensors and the stop of one run; ``view`` records events and readings."""
 
-    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list | None = None,
-                 targets: dict | None = None):
+    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list, targets: dict):
         sc, sch = setup.sc, setup.schedule
-        self.setup, self.view, self.threads, self.taps = setup, view, threads, taps or []
-        self.targets = setup.targets if targets is None else targets  # (the session's: a sensed one where last seen)
+        self.setup, self.view, self.threads, self.taps = setup, view, threads, taps
+        self.targets = targets  # (the session's: a sensed one where it was last seen)
         self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}

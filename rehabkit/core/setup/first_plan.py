@@ -12,6 +12,7 @@ from rehabkit.core.setup.assembly import Assembly
 from rehabkit.core.setup.checks import at_target
 from rehabkit.core.setup.dynamics_check import missing_inertia, plan_torque
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from rehabkit.core.setup.targets import looks_like_radians
 
 
 def start_posture(a: Assembly) -> np.ndarray:
@@ -67,11 +68,10 @@ def all_small(a: Assembly) -> str | None:
     if len(given) < 2:  # (one small posture is a posture)
         return None
     values = [np.abs(np.asarray(getattr(t, key), float)) for _, t, key in given]
-    if any(len(v) != len(revolute) for v in values):
+    if any(len(v) != len(revolute) for v in values) or \
+            not looks_like_radians(np.concatenate(values), np.tile(revolute, len(values))):
         return None
     turning = np.concatenate([v[revolute] for v in values])
-    if not len(turning) or turning.max() > 2 * np.pi or turning.max() < 0.2:
-        return None
     i, _, key = given[int(np.argmax([v[revolute].max() for v in values]))]  # (at the posture that moves most)
     at = a.loaded.source.key_marks.get(("task", "targets", i, key))
     return (f"task.targets.{i}.{key}{f' ({at})' if at else ''}: every posture's revolute values are within ±2π "

@@ -210,14 +210,18 @@ def posture_si(name: str, spec, model) -> np.ndarray:
     return np.where(revolute, np.radians(values), values)
 
 
+def looks_like_radians(values_deg, revolute) -> bool:
+    """Values given as degrees whose revolute ones are all within ±2π, not all near zero (a posture of a few degrees
+    at most is rare; radians are common)."""
+    v = np.abs(np.asarray(values_deg, float)[np.asarray(revolute, bool)])
+    return bool(len(v)) and 0.2 <= v.max() <= 2 * np.pi
+
+
 def radians_hint(values_deg, revolute, key: str = "joints_deg") -> str:
     """Why a posture given in degrees may be radians (its values "are all within ±2π: ..."; "" where not): every
     revolute value within ±2π, not all near zero (a posture of a few degrees at most is rare; radians are common).
     ``key``: the form the fix names (``joints_deg``, or ``joints``, which takes degrees for the revolute joints)."""
-    if values_deg is None:
-        return ""
-    v = np.abs(np.asarray(values_deg, float)[np.asarray(revolute, bool)])
-    if not len(v) or v.max() > 2 * np.pi or v.max() < 0.2:
+    if values_deg is None or not looks_like_radians(values_deg, revolute):
         return ""
     takes = "joints_deg takes degrees" if key == "joints_deg" else "joints takes degrees for a revolute joint"
     return f"are all within ±2π: written in radians? {takes} (joints_rad takes SI: radians, and metres)"
