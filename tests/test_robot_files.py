@@ -201,3 +201,22 @@ def test_a_misspelt_end_effector_is_said_at_its_setting_with_the_names_nearest(t
     assert main(["validate", str(p)]) == 2
     said = capsys.readouterr().err
     assert f"{p}:2:" in said and "robot.ee_frame: " in said and "did you mean 'l2'" in said
+
+
+def test_pinocchios_file_of_a_robot_is_one_in_the_cache_per_variant(tmp_path, monkeypatch):
+    """Pinocchio reads MJCF from files only: the robot's is kept in the cache by its content, written whole — a
+    temporary file removed after reading was left behind by a process killed while it read."""
+    import yaml
+
+    from plugins.robots.dh import DHRobot
+    from rehabkit.models.dh import DHRobotSpec
+
+    monkeypatch.setenv("REHABKIT_CACHE", str(tmp_path))
+    spec = yaml.safe_load((DATA / "arm3_dh.yaml").read_text())["robot"]
+    spec.pop("type")
+    for _ in range(2):  # (the same robot twice: one file)
+        assert DHRobot(DHRobotSpec.model_validate(spec)).model.pin_model.nq == 3
+    spec["joints"][0]["mass"] = 2.0  # (another variant: another file)
+    assert DHRobot(DHRobotSpec.model_validate(spec)).model.pin_model.nq == 3
+    files = sorted(p.name for p in (tmp_path / "descriptions" / "mjcf").iterdir())
+    assert len(files) == 2 and all(f.startswith("arm3-") and f.endswith(".xml") for f in files)

@@ -134,19 +134,34 @@ class RobotModel:
 
     def mjcf_pin_model(self):
         """Pinocchio's model of the MJCF as written (a floating root stays free; :attr:`pin_model` is the robot's own):
-        its parser reads files only, so the MJCF goes into a file of its own for
-        the moment it reads it — beside the robot's assets where its mesh paths are relative to them, else in the
-        temporary folder — and is removed at once (runs left one per robot variant behind before)."""
+        its parser reads files only, so the MJCF is a file in the cache, named by its content (written whole: temp,
+        then rename) and kept — one per robot variant however many runs, and none left half-written or behind by a
+        process killed while it read (a temporary file removed after reading was, by a bridge killed mid-build). A
+        robot whose mesh paths are relative to its assets (``asset_dir``) has its file beside them, removed once
+        read."""
+        import hashlib
+
         import pinocchio as pin
 
-        where = self.asset_dir or Path(tempfile.gettempdir())
-        fd, name = tempfile.mkstemp(prefix=f".rehabkit-{self.name}-", suffix=".xml", dir=where)
-        try:
+        if self.asset_dir is not None:
+            fd, name = tempfile.mkstemp(prefix=f".rehabkit-{self.name}-", suffix=".xml", dir=self.asset_dir)
+            try:
+                with os.fdopen(fd, "w") as f:
+                    f.write(self.mjcf)
+                return pin.buildModelFromMJCF(name)
+            finally:
+                Path(name).unlink(missing_ok=True)
+        from rehabkit.models.files.ros_package import cache_dir
+
+        folder = cache_dir() / "mjcf"
+        path = folder / f"{self.name}-{hashlib.sha256(self.mjcf.encode()).hexdigest()[:16]}.xml"
+        if not path.exists():
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, part = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=folder)
             with os.fdopen(fd, "w") as f:
                 f.write(self.mjcf)
-            return pin.buildModelFromMJCF(name)
-        finally:
-            Path(name).unlink(missing_ok=True)
+            os.replace(part, path)
+        return pin.buildModelFromMJCF(str(path))
 
     @cached_property
     def pin_model(self):
