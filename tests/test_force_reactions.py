@@ -3,6 +3,8 @@ instead of stopping stiffly, keeping every other rule; and the compliant test ri
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import mujoco
 import numpy as np
 import pytest
@@ -24,7 +26,8 @@ def _run(kind: str, **more):
             **more}
     runner = Runner(load_scenario(FORCE, over))
     result = runner.run()
-    a = runner.setup
+    # the robot (the run's constant setup) and the safety layer as the run left it (the session's)
+    a = SimpleNamespace(robot=runner.setup.robot, backend=runner.setup.backend, safety=runner.session.safety)
     t, q = result.trace.t, result.trace.q
     k0 = int(np.searchsorted(t, a.safety.tripped_at - 1e-12))
     hands = a.robot.model.to_world(a.robot.fk_batch(q[k0:])[:, :3, 3])
@@ -154,7 +157,7 @@ def test_a_robot_of_ones_own_with_a_light_wrist_yields_or_stops_without_whipping
     m = result.metrics
     assert result.passed, result.failures
     if reaction == "yield":
-        assert runner.setup.safety.reaction == "yield" and m["force_after_trip_peak_n"] <= 11.0  # never escalated
+        assert runner.session.safety.reaction == "yield" and m["force_after_trip_peak_n"] <= 11.0  # never escalated
     else:
         assert m["stop_time_s"] < 0.5 and m["stop_peak_speed_deg_s"] < 90.0  # at rest, the wrist not spinning
         assert m["force_after_trip_peak_n"] > 20.0  # (held stiffly against the rig)

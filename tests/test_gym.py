@@ -66,8 +66,9 @@ ACTIONS = {"residual (a person strapped in)": (SCENARIOS / "hit_myoarm.yaml", {}
 
 @pytest.mark.parametrize("path, overrides", ACTIONS.values(), ids=ACTIONS)
 def test_reset_frees_the_last_episode_without_the_collector(path, overrides, monkeypatch):
-    """Reference counting alone frees the last episode at reset — its MuJoCo scene is ~100 MB with a musculoskeletal
-    arm — so a reset needs no full collection (~50 ms): a reference cycle anywhere in the run would hold it here."""
+    """A reset that builds the run again (random targets, a robot's backend: where the start can't be restored) frees
+    the last episode by reference counting alone — its MuJoCo scene is ~100 MB with a musculoskeletal arm — so it needs
+    no full collection (~50 ms): a reference cycle anywhere in the run, or in the start's snapshot, would hold it."""
     env = ScenarioEnv(path, {**overrides, "duration": 0.2})
     env.reset(seed=1)
     env.step(np.zeros(env.action_space.shape, np.float32))  # (the loop leaves the run in the oldest generation)
@@ -80,7 +81,9 @@ def test_reset_frees_the_last_episode_without_the_collector(path, overrides, mon
     monkeypatch.setattr(gc, "collect", lambda generation=2: full.append(generation) or 0)  # (collects nothing)
     gc.disable()
     try:
-        env.reset(seed=2)
+        assert env._start is not None  # (the start's snapshot, held until the run is dropped)
+        env.close_run()
+        env._open(2)
         alive = [name for name, ref in old.items() if ref() is not None]
     finally:
         gc.enable()

@@ -26,6 +26,8 @@ from rehabkit.store.patches import open_store
 class ArmKeypad(Controller):
     """ARM keypad HMI: menus, jogs, fold/unfold, record and replay of patches, PD + gravity servo."""
 
+    RUN_STATE_NESTED = ("patches", "jogger", "jog", "auto")  # (its parts changed in place: a snapshot takes them)
+
     metrics = (
         Metric("patches_stored", "count", description="patches stored with the keypad"),
         Metric("replays", "count", description="patches replayed"),

@@ -53,6 +53,8 @@ class Stats:
 class PatchBook:
     """The patches of one session: what is being recorded, what is being replayed, and the checks after."""
 
+    RUN_STATE_NESTED = ("stats", "store")  # (changed in place as the run goes: a session snapshot takes them)
+
     def __init__(self, store, robot, arm, ramp_s: float, note: Callable[[float, str], None]):
         self.store, self.robot, self.arm, self.ramp_s, self.note = store, robot, arm, ramp_s, note
         self.model = robot.model

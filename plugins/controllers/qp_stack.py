@@ -50,6 +50,8 @@ class QpStackConfig(StrictModel):
 class QpStack(Controller):
     """Cascade of velocity-level QPs (strict priorities, soft weights within a level), PD servo."""
 
+    RUN_STATE_NESTED = ("state",)  # (its kinematic state, changed in place: a session snapshot takes it)
+
     metrics = (
         Metric("qp_cycles", "count", description="control cycles of the QP cascade"),
         Metric("qp_cycles_over_1ms", "count", description="cycles whose cascade took over 1 ms", clock="wall"),

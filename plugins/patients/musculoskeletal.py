@@ -35,6 +35,9 @@ class Musculoskeletal(EmbodiedPatient):
     """A muscle-driven arm (MyoSuite's MyoArm or MyoElbow) in the scene, strapped to the robot; see the module."""
 
     relaxed = {"drive": {"participation": 0.0}}  # (still holding their own arm up: the robot carries itself only)
+    # what its parts change while a run goes (a session snapshot takes them): the noise, the solver's warm start, the
+    # reflex's and the tremor's filters, the fatigue (the arm's body is the scene's, taken with the backend's state)
+    RUN_STATE_NESTED = ("noise_stream", "so", "reflex", "tremor", "fatigue", "arm")
 
     metrics = (
         Metric("peak_cuff_force_n", "N", outcome=True, description="largest strap force over the run"),

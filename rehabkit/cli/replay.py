@@ -48,10 +48,14 @@ def _replay(args: argparse.Namespace) -> int:
             return EXIT_INVALID
         from rehabkit.rehab.replay import replay
 
-        rep = replay(source, sets, args.out, progress=True)
+        rep = replay(source, sets, args.out, progress=True, fork_at=args.fork_at)
         if rep.result.refusal is None:
             rep.original["deviation"] = _run_deviation(source, rep.result)
     else:
+        if args.fork_at is not None:
+            print("error: --fork-at goes with a run's folder: a bag holds no simulation state to fork from",
+                  file=sys.stderr)
+            return EXIT_INVALID
         from rehabkit.ros.replay.bag_replay import replay_bag
         from rehabkit.ros.replay.session_bag import parse_topics
 
@@ -63,6 +67,10 @@ def _replay(args: argparse.Namespace) -> int:
         print(str(rep.result.refusal), file=sys.stderr)
         return EXIT_INVALID
     print(rep.table())
+    if rep.fork is not None:
+        fresh = f"; started afresh: {', '.join(rep.fork['fresh'])}" if rep.fork.get("fresh") else ""
+        print(f"  FORK  the recorded session up to {rep.fork['t']:g} s (step {rep.fork['step']}), then the new "
+              f"settings{fresh}")
     deviation = rep.original.get("deviation")
     if isinstance(deviation, str):  # (a run's folder without its joints: said why)
         print(f"  DEVIATION  {deviation}")
@@ -107,4 +115,6 @@ def add_parser(sub) -> None:
     rp.add_argument("--out", metavar="DIR", help="output folder (default: RUN_DIR/replay-<values>, or "
                                                  "<BAG>-replay-<values> beside the bag)")
     rp.add_argument("--bag", action="store_true", help="also write run.mcap, a ROS 2 bag of the replay")
+    rp.add_argument("--fork-at", type=float, metavar="T", help="keep the recorded session up to T seconds and go on "
+                    "from there with the new settings (same person, same state); a run's folder only")
     rp.set_defaults(func=cmd_replay)

@@ -212,7 +212,7 @@ def _trace_topics(bag: _Bag, setup, record, start_ns: int, rec: BagRecorder) -> 
     for k in range(0, len(tr.t), every):
         moved = rec.tree.moving(tr.q[k], rec.roots.get(k))
         bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [_transform(t, int(ns[k])) for t in moved]}, int(ns[k]))
-    events = list(setup.safety.events)
+    events = list(record.safety.events)
     said = [(e.t, "ERROR", f"SAFETY {e.message}") for e in events]
     trips = {(e.t, e.rule) for e in events}  # (each trip is among the interventions too: said once)
     said += [(e.t, e.level, f"SAFETY {e.message}") for e in record.interventions if (e.t, e.rule) not in trips]

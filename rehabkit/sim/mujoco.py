@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from typing import Literal
 
 import mujoco
@@ -22,6 +23,7 @@ from rehabkit.core.kinds.capabilities import (
     SceneObjects,
 )
 from rehabkit.core.kinds.interfaces import Backend, Contact, Context, StrictModel
+from rehabkit.core.kinds.run_state import capture, restore
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.sim.loads import LoadApplier
@@ -34,6 +36,11 @@ class MujocoConfig(StrictModel):
 
     timestep: float = Field(0.001, gt=0, le=0.01, description="physics step [s]")
     integrator: Literal[tuple(INTEGRATORS)] = "implicitfast"  # type: ignore[valid-type]
+
+
+# the model's parameters that a run changes as it goes: a brake's friction and its constraint's softness
+# (sim.scene.engage_brakes), a muscle's peak force under fatigue (the musculoskeletal patient), a grasp's weld (grasp)
+RUN_MODEL_FIELDS = ("dof_frictionloss", "dof_solref", "dof_solimp", "actuator_gainprm", "eq_data")
 
 
 def span(indices: np.ndarray) -> slice | np.ndarray:
@@ -49,6 +56,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
     driven by joint torques."""
 
     latch_name = "sim-{robot}"
+    restorable = True
+    RUN_STATE_NESTED = ("_errors",)  # (its noise stream: drawn from as the run goes)
 
     def __init__(self, config: MujocoConfig, context: Context):
         robot = context.robot.model
@@ -64,7 +73,8 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         for body in self.bodies:
             body.bind(self.model, self.data)
         self.loads = LoadApplier(self.model, context.world.loads if context.world is not None else ())
-        self._errors = InstrumentErrors(context.instruments, context.seed or 0)
+        self._errors = InstrumentErrors(context.instruments, context.seed or 0, rng=context.seeds.generator(
+            InstrumentErrors.KEY) if context.seeds is not None else None)
         self._latch = EStopLatch.named(self.latch_name.format(robot=robot.name))  # (a rehearsal's latches as a robot's)
         self.ramp_in_after_clear = 0.0
         jids = [self.model.joint(name).id for name in robot.joint_names]
@@ -230,6 +240,19 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
             s = self.model.sensor(name)
             span = self._instruments[name] = slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
         return self._errors.apply(name, self.data.sensordata[span].copy())
+
+    def run_state(self) -> tuple[dict, mujoco.MjData, dict[str, np.ndarray]]:
+        """The scene's whole state (an ``MjData`` copy: the robot's, a person's body, objects, contacts, warm starts),
+        the model's parameters a run changes (brakes' friction, muscles' fatigue) and the backend's own (held
+        objects, the noise stream)."""
+        return capture(self), copy.copy(self.data), {f: getattr(self.model, f).copy() for f in RUN_MODEL_FIELDS}
+
+    def restore_run_state(self, state: tuple[dict, mujoco.MjData, dict[str, np.ndarray]]) -> None:
+        own, data, params = state
+        restore(self, own)  # (``data`` is the same object: its contents are put back in place, views stay valid)
+        mujoco.mj_copyData(self.data, self.model, data)
+        for name, values in params.items():
+            getattr(self.model, name)[...] = values
 
     def close(self) -> None:
         self.close_view()

@@ -65,10 +65,12 @@ def add_instruments(spec: mujoco.MjSpec, instruments) -> None:
 class InstrumentErrors:
     """A simulated sensor's imperfections (each instrument's bias and white noise), from its own seeded stream."""
 
-    def __init__(self, instruments, seed: int = 0):
+    KEY = 0x5E45  # its stream's key beside the seed
+
+    def __init__(self, instruments, seed: int = 0, rng: np.random.Generator | None = None):
         self.bias = {i.name: np.asarray(i.bias, float) for i in instruments if i.simulated_error}
         self.noise = {i.name: i.noise for i in instruments if i.simulated_error}
-        self.rng = np.random.default_rng([seed, 0x5E45])
+        self.rng = rng if rng is not None else np.random.default_rng([seed, self.KEY])
 
     def apply(self, name: str, value: np.ndarray) -> np.ndarray:
         bias = self.bias.get(name)

@@ -91,6 +91,16 @@ class PatchStore:
             raise StoreError(f"{self.path} is not a rehabkit patch store ({exc}); it was left untouched — "
                              "move it away or set REHABKIT_DATA to another folder") from None
 
+    def run_state(self) -> list[tuple[int, str]]:
+        """The patches as they are now (a run session's snapshot takes them with the keypad's state)."""
+        return self.db.execute("SELECT slot, body FROM patches ORDER BY slot").fetchall()
+
+    def restore_run_state(self, rows: list[tuple[int, str]]) -> None:
+        """The patches as :meth:`run_state` took them, in one transaction."""
+        with self._transaction():
+            self.db.execute("DELETE FROM patches")
+            self.db.executemany("INSERT INTO patches (slot, body) VALUES (?, ?)", rows)
+
     @classmethod
     def in_memory(cls) -> PatchStore:
         """A fresh store that writes no file: a run's own, when the run has no folder to keep it in."""

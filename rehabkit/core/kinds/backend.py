@@ -9,6 +9,7 @@ from typing import ClassVar
 import numpy as np
 
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.run_state import RunState
 from rehabkit.core.kinds.trace import Trace
 
 
@@ -96,7 +97,16 @@ class EStopLatchedError(BackendFaultError):
         self.latch, self.where = latch, where
 
 
-class Backend(ABC):
+class NotRestorableError(TypeError):
+    """A run on this backend can't be snapshotted or restored: its state is a real robot's (a link, a bus)."""
+
+    def __init__(self, backend: str):
+        super().__init__(f"backend '{backend}' drives a robot: its state can't be taken and put back (a snapshot, a "
+                         "learning environment's fast reset and a forked replay need a simulation)")
+        self.backend = backend
+
+
+class Backend(RunState, ABC):
     """Where commands go and state comes from: a simulator or a robot link.
 
     This is the stepping core every backend has. What only some backends can do — contacts, a scene to draw,
@@ -115,6 +125,9 @@ class Backend(ABC):
     # how long after the control period a torque takes to act on the robot, from the state it was computed at [s]: a
     # bus whose drives take their targets at the next SYNC adds one period (the safety layer's gains allow for it)
     loop_delay: float = 0.0
+    # its whole state can be taken and put back (a simulation: run_state/restore_run_state); a robot's can't, and a
+    # session snapshot on it is refused by this flag (NotRestorableError)
+    restorable: ClassVar[bool] = False
 
     @abstractmethod
     def reset(self, q0: np.ndarray) -> None:
@@ -131,6 +144,13 @@ class Backend(ABC):
     @abstractmethod
     def step(self, n: int = 1) -> None:
         """Advance ``n`` timesteps."""
+
+    def run_state(self) -> object:
+        """The simulation's whole state (the scene's and the backend's own), where ``restorable``; a robot's backend
+        raises :class:`NotRestorableError`."""
+        if not self.restorable:
+            raise NotRestorableError(type(self).__name__)
+        return super().run_state()
 
     def run_metrics(self, trace: Trace) -> dict[str, float]:
         """Figures about the run only the backend knows (e.g. a link's deadline misses); default none."""

@@ -15,6 +15,36 @@ from rehabkit.core.kinds.sensor import Instrument, Reading
 ReferenceSpace = Literal["joint", "cartesian"]
 
 
+class Seeds:
+    """The run's random generators, each made from the scenario's seed and a key of its own (``Context.rng``: no key;
+    ``Context.stream(name)``: the name's bytes). It keeps what it made so that a learning environment can start its
+    next episode on another seed without building the run again: :meth:`reseed`, valid while :meth:`untouched`."""
+
+    def __init__(self, seed: int):
+        self.seed = seed
+        self._made: list[tuple[tuple[int, ...], np.random.Generator]] = []
+
+    def _fresh(self, seed: int, key: tuple[int, ...]) -> np.random.Generator:
+        return np.random.default_rng([seed, *key] if key else seed)
+
+    def generator(self, *key: int) -> np.random.Generator:
+        """A generator of its own for ``key`` (none: the run's shared one)."""
+        gen = self._fresh(self.seed, key)
+        self._made.append((key, gen))
+        return gen
+
+    def untouched(self) -> bool:
+        """No generator made has been drawn from yet: all the run did so far is the same on any seed."""
+        return all(gen.bit_generator.state == self._fresh(self.seed, key).bit_generator.state
+                   for key, gen in self._made)
+
+    def reseed(self, seed: int) -> None:
+        """Every generator made, as made from ``seed`` (each in place: whoever holds it draws the new stream)."""
+        for key, gen in self._made:
+            gen.bit_generator.state = self._fresh(seed, key).bit_generator.state
+        self.seed = seed
+
+
 @dataclass(frozen=True)
 class Context:
     """What every plugin factory receives besides its own config (read-only: the run's setup makes a new one
@@ -58,6 +88,7 @@ class Context:
     interaction_force: Callable[[], np.ndarray | None] | None = None
     plugins: Any = None  # the run's plugin registry (``build`` makes others from it)
     latest: Callable[[str], Reading | None] | None = None  # the session's latest reading of a sensor (``reading``)
+    seeds: Seeds | None = None  # what made ``rng`` and makes each ``stream``: a reset may re-seed them in place
 
     def reading(self, sensor: str) -> Reading | None:
         """The latest reading of the scenario's sensor named ``sensor`` (its values, time and frame), or None
@@ -88,6 +119,8 @@ class Context:
         Draws from it don't depend on what other plugins draw, so a counterfactual replay with another
         controller sees the same patient noise and sensor noise.
         """
+        if self.seeds is not None:
+            return self.seeds.generator(*name.encode())
         return np.random.default_rng([self.seed, *name.encode()])
 
     def resolve(self, path: str | Path) -> Path:

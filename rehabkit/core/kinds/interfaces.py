@@ -17,6 +17,7 @@ from rehabkit.core.kinds.errors import PlanningError, SettingError
 from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
 from rehabkit.core.kinds.robot import IKUnavailableError, Robot
+from rehabkit.core.kinds.run_state import RunState
 from rehabkit.core.kinds.sensor import Instrument, InteractionForceSensor, Reading, Sensor, SensorConfig
 from rehabkit.core.kinds.trace import Trace
 from rehabkit.models.strict import StrictModel
@@ -95,7 +96,7 @@ class Plan:
 ControllerReference = Literal["joint", "cartesian", "own"]  # a controller's: the plan's space, or its own
 
 
-class Planner(ABC):
+class Planner(RunState, ABC):
     """Computes a trajectory at start and on task events.
 
     ``space`` says what the trajectory holds: joint values (``dof`` wide) or
@@ -123,7 +124,7 @@ class Planner(ABC):
         return {}
 
 
-class Controller(ABC):
+class Controller(RunState, ABC):
     """Turns a reference and the measured state into joint torques, at the control rate.
 
     ``reference`` is what it follows: the plan's references in ``"joint"`` or ``"cartesian"`` space (see

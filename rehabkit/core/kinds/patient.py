@@ -11,10 +11,11 @@ import numpy as np
 
 from rehabkit.core.kinds.backend import Drawing
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.run_state import RunState
 from rehabkit.core.kinds.trace import Trace
 
 
-class Patient(ABC):
+class Patient(RunState, ABC):
     """A simulated person at the robot's joints: the torques their arm applies, each control step.
 
     ``delay_s`` is how late the person perceives the task: the runner passes the goal of the

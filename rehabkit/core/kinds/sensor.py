@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import Field
 
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.kinds.run_state import RunState
 from rehabkit.core.kinds.trace import Trace
 from rehabkit.models.strict import StrictModel
 
@@ -67,7 +68,7 @@ class Reading:
     frame: str | None
 
 
-class Sensor(ABC):
+class Sensor(RunState, ABC):
     """Reads something at its own rate (its config's ``rate_hz``, :class:`SensorConfig`); readings go to the log and
     to the run's readings (``Context.reading``)."""
 

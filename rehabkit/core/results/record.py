@@ -57,4 +57,5 @@ class RunRecord:
     no_plan: str | None = None  # why the first plan was refused or failed: the robot never moved
     interventions: list[Any] = field(default_factory=list)  # the safety layer's and the robot side's, in time order
     first_contact: dict[str, Any] | None = None  # when, what and where the robot first touched something
+    safety: Any = None  # the run's safety layer as the run left it: tripped or not, its events (a SafetyLayer)
 

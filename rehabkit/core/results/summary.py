@@ -75,10 +75,10 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
     metrics.update({
         "sim_time_s": sim_time, "wall_time_s": r.wall_s, "setup_time_s": r.setup_s,
         "real_time_factor": sim_time / r.wall_s if r.wall_s > 0 else float("inf"),
-        "contact_steps": r.contact_steps, "safety_events": len(a.safety.events),
-        "torque_saturation_steps": a.safety.saturated_steps,
+        "contact_steps": r.contact_steps, "safety_events": len(r.safety.events),
+        "torque_saturation_steps": r.safety.saturated_steps,
     })
-    metrics.update(stop_metrics(a, trace))
+    metrics.update(stop_metrics(a, trace, r.safety))
     ends = [p["t"] + p["duration_s"] for p in r.plans if "duration_s" in p]
     if ends:  # (the task's time: did the run last until its last plan's end?)
         metrics["plan_end_s"] = float(max(ends))
@@ -88,7 +88,7 @@ def core_metrics(a: Assembly, r: RunRecord) -> tuple[dict[str, float], dict[str,
 
 def _tracking_why(a: Assembly, r: RunRecord) -> dict[str, Any] | None:
     """Why the worst joint tracked badly, where it did (:func:`tracking_causes`)."""
-    trace, safety = r.trace, a.safety
+    trace, safety = r.trace, r.safety
     if not len(trace.t):
         return None
     trip = (safety.tripped_at, safety.events[0].rule) if safety.tripped_at is not None and safety.events else None
@@ -99,19 +99,20 @@ def _tracking_why(a: Assembly, r: RunRecord) -> dict[str, Any] | None:
     return tracking_causes(trace, a.robot.model, trip, r.first_contact, inertia)
 
 
-def stop_metrics(a: Assembly, trace) -> dict[str, float]:
-    """What the safety stop took (the first trip): its category, the time to standstill, the travel meanwhile."""
-    if a.safety.tripped_at is None or not len(trace.t):
+def stop_metrics(a: Assembly, trace, safety) -> dict[str, float]:
+    """What the run's ``safety`` layer's stop took (the first trip): its category, the time to standstill, the travel
+    meanwhile."""
+    if safety.tripped_at is None or not len(trace.t):
         return {}
-    k0 = int(np.searchsorted(trace.t, a.safety.tripped_at - 1e-12))
+    k0 = int(np.searchsorted(trace.t, safety.tripped_at - 1e-12))
     hand = np.full((len(trace.t), 3), np.nan)
     hand[k0:] = a.robot.fk_batch(trace.q[k0:])[:, :3, 3]  # (the stop's steps only)
-    figures = stop_figures(trace.t, trace.q, trace.qd, hand, a.safety.tripped_at, a.robot.model.revolute)
-    category = a.safety.category
+    figures = stop_figures(trace.t, trace.q, trace.qd, hand, safety.tripped_at, a.robot.model.revolute)
+    category = safety.category
     out = {"stop_category": float(category) if category is not None else math.nan, **figures}
-    lim = a.safety.limits
+    lim = safety.limits
     out["joints_in_range"] = float(np.all((trace.q[k0:] >= lim.lower) & (trace.q[k0:] <= lim.upper)))
-    limit = a.safety.config.interaction_force_n
+    limit = safety.config.interaction_force_n
     if trace.f_h is not None and limit is not None:
         after = trace.f_h[k0:]
         dt = float(trace.t[1] - trace.t[0]) if len(trace.t) > 1 else 0.0
@@ -172,7 +173,7 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
         # a robot that never moved has no tracking error: that passes nothing
         for v in verdicts:
             v.update(passed=False, reason=f"no plan ran ({r.no_plan})")
-    unexpected_trip = a.safety.tripped and "safety_events" not in sc.expect
+    unexpected_trip = r.safety.tripped and "safety_events" not in sc.expect
     task = task_section(metrics)
     # an unfinished task fails a run that has verdicts (they would judge what did not happen), as a stop does, unless
     # the scenario says otherwise (a rehearsal of the first seconds: `expect: {task_complete: {eq: 0}}`) or expects a
@@ -186,7 +187,7 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
         "rehabkit_version": __version__, "seed": sc.seed, "plugins": plugin_versions(a),
         "passed": all(v["passed"] for v in verdicts) and not unexpected_trip and not unfinished,
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
-        "safety": {"tripped": a.safety.tripped, "events": [e.as_dict() for e in a.safety.events],
+        "safety": {"tripped": r.safety.tripped, "events": [e.as_dict() for e in r.safety.events],
                    "interventions": [e.as_dict() for e in interventions],
                    "plan_warnings": r.plan_warnings, "estop_latched": a.backend.latched_estop(),
                    **({"first_contact": r.first_contact} if r.first_contact else {})},

@@ -76,7 +76,7 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
     """Advance the session until the end, a stop event, or the safety layer's stop has run its course — or, run in
     parts, from where it stands up to step ``k_to`` (a learning environment's policy period)."""
     a, st, view, timeline, trace = session.setup, session.loop, session.view, session.timeline, session.trace
-    sch, backend, safety, controller = a.schedule, a.backend, a.safety, a.controller
+    sch, backend, safety, controller = a.schedule, a.backend, session.safety, a.controller
     n, dof, dt, sub = sch.steps, a.robot.model.dof, sch.control_dt, sch.substeps
     k_from, k_end = st.k, n if k_to is None else min(k_to, n)
     ref_q, ref_qd, ref_qdd = session.ref.views()
@@ -133,7 +133,7 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
             if person is not None:
                 tau_h[k] = person(t, q, qd, goal_at[max(0, k - late)])
             if force_at is not None:
-                force = force_at(t, q, tau_h[k] if person is not None else None)
+                session.force = force = force_at(t, q, tau_h[k] if person is not None else None)
                 if f_h is not None:
                     f_h[k] = math.sqrt(force @ force)
                 safety.check_force(t, q, force, qd)

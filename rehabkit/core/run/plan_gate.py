@@ -21,6 +21,8 @@ from rehabkit.core.setup.space import JointSpace
 class PlanGate:
     """Asks the scenario's planner, checks what it answers, keeps the plans' diagnostics and warnings."""
 
+    RUN_STATE_FIELDS = ("metrics", "warnings")  # (what a run adds: a snapshot's)
+
     def __init__(self, setup, space: JointSpace, catalogue: MetricCatalogue):
         self.planner, self.robot, self.safety, self.space = setup.planner, setup.robot, setup.safety, space
         self.scene_actions = tuple(scene_actions(setup.backend))

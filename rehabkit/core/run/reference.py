@@ -24,6 +24,8 @@ class ReferenceBuffer:
     references, the robot's forward kinematics for joint ones.
     """
 
+    RUN_STATE_FIELDS = ("pos", "vel", "acc", "goal", "goal_at", "movements")  # (what plans write: a snapshot's)
+
     def __init__(self, steps: int, start: np.ndarray, dt: float, hand: Callable[[np.ndarray], np.ndarray]):
         w = len(start)
         self.pos = np.tile(start, (steps + 1, 1))

@@ -16,6 +16,7 @@ import signal
 import threading
 import time
 import weakref
+from collections.abc import Callable
 from pathlib import Path
 
 import yaml
@@ -65,7 +66,8 @@ class Runner:
             raise SetupError("; ".join(f"extension '{b.name}' failed to load: {b.error}" for b in broken)
                              + " (fix or uninstall it)")
         self.setup = assemble(self.loaded, self.registry, self.extensions, self.out_dir,
-                              plan=self._calls.plan, note=self._calls.note, latest=self._calls.latest)
+                              plan=self._calls.plan, note=self._calls.note, latest=self._calls.latest,
+                              force=self._calls.force)
         return self.setup
 
     def start(self) -> RunSession:
@@ -73,16 +75,21 @@ class Runner:
         :meth:`run` does first, and what a learning environment does at each reset (it then runs the loop a
         policy period at a time with :func:`~rehabkit.core.run.loop.run_loop`'s ``k_to``)."""
         a = self.build()
+        # said while assembling and opening (a link's reset names its key): the session's from now on
         self.session = open_session(a, self.spawn, self._calls.notes)
+        self._calls.notes = []
         self._calls.session = weakref.ref(self.session)
         return self.session
 
-    def run(self) -> RunResult:
-        """Build, run and finish; outputs are complete files or none."""
+    def run(self, prepare: Callable[[RunSession], object] | None = None) -> RunResult:
+        """Build, run and finish; outputs are complete files or none. ``prepare(session)``: called with the session
+        standing at its start, before the loop (a forked replay puts the recorded session's state into it)."""
         session = None
         try:
             t_setup = time.perf_counter()
             session = self.start()
+            if prepare is not None:
+                prepare(session)
             # a control loop's matrices are small: BLAS worker threads only spin against it, and against a bridge or
             # renderer sharing the machine
             with threadpool_limits(limits=1, user_api="blas"):
@@ -140,6 +147,11 @@ class _Calls:
         session = self.session() if self.session is not None else None
         return session.timeline.readings.get(sensor) if session is not None and session.timeline else None
 
+    def force(self):
+        # Context.interaction_force: the force the run's safety layer checked last (None before the session's first)
+        session = self.session() if self.session is not None else None
+        return session.force if session is not None else None
+
     def plan(self, t, q, qd, targets):
         # Context.plan: a controller's own plan, made by the session (controllers ask only while it runs)
         return self.session().plan_for_controller(t, q, qd, targets)
@@ -162,8 +174,9 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                        session.plans, session.gate.metrics, tl.fired, tl.acted, session.notes, session.gate.warnings,
                        extra, no_plan=first.reason if first is not None else None,
                        # the host's interventions and the robot side's (a bridge's held commands), in time order
-                       interventions=sorted(a.safety.interventions + a.backend.interventions(), key=lambda e: e.t),
-                       first_contact=session.loop.first_contact)
+                       interventions=sorted(session.safety.interventions + a.backend.interventions(),
+                                            key=lambda e: e.t),
+                       first_contact=session.loop.first_contact, safety=session.safety)
     summary = summarize(a, record, session.catalogue, session.view)
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:

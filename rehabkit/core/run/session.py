@@ -25,6 +25,7 @@ from rehabkit.core.run.plugin_fault import plugin_fault
 from rehabkit.core.run.reference import ReferenceBuffer
 from rehabkit.core.run.sensor_threads import SensorThreads
 from rehabkit.core.run.timeline import Replan, Timeline
+from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.safety.limit_breach import LimitBreach
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.setup.assembly import Assembly, SetupError
@@ -77,6 +78,7 @@ class RunSession:
     catalogue: MetricCatalogue
     gate: PlanGate
     q0: np.ndarray
+    safety: SafetyLayer  # the run's safety layer (made from the Assembly's SafetySetup): tripped or not, its events
     timeline: Timeline | None = None
     threads: SensorThreads | None = None
     taps: list = field(default_factory=list)  # extensions' RunTaps: each reading as it is taken
@@ -87,6 +89,7 @@ class RunSession:
     # the task's targets as the run knows them: the admitted ones, a sensed one where it was last seen (the Assembly
     # keeps what was admitted; a run writes here)
     targets: dict[str, Target] = field(default_factory=dict)
+    force: np.ndarray | None = None  # the interaction force the safety layer checked last (Context.interaction_force)
 
     @property
     def first_refusal(self) -> PlanRefusal | None:
@@ -103,7 +106,7 @@ class RunSession:
         except Exception as exc:
             a = self.setup
             said, data = plugin_fault(a.registry, "planner", a.sc.planner.type, exc)
-            a.safety.trip(t, q, "plugin-error", said, qd, data=data)
+            self.safety.trip(t, q, "plugin-error", said, qd, data=data)
 
     def replan(self, k: int, t: float, q: np.ndarray, qd: np.ndarray, request: Replan, first: bool = False) -> None:
         """Plan through the request's targets from the current state and follow it from step ``k`` (by the planner
@@ -138,7 +141,7 @@ class RunSession:
             refusal = replace(refusal, located=first_plan_refusal(self.setup, failure))
         if self.first_refusal is None:  # (the first plan's refusal is kept: the robot never moved)
             self.refusal = refusal
-        self.setup.safety.trip(refusal.t, q, "plan", refusal.reason + then, breach=refusal.breach,
+        self.safety.trip(refusal.t, q, "plan", refusal.reason + then, breach=refusal.breach,
                                data={"actions": list(refusal.actions)} if refusal.actions else None)
 
     def plan_for_controller(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
@@ -202,8 +205,9 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
         if isinstance(exc, BackendFaultError):
             raise SetupError(f"backend '{a.sc.backend.type}': {exc}") from exc
         raise
+    safety = a.safety.layer()
     if a.backend.ramp_in_after_clear:  # the first session after an e-stop was cleared eases in
-        a.safety.require_ramp_in(a.backend.ramp_in_after_clear)
+        safety.require_ramp_in(a.backend.ramp_in_after_clear)
     if isinstance(a.robot, PassiveJoints) and isinstance(a.backend, NamedJoints):
         # parallel mechanisms: the passive joints assembled too, where the backend sets joints by name
         a.backend.set_joints(a.robot.passive_state(q0))
@@ -211,7 +215,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     ref_q, ref_qd, _ = ref.views()
     a.space.allocate(trace, ref_q, ref_qd)
     catalogue = a.catalogue  # (made once, at assembly: validate's and the run's are one)
-    session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0,
+    session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0, safety,
                          notes=list(notes or []), targets=dict(a.targets))
     session.taps = [tap for tap in a.extensions.hook.rehabkit_run_opened(setup=a) if tap is not None]
     threads = None
@@ -220,7 +224,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
         threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
                                 prepare=encode_images if view.active and not session.taps else None)
     session.threads = threads
-    session.timeline = Timeline(a, view, threads, session.taps, session.targets)
+    session.timeline = Timeline(a, view, threads, session.taps, session.targets, safety)
     try:
         _first_plan(session)
     except BaseException:
@@ -233,13 +237,13 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
 def _first_plan(s: RunSession) -> None:
     a = s.setup
     s.replan(0, 0.0, s.q0, np.zeros(a.robot.model.dof), s.timeline.request(a.sc.task.order()), first=True)
-    if a.safety.tripped and s.refusal is None:  # (an e-stop still latched, say)
+    if s.safety.tripped and s.refusal is None:  # (an e-stop still latched, say)
         s.refusal = PlanRefusal(0.0, "stopped before it moved", first=True)
-    if a.safety.tripped and s.refusal is not None and s.refusal.breach is not None:
+    if s.safety.tripped and s.refusal is not None and s.refusal.breach is not None:
         # a first plan breaking a limit in force — the robot's own or narrowed — is refused before anything runs,
         # as validate refuses it (it ran 0.5 s and wrote its files where the limit was the robot's own)
         raise breach_refusal(a, s.refusal.breach)
-    if a.safety.tripped and a.limit_sources.by_joint:
+    if s.safety.tripped and a.limit_sources.by_joint:
         # refused before it runs (not stopped at t=0): the limits in force were narrowed, and said where
         raise SetupError(f"{s.refusal.reason} (joint limits narrowed by the patient's profile or the safety "
                          "envelope)", s.refusal.breach)

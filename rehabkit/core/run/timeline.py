@@ -37,10 +37,15 @@ class Replan:
 class Timeline:
     """Events, scene actions, sensors and the stop of one run; ``view`` records events and readings."""
 
-    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list, targets: dict):
+    # what changes while the run goes (a session snapshot takes these; the rest is the run's wiring)
+    RUN_STATE_FIELDS = ("_replans", "readings", "fired", "_following", "acted", "actions", "_timed", "_waiting",
+                        "_watch", "_next_reach", "stop_at", "_ramp_out_at", "_sensor_due")
+
+    def __init__(self, setup: Assembly, view, threads: SensorThreads | None, taps: list, targets: dict, safety):
         sc, sch = setup.sc, setup.schedule
         self.setup, self.view, self.threads, self.taps = setup, view, threads, taps
         self.targets = targets  # (the session's: a sensed one where it was last seen)
+        self.safety = safety  # (the session's layer: an e-stop or a plugin's fault trips it, the end ramps out)
         self._replans: list[Replan] = []
         self.events = sc.task.events
         self.specs = {t.name: t for t in sc.task.targets}
@@ -123,14 +128,14 @@ class Timeline:
                         self._waiting.remove(i)
                         self._fire(i, k, t, q, qd)
             if self._ramp_out_at is not None and k >= self._ramp_out_at:
-                a.safety.begin_ramp_out(t, q)
+                self.safety.begin_ramp_out(t, q)
                 self._ramp_out_at = None
             if k >= self.stop_at:
                 return -1, self._take_replans()
             self._read_sensors(k, t, q, qd)
         except Exception as exc:
             debug_traceback(exc)
-            a.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
+            self.safety.trip(t, q, "plugin-error", f"{type(exc).__name__} during events/sensors: {exc}", qd)
         replans = self._take_replans()
         nxt = self.stop_at
         for d in self._sensor_due:
@@ -205,7 +210,7 @@ class Timeline:
         elif ev.action == "estop":  # pressed: stopped in the e-stop rule's category, latched at the robot
             a = self.setup
             why = f"e-stop pressed (event {i}, {trigger})"
-            a.safety.trip(t, q, "e-stop", why, qd)
+            self.safety.trip(t, q, "e-stop", why, qd)
             if not a.backend.latch_estop(why):
                 self.view.event(t, f"backend '{a.sc.backend.type}' keeps no e-stop latch", level="WARN")
         elif ev.action == "move":

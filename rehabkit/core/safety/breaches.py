@@ -13,6 +13,8 @@ from rehabkit.models.robot_model import JointLimits
 class Breaches:
     """The limits broken by states against ``limits`` (joint ``names``; ``revolute`` ones said in degrees)."""
 
+    RUN_STATE_FIELDS = ("_said",)  # (a snapshot's)
+
     def __init__(self, limits: JointLimits, names: list[str], revolute: np.ndarray):
         self.limits, self.names, self.revolute = limits, names, revolute
         self._said: set[tuple[str, str | None]] = set()

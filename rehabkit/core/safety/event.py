@@ -31,6 +31,8 @@ class Clipping:
     """Torque clipping as interventions: steps clipped in a row (one control period apart) are one episode, its
     peak (the largest share of a joint's effort limit) and its length kept; a new episode is told to ``note``."""
 
+    RUN_STATE_FIELDS = ("episode",)  # (a snapshot's)
+
     def __init__(self, names: list[str], effort: np.ndarray, dt: float, note: Callable[[SafetyEvent], None]):
         self.names, self.effort, self.dt, self.note = names, effort, dt, note
         self.episode: SafetyEvent | None = None  # the one under way

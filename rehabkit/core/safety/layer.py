@@ -17,16 +17,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
+from rehabkit.core.kinds.run_state import RunState
 from rehabkit.core.safety.breaches import Breaches
 from rehabkit.core.safety.compliance import Compliance
 from rehabkit.core.safety.event import Clipping, SafetyEvent
-from rehabkit.core.safety.keep_in import KeepIn
+from rehabkit.core.safety.keep_in import KeepIn, world_box
 from rehabkit.core.safety.limit_breach import LimitBreach
 from rehabkit.core.safety.ramps import Ramps
-from rehabkit.core.safety.stopping import WORDS, Stopping
+from rehabkit.core.safety.stopping import WORDS, Stopping, stop_categories
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
@@ -34,11 +36,56 @@ from rehabkit.models.robot_model import JointLimits, RobotModel
 _count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
 
 
-class SafetyLayer:
+@dataclass(frozen=True)
+class SafetySetup:
+    """The run's safety layer as set up — its rules, limits and what it is wired to — which does not change while a
+    run goes; each run session makes its own :class:`SafetyLayer` from it (:meth:`layer`), holding what does."""
+
+    robot: RobotModel
+    config: SafetyConfig
+    gravity: Callable[[np.ndarray], np.ndarray] | None = None
+    hand: Callable[[np.ndarray], np.ndarray] | None = None
+    dt: float = 1e-3
+    delay: float = 0.0  # the backend's loop delay beyond the control period [s] (SafetyLayer.allow_for_delay)
+    joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None
+    push_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None
+    on_yield: Callable[[bool], None] | None = None
+
+    def layer(self) -> SafetyLayer:
+        """A layer standing at a run's start: not tripped, no event yet."""
+        layer = SafetyLayer(self.robot, self.config, self.gravity, self.hand, self.dt)
+        layer.joint_torque, layer.push_torque, layer.on_yield = self.joint_torque, self.push_torque, self.on_yield
+        layer.allow_for_delay(self.delay)
+        return layer
+
+    @property
+    def limits(self) -> JointLimits:
+        """The ranges, speeds and torques a run keeps to (the robot's, narrowed)."""
+        return self.robot.limits
+
+    @property
+    def keep_in(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The keep-in box's world corners (min, max), if there is one."""
+        box = self.config.keep_in
+        return world_box(box, self.robot.base_pose) if box is not None else None
+
+    @property
+    def categories(self) -> dict[str, int]:
+        """The stop category of each rule."""
+        return stop_categories(self.robot, self.config)
+
+
+class SafetyLayer(RunState):
     """Checks every command (the rules: the module docstring) against the limits of ``robot`` (the runner narrows
     them first); ``hand(q)``: the hand's world position, for a keep-in box; ``dt`` tells one clipping episode from
     the next. How it stops the robot is its ``stopping`` (:class:`~rehabkit.core.safety.stopping.Stopping`), its soft
-    start and stop its ``ramps`` (:class:`~rehabkit.core.safety.ramps.Ramps`)."""
+    start and stop its ``ramps`` (:class:`~rehabkit.core.safety.ramps.Ramps`). It is a run's: its state —
+    tripped or not, the events, the stop and ramps under way — is taken and put back with the session's
+    (``run_state``)."""
+
+    RUN_STATE_NESTED = ("stopping", "ramps", "compliance", "_clipping", "_breaches")
+    RUN_STATE_FIELDS = ("events", "interventions", "tripped_at", "compliance", "saturated_steps", "_plain",
+                        *RUN_STATE_NESTED)
 
     def __init__(self, robot: RobotModel, config: SafetyConfig, gravity=None,
                  hand: Callable[[np.ndarray], np.ndarray] | None = None, dt: float = 1e-3):

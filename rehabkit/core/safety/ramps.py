@@ -19,6 +19,8 @@ class Ramps:
     """Ramp-in and ramp-out of :class:`~rehabkit.core.safety.layer.SafetyLayer`: ``hold(posture, q, qd)`` is the
     torque holding a posture, ``note`` keeps the interventions."""
 
+    RUN_STATE_FIELDS = ("ramp_in", "_ramp_in_noted", "ramp_from", "start_q")  # (a snapshot's)
+
     def __init__(self, config, hold, note):
         self.config, self.hold, self.note = config, hold, note
         self.ramp_in, self._ramp_in_noted = config.ramp_in_s, False

@@ -162,17 +162,25 @@ def stop_decel(config, revolute: np.ndarray) -> np.ndarray | None:
     return np.where(revolute, math.nan if turn is None else math.radians(turn), math.nan if slide is None else slide)
 
 
+def stop_categories(robot, config) -> dict[str, int]:
+    """The stop category of each rule: the envelope's, else 2 for a robot that holds its posture and 0 for one whose
+    safe stop is zero torque."""
+    default = 2 if robot.safe_stop == "hold" else 0
+    return {r: config.category_of(r, default) for r in STOP_RULES}
+
+
 class Stopping:
     """How :class:`~rehabkit.core.safety.layer.SafetyLayer` stops the robot once it has tripped: the category each
     rule gets, the controlled stop's ramp, the hold, the torque going off; ``note`` keeps its interventions."""
+
+    RUN_STATE_FIELDS = ("category", "ramp", "limp", "hold_q")  # (what a stop under way changes: a snapshot's)
 
     def __init__(self, robot, config, lo: np.ndarray, hi: np.ndarray, gravity, dt: float, note,
                  gain_dt: float | None = None):
         self.config, self.lo, self.hi, self.gravity, self.dt, self.note = config, lo, hi, gravity, dt, note
         self.gain_dt = gain_dt or dt  # (the period and the backend's loop delay: what the hold's gains must bear)
         self.robot, self.effort, self.zero = robot, robot.limits.effort, np.zeros(robot.dof)
-        default = 2 if robot.safe_stop == "hold" else 0
-        self.by_rule = {r: config.category_of(r, default) for r in STOP_RULES}
+        self.by_rule = stop_categories(robot, config)
         self.decel = stop_decel(config, robot.revolute)
         self.category: int | None = None  # the stop under way's
         self.ramp: ControlledStop | None = None

@@ -21,9 +21,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
-
 from rehabkit.core.kinds.capabilities import CompliantGaps
+from rehabkit.core.kinds.context import Seeds
 from rehabkit.core.kinds.interfaces import (
     Backend,
     Context,
@@ -39,7 +38,7 @@ from rehabkit.core.kinds.interfaces import (
 from rehabkit.core.kinds.names import suggest
 from rehabkit.core.plugins.lifecycle import Extensions
 from rehabkit.core.plugins.registry import PluginRegistry
-from rehabkit.core.safety.layer import SafetyLayer
+from rehabkit.core.safety.layer import SafetySetup
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.setup.checks import (
@@ -55,7 +54,7 @@ from rehabkit.core.setup.checks import (
     metric_catalogue,
 )
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
-from rehabkit.core.setup.force_source import ForceSource, LastForce
+from rehabkit.core.setup.force_source import ForceSource
 from rehabkit.core.setup.limits import (
     LimitSources,
     envelope_narrowings,
@@ -117,7 +116,7 @@ class Assembly:
     patient: Patient | None = None
     space: JointSpace | None = None  # the reference's space (joint or Cartesian: a CartesianSpace)
     force_source: ForceSource | None = None  # the interaction force each control step, and its last value
-    safety: SafetyLayer | None = None
+    safety: SafetySetup | None = None  # the rules and limits; each run session makes its own layer from them
     schedule: Schedule | None = None
     patient_slot: Any = None  # where the scenario holds the simulated patient's settings (a PatientSlot), if it does
 
@@ -154,8 +153,10 @@ class Assembly:
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,
              upto: Literal["targets", "plugins", "run"] = "run", plan: Callable | None = None,
-             note: Callable[[float, str], None] | None = None, latest: Callable | None = None) -> Assembly:
-    """Build the run of ``loaded`` (see the module docstring); ``plan``/``note`` go to the controllers' context.
+             note: Callable[[float, str], None] | None = None, latest: Callable | None = None,
+             force: Callable | None = None) -> Assembly:
+    """Build the run of ``loaded`` (see the module docstring); ``plan``, ``note``, ``latest`` and ``force`` go to the
+    plugins' context (``Context.plan``, ``note``, ``reading`` and ``interaction_force``: what the run session says).
 
     Raises:
         ScenarioError: something the scenario got wrong, located in its file.
@@ -163,7 +164,8 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     """
     sc = loaded.model
     slot = patient_slot(sc, registry, extensions)
-    ctx = Context(loaded.directory, np.random.default_rng(sc.seed), 1.0 / sc.rates.control_hz, world=sc.world,
+    seeds = Seeds(sc.seed)
+    ctx = Context(loaded.directory, seeds.generator(), 1.0 / sc.rates.control_hz, world=sc.world, seeds=seeds,
                   out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=slot.section if slot else None, plan=plan,
                   note=note, dry_run=upto != "run", plugins=registry, latest=latest)
     a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx, patient_slot=slot)
@@ -207,8 +209,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
             config = type(sc.planner).model_validate({**sc.planner.model_dump(), **ev.planner})
             a.event_planners[i] = a.make("planner", config, ("task", "events", i, "planner"))
     space = a.planner.space if a.planner is not None else a.context.reference_space
-    last_force = LastForce()
-    a.context = replace(a.context, reference_space=space, interaction_force=last_force)
+    a.context = replace(a.context, reference_space=space, interaction_force=force or _no_force)
     a.controller = attempt("controller", sc.controller, ("controller",))
     if refused:
         raise PluginSetupError.together(refused)
@@ -223,21 +224,25 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
             raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
                              f"{suggest(t.sensor, a.sensors)}")
     person_and_safety(a)
-    last_force.source = a.force_source
     if upto == "run":  # last: a backend may start processes (a hardware link's bridge); its scene holds the
         # sensors' instruments and an embodied patient's body
         bodies = (a.patient,) if isinstance(a.patient, EmbodiedPatient) else ()
         a.context = replace(a.context, bodies=bodies)
         a.backend = a.make("backend", sc.backend, ("backend",))
-        a.safety.allow_for_delay(a.backend.loop_delay)
-        if isinstance(a.backend, CompliantGaps):  # (its gaps in the commands bridged yielding, in a yield)
-            a.safety.on_yield = a.backend.comply
+        a.safety = replace(a.safety, delay=a.backend.loop_delay,
+                           # (its gaps in the commands bridged yielding, in a yield)
+                           on_yield=a.backend.comply if isinstance(a.backend, CompliantGaps) else None)
     else:
         a.backend_warnings = list(a.make("backend", sc.backend, ("backend",), check_only=True) or [])
     a.catalogue = metric_catalogue(a)
     check_expectations(a)
     a.schedule = _schedule(a)
     return a
+
+
+def _no_force() -> None:
+    """``Context.interaction_force()`` outside a run: no force was checked."""
+    return None
 
 
 def _narrow_limits(a: Assembly) -> None:

@@ -1,9 +1,9 @@
-"""Where a run's interaction force comes from, chosen once at setup, and its last value.
+"""Where a run's interaction force comes from, chosen once at setup.
 
 The safety envelope checks the force between person and robot every control step; a controller reads the
-value checked last (``Context.interaction_force()``). The source is measured — force-torque sensors on any
-backend that reads them, or an embodied person's straps in the simulated scene — or estimated at the hand from
-a simulated person's joint torques. An interaction-force limit with no source is refused at the setting.
+value checked last (``Context.interaction_force()``, the run session's). The source is measured — force-torque
+sensors on any backend that reads them, or an embodied person's straps in the simulated scene — or estimated at
+the hand from a simulated person's joint torques. An interaction-force limit with no source is refused at the setting.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ Read = Callable[[float, np.ndarray, "np.ndarray | None"], np.ndarray]
 
 
 class ForceSource:
-    """``source(t, q, tau_person)`` → the interaction force [N] (3 values, world frame); ``last`` is the value it
-    gave last (None before the first step), ``measured`` whether it is measured or estimated."""
+    """``source(t, q, tau_person)`` → the interaction force [N] (3 values, world frame); ``measured`` whether it is
+    measured or estimated. The value a run checked last is its session's (``RunSession.force``)."""
 
     def __init__(self, read: Read, measured: bool,
                  joint_torque: Callable[[np.ndarray, np.ndarray], np.ndarray | None] | None = None,
@@ -31,23 +31,9 @@ class ForceSource:
         self.joint_torque = joint_torque  # (q, force) -> the joint torques it exerts, where known
         # (q, force) -> the joint torques of the whole interaction now (several straps: all of them); default the above
         self.push_torque = push_torque or joint_torque
-        self.last: np.ndarray | None = None
 
     def __call__(self, t: float, q: np.ndarray, tau_h: np.ndarray | None) -> np.ndarray:
-        self.last = force = self._read(t, q, tau_h)
-        return force
-
-
-class LastForce:
-    """``Context.interaction_force()``: the last value of ``source`` (None while there is none). The source is chosen
-    after the controllers that read this are built: it is handed over, not reached through the assembly, which holds
-    the context — a reference cycle that would keep the run alive until a full collection."""
-
-    def __init__(self):
-        self.source: ForceSource | None = None
-
-    def __call__(self) -> np.ndarray | None:
-        return self.source.last if self.source is not None else None
+        return self._read(t, q, tau_h)
 
 
 def force_source(a, limit: float | None) -> ForceSource | None:

@@ -1,6 +1,7 @@
 """The person in a run and the safety layer that guards them: the simulated patient plugin's slot (a layer's section
 holding its settings), the patient built where the backend can host them, the interaction-force source and limit,
-and the :class:`~rehabkit.core.safety.layer.SafetyLayer` — step 5 of :mod:`rehabkit.core.setup.assembly`."""
+and the :class:`~rehabkit.core.safety.layer.SafetySetup` each run's safety layer is made from — step 5 of
+:mod:`rehabkit.core.setup.assembly`."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from rehabkit.core.kinds.capabilities import ExternalTorques, HostsBodies
 from rehabkit.core.kinds.interfaces import EmbodiedPatient
 from rehabkit.core.plugins.lifecycle import Extensions
 from rehabkit.core.plugins.registry import PluginRegistry
-from rehabkit.core.safety.layer import SafetyLayer
+from rehabkit.core.safety.layer import SafetySetup
 from rehabkit.core.setup.checks import has
 from rehabkit.core.setup.errors import PluginSetupError
 from rehabkit.core.setup.force_source import check_reaction, force_source
@@ -67,12 +68,12 @@ def person_and_safety(a) -> None:
     force_limit = min(limits) if limits else None
     a.force_source = force_source(a, force_limit)
     check_reaction(a, force_limit)
-    a.safety = SafetyLayer(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
+    source = a.force_source
+    a.safety = SafetySetup(a.robot.model, sc.safety.model_copy(update={"interaction_force_n": force_limit}),
                            gravity=a.robot.gravity_torque, dt=a.context.control_dt,
-                           hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None)
-    if a.force_source is not None:
-        a.safety.joint_torque = a.force_source.joint_torque
-        a.safety.push_torque = a.force_source.push_torque
+                           hand=hand_in_world(a.robot) if sc.safety.keep_in is not None else None,
+                           joint_torque=source.joint_torque if source is not None else None,
+                           push_torque=source.push_torque if source is not None else None)
     off = sorted(r for r, c in a.safety.categories.items() if c < 2 and r in sc.safety.stop_category)
     if off and a.robot.model.brakes is None and a.context.note is not None:
         a.context.note(0.0, f"stop category 0/1 for {', '.join(off)}: the torque goes off, and robot "
