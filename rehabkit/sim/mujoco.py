@@ -58,6 +58,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
     latch_name = "sim-{robot}"
     restorable = True
     RUN_STATE_NESTED = ("_errors",)  # (its noise stream: drawn from as the run goes)
+    RUN_STATE_FIELDS = ("_errors", "_quiet_pairs", "ramp_in_after_clear")  # (the rest is its scene's wiring)
 
     def __init__(self, config: MujocoConfig, context: Context):
         robot = context.robot.model

@@ -66,6 +66,7 @@ class InstrumentErrors:
     """A simulated sensor's imperfections (each instrument's bias and white noise), from its own seeded stream."""
 
     KEY = 0x5E45  # its stream's key beside the seed
+    RUN_STATE_FIELDS = ("rng",)  # (a session snapshot takes its stream)
 
     def __init__(self, instruments, seed: int = 0, rng: np.random.Generator | None = None):
         self.bias = {i.name: np.asarray(i.bias, float) for i in instruments if i.simulated_error}

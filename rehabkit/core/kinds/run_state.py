@@ -95,12 +95,13 @@ def _give(current: Any, saved: Any) -> Any:
         gen = np.random.default_rng()
         gen.bit_generator.state = saved.state
         return gen
-    if isinstance(saved, _Own):
-        saved.obj.restore_run_state(saved.state)
-        return saved.obj
-    if isinstance(saved, _Nested):
-        restore(saved.obj, saved.state)
-        return saved.obj
+    if isinstance(saved, _Nested):  # (into the part held now where it is of the same kind: a fork's own part)
+        part = current if current is not None and type(current) is type(saved.obj) else saved.obj
+        if isinstance(saved, _Own):
+            part.restore_run_state(saved.state)
+        else:
+            restore(part, saved.state)
+        return part
     if isinstance(saved, np.ndarray):
         if isinstance(current, np.ndarray) and current.shape == saved.shape and current.dtype == saved.dtype \
                 and current.flags.writeable:
