@@ -46,7 +46,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if result.refusal is not None:  # the scenario as written could not be planned: bad input, said where
         _err(str(result.refusal))
         return EXIT_INVALID
-    return EXIT_OK if result.passed else EXIT_FAILED
+    return result.exit_code  # (how it ended: completed 0/1, stopped 1, faults 3/4, interrupted 130/143)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -289,9 +289,10 @@ def main(argv: list[str] | None = None) -> int:
     except PluginError as exc:
         _err(f"error: {exc}")
         return EXIT_INVALID
-    except KeyboardInterrupt:
-        _err("interrupted")
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:  # (a run's loop takes its own: here, before one began or outside a run)
+        _err("interrupted" + (" (SIGTERM)" if getattr(exc, "signal", None) == "SIGTERM" else "")
+             + "; nothing was written")
+        return 143 if getattr(exc, "signal", None) == "SIGTERM" else EXIT_INTERRUPTED
     except BrokenPipeError:  # e.g. `rehabkit plugins | head`: the reader left, nothing to report
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK

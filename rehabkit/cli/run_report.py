@@ -28,6 +28,9 @@ def verdict_lines(s: dict[str, Any]) -> list[str]:
     replay says them as a run does)."""
     m = s["metrics"]
     lines: list[str] = []
+    ended = s.get("ended", {"how": "completed"})
+    if ended["how"] not in ("completed", "stopped"):  # (cut short: said first, the verdicts after say what it reached)
+        lines.append(f"  ENDED   {ended['how']} at {ended.get('t', m['sim_time_s']):.3f} s: {ended['reason']}")
     for e in s["expectations"]:
         value = "missing" if e["value"] is None else f"{e['value']:.6g}"
         lines.append(f"  {'PASS' if e['passed'] else 'FAIL'}  {e['metric']} = {value}  (expected {e['bound']})"

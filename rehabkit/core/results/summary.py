@@ -19,6 +19,7 @@ import numpy as np
 from rehabkit.core.kinds.metric import MetricCatalogue
 from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.plugins.lifecycle import Contribution
+from rehabkit.core.results.ending import RunEnding
 from rehabkit.core.results.metrics import evaluate, tracking_metrics
 from rehabkit.core.results.record import RunRecord
 from rehabkit.core.results.tracking_causes import tracking_causes
@@ -43,6 +44,12 @@ class RunResult:
     trace: Trace
     out_dir: Path | None
     refusal: Any = None
+    ending: RunEnding | None = None  # how the run ended (None: as completed)
+
+    @property
+    def exit_code(self) -> int:
+        """The command's exit code for this run: how it ended and whether it passed (``RunEnding.exit_code``)."""
+        return (self.ending or RunEnding("completed")).exit_code(self.passed)
 
     @property
     def passed(self) -> bool:
@@ -144,16 +151,20 @@ def run_inputs(a: Assembly, r: RunRecord) -> dict[str, Any]:
             **(a.patient.inputs() if a.patient is not None else {})}
 
 
-def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> dict[str, Any]:
-    """The summary document: metrics (the core's, the plugins', the extensions'), verdicts, safety, events,
-    plans, reports, and the extensions' sections; the interventions and series go to the log.
+def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view,
+              ending: RunEnding | None = None) -> dict[str, Any]:
+    """The summary document: how the run ended, metrics (the core's, the plugins', the extensions'), verdicts,
+    safety, events, plans, reports, and the extensions' sections; the interventions and series go to the log.
 
-    A safety stop fails the run unless the scenario's expectations are about safety events.
+    A safety stop fails the run unless the scenario's expectations are about safety events. A run cut short
+    (``ending.early``: interrupted, a plugin's or the backend's fault) is judged on what it reached, and an expectation
+    it met by then is said not reached rather than passed.
     """
+    ending = ending or RunEnding("completed")
     sc = a.sc
     interventions = r.interventions
     metrics, per_joint = core_metrics(a, r)
-    contributions: list[Contribution] = [c for c in a.extensions.hook.rehabkit_run_finished(setup=a, record=r) if c]
+    contributions: list[Contribution] = a.extensions.run_finished(a, r)
     sections: dict[str, Any] = dict(a.sections)
     for c in contributions:
         metrics.update(c.metrics)
@@ -169,6 +180,11 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
     view.finish(interventions, series)
     metrics = {k: _as_count(v) if catalogue.get(k).unit == "count" else v for k, v in metrics.items()}
     verdicts = evaluate(sc.expect, metrics)
+    if ending.early:  # what the run met before it was cut short is not what the scenario asked of the whole run
+        for v in verdicts:
+            if v["passed"]:
+                v.update(passed=False, reason=f"not reached: the run {ending.words} at "
+                                              f"{metrics.get('sim_time_s', 0.0):.3f} s of {sc.duration:g} s")
     if r.no_plan is not None and "safety_events" not in sc.expect:  # (unless the scenario expects a stop)
         # a robot that never moved has no tracking error: that passes nothing
         for v in verdicts:
@@ -185,7 +201,8 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view) -> di
     return {
         "scenario": str(a.loaded.path), "name": sc.name or a.loaded.path.stem,
         "rehabkit_version": __version__, "seed": sc.seed, "plugins": plugin_versions(a),
-        "passed": all(v["passed"] for v in verdicts) and not unexpected_trip and not unfinished,
+        "ended": ending.as_dict(),
+        "passed": all(v["passed"] for v in verdicts) and not unexpected_trip and not unfinished and not ending.early,
         "metrics": metrics, "metric_info": catalogue.info(metrics), "per_joint": per_joint, "expectations": verdicts,
         "safety": {"tripped": r.safety.tripped, "events": [e.as_dict() for e in r.safety.events],
                    "interventions": [e.as_dict() for e in interventions],

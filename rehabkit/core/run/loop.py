@@ -178,3 +178,37 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
         if bar is not None:
             bar.close()
     return LoopResult(k, time.perf_counter() - t_loop, contact_steps, t_loop)
+
+
+def bring_to_rest(session: RunSession, rule: str, message: str) -> None:
+    """End a run that was cut short (Ctrl-C, SIGTERM, a plugin's error out of the loop) as a safety stop ends one: the
+    safety layer trips with ``rule`` (its stop category) and drives the robot — the controller, the person and the
+    recording left out — until the stop has run its course, or the run's end. A backend that can't be driven any more
+    ends it there."""
+    a, st, safety, backend = session.setup, session.loop, session.safety, session.setup.backend
+    sch = a.schedule
+    dt, n, dof = sch.control_dt, sch.steps, a.robot.model.dof
+    trace, packed = session.trace, session.packed
+    record = a.space.recorder(trace, backend)  # (the hand where a Cartesian reference's space tracks it)
+    k = min(st.k, n)
+    try:
+        _, q, qd = backend.state()
+        if safety.tripped_at is None:
+            safety.trip(k * dt, q, rule, message, qd)
+        while k < n:
+            t = k * dt
+            _, q, qd = backend.state()
+            trace.q[k], trace.qd[k] = q, qd
+            if record is not None:
+                record(k, q)
+            packed[k, 2 * dof :] = 0.0  # (tripped: the layer sends its stop's torque whatever the row holds)
+            backend.command(safety.check_row(t, packed[k]))
+            backend.step(sch.substeps)
+            k += 1
+            if _stopped(st, safety, backend, t, dt, a.sc.safety.stop_after_s):
+                break
+    except BackendFaultError as exc:  # (the robot side stops it on its own: its watchdogs)
+        if safety.tripped_at is None:
+            safety.trip(k * dt, trace.q[max(k - 1, 0)], "backend", str(exc))
+    finally:
+        st.k, st.stopped = k, True

@@ -11,6 +11,7 @@ them, and calls the extensions at setup and at the end.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
 import threading
@@ -23,12 +24,14 @@ import yaml
 from threadpoolctl import threadpool_limits
 
 from rehabkit.core.io import atomic_write_json, atomic_write_text
-from rehabkit.core.log import safety_log
+from rehabkit.core.kinds.interfaces import BackendFaultError
+from rehabkit.core.log import background, safety_log
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginRegistry, default_registry
+from rehabkit.core.results.ending import RunEnding, ending_of
 from rehabkit.core.results.record import RunRecord
 from rehabkit.core.results.summary import RunResult, summarize
-from rehabkit.core.run.loop import LoopResult, run_loop
+from rehabkit.core.run.loop import LoopResult, bring_to_rest, run_loop
 from rehabkit.core.run.session import RunSession, open_session
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.setup.assembly import Assembly, SetupError, assemble
@@ -86,15 +89,14 @@ class Runner:
         standing at its start, before the loop (a forked replay puts the recorded session's state into it)."""
         session = None
         try:
-            t_setup = time.perf_counter()
-            session = self.start()
-            if prepare is not None:
-                prepare(session)
-            # a control loop's matrices are small: BLAS worker threads only spin against it, and against a bridge or
-            # renderer sharing the machine
-            with threadpool_limits(limits=1, user_api="blas"):
-                loop = run_loop(session, self.progress)
-            result = finish(session, loop, loop.started - t_setup, self.out_dir)
+            with _terminated_as_interrupt():
+                t_setup = time.perf_counter()
+                session = self.start()
+                if prepare is not None:
+                    prepare(session)
+                loop, ending = self._loop(session)
+                with _signals_held():  # (files closed whole: a second Ctrl-C waits for them)
+                    result = finish(session, loop, loop.started - t_setup, self.out_dir, ending)
         except BaseException:
             if session is not None:
                 release_backend(session.setup.backend)  # (the robot stopped first, however the run ended)
@@ -108,6 +110,71 @@ class Runner:
         finally:
             if session is not None and session.threads is not None:
                 session.threads.close()
+
+    def _loop(self, session: RunSession) -> tuple[LoopResult, RunEnding]:
+        """The loop, and how it ended: its course run, or cut short — Ctrl-C, SIGTERM, an error out of a plugin or
+        the backend — and then the robot brought to rest by the safety layer before anything else (a second Ctrl-C
+        does not cut that short)."""
+        t0 = time.perf_counter()
+        try:
+            # a control loop's matrices are small: BLAS worker threads only spin against it, and against a bridge or
+            # renderer sharing the machine
+            with threadpool_limits(limits=1, user_api="blas"):
+                loop = run_loop(session, self.progress)
+            return loop, ending_of(session.safety.events, session.safety.tripped_at)
+        except KeyboardInterrupt as exc:
+            name = exc.signal if isinstance(exc, Terminated) else "SIGINT"
+            said = "SIGTERM: the process was asked to stop" if name == "SIGTERM" else "Ctrl-C (SIGINT)"
+            rule, how = "interrupt", "interrupted"
+        except BackendFaultError as exc:
+            name, said, rule, how = None, str(exc), "backend", "backend-fault"
+        except Exception as exc:  # noqa: BLE001 (a plugin's error out of the loop: the run ends, the robot at rest)
+            name, rule, how = None, "plugin-error", "plugin-fault"
+            said = f"{type(exc).__name__} out of the control loop: {exc}"
+            logging.getLogger(__name__).debug("the run's loop raised", exc_info=True)
+        with _signals_held():
+            t = session.loop.k * session.setup.schedule.control_dt
+            bring_to_rest(session, rule, said)
+        loop = LoopResult(session.loop.k, time.perf_counter() - t0, session.loop.contact_steps, t0)
+        return loop, RunEnding(how, said, t, session.setup.sc.duration, name, cut_short=True)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a service manager stopping the program), taken as Ctrl-C is: the robot brought to rest, the files
+    closed."""
+
+    signal = "SIGTERM"
+
+
+@contextlib.contextmanager
+def _terminated_as_interrupt():
+    """SIGTERM raises :class:`Terminated` in the main thread while a run goes (elsewhere, Python takes no signals)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminated(signum, frame):
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """SIGINT and SIGTERM held off (in the main thread) while the robot is brought to rest and the files closed."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def release_backend(backend) -> None:
@@ -157,7 +224,8 @@ class _Calls:
         return self.session().plan_for_controller(t, q, qd, targets)
 
 
-def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path | None) -> RunResult:
+def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path | None,
+           ending: RunEnding | None = None) -> RunResult:
     """What a run leaves behind: the record → the summary (metrics, verdicts) and, with ``out_dir``, the recording,
     the scenario as it ran, the safety log and ``summary.json``, each written whole (:meth:`Runner.run` then closes
     the backend)."""
@@ -177,16 +245,24 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                        interventions=sorted(session.safety.interventions + a.backend.interventions(),
                                             key=lambda e: e.t),
                        first_contact=session.loop.first_contact, safety=session.safety)
-    summary = summarize(a, record, session.catalogue, session.view)
+    summary = summarize(a, record, session.catalogue, session.view, ending or RunEnding("completed"))
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:
-        summary["outputs"] = {**session.view.close(), "scenario": SNAPSHOT, **a.backend.outputs()}
-        snapshot = (f"# {a.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "
-                    "`rehabkit replay` reads it\n" + yaml.dump(a.loaded.source.data, Dumper=_DUMPER, sort_keys=False))
-        atomic_write_text(out_dir / SNAPSHOT, snapshot)
-        # the tamper-evident record of the run's safety (rehabkit audit), its last hash in the summary
-        summary["outputs"]["safety_log"] = safety_log.LOG
-        summary["safety_log_hash"] = safety_log.write(out_dir / safety_log.LOG,
-                                                      safety_log.run_records(a, snapshot, summary))
+        # the recording's file is finished in the background while the other files are written, and is whole in
+        # place (renamed) before the summary lists it
+        outputs, recording_written = session.view.begin_close()
+        try:
+            summary["outputs"] = {**outputs, "scenario": SNAPSHOT, **a.backend.outputs()}
+            snapshot = (f"# {a.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "
+                        "`rehabkit replay` reads it\n" + yaml.dump(a.loaded.source.data, Dumper=_DUMPER,
+                                                                    sort_keys=False))
+            snapshot_written = background.begin(atomic_write_text, out_dir / SNAPSHOT, snapshot)  # (its disk wait
+            # overlapping the safety log's) the tamper-evident record of the run's safety (rehabkit audit), its last hash in the summary
+            summary["outputs"]["safety_log"] = safety_log.LOG
+            summary["safety_log_hash"] = safety_log.write(out_dir / safety_log.LOG,
+                                                          safety_log.run_records(a, snapshot, summary))
+            snapshot_written()
+        finally:
+            recording_written()
         atomic_write_json(out_dir / "summary.json", summary)
-    return RunResult(summary, trace, out_dir, first.located if first is not None else None)
+    return RunResult(summary, trace, out_dir, first.located if first is not None else None, ending)

@@ -12,7 +12,7 @@ from rehabkit.models.strict import StrictModel
 Vec3 = tuple[float, float, float]
 # the rules a safety stop is made by, each with its stop category (IEC 60204-1) in ``stop_category``
 STOP_RULES = ("default", "position", "velocity", "torque", "non-finite", "keep-in", "interaction-force", "e-stop",
-              "plan", "plugin-error", "backend")
+              "plan", "plugin-error", "backend", "interrupt")
 
 
 class JointEnvelope(StrictModel):
