@@ -80,3 +80,73 @@ def test_a_broken_extension_stops_runs_naming_it():
     exts = Extensions([("typo-layer", broken)], entry_points=False)
     with pytest.raises(SetupError, match="extension 'typo-layer' failed to load: .*rehabkit_run_finishd"):
         Runner(load_scenario(SCENARIOS / "hit_roundtrip.yaml", SHORT), extensions=exts).build()
+
+
+def test_each_hook_is_given_what_it_reads_and_the_core_applies_what_it_returns():
+    """No hook is given the run's assembly: each reads narrow, read-only arguments and returns what it adds — other
+    robot settings (their notes kept for it), a replaced target, a tap — which the core applies; the extension's
+    notes and tap come back to it as its ``state`` at the run's end."""
+    from dataclasses import FrozenInstanceError, replace
+
+    from rehabkit.core.plugins.lifecycle import Admission, ExtensionState, RobotSettings, RunInfo
+    from rehabkit.plugin import Contribution, RunTap, hookimpl
+
+    seen: dict = {}
+
+    class Tap(RunTap):
+        readings = 0
+
+        def reading(self, t, name, reading):
+            self.readings += 1
+
+    layer = types.ModuleType("typed_layer")
+
+    @hookimpl
+    def rehabkit_configure_robot(robot_config):
+        return RobotSettings(robot_config.model_copy(), {"why": "a copy"})
+
+    @hookimpl
+    def rehabkit_narrow_limits(model):
+        seen["dof"] = model.dof
+        return []
+
+    @hookimpl
+    def rehabkit_force_limit(scenario):
+        seen["scenario"] = scenario
+        return None  # (a limit needs a source of the force: the round trip measures none)
+
+    @hookimpl
+    def rehabkit_admit_targets(targets):
+        seen["targets"] = targets
+        return Admission({"B": replace(targets["B"])}, ({"target": "B", "why": "a copy"},))
+
+    @hookimpl
+    def rehabkit_run_opened(run, state):
+        seen["opened"] = run, state
+        return Tap()
+
+    @hookimpl
+    def rehabkit_run_finished(run, record, state):
+        seen["finished"] = run, state
+        return Contribution(sections={"typed": {"notes": dict(state.notes), "readings": state.tap.readings > 0}})
+
+    for hook in (rehabkit_configure_robot, rehabkit_narrow_limits, rehabkit_force_limit, rehabkit_admit_targets,
+                 rehabkit_run_opened, rehabkit_run_finished):
+        setattr(layer, hook.__name__, hook)
+    exts = Extensions([("typed", layer)], entry_points=False)
+    runner = Runner(load_scenario(SCENARIOS / "hit_roundtrip.yaml", SHORT, extensions=exts), extensions=exts)
+    result = runner.run()
+    a = runner.setup
+    assert seen["dof"] == a.robot.model.dof and a.robot_config is not a.sc.robot
+    with pytest.raises(TypeError):  # (the targets are read, not written)
+        seen["targets"]["A"] = None
+    assert a.targets["B"] is not seen["targets"]["B"] and a.replaced == [{"target": "B", "why": "a copy"}]
+    run, opened = seen["opened"]
+    assert isinstance(run, RunInfo) and opened == ExtensionState({"why": "a copy"})
+    assert run.replaced == tuple(a.replaced) and run.targets["B"] is a.targets["B"]
+    with pytest.raises(FrozenInstanceError):
+        run.robot = None
+    _, finished = seen["finished"]
+    assert isinstance(finished.tap, Tap) and exts.state(a, "typed").tap is None  # (the tap was the run's)
+    assert result.summary["typed"] == {"notes": {"why": "a copy"}, "readings": True}
+    assert seen["scenario"] is a.sc and run.scenario is a.sc and a.safety.config.interaction_force_n is None

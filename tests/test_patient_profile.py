@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.rehab.patient import PatientBase, effective_limits
 from tests.conftest import SCENARIOS
+from tests.located import located, where
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 
@@ -54,15 +56,11 @@ def test_a_joint_target_outside_the_patients_range_is_refused_with_its_place(tmp
     path = _scenario(tmp_path, {"id": "P9", "side": "right", "joints": {"elbow_1": {"passive_deg": [20, 80]}}})
     with pytest.raises(ScenarioError) as err:
         run_scenario(path)
-    text = str(err.value)
-    assert "target 'A'" in text and "elbow_1 beyond its position limit (90.0°, limit 80.0°)" in text
-    assert "patient P9's passive range is [20.0, 80.0]°" in text
-    assert "outside_rom: nearest" in text
-    assert f"{HIT.name}:" in text and ":" in text.split(HIT.name + ":")[1]  # file:line:col of the target
-    line = int(text.split(HIT.name + ":")[1].split(":")[0])
-    assert "name: A" in HIT.read_text().splitlines()[line - 1]
+    (d,) = err.value.diagnostics  # at target A (line 30 of the file it extends), which breaks elbow_1's range
+    assert (Path(d.mark.file).name, d.mark.line, d.mark.col, d.path) == (HIT.name, 30, 7, "task.targets.0")
+    assert "outside_rom: nearest" in d.message  # (the fix, in the message)
     assert main(["run", str(path), "--out", str(tmp_path / "o")]) == 2
-    assert "target 'A'" in capsys.readouterr().err
+    assert [x[1:] for x in located(capsys.readouterr().err)] == [(30, 7, "task.targets.0")]
     assert not (tmp_path / "o" / "summary.json").exists()  # refused before it runs: nothing written
 
 
@@ -71,9 +69,7 @@ def test_a_cartesian_target_whose_posture_leaves_the_range_is_refused(tmp_path):
     path = _scenario(tmp_path, {"id": "P9", "side": "right", "joints": {"shoulder_2": {"passive_deg": [85, 120]}}})
     with pytest.raises(ScenarioError) as err:
         run_scenario(path)
-    text = str(err.value)
-    assert "target 'B'" in text and "the posture the IK finds for it puts shoulder_2 beyond its position limit" in text
-    assert "target 'A'" not in text
+    assert where(err.value) == [(31, 7, "task.targets.1")]  # B only, not A
 
 
 def test_nearest_admissible_target_replaces_it_and_the_run_stays_in_range(tmp_path, hit):
@@ -94,10 +90,10 @@ def test_unknown_joint_names_are_located_with_suggestions(tmp_path):
                      safety={"joints": {"wrist2": {"torque_nm": 1}}})
     with pytest.raises(ScenarioError) as err:
         Runner(load_scenario(path)).build()
-    text = str(err.value)
-    assert "no joint 'elbow1' on robot 'hit'; did you mean 'elbow_1'" in text
-    assert "no joint 'wrist2'" in text and "did you mean 'wrist_2'" in text
-    assert "s.yaml:" in text
+    assert where(err.value) == [(6, 5, "patient.joints.elbow1"), (13, 5, "safety.joints.wrist2")]
+    assert {Path(d.mark.file).name for d in err.value.diagnostics} == {"s.yaml"}
+    elbow, wrist = err.value.diagnostics
+    assert "did you mean 'elbow_1'" in elbow.message and "did you mean 'wrist_2'" in wrist.message  # (the fix)
 
 
 def test_profile_in_its_own_file_errors_point_into_it(tmp_path):
@@ -105,15 +101,15 @@ def test_profile_in_its_own_file_errors_point_into_it(tmp_path):
     path = _scenario(tmp_path, "p.yaml")
     with pytest.raises(ScenarioError) as err:
         load_scenario(path)
-    text = str(err.value)
-    assert "p.yaml:2:7: patient.side" in text and "'left' or 'right'" in text
-    assert "p.yaml:4:" in text and "passive_deg must be [lowest, highest]" in text
+    assert where(err.value) == [(2, 7, "patient.side"), (4, 3, "patient.joints.elbow_1")]
+    assert {Path(d.mark.file).name for d in err.value.diagnostics} == {"p.yaml"}
 
 
 def test_profile_ids_are_pseudonyms_not_names(tmp_path):
     path = _scenario(tmp_path, {"id": "Jane Doe", "side": "left"})
-    with pytest.raises(ScenarioError, match="patient.id"):
+    with pytest.raises(ScenarioError) as err:
         load_scenario(path)
+    assert where(err.value) == [(3, 7, "patient.id")]
 
 
 def test_the_lexos_adapts_its_segments_to_the_profile_unless_the_scenario_sets_them(tmp_path):
@@ -128,7 +124,8 @@ def test_the_lexos_adapts_its_segments_to_the_profile_unless_the_scenario_sets_t
     run = Runner(load_scenario(path))
     run.build()
     assert run.robot.lengths == (0.31, 0.31)  # upper_arm set in the scenario wins; forearm from the profile
-    segments = run.setup.extras["segments"]  # what the rehab extension did, as summary.json's patient.segments
+    # what the rehab extension noted when it set the robot up (its ExtensionState), as summary.json's patient.segments
+    segments = run.setup.extensions.state(run.setup, "rehab").notes["segments"]
     assert "from the profile" in segments["forearm"] and "set in the scenario" in segments["upper_arm"]
     assert "no setting 'hand'" in segments["hand"]
 

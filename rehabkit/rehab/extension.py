@@ -14,7 +14,7 @@ from pydantic import Field
 
 from rehabkit.core.kinds.metric import Metric
 from rehabkit.core.plugins.hookspecs import hookimpl
-from rehabkit.core.plugins.lifecycle import Contribution, Section
+from rehabkit.core.plugins.lifecycle import Admission, Contribution, ExtensionState, RobotSettings, RunInfo, Section
 from rehabkit.models.strict import StrictModel
 
 METRICS = (
@@ -40,60 +40,60 @@ def rehabkit_metrics():
 
 
 @hookimpl
-def rehabkit_configure_robot(setup) -> None:
+def rehabkit_configure_robot(scenario, source, robot_config) -> RobotSettings:
     from rehabkit.rehab.admission import adapt_segments
 
-    setup.robot_config, setup.extras["segments"] = adapt_segments(setup.robot_config, setup.sc.patient,
-                                                                  setup.loaded.source)
+    config, segments = adapt_segments(robot_config, scenario.patient, source)
+    return RobotSettings(config, {"segments": segments})  # (segments: what became of each length, for the summary)
 
 
 @hookimpl
-def rehabkit_narrow_limits(setup):
+def rehabkit_narrow_limits(scenario, source, model):
     from rehabkit.rehab.admission import profile_narrowings
 
-    profile = setup.sc.patient
-    return profile_narrowings(setup.robot.model, profile, setup.loaded.source) if profile is not None else []
+    profile = scenario.patient
+    return profile_narrowings(model, profile, source) if profile is not None else []
 
 
 @hookimpl
-def rehabkit_force_limit(setup):
-    profile = setup.sc.patient
+def rehabkit_force_limit(scenario):
+    profile = scenario.patient
     return profile.comfort.max_interaction_force_n if profile is not None else None
 
 
 @hookimpl
-def rehabkit_admit_targets(setup) -> None:
+def rehabkit_admit_targets(scenario, source, targets, robot, robot_limits, limit_sources) -> Admission:
     from rehabkit.rehab.admission import admit_targets
 
-    sc = setup.sc
-    setup.replaced = admit_targets(setup.targets, sc.task, setup.robot, setup.robot_limits, setup.limit_sources,
-                                   sc.patient, setup.loaded.source)
+    admitted = dict(targets)  # (admit_targets puts a replacement in place)
+    replaced = admit_targets(admitted, scenario.task, robot, robot_limits, limit_sources, scenario.patient, source)
+    return Admission({name: t for name, t in admitted.items() if t is not targets[name]}, tuple(replaced))
 
 
 @hookimpl
-def rehabkit_run_finished(setup, record):
+def rehabkit_run_finished(run: RunInfo, record, state: ExtensionState) -> Contribution:
     from rehabkit.rehab.run_outcomes import outcome_series, run_outcomes
 
     breaches = sum(e.rule not in ("ramp-in", "ramp-out") for e in record.interventions)
-    metrics, details = run_outcomes(record.trace, setup.robot, record.movements, setup.schedule.control_dt,
-                                    setup.sc.outcomes, breaches)
+    metrics, details = run_outcomes(record.trace, run.robot, record.movements, run.schedule.control_dt,
+                                    run.scenario.outcomes, breaches)
     return Contribution(
         metrics=metrics,
-        sections={"patient": patient_summary(setup),
+        sections={"patient": patient_summary(run, state.notes.get("segments", {})),
                   "outcomes": {k: v for k, v in details.items() if k != "interaction_force_n"}},
-        series=outcome_series(record.trace.t, details, setup.schedule.log_every),
+        series=outcome_series(record.trace.t, details, run.schedule.log_every),
     )
 
 
-def patient_summary(setup) -> dict | None:
-    """Who the run was for (pseudonymous), what their profile changed, and the effective limits' sources."""
-    p = setup.sc.patient
-    if p is None and not setup.limit_sources.by_joint:
+def patient_summary(run: RunInfo, segments: dict) -> dict | None:
+    """Who the run was for (pseudonymous), what their profile changed (``segments``: what became of each segment
+    length), and the effective limits' sources."""
+    p = run.scenario.patient
+    if p is None and not run.limit_sources.by_joint:
         return None
-    out = {"effective_limits": setup.limit_sources.as_dict(), "replaced_targets": setup.replaced}
+    out = {"effective_limits": run.limit_sources.as_dict(), "replaced_targets": list(run.replaced)}
     if p is not None:
-        out.update(id=p.id, side=p.side, segments=setup.extras.get("segments", {}),
-                   simulated=None if setup.patient is None else p.model.type)
+        out.update(id=p.id, side=p.side, segments=segments, simulated=None if run.patient is None else p.model.type)
     return out
 
 

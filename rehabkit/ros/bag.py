@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from rehabkit.core.kinds.capabilities import BaseState
-from rehabkit.core.plugins.lifecycle import RunTap
+from rehabkit.core.plugins.lifecycle import RunInfo, RunTap
 from rehabkit.models.hand_force import least_wrenches
 from rehabkit.ros.bag_sensors import reading_messages
 from rehabkit.ros.msgdefs import datatype, msgdef
@@ -87,14 +87,14 @@ class BagRecorder(RunTap):
     a floating robot's root at the log rate, the trace's topics when the run is over (:meth:`finish`, then renamed to
     ``run.mcap``); dropped if the run fails."""
 
-    def __init__(self, path: Path, setup, start_ns: int, description: str):
+    def __init__(self, path: Path, run: RunInfo, start_ns: int, description: str):
         self.path, self.start_ns = path, start_ns
         self.part = path.with_name(f".{path.name}.part")
-        robot = setup.robot.model
+        robot = run.robot.model
         # a floating robot's root moves: its pose in the world at the log rate, as the backend reports it
-        self._root = setup.backend.base_state if robot.floating and isinstance(setup.backend, BaseState) else None
+        self._root = run.backend.base_state if robot.floating and isinstance(run.backend, BaseState) else None
         hand = robot.pin_model.frames[robot.ee_frame_id].name  # (the frame /wrench is given in)
-        frames = [hand, *(s.frame for s in setup.sensors.values() if isinstance(s.frame, str))]
+        frames = [hand, *(s.frame for s in run.sensors.values() if isinstance(s.frame, str))]
         try:
             self.tree = TfTree(description, robot, frames, floating=self._root is not None)
         except ValueError:  # (a description whose tree can't be read as one: the model's own, as a URDF)
@@ -104,8 +104,8 @@ class BagRecorder(RunTap):
                                floating=self._root is not None)
         self.base = self.tree.base
         self.bag = _Bag(self.part)
-        self._frames = {name: _ros_frame(s.frame, self.base) for name, s in setup.sensors.items()}
-        self._channels = {name: s.channels for name, s in setup.sensors.items()}
+        self._frames = {name: _ros_frame(s.frame, self.base) for name, s in run.sensors.items()}
+        self._channels = {name: s.channels for name, s in run.sensors.items()}
         self.roots: dict[int, np.ndarray] = {}  # logged control step → the root's pose
         self.bag.put("/robot_description", "std_msgs/String", {"data": description}, start_ns)
         self.bag.put("/tf_static", "tf2_msgs/TFMessage",
@@ -135,10 +135,10 @@ class BagRecorder(RunTap):
         self.bag.file.close()
         self.part.unlink(missing_ok=True)
 
-    def finish(self, setup, record) -> dict:
+    def finish(self, run: RunInfo, record) -> dict:
         """The trace's topics, the bag closed and renamed; returns its topics with their types and message counts."""
         try:
-            _trace_topics(self.bag, setup, record, self.start_ns, self)
+            _trace_topics(self.bag, run, record, self.start_ns, self)
             self.bag.finish()
             os.replace(self.part, self.path)
         except BaseException:
@@ -152,19 +152,19 @@ TARGETS = {"point": ("/targets", "geometry_msgs/PointStamped"), "pose": ("/targe
            "joints": ("/targets/joint_states", "sensor_msgs/JointState")}  # a target's topic and type, by kind
 
 
-def _targets(bag: _Bag, setup, record, ns: np.ndarray, tree: TfTree) -> None:
+def _targets(bag: _Bag, run: RunInfo, record, ns: np.ndarray, tree: TfTree) -> None:
     """Each movement's goal as it began, by what its target gives (:data:`TARGETS`): a posture's joint values as the
     task gives them, a hand pose (a position and the orientation the hand must take; as the plan reaches it where
     some axes are free), or where the hand goes; in the bag's base frame."""
-    tr, robot = record.trace, setup.robot.model
+    tr, robot = record.trace, run.robot.model
     names, m = list(robot.joint_names), tree.base_to_frame
-    sensed = {spec.name for spec in setup.sc.task.targets if spec.sensor}  # (their position: the movement's)
+    sensed = {spec.name for spec in run.scenario.task.targets if spec.sensor}  # (their position: the movement's)
     for mv in record.movements:
         if mv.k0 >= len(tr.t):
             continue
         at = int(ns[mv.k0])
         header = {"stamp": _stamp(at), "frame_id": tree.base}
-        target = setup.targets.get(mv.name) if mv.name is not None else None
+        target = run.targets.get(mv.name) if mv.name is not None else None
         if target is not None and target.q is not None:  # (a posture stays one: a replay reaches it, not an IK's)
             topic, msg_type = TARGETS["joints"]
             bag.put(topic, msg_type, {"header": {**header, "frame_id": ""}, "name": names,
@@ -181,10 +181,10 @@ def _targets(bag: _Bag, setup, record, ns: np.ndarray, tree: TfTree) -> None:
             bag.put(topic, msg_type, {"header": header, "point": _xyz(m[:3, :3] @ goal + m[:3, 3])}, at)
 
 
-def _trace_topics(bag: _Bag, setup, record, start_ns: int, rec: BagRecorder) -> None:
+def _trace_topics(bag: _Bag, run: RunInfo, record, start_ns: int, rec: BagRecorder) -> None:
     """Joint states, reference, the person's wrench and the interaction force every control step, the targets as
     each movement began, tf at the log rate, the safety layer's events and the notes."""
-    tr, robot = record.trace, setup.robot.model
+    tr, robot = record.trace, run.robot.model
     names = list(robot.joint_names)
     ns = start_ns + np.rint(tr.t * 1e9).astype(np.int64)
     person = tr.tau_h is not None and len(tr.t) and np.any(tr.tau_h)
@@ -207,8 +207,8 @@ def _trace_topics(bag: _Bag, setup, record, start_ns: int, rec: BagRecorder) -> 
             bag.put("/wrench", "geometry_msgs/WrenchStamped",
                     {"header": {**stamp, "frame_id": model.frames[hand].name},
                      "wrench": {"force": _xyz(w[:3]), "torque": _xyz(w[3:])}}, int(ns[k]))
-    _targets(bag, setup, record, ns, rec.tree)
-    every = max(1, setup.schedule.log_every)
+    _targets(bag, run, record, ns, rec.tree)
+    every = max(1, run.schedule.log_every)
     for k in range(0, len(tr.t), every):
         moved = rec.tree.moving(tr.q[k], rec.roots.get(k))
         bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [_transform(t, int(ns[k])) for t in moved]}, int(ns[k]))

@@ -3,11 +3,14 @@
 Row-by-row ``rr.log`` costs tens of microseconds a call, more than a whole
 control step, so poses are buffered at the log rate and, with the joint series
 the runner already records, sent as columns (``send_columns``) every few
-simulated seconds and at the end. The file is written as ``run.rrd.tmp`` and renamed when complete.
+simulated seconds and at the end. The file is written as ``run.rrd.tmp`` and renamed when complete; its end
+(encoding and writing what is left) can go on in a background thread while the run is summed up
+(:meth:`RerunLog.begin_close`), joined before the rename.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import warnings
@@ -20,6 +23,7 @@ import numpy as np
 import rerun as rr
 
 from rehabkit.core.kinds.interfaces import BodyPoses, Drawing, GeomVisual
+from rehabkit.core.log import background
 from rehabkit.core.log.archetypes import LIMIT_RGB, PALETTE, entity_part, paler, shape, xyzw
 from rehabkit.core.log.blueprint import Contents, blueprint, labelled
 from rehabkit.core.log.buffers import TIMELINE, Drawings, SensorSeries
@@ -63,6 +67,7 @@ class RerunLog:
         self.deferred = False
         self._queue: deque[Callable[[], None]] = deque()
         self._rows: list[tuple] = []
+        self._closing: Callable[[], None] | None = None
         self._ee_path: list[np.ndarray] = []
         rec = self.rec
         self._drawings, self._sensors = Drawings(), SensorSeries(rec, self.contents)
@@ -243,20 +248,39 @@ class RerunLog:
 
     def discard(self) -> None:
         """Drop an unfinished recording (a run that died outside plugin code)."""
+        if self._closing is not None:  # (its end under way in the background: waited for, then dropped)
+            with contextlib.suppress(Exception):
+                self._closing()
         self.rec.disconnect()
         self.tmp.unlink(missing_ok=True)
 
-    def close(self) -> Path:
-        """Flush everything, finish the file and move it into place."""
+    def begin_close(self) -> Callable[[], Path]:
+        """Finish the recording in a background thread — send everything left and the layout, encode and write it —
+        while the caller writes its other files (their disk waits leave the interpreter free for it); returns the
+        call that waits for it and moves the file into place (until then it is ``run.rrd.tmp``: the file is whole
+        at its name or not there). Nothing is logged to this log once it is called."""
+        written = background.begin(self._end, name="rerun-close")
+        self._closing = written
+
+        def wait() -> Path:
+            written()
+            os.replace(self.tmp, self.path)
+            return self.path
+        return wait
+
+    def _end(self) -> None:
         self.flush()
         while self._queue:
             self.send_one()
         if self._ee_path:
-            self.rec.log("world/end_effector_path", rr.LineStrips3D([np.array(self._ee_path)],
-                                                                     colors=[[250, 180, 40]], radii=0.004), static=True)
-            self.frame_on(np.array(self._ee_path))
+            path = np.array(self._ee_path)
+            self.rec.log("world/end_effector_path", rr.LineStrips3D([path], colors=[[250, 180, 40]], radii=0.004),
+                         static=True)
+            self.frame_on(path)
         self.send_layout()
         self.rec.flush()
         self.rec.disconnect()
-        os.replace(self.tmp, self.path)
-        return self.path
+
+    def close(self) -> Path:
+        """Flush everything, finish the file and move it into place."""
+        return self.begin_close()()

@@ -66,6 +66,9 @@ class RunView:
             self._joint_space = log.contents.joint_space = True
             log.points(f"joint_space/{name}", log.in_own_units(points), (200, 80, 80), 0.4)
         self.log = log
+        # a reading's way into the log, looked up once (sensors read at up to the control rate)
+        self._add_reading = log._sensors.add
+        self._channels = {name: sensor.channels for name, sensor in setup.sensors.items()}
         self._framed = False
         if spawn:  # a live viewer lays the run out as it comes (the file gets the final layout at the end)
             log.send_layout()
@@ -104,8 +107,8 @@ class RunView:
 
     def sensor(self, t: float, name: str, reading: dict) -> None:
         """A sensor's reading, and where it saw a target."""
-        self.log.sensor(t, name, reading, self.setup.sensors[name].channels)
-        if reading.get("target_position") is not None:
+        self._add_reading(t, name, reading, self._channels.get(name) or self.setup.sensors[name].channels)
+        if "target_position" in reading and reading["target_position"] is not None:
             self.log.points(f"world/sensed/{name}", self.setup.robot.model.to_world(reading["target_position"]),
                             (40, 220, 40), 0.02, t)
 
@@ -150,8 +153,14 @@ class RunView:
 
     def close(self) -> dict[str, str]:
         """The recording written whole; what the summary lists of it."""
-        self.log.close()
-        return {"rrd": "run.rrd"}
+        outputs, wait = self.begin_close()
+        wait()
+        return outputs
+
+    def begin_close(self) -> tuple[dict[str, str], Callable[[], object]]:
+        """What the summary lists of the recording, and the call that waits for the file to be whole in place (it is
+        finished in the background meanwhile: :meth:`RerunLog.begin_close`)."""
+        return {"rrd": "run.rrd"}, self.log.begin_close()
 
     def discard(self) -> None:
         """The run failed: no half-written recording is left."""
@@ -172,3 +181,6 @@ class NullView:
 
     def close(self) -> dict[str, str]:
         return {}
+
+    def begin_close(self) -> tuple[dict[str, str], Callable[[], object]]:
+        return {}, self._nothing

@@ -217,7 +217,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     catalogue = a.catalogue  # (made once, at assembly: validate's and the run's are one)
     session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0, safety,
                          notes=list(notes or []), targets=dict(a.targets))
-    session.taps = [tap for tap in a.extensions.hook.rehabkit_run_opened(setup=a) if tap is not None]
+    session.taps = a.extensions.run_opened(a)
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
         # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are)

@@ -169,7 +169,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
                   out_dir=out_dir, seed=sc.seed, safety=sc.safety, patient=slot.section if slot else None, plan=plan,
                   note=note, dry_run=upto != "run", plugins=registry, latest=latest)
     a = Assembly(loaded, registry, extensions, out_dir, sc.robot, ctx, patient_slot=slot)
-    extensions.hook.rehabkit_configure_robot(setup=a)
+    extensions.configure_robot(a)
     a.context = replace(ctx, robot_spec=a.robot_config.model_dump(mode="json"))
     a.robot = a.make("robot", a.robot_config, ("robot",))
     check_robot_model(a)
@@ -181,7 +181,7 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
         a.targets = resolve_targets(sc.task, a.robot, sc.seed)
     except PlanningError as exc:
         raise at_target(a, exc, "task") or SetupError(f"task: {exc}") from exc
-    extensions.hook.rehabkit_admit_targets(setup=a)
+    extensions.admit_targets(a)
     check_joint_targets(a)
     check_duration(a)
     if upto == "targets":
@@ -263,7 +263,7 @@ def _narrow_limits(a: Assembly) -> None:
         problems += [Diagnostic(_nearest_mark(source, (*path, key)), ".".join((*path, key)), msg)
                      for key, msg in wrong_kind_settings(keys, model).items()]
     try:
-        asked = [nw for found in a.extensions.hook.rehabkit_narrow_limits(setup=a) for nw in found or ()]
+        asked = a.extensions.narrow_limits(a)
     except ScenarioError as exc:  # every misnamed joint at once, the extensions' and the envelope's
         raise ScenarioError([*exc.diagnostics, *problems]) from None
     if problems:

@@ -63,7 +63,7 @@ def person_and_safety(a) -> None:
                                        f"{where} '{model_cfg.type}' needs a backend that {what}; backend "
                                        f"'{sc.backend.type}' does not")
             a.patient = a.make("patient", model_cfg, slot.path)
-    limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(setup=a))
+    limits = [v for v in (sc.safety.interaction_force_n, *a.extensions.hook.rehabkit_force_limit(scenario=sc))
               if v is not None]
     force_limit = min(limits) if limits else None
     a.force_source = force_source(a, force_limit)

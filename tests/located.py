@@ -1,0 +1,27 @@
+"""Read the CLI's located errors back into fields: ``file:line:col: path: message`` lines as (file, line, col, path),
+so a test asserts where an error points (and which setting) rather than how it is worded (issue 47; the wording
+is asserted once per kind of message in tests/test_message_wording.py)."""
+
+from __future__ import annotations
+
+import re
+
+LOCATED = re.compile(r"^(?P<file>.+?):(?P<line>\d+):(?P<col>\d+): (?P<path>[\w.\-<> ]+?): ", re.M)
+
+
+def located(text: str) -> list[tuple[str, int, int, str]]:
+    """Every ``file:line:col: path: …`` line of ``text`` (a CLI's stderr) as (file, line, col, path)."""
+    return [(m["file"], int(m["line"]), int(m["col"]), m["path"]) for m in LOCATED.finditer(text)]
+
+
+def where(err) -> list[tuple[int, int, str]]:
+    """A :class:`ScenarioError`'s diagnostics as (line, col, path)."""
+    return [(d.mark.line, d.mark.col, d.path) for d in err.diagnostics]
+
+
+SET = re.compile(r"^<--set (?P<set>[^>]+)>: (?P<path>[\w.\-]+): ", re.M)
+
+
+def set_located(text: str) -> list[tuple[str, str]]:
+    """Every ``<--set KEY>: path: …`` line of ``text`` (an error in a ``--set`` override) as (KEY, path)."""
+    return [(m["set"], m["path"]) for m in SET.finditer(text)]
