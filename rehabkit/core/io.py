@@ -13,6 +13,10 @@ import yaml
 
 _BASE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where installed: ~10x the pure-Python parser
 
+# the process's umask, read once: reading it means setting it, which other threads writing files would meet
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
 
 class YAML_LOADER(_BASE_LOADER):  # noqa: N801 (a loader class, named as the constant it replaced)
     """PyYAML's safe loader reading numbers as YAML 1.2 does (and editors' YAML, e.g. check-jsonschema's): ``1e-6``
@@ -36,9 +40,7 @@ def atomic_write_text(path: Path, text: str, private: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")  # (created 0600)
     if not private:  # outputs are ordinary files
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
+        os.fchmod(fd, 0o666 & ~_UMASK)
     try:
         with os.fdopen(fd, "w") as f:
             f.write(text)

@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits
 
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.kinds.interfaces import BackendFaultError
-from rehabkit.core.log import background, safety_log
+from rehabkit.core.log import safety_log
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginRegistry, default_registry
 from rehabkit.core.results.ending import RunEnding, ending_of
@@ -248,25 +248,21 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
     summary = summarize(a, record, session.catalogue, session.view, ending or RunEnding("completed"))
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:
-        # the recording's file and the scenario as it ran are written in the background while the safety log is
-        # (their encoding and disk waits overlapping), each whole in place before the summary lists it
+        # the recording's file is finished in the background while the other files are written (its encoding
+        # overlapping their disk waits), and is whole in place before the summary lists it. (Those files one after
+        # the other: atomic_write_text sets the process's umask for a moment.)
         outputs, recording_written = session.view.begin_close()
-        snapshot_written = None
         try:
             summary["outputs"] = {**outputs, "scenario": SNAPSHOT, **a.backend.outputs()}
             snapshot = (f"# {a.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "
                         "`rehabkit replay` reads it\n" + yaml.dump(a.loaded.source.data, Dumper=_DUMPER,
                                                                     sort_keys=False))
-            snapshot_written = background.begin(atomic_write_text, out_dir / SNAPSHOT, snapshot)
+            atomic_write_text(out_dir / SNAPSHOT, snapshot)
             # the tamper-evident record of the run's safety (rehabkit audit), its last hash in the summary
             summary["outputs"]["safety_log"] = safety_log.LOG
             summary["safety_log_hash"] = safety_log.write(out_dir / safety_log.LOG,
                                                           safety_log.run_records(a, snapshot, summary))
-        finally:  # (both waited for, however the rest went)
-            try:
-                recording_written()
-            finally:
-                if snapshot_written is not None:
-                    snapshot_written()
+        finally:  # (waited for, however the rest went)
+            recording_written()
         atomic_write_json(out_dir / "summary.json", summary)
     return RunResult(summary, trace, out_dir, first.located if first is not None else None, ending)
