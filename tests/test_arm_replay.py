@@ -19,6 +19,7 @@ from rehabkit.geometry.solids import path_hits
 from rehabkit.models.dh import PoseSpec
 from rehabkit.testing import group
 from tests.conftest import ROOT, SCENARIOS
+from tests.located import where
 
 SCENARIO = SCENARIOS / "arm_replay.yaml"
 HOME = np.array([0.02, -2.177892, -2.050919, 0.955987, 0.0, -2.04666, 0.963701, 0.0])
@@ -130,12 +131,12 @@ def test_key_timeline_errors_name_the_file_line_key_and_menu(tmp_path):
                    "    - {at: 0.5, key: J}\n    - {at: 1.0, key: x+, hold_s: 2}\n")
     with pytest.raises(ScenarioError) as err:
         load_scenario(bad)
-    message = str(err.value)
-    assert message.startswith(f"{bad}:6:"), message  # the line of the offending press
-    assert "keys[1] (t = 1.0 s, 'x+'): not a key of the JOINT menu" in message
-    with pytest.raises(ScenarioError, match="hold it 2 s to store"):
+    (d,) = err.value.diagnostics  # at the offending press (x+ is not a key of the JOINT menu)
+    assert (d.mark.file, d.mark.line, d.mark.col, d.path) == (str(bad), 6, 22, "controller.keys.1.key")
+    with pytest.raises(ScenarioError) as short:  # a store held 1 s (hold it 2 s to store)
         load_scenario(SCENARIO, {"controller.keys": [{"at": 0.5, "key": "R"}, {"at": 1.0, "key": "3"},
                                                      {"at": 1.5, "key": "store", "hold_s": 1.0}]})
+    assert where(short.value) == [(24, 23, "controller.keys.2.key")]
 
 
 def test_a_foreign_store_is_refused_and_left_untouched(tmp_path):

@@ -11,6 +11,7 @@ from rehabkit.api import run_scenario
 from rehabkit.cli import main
 from rehabkit.core.scenario.loader import load_scenario
 from tests.conftest import SCENARIOS
+from tests.located import set_located
 
 SAFETY = SCENARIOS / "safety"
 
@@ -30,7 +31,8 @@ def test_a_noiseless_sensor_reads_the_push_exactly_once_tared():
 def test_a_force_limit_over_the_link_needs_a_force_sensor(capsys):
     hit = SCENARIOS / "hit_roundtrip.yaml"
     code = main(["validate", str(hit), "--set", "backend.type=hardware", "--set", "safety.interaction_force_n=40"])
-    assert code == 2 and "needs a source of the force: a force-torque sensor" in capsys.readouterr().err
+    assert (code, set_located(capsys.readouterr().err)) == (
+        2, [("safety.interaction_force_n", "safety.interaction_force_n")])  # (no source of the force over the link)
     assert main(["validate", str(hit), "--set", "backend.type=hardware", "--set", "safety.interaction_force_n=40",
                  "--set", "sensors.ft={type: force-torque}"]) == 0
 
@@ -38,7 +40,8 @@ def test_a_force_limit_over_the_link_needs_a_force_sensor(capsys):
 def test_a_load_on_a_body_the_scene_lacks_is_refused_with_the_closest_names(capsys):
     code = main(["validate", str(SAFETY / "hit_force.yaml"), "--set", "world.loads.0.body=handel"])
     err = capsys.readouterr().err
-    assert code == 2 and "no body 'handel'" in err
+    assert (code, set_located(err)) == (2, [("world.loads.0.body", "world.loads.0.body")])
+    assert "choices: base, elbow_1_link" in err  # (the closest names: the fix)
 
 
 def test_a_sensor_at_a_cuff_reads_the_strapped_persons_cuff_force():

@@ -19,6 +19,7 @@ from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.core.setup.errors import SetupError
 from tests.conftest import SCENARIOS, checked
+from tests.located import set_located
 
 ESTOP = SCENARIOS / "safety" / "hit_estop.yaml"
 LINK = {"backend": {"type": "hardware", "clock": "lockstep"}}
@@ -53,7 +54,8 @@ def test_each_category_sends_what_it_says(hit, category):
 def test_a_stop_category_for_an_unknown_rule_is_refused_where_written(capsys):
     code = main(["validate", str(ESTOP), "--set", "safety.stop_category.estop=1"])
     err = capsys.readouterr().err
-    assert code == 2 and "stop_category" in err and "e-stop" in err
+    assert (code, set_located(err)) == (2, [("safety.stop_category.estop", "safety.stop_category.estop")])
+    assert err.rstrip().endswith("did you mean 'e-stop'?")  # (the fix)
 
 
 def _stop(category: int, link: bool = False) -> dict:

@@ -1,0 +1,86 @@
+"""The wording of each kind of message, asserted once, in full, for one constructed value (issue 47).
+
+Elsewhere tests assert an error's fields (a diagnostic's path, line and column, a breach's joint and quantity, an
+event's rule, an exit code); here the rendered text of one of each, so the wording is checked in one place and a
+change of words is one edit here, not a hunt through the suite."""
+
+import numpy as np
+import pytest
+
+from rehabkit.core.run.session import PlanRefusal
+from rehabkit.core.safety.event import Clipping, SafetyEvent
+from rehabkit.core.safety.limit_breach import LimitBreach
+from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
+from rehabkit.core.setup.errors import PluginSetupError, SetupError
+from tests.conftest import DATA
+
+
+def test_a_located_scenario_error_reads_file_line_col_path_message():
+    d = Diagnostic(Mark("arm3.yaml", 18, 3), "robot.joints.2.range_deg", "lower bound 90.0 is above upper 80.0")
+    assert str(d) == "arm3.yaml:18:3: robot.joints.2.range_deg: lower bound 90.0 is above upper 80.0"
+    assert str(Diagnostic(Mark("arm3.yaml", 0, 0), "", "empty file")) == "arm3.yaml: empty file"  # (no place)
+    both = ScenarioError([d, Diagnostic(Mark("arm3.yaml", 25, 11), "duration", "a number is needed here")])
+    assert str(both) == ("arm3.yaml:18:3: robot.joints.2.range_deg: lower bound 90.0 is above upper 80.0\n"
+                         "arm3.yaml:25:11: duration: a number is needed here")
+
+
+def test_a_plugins_refusal_names_the_plugin_then_its_reason(tmp_path):
+    from rehabkit.core.run.runner import Runner
+    from rehabkit.core.scenario.loader import load_scenario
+
+    path = tmp_path / "arm3.yaml"
+    path.write_text((DATA / "arm3_dh.yaml").read_text().replace("kp: [300, 300, 150]", "kp: [300, 300]"))
+    with pytest.raises(PluginSetupError) as err:
+        Runner(load_scenario(path)).build()
+    assert str(err.value) == f"{path}:18:3: controller.kp: controller 'joint-pd': has 2 values; the robot has 3 joints"
+
+
+def test_a_limit_breach_describes_itself_in_the_joints_own_unit():
+    assert LimitBreach("position", "elbow", np.radians(131.2), np.radians(120.0), 0.25).describe() == \
+        "elbow beyond its position limit at t+0.250s (131.2°, limit 120.0°)"
+    assert LimitBreach("torque", "slide", 120.0, 100.0, None, False).describe() == \
+        "slide beyond its force limit (120.0 N, limit 100.0 N)"  # a prismatic joint's torque is a force
+    assert LimitBreach("velocity", "slide", 0.1234, 0.12, None, False).describe() == \
+        "slide beyond its velocity limit (0.123 m/s, limit 0.120 m/s)"  # (metres to the millimetre)
+
+
+def test_a_plan_refusal_says_the_breach_or_the_actions_the_backend_cannot_do():
+    """A plan refusal's reason, as the run's plan gate words it (a refused plan's ``PlanRefusal.reason``)."""
+    from types import SimpleNamespace
+
+    from rehabkit.core.run.plan_gate import PlanGate
+
+    breach = LimitBreach("velocity", "wrist_1", np.radians(12.0), np.radians(10.0), 0.5)
+    gate = SimpleNamespace(space=SimpleNamespace(limit_breach=lambda plan, within: breach), duration=2.0,
+                           scene_actions=("attach",))
+    reason, found, actions = PlanGate.problem(gate, SimpleNamespace(actions=[]), 1.0)
+    refusal = PlanRefusal(1.0, reason, breach=found, actions=actions)
+    assert refusal.unplannable and refusal.breach is breach and refusal.reason == \
+        "planned trajectory: wrist_1 beyond its velocity limit at t+0.500s (12.0 °/s, limit 10.0 °/s)"
+    gate.space.limit_breach = lambda plan, within: None
+    assert PlanGate.problem(gate, SimpleNamespace(actions=[(0.5, "weld", {})]), 1.0) == (
+        "plan action(s) ['weld'] unknown; the backend can do: attach", None, ("weld",))
+
+
+def test_a_safety_events_message_says_when_and_what():
+    events: list[SafetyEvent] = []
+    Clipping(["elbow", "wrist"], np.array([10.0, 5.0]), 0.002, events.append).step(
+        0.25, np.array([12.0, 1.0]), np.array([True, False]))
+    (e,) = events
+    assert (e.rule, e.joint, e.value, e.limit, e.level) == ("torque-clip", "elbow", 12.0, 10.0, "WARN")
+    assert e.message == "t=0.250s: commanded torque clipped to the effort limit"
+
+
+def test_a_setup_error_is_its_message():
+    breach = LimitBreach("position", "elbow", np.radians(131.2), np.radians(120.0))
+    err = SetupError(f"the first plan would break a joint limit: {breach.describe()}", breach)
+    assert err.breach is breach
+    assert str(err) == ("the first plan would break a joint limit: "
+                        "elbow beyond its position limit (131.2°, limit 120.0°)")
+
+
+def test_a_cli_error_line_names_the_file_then_the_problem(capsys):
+    from rehabkit.cli import main
+
+    assert main(["validate", "/nonexistent/s.yaml"]) == 2
+    assert capsys.readouterr().err == "/nonexistent/s.yaml: no such file\n"
