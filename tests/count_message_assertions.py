@@ -32,10 +32,8 @@ def is_str(n):
         return True
     if isinstance(n, ast.BinOp) and isinstance(n.op, (ast.Add, ast.Mod)):
         return is_str(n.left) or is_str(n.right)
-    if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr in ("format", "join") \
-            and is_str(n.func.value):
-        return True
-    return False
+    return isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr in ("format", "join") \
+        and is_str(n.func.value)
 
 
 def textual(n, names):
