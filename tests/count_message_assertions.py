@@ -82,7 +82,8 @@ def is_text_assert(test, names):
         if isinstance(s, ast.Call) and isinstance(s.func, ast.Attribute):
             if s.func.attr in ("startswith", "endswith") and textual(s.func.value, names):
                 return True
-            if s.func.attr in ("search", "match", "fullmatch", "findall") and any(textual(a, names) for a in s.args[1:]):
+            regex = s.func.attr in ("search", "match", "fullmatch", "findall")
+            if regex and any(textual(a, names) for a in s.args[1:]):
                 return True
     return False
 
