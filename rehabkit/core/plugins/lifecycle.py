@@ -275,8 +275,8 @@ class Extensions:
         return self._sections[1]
 
     # -- the run-lifecycle hooks, called by the core: each given what it reads, its answers applied here --------
-    # ``a`` is the run's Assembly: only the core (these methods) writes it. ``a.extras`` holds each extension's
-    # ExtensionState by its name.
+    # ``a`` is the run's Assembly: only the core (these methods) writes it, while it is assembled. ``a.extras`` holds
+    # each extension's ExtensionState by its name as the set-up left it (its notes); a run's taps are its session's.
 
     def _each(self, hook: str) -> Iterator[tuple[str, Callable[..., Any]]]:
         """Each extension implementing ``hook``, in pluggy's order: its name and a call taking the hook's arguments
@@ -308,25 +308,24 @@ class Extensions:
             a.targets.update(admission.targets)
         a.replaced = [line for admission in admitted for line in admission.replaced]
 
-    def run_opened(self, a: Assembly) -> list[RunTap]:
-        """:func:`rehabkit_run_opened`: the run's taps, each kept in its extension's :class:`ExtensionState`."""
-        run, taps = run_info(a), []
+    def run_opened(self, a: Assembly) -> tuple[list[RunTap], dict[str, ExtensionState]]:
+        """:func:`rehabkit_run_opened`: the run's taps, and each extension's :class:`ExtensionState` for this run
+        (its tap in it): the run session's to keep — the Assembly is the same for every session made from it."""
+        run, taps, states = run_info(a), [], {}
         for name, call in self._each("rehabkit_run_opened"):
             tap = call(run=run, state=self.state(a, name))
-            if tap is not None or name in a.extras:  # (a tap left by a session that failed: not this one's)
-                a.extras[name] = replace(self.state(a, name), tap=tap)
             if tap is not None:
+                states[name] = replace(self.state(a, name), tap=tap)
                 taps.append(tap)
-        return taps
+        return taps, states
 
-    def run_finished(self, a: Assembly, record: RunRecord) -> list[Contribution]:
-        """:func:`rehabkit_run_finished`: the extensions' contributions, in pluggy's order (each extension's tap
-        let go of: it was the run's)."""
-        run, out = run_info(a), []
+    def run_finished(self, a: Assembly, record: RunRecord,
+                     states: Mapping[str, ExtensionState] | None = None) -> list[Contribution]:
+        """:func:`rehabkit_run_finished`: the extensions' contributions, in pluggy's order; ``states``: the run's
+        (:meth:`run_opened`'s), else what the extensions noted while the run was assembled."""
+        run, out, states = run_info(a), [], states or {}
         for name, call in self._each("rehabkit_run_finished"):
-            state = self.state(a, name)
-            if state.tap is not None:
-                a.extras[name] = replace(state, tap=None)
+            state = states.get(name) or self.state(a, name)
             if (contribution := call(run=run, record=record, state=state)) is not None:
                 out.append(contribution)
         return out

@@ -58,4 +58,5 @@ class RunRecord:
     interventions: list[Any] = field(default_factory=list)  # the safety layer's and the robot side's, in time order
     first_contact: dict[str, Any] | None = None  # when, what and where the robot first touched something
     safety: Any = None  # the run's safety layer as the run left it: tripped or not, its events (a SafetyLayer)
+    extension_states: dict[str, Any] = field(default_factory=dict)  # each extension's state in this run (its tap)
 

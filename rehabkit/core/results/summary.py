@@ -164,7 +164,7 @@ def summarize(a: Assembly, r: RunRecord, catalogue: MetricCatalogue, view,
     sc = a.sc
     interventions = r.interventions
     metrics, per_joint = core_metrics(a, r)
-    contributions: list[Contribution] = a.extensions.run_finished(a, r)
+    contributions: list[Contribution] = a.extensions.run_finished(a, r, r.extension_states)
     sections: dict[str, Any] = dict(a.sections)
     for c in contributions:
         metrics.update(c.metrics)

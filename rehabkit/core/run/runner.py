@@ -244,7 +244,8 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                        # the host's interventions and the robot side's (a bridge's held commands), in time order
                        interventions=sorted(session.safety.interventions + a.backend.interventions(),
                                             key=lambda e: e.t),
-                       first_contact=session.loop.first_contact, safety=session.safety)
+                       first_contact=session.loop.first_contact, safety=session.safety,
+                       extension_states=session.extension_states)
     summary = summarize(a, record, session.catalogue, session.view, ending or RunEnding("completed"))
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:

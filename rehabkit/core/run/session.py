@@ -82,6 +82,7 @@ class RunSession:
     timeline: Timeline | None = None
     threads: SensorThreads | None = None
     taps: list = field(default_factory=list)  # extensions' RunTaps: each reading as it is taken
+    extension_states: dict = field(default_factory=dict)  # each extension's ExtensionState for this run (its tap)
     loop: LoopState = field(default_factory=LoopState)
     plans: list[dict] = field(default_factory=list)
     notes: list[dict] = field(default_factory=list)
@@ -217,7 +218,7 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     catalogue = a.catalogue  # (made once, at assembly: validate's and the run's are one)
     session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0, safety,
                          notes=list(notes or []), targets=dict(a.targets))
-    session.taps = a.extensions.run_opened(a)
+    session.taps, session.extension_states = a.extensions.run_opened(a)
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
         # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are)

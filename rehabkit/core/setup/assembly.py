@@ -107,7 +107,7 @@ class Assembly:
     backend_warnings: list[str] = field(default_factory=list)  # (validate: what the backend's check says, not refuses)
     catalogue: Any = None  # every metric the run can report, described (a MetricCatalogue), made once at assembly
     sections: dict[str, Any] = field(default_factory=dict)
-    extras: dict[str, Any] = field(default_factory=dict)  # extensions' own state between their hooks
+    extras: dict[str, Any] = field(default_factory=dict)  # each extension's ExtensionState as set up (its notes)
     sensors: dict[str, Sensor] = field(default_factory=dict)
     backend: Backend | None = None
     planner: Planner | None = None
