@@ -37,6 +37,7 @@ from rehabkit.core.kinds.interfaces import (
     IKUnavailableError,
     Instrument,
     InteractionForceSensor,
+    JointRom,
     Patient,
     Plan,
     Planner,
@@ -67,13 +68,28 @@ from rehabkit.models.robot_model import JointLimits, RobotModel
 from rehabkit.models.strict import FilePath, SensorName
 from rehabkit.models.wearable import Strap, Wearable
 
+# The modules a plugin imports from rehabkit, built-in or third-party: this one and the public helper modules (each
+# with its own ``__all__``; see the README's "Public helper modules"). Everything else is internal and may change;
+# a plugin never imports a backend (rehabkit.sim, .hardware, .canopen) nor a layer (rehabkit.rehab, .ros, .sweep, ...).
+PUBLIC_MODULES = (
+    "rehabkit.plugin",
+    "rehabkit.kinematics",  # kinematic chains, DH descriptions, the robot model, MJCF building, wearables, robot files
+    "rehabkit.trajectories",  # time laws, rest-to-rest timing
+    "rehabkit.workspaces",  # voxel workspaces and the searches over them
+    "rehabkit.planning",  # joint-space and Cartesian planning helpers, throwing
+    "rehabkit.control",  # QP task stack, small solves, learned policies, saved poses
+    "rehabkit.sensing",  # Kalman filtering, rigid-body estimation
+    "rehabkit.musculoskeletal",  # musculoskeletal arms, their fitting, static optimisation, impairments
+    "rehabkit.recordings",  # sessions recorded in ROS bags
+)
+
 __all__ = [
-    # registering
-    "hookimpl", "Declared",
+    # registering; the modules a plugin may import
+    "hookimpl", "Declared", "PUBLIC_MODULES",
     # the plugin kinds and what they exchange
     "Robot", "RobotModel", "JointLimits", "PoseSpec", "Planner", "Plan", "PlanRequest", "Trajectory", "Target",
     "ReferenceSpace", "Controller", "ControllerReference", "Sensor", "SensorConfig", "Instrument",
-    "InteractionForceSensor", "Backend", "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient",
+    "InteractionForceSensor", "Backend", "BodyPoses", "Contact", "GeomVisual", "Patient", "EmbodiedPatient", "JointRom",
     "Context", "StrictModel", "FilePath", "SensorName", "Reading", "Wearable", "Strap",
     # what every kind's run_metrics(trace) reads: the run's record at the control rate
     "Trace",

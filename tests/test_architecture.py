@@ -152,3 +152,57 @@ def test_the_public_api_imports_no_simulator_robotics_library_or_viewer():
     code = f"import sys, rehabkit.plugin; print(','.join(m for m in {heavy!r} if m in sys.modules))"
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
     assert done.stdout.strip() == ""
+
+
+def test_built_in_plugins_import_only_the_public_api():
+    """A built-in plugin imports from rehabkit only what a third party may: ``rehabkit.plugin`` and the public helper
+    modules (``rehabkit.plugin.PUBLIC_MODULES``), never an internal module, a backend or a layer; and every name
+    each public module lists in ``__all__`` exists."""
+    import ast
+    import importlib.util
+    from pathlib import Path
+
+    from rehabkit.plugin import PUBLIC_MODULES
+
+    forbidden = ("rehabkit.core", "rehabkit.sim", "rehabkit.hardware", "rehabkit.canopen", "rehabkit.rehab",
+                 "rehabkit.ros", "rehabkit.sweep", "rehabkit.gym", "rehabkit.learning", "rehabkit.safety_report",
+                 "rehabkit.cli", "rehabkit.api", "rehabkit.testing")
+    assert not [m for m in PUBLIC_MODULES if m.startswith(forbidden)]
+    bad = []
+    for path in sorted((ROOT / "plugins").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno}: {m}" for m in names
+                    if (m == "rehabkit" or m.startswith("rehabkit.")) and m not in PUBLIC_MODULES]
+    assert bad == []
+    # each name resolved where the module says it comes from (a helper module loads a name's module on first use:
+    # read, not imported, to keep this cheap — importing them all pulls in MuJoCo, Pinocchio, SciPy, OMPL)
+    defined: dict[str, set[str]] = {}
+
+    def top_level(module: str) -> set[str]:
+        if module not in defined:
+            tree = ast.parse(Path(importlib.util.find_spec(module).origin).read_text())
+            names = set()
+            for node in tree.body:
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                    names.add(node.name)
+                elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+                    for target in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                        names |= {n.id for n in ast.walk(target) if isinstance(n, ast.Name)}
+                elif isinstance(node, (ast.Import, ast.ImportFrom)):
+                    names |= {(a.asname or a.name).split(".")[0] for a in node.names}
+            defined[module] = names
+        return defined[module]
+
+    for name in PUBLIC_MODULES:
+        module = importlib.import_module(name)
+        assert module.__doc__ and module.__all__, name
+        sources = {attr: where for where, attrs in getattr(module, "_FROM", {}).items() for attr in attrs}
+        missing = [attr for attr in module.__all__ if attr not in vars(module) and
+                   (attr not in sources or attr not in top_level(sources[attr]))]
+        assert missing == [], name

@@ -18,9 +18,9 @@ from rehabkit_plugins.controllers.arm_keypad_patches import Auto, PatchBook
 from rehabkit_plugins.controllers.arm_keypad_settings import ArmKeypadConfig
 from rehabkit_plugins.robots.contracts import LiftArmGripper
 
-from rehabkit.models.time_laws import PEAK_VELOCITY
+from rehabkit.control import open_store
 from rehabkit.plugin import Context, Controller, Metric, hookimpl
-from rehabkit.store.patches import open_store
+from rehabkit.trajectories import PEAK_VELOCITY
 
 
 class ArmKeypad(Controller):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rehabkit.models.time_laws import quintic
+from rehabkit.trajectories import quintic
 
 AXES = {"x": 0, "y": 1, "z": 2, "roll": 0, "pitch": 1, "yaw": 2}
 SOFT_LIMIT_FRACTION = 0.002

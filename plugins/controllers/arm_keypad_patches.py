@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rehabkit.control import Action, Patch
 from rehabkit.plugin import PlanningError, Target
-from rehabkit.store.patches import Action, Patch
 
 SETTLE_S = 1.0  # after a replay ends, the error to the stored target is measured this much later
 

@@ -23,8 +23,7 @@ import numpy as np
 import pinocchio as pin
 from pydantic import Field, model_validator
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, Metric, StrictModel
+from rehabkit.plugin import Context, Controller, Metric, StrictModel, hookimpl
 
 SERIES_EVERY = 10
 

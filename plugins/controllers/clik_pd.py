@@ -19,9 +19,8 @@ import pinocchio as pin
 from numba import njit
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.numerics.spd3 import adjugate_solve3
-from rehabkit.plugin import Context, Controller, SettingError, StrictModel
+from rehabkit.control import adjugate_solve3
+from rehabkit.plugin import Context, Controller, SettingError, StrictModel, hookimpl
 
 _solve3 = njit(cache=True, nogil=True)(adjugate_solve3)
 

@@ -8,8 +8,7 @@ import numpy as np
 import pinocchio as pin
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, SettingError, StrictModel
+from rehabkit.plugin import Context, Controller, SettingError, StrictModel, hookimpl
 
 
 class JointPDConfig(StrictModel):

@@ -23,8 +23,7 @@ import numpy as np
 import pinocchio as pin
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, Metric, SettingError, StrictModel
+from rehabkit.plugin import Context, Controller, Metric, SettingError, StrictModel, hookimpl
 
 MARGIN_DEG = 1.0  # the stretch stops this short of the robot's own limit
 EASE_S = 0.5  # the return reaches its speed over this long

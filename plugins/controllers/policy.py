@@ -16,10 +16,9 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.models.policy import Policy
-from rehabkit.models.strict import FilePath
-from rehabkit.plugin import Context, Controller, SettingError, StrictModel
+from rehabkit.control import Policy
+from rehabkit.kinematics import FilePath
+from rehabkit.plugin import Context, Controller, SettingError, StrictModel, hookimpl
 
 CONTROLLER_TERMS = ("joint_state", "reference", "tracking_error", "phase")
 

@@ -20,10 +20,17 @@ import numpy as np
 import pinocchio as pin
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, FloatingBase, Metric, StrictModel
-from rehabkit.wholebody.stack import Level, compile_kernels, solve_cascade
-from rehabkit.wholebody.tasks import Constraints, ConstraintSpec, KinematicState, Task, TaskSpec
+from rehabkit.control import (
+    Constraints,
+    ConstraintSpec,
+    KinematicState,
+    Level,
+    Task,
+    TaskSpec,
+    compile_kernels,
+    solve_cascade,
+)
+from rehabkit.plugin import Context, Controller, FloatingBase, Metric, StrictModel, hookimpl
 
 
 class LevelSpec(StrictModel):

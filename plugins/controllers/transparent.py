@@ -8,8 +8,7 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Controller, StrictModel
+from rehabkit.plugin import Context, Controller, StrictModel, hookimpl
 
 
 class TransparentConfig(StrictModel):

@@ -18,14 +18,24 @@ import mujoco
 import numpy as np
 from rehabkit_plugins.patients.musculoskeletal_settings import MusculoskeletalConfig, per_group, wearable_for
 
-from rehabkit import hookimpl
-from rehabkit.musculo.fit import compose, fit_arm, strap_rows, strap_solref
-from rehabkit.musculo.human import CATALOGUE, PREFIX, HumanArm, load_arm_spec
-from rehabkit.musculo.impairments import MuscleFatigue, NoiseStream, StretchReflex, Tremor
-from rehabkit.musculo.scaling import scale_arm
-from rehabkit.musculo.static_opt import StaticOptimisation
-from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, SettingError
-from rehabkit.sim.mujoco import span
+from rehabkit.musculoskeletal import (
+    CATALOGUE,
+    PREFIX,
+    HumanArm,
+    MuscleFatigue,
+    NoiseStream,
+    StaticOptimisation,
+    StretchReflex,
+    Tremor,
+    compose,
+    fit_arm,
+    load_arm_spec,
+    scale_arm,
+    span,
+    strap_rows,
+    strap_solref,
+)
+from rehabkit.plugin import Context, Drawing, EmbodiedPatient, Metric, SettingError, hookimpl
 
 SERIES_EVERY = 10  # control steps between logged samples
 CUFF_ARROW_M_PER_N = 0.01  # the cuff forces drawn 1 cm per N: a 25 N push is a 25 cm arrow

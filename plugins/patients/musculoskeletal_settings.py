@@ -9,7 +9,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from rehabkit.models.wearable import Strap, Wearable
+from rehabkit.kinematics import Strap, Wearable
 from rehabkit.plugin import SettingError, StrictModel, suggest
 
 Vec3 = tuple[float, float, float]

@@ -14,9 +14,8 @@ import hashlib
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Patient, SettingError, StrictModel
-from rehabkit.ros.replay.session_bag import BagError, read_session
+from rehabkit.plugin import Context, Patient, SettingError, StrictModel, hookimpl
+from rehabkit.recordings import BagError, read_session
 
 
 class RecordedWrenchConfig(StrictModel):

@@ -33,9 +33,7 @@ import pinocchio as pin
 from numba import njit
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Context, Metric, Patient, SettingError, StrictModel
-from rehabkit.rehab.profile import JointRom
+from rehabkit.plugin import Context, JointRom, Metric, Patient, SettingError, StrictModel, hookimpl
 
 PerJoint = float | list[float]
 NonNegative = Annotated[float, Field(ge=0)]  # (a bound on each branch of a union: JSON Schema has no 'ge' on a union)

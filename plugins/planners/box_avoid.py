@@ -21,12 +21,8 @@ from pydantic import Field
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
-from rehabkit import hookimpl
-from rehabkit.geometry.box_avoid import NoPathError, plan_path
-from rehabkit.geometry.solids import Solid, make_solid
-from rehabkit.models.chain import rpy_to_matrix
-from rehabkit.models.time_laws import PEAK_VELOCITY as PEAK
-from rehabkit.models.time_laws import quintic
+from rehabkit.kinematics import rpy_to_matrix
+from rehabkit.planning import NoPathError, Solid, make_solid, plan_path
 from rehabkit.plugin import (
     Context,
     Metric,
@@ -37,7 +33,10 @@ from rehabkit.plugin import (
     SettingError,
     StrictModel,
     angular_distance,
+    hookimpl,
 )
+from rehabkit.trajectories import PEAK_VELOCITY as PEAK
+from rehabkit.trajectories import quintic
 
 
 class BoxAvoidConfig(StrictModel):

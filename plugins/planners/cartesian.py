@@ -17,7 +17,6 @@ import contextlib
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
 from rehabkit.plugin import (
     Context,
     Metric,
@@ -29,6 +28,7 @@ from rehabkit.plugin import (
     StrictModel,
     Target,
     angle_axis,
+    hookimpl,
     unreachable,
 )
 
@@ -83,7 +83,7 @@ class CartesianPlanner(Planner):
         self.checker = None
         world = context.world
         if config.clearance_m is not None and world is not None and (world.objects or world.floor):
-            from rehabkit.cspace.scene_check import SceneCollision
+            from rehabkit.planning import SceneCollision
 
             self.checker = SceneCollision(self.robot.model, world, config.clearance_m)
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
 from rehabkit.plugin import (
     Context,
     Metric,
@@ -23,6 +22,7 @@ from rehabkit.plugin import (
     PlanRequest,
     SettingError,
     StrictModel,
+    hookimpl,
     joint_waypoints,
 )
 

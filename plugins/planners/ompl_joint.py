@@ -15,11 +15,19 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.cspace.ompl_seed import seed_ompl
-from rehabkit.cspace.scene_check import SceneCollision
-from rehabkit.cspace.timing import RestToRestPath, rest_to_rest_durations
-from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, joint_waypoints
+from rehabkit.planning import SceneCollision, seed_ompl
+from rehabkit.plugin import (
+    Context,
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    StrictModel,
+    hookimpl,
+    joint_waypoints,
+)
+from rehabkit.trajectories import RestToRestPath, rest_to_rest_durations
 
 ALGORITHMS = {"rrt-connect": "RRTConnect", "rrt-star": "RRTstar", "prm": "PRM"}
 

@@ -22,12 +22,18 @@ from pydantic import Field
 from rehabkit_plugins.robots.contracts import ClusterPoints
 from scipy import ndimage
 
-from rehabkit import hookimpl
-from rehabkit.cspace.genetic import GAConfig, PathGA, resample
-from rehabkit.cspace.joint_matrix import JointMatrix, build_joint_matrix
-from rehabkit.cspace.occupancy import rasterise
-from rehabkit.cspace.ompl_seed import seed_ompl
-from rehabkit.plugin import Context, Metric, Plan, Planner, PlanningError, PlanRequest, StrictModel, joint_waypoints
+from rehabkit.planning import GAConfig, JointMatrix, PathGA, build_joint_matrix, rasterise, resample, seed_ompl
+from rehabkit.plugin import (
+    Context,
+    Metric,
+    Plan,
+    Planner,
+    PlanningError,
+    PlanRequest,
+    StrictModel,
+    hookimpl,
+    joint_waypoints,
+)
 
 from .multi_cubic import MultiCubicTrajectory, solve_multi_cubic
 

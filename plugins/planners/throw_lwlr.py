@@ -22,8 +22,7 @@ import numpy as np
 import pinocchio as pin
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.models.time_laws import quintic
+from rehabkit.planning import LWLR, PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
 from rehabkit.plugin import (
     Context,
     FloatingBase,
@@ -34,9 +33,9 @@ from rehabkit.plugin import (
     PlanRequest,
     SettingError,
     StrictModel,
+    hookimpl,
 )
-from rehabkit.throwing.lwlr import LWLR
-from rehabkit.throwing.model import PARAMS, Throw, follow_through, hand_path, parabola, plane_crossing
+from rehabkit.trajectories import quintic
 
 RATE = 1000.0  # samples per second of the planned hand path
 

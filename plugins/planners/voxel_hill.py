@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from rehabkit import hookimpl
-from rehabkit.workspace.planning import VoxelPlanner, VoxelPlannerConfig
-from rehabkit.workspace.search import hill
+from rehabkit.plugin import hookimpl
+from rehabkit.workspaces import VoxelPlanner, VoxelPlannerConfig, hill
 
 
 class VoxelHill(VoxelPlanner):

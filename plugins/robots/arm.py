@@ -25,11 +25,19 @@ from pydantic import Field
 from rehabkit_plugins.robots.arm_kinematics import elbow_up, nearest_elbow_up
 from rehabkit_plugins.robots.contracts import LiftArmGripper
 
-from rehabkit import hookimpl
-from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
-from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
-from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
-from rehabkit.plugin import Context, Robot, StrictModel, load_yaml
+from rehabkit.kinematics import (
+    ROBOT_CONAFFINITY,
+    ROBOT_CONTYPE,
+    DHRobotSpec,
+    DHRowSpec,
+    JointLimits,
+    JointSpec,
+    PoseSpec,
+    RobotModel,
+    SafeStop,
+    build_dh_robot,
+)
+from rehabkit.plugin import Context, Robot, StrictModel, hookimpl, load_yaml
 
 TABLE_MM = [(0, 0, 0), (-90, 0, 0), (0, 396.7, 99.2), (90, 0, 323.4), (-90, 0, 0), (90, 0, 0)]
 FINGER = (0.006, 0.012, 0.035)  # finger half sizes [m]: thickness, width, length

@@ -14,11 +14,8 @@ from pydantic import Field
 from rehabkit_plugins.robots.contracts import ClusterPoints
 from scipy.optimize import least_squares
 
-from rehabkit import hookimpl
-from rehabkit.models.chain import matrix_to_quat_wxyz
-from rehabkit.models.dh import PoseSpec
-from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
-from rehabkit.plugin import Context, PassiveJoints, Robot, StrictModel
+from rehabkit.kinematics import JointLimits, PoseSpec, RobotModel, SafeStop, matrix_to_quat_wxyz
+from rehabkit.plugin import Context, PassiveJoints, Robot, StrictModel, hookimpl
 
 from .capaman_kinematics import CapamanGeometry, forward, forward_jacobian, inverse
 from .capaman_mjcf import MASS, build_capaman_mjcf

@@ -11,8 +11,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from rehabkit.models.chain import matrix_to_quat_wxyz
-from rehabkit.models.mjcf_builder import ROBOT_CONAFFINITY, ROBOT_CONTYPE
+from rehabkit.kinematics import ROBOT_CONAFFINITY, ROBOT_CONTYPE, matrix_to_quat_wxyz
 
 from .capaman_kinematics import CapamanGeometry
 

@@ -20,10 +20,8 @@ import pinocchio as pin
 from pydantic import Field
 from scipy.linalg.lapack import dgesv
 
-from rehabkit import hookimpl
-from rehabkit.models.chain import matrix_to_quat_wxyz, rpy_to_matrix
-from rehabkit.models.robot_model import JointLimits, RobotModel, SafeStop
-from rehabkit.plugin import Context, FloatingBase, Robot, StrictModel
+from rehabkit.kinematics import JointLimits, RobotModel, SafeStop, matrix_to_quat_wxyz, rpy_to_matrix
+from rehabkit.plugin import Context, FloatingBase, Robot, StrictModel, hookimpl
 
 VELOCITY_RAD_S = 4.0  # the URDF's velocity limit for every joint (marked there as not measured)
 FEET = ("l_sole", "r_sole")

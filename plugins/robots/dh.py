@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from rehabkit import hookimpl
-from rehabkit.models.dh import DHRobotSpec, build_dh_robot
-from rehabkit.plugin import Context, Robot
+from rehabkit.kinematics import DHRobotSpec, build_dh_robot
+from rehabkit.plugin import Context, Robot, hookimpl
 
 
 class DHRobot(Robot):

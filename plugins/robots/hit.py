@@ -29,12 +29,21 @@ from importlib import resources
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.models.chain import DHRow, KinematicChain, inv_se3, mdh_transform
-from rehabkit.models.dh import DHRobotSpec, DHRowSpec, JointSpec, PoseSpec, build_dh_robot
-from rehabkit.models.robot_model import SafeStop
-from rehabkit.models.wearable import Strap, Wearable
-from rehabkit.plugin import Context, Robot, StrictModel, load_yaml
+from rehabkit.kinematics import (
+    DHRobotSpec,
+    DHRow,
+    DHRowSpec,
+    JointSpec,
+    KinematicChain,
+    PoseSpec,
+    SafeStop,
+    Strap,
+    Wearable,
+    build_dh_robot,
+    inv_se3,
+    mdh_transform,
+)
+from rehabkit.plugin import Context, Robot, StrictModel, hookimpl, load_yaml
 
 L1, L2, L3 = 0.313, 0.252, 0.1  # upper arm, forearm, hand [m] (paper's values)
 

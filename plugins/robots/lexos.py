@@ -27,16 +27,21 @@ import numpy as np
 from numba import njit
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.models.chain import KinematicChain, rot_x, trans
-from rehabkit.models.dh import JointSpec, PoseSpec, links_and_limits
-from rehabkit.models.mjcf_builder import build_chain_mjcf
-from rehabkit.models.robot_model import RobotModel, SafeStop
-from rehabkit.models.wearable import Strap, Wearable
-from rehabkit.plugin import Context, RandomReach, Robot, StrictModel, WorkspaceTable, load_yaml
-from rehabkit.workspace.build import build_workspace
-from rehabkit.workspace.grid import VoxelWorkspace
-from rehabkit.workspace.sampling import random_inner, random_inner_not_straight
+from rehabkit.kinematics import (
+    JointSpec,
+    KinematicChain,
+    PoseSpec,
+    RobotModel,
+    SafeStop,
+    Strap,
+    Wearable,
+    build_chain_mjcf,
+    links_and_limits,
+    rot_x,
+    trans,
+)
+from rehabkit.plugin import Context, RandomReach, Robot, StrictModel, WorkspaceTable, hookimpl, load_yaml
+from rehabkit.workspaces import VoxelWorkspace, build_workspace, random_inner, random_inner_not_straight
 
 UPPER_ARM, FOREARM = 0.30, 0.35  # [m], adult anthropometry (no public L-Exos figures)
 

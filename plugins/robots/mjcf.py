@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from rehabkit import hookimpl
-from rehabkit.models.files.mjcf_import import ModelFileConfig, ModelFileError, robot_from_file
-from rehabkit.plugin import Context, Robot, SettingError
+from rehabkit.kinematics import ModelFileConfig, ModelFileError, robot_from_file
+from rehabkit.plugin import Context, Robot, SettingError, hookimpl
 
 
 class MjcfRobot(Robot):

@@ -7,11 +7,17 @@ import math
 import pinocchio as pin
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.models.files.mjcf_import import ModelFileConfig, ModelFileError, robot_from_file
-from rehabkit.models.files.ros_package import DescriptionError, prepared, resolve_uri, visual_only
-from rehabkit.models.strict import FilePath
-from rehabkit.plugin import Context, Robot, SettingError
+from rehabkit.kinematics import (
+    DescriptionError,
+    FilePath,
+    ModelFileConfig,
+    ModelFileError,
+    prepared,
+    resolve_uri,
+    robot_from_file,
+    visual_only,
+)
+from rehabkit.plugin import Context, Robot, SettingError, hookimpl
 
 
 class UrdfConfig(ModelFileConfig):

@@ -15,10 +15,8 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.estimation.kalman import ConstantRateModel, KalmanBank, rts_smooth
-from rehabkit.estimation.rigid_body import AccelerometerArray, AngularVelocityEKF
-from rehabkit.plugin import Backend, Context, Instrument, Instruments, Metric, Sensor, SensorConfig
+from rehabkit.plugin import Backend, Context, Instrument, Instruments, Metric, Sensor, SensorConfig, hookimpl
+from rehabkit.sensing import AccelerometerArray, AngularVelocityEKF, ConstantRateModel, KalmanBank, rts_smooth
 
 Vec3 = tuple[float, float, float]
 MOVING_RAD_S = 0.02  # the plate counts as moving above this true angular speed

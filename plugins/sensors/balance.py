@@ -14,8 +14,17 @@ import pinocchio as pin
 from pydantic import Field
 from scipy.spatial import ConvexHull
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Backend, BaseState, Context, FloatingBase, Metric, Sensor, SensorConfig, SettingError
+from rehabkit.plugin import (
+    Backend,
+    BaseState,
+    Context,
+    FloatingBase,
+    Metric,
+    Sensor,
+    SensorConfig,
+    SettingError,
+    hookimpl,
+)
 
 
 class BalanceConfig(SensorConfig):

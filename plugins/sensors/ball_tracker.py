@@ -13,9 +13,8 @@ import math
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Backend, Context, Metric, SceneGeometry, SceneObjects, Sensor, SensorConfig
-from rehabkit.throwing.model import GRAVITY
+from rehabkit.planning import GRAVITY
+from rehabkit.plugin import Backend, Context, Metric, SceneGeometry, SceneObjects, Sensor, SensorConfig, hookimpl
 
 FIT_SAMPLES = 20  # samples after the release used to fit the flight's initial state
 

@@ -17,8 +17,7 @@ import cv2
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Backend, Cameras, Context, Metric, Sensor, SensorConfig, SettingError
+from rehabkit.plugin import Backend, Cameras, Context, Metric, Sensor, SensorConfig, SettingError, hookimpl
 
 HSV = tuple[int, int, int]
 

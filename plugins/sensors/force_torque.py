@@ -24,7 +24,6 @@ import mujoco
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
 from rehabkit.plugin import (
     Backend,
     Context,
@@ -35,6 +34,7 @@ from rehabkit.plugin import (
     SensorConfig,
     SettingError,
     StrictModel,
+    hookimpl,
 )
 
 Vec3 = tuple[float, float, float]

@@ -8,8 +8,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 from pydantic import Field
 
-from rehabkit import hookimpl
-from rehabkit.plugin import Backend, Context, Sensor, SensorConfig, SettingError
+from rehabkit.plugin import Backend, Context, Sensor, SensorConfig, SettingError, hookimpl
 
 
 class JointEncoderConfig(SensorConfig):

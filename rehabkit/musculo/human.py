@@ -25,7 +25,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rehabkit.sim.mujoco import span
+from rehabkit.numerics.indices import span
 
 PREFIX = "human/"
 

@@ -20,7 +20,7 @@ import numpy as np
 import qpsolvers
 
 from rehabkit.musculo.human import HumanArm
-from rehabkit.sim.mujoco import span
+from rehabkit.numerics.indices import span
 
 TOLERANCE_NM = 1e-3  # a torque met within this is reproduced; beyond it the step is saturated
 EFFORT_WEIGHT = 1e-4  # the least-squares fallback's pull toward low activations (per N·m² of torque error)

@@ -16,29 +16,9 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from rehabkit.core.kinds.interfaces import StrictModel
+from rehabkit.core.kinds.patient import JointRom  # (a core kind's: a simulated person has its own)
 
 Range = tuple[float, float]
-
-
-class JointRom(StrictModel):
-    """Range of motion of one revolute joint [deg] and its comfortable speed [deg/s] (a prismatic joint has none: its
-    limits are the safety envelope's, in metres)."""
-
-    passive_deg: Range = Field(description="range the joint can be moved through (a hard limit)")
-    active_deg: Range | None = Field(None, description="range the person reaches on their own")
-    max_speed_deg_s: float | None = Field(None, gt=0, description="comfortable speed of this joint")
-
-    @model_validator(mode="after")
-    def _nested(self) -> JointRom:
-        lo, hi = self.passive_deg
-        if lo >= hi:
-            raise ValueError(f"passive_deg must be [lowest, highest], got {list(self.passive_deg)}")
-        if self.active_deg is not None:
-            a, b = self.active_deg
-            if a >= b or a < lo or b > hi:
-                raise ValueError(f"active_deg {list(self.active_deg)} must be an interval inside passive_deg "
-                                 f"{list(self.passive_deg)}")
-        return self
 
 
 class Comfort(StrictModel):

@@ -26,6 +26,7 @@ from rehabkit.core.kinds.interfaces import Backend, Contact, Context, StrictMode
 from rehabkit.core.kinds.run_state import capture, restore
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
+from rehabkit.numerics.indices import span
 from rehabkit.sim.loads import LoadApplier
 from rehabkit.sim.scene import INTEGRATORS, InstrumentErrors, add_instruments, build_scene, couple_joints, engage_brakes
 from rehabkit.sim.scene_view import SceneView
@@ -41,13 +42,6 @@ class MujocoConfig(StrictModel):
 # the model's parameters that a run changes as it goes: a brake's friction and its constraint's softness
 # (sim.scene.engage_brakes), a muscle's peak force under fatigue (the musculoskeletal patient), a grasp's weld (grasp)
 RUN_MODEL_FIELDS = ("dof_frictionloss", "dof_solref", "dof_solimp", "actuator_gainprm", "eq_data")
-
-
-def span(indices: np.ndarray) -> slice | np.ndarray:
-    """A slice when the indices are contiguous: cheaper than fancy indexing in the hot loop."""
-    if len(indices) and np.all(np.diff(indices) == 1):
-        return slice(int(indices[0]), int(indices[-1]) + 1)
-    return indices
 
 
 class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, HeldObjects, Cameras, Instruments,

@@ -15,7 +15,7 @@ from rehabkit.core.kinds.backend import Backend, BackendFaultError, BodyPoses, C
 from rehabkit.core.kinds.context import Context, ReferenceSpace
 from rehabkit.core.kinds.errors import PlanningError, SettingError
 from rehabkit.core.kinds.metric import Metric
-from rehabkit.core.kinds.patient import EmbodiedPatient, Patient
+from rehabkit.core.kinds.patient import EmbodiedPatient, JointRom, Patient
 from rehabkit.core.kinds.robot import IKUnavailableError, Robot
 from rehabkit.core.kinds.run_state import RunState
 from rehabkit.core.kinds.sensor import Instrument, InteractionForceSensor, Reading, Sensor, SensorConfig
@@ -165,7 +165,7 @@ class Controller(RunState, ABC):
 __all__ = [  # the backend, sensor and patient kinds live in modules of their own; importable from here as before
     "Backend", "BackendFaultError", "BodyPoses", "Contact", "Context", "Controller", "Drawing", "EmbodiedPatient",
     "GeomVisual",
-    "IKUnavailableError",
+    "IKUnavailableError", "JointRom",
     "Instrument", "InteractionForceSensor", "Patient", "Plan", "Planner", "PlanningError", "SettingError",
     "PlanRequest", "Reading",
     "ReferenceSpace", "ControllerReference", "Robot", "Sensor", "SensorConfig", "StrictModel", "Target", "Trajectory",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -118,7 +119,11 @@ def converted(mesh: Path) -> Path:
     out = cache_dir() / "meshes" / f"{mesh.stem}-{digest}.stl"
     if out.exists():
         return out
-    loaded = trimesh.load(str(mesh), force="mesh")
+    with warnings.catch_warnings():
+        # pycollada 0.9.3 (the newest release) sets arrays' .shape, which NumPy 2.5 deprecates; fixed upstream
+        # (pycollada PRs 163 and 164), not yet released: drop this once a newer pycollada is required
+        warnings.filterwarnings("ignore", "Setting the shape on a NumPy array", DeprecationWarning, r"collada\.")
+        loaded = trimesh.load(str(mesh), force="mesh")
     if loaded.is_empty:
         raise DescriptionError(str(mesh), "the file holds no triangles", "export the mesh with its geometry")
     return _written(out, loaded.export(file_type="stl"))
