@@ -46,6 +46,7 @@ from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.stopping import joint_inertia
 from rehabkit.hardware.bridge import HOLD_KD, HOLD_KP
+from rehabkit.hardware.bridge_process import signals_held
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror
@@ -296,22 +297,24 @@ class CanopenBackend(MirroredScene, Backend, Instruments, FollowsReference):
     def close(self) -> None:
         """The run's end, however it came (:mod:`~rehabkit.canopen.drives.ending`): the robot brought to rest in the
         run's stop category, the power stages off, the drives' watchdogs of the host disarmed, NMT pre-operational;
-        then the bus closed."""
-        try:
-            if self.clock is not None:  # (its own cycles end; the end's keep their deadlines, then the process is
-                self.clock.stop()  # put back as it was)
+        then the bus closed. SIGINT and SIGTERM are held off meanwhile: a second Ctrl-C, a service manager's SIGTERM,
+        must not leave the drives powered and operational."""
+        with signals_held():
             try:
-                if self._configured:
-                    self._end()
+                if self.clock is not None:  # (its own cycles end; the end's keep their deadlines, then the process is
+                    self.clock.stop()  # put back as it was)
+                try:
+                    if self._configured:
+                        self._end()
+                finally:
+                    if self.clock is not None:
+                        self.clock.close()
+                if self.rig is not None:
+                    self.rig.stop_watching()
+                self.bus.close(keep_trace=self._started)  # (a run refused at its reset leaves no trace file)
             finally:
-                if self.clock is not None:
-                    self.clock.close()
-            if self.rig is not None:
-                self.rig.stop_watching()
-            self.bus.close(keep_trace=self._started)  # (a run refused at its reset leaves no trace file)
-        finally:
-            if self.frames is not None:
-                self.frames.close()
+                if self.frames is not None:
+                    self.frames.close()
 
     def _end(self) -> None:
         limits = self._limits

@@ -30,7 +30,7 @@ from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.safety.event import SafetyEvent
-from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
+from rehabkit.hardware.bridge_process import signals_held, spawn_bridge, stop_bridge
 from rehabkit.hardware.bridge_says import hold_breach, hold_reason, latched_message
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer
@@ -287,12 +287,15 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         return link_series(self)
 
     def close(self) -> None:
-        try:
-            stop_bridge(self.process)  # the bridge first: nothing below may leave it running
-        finally:
-            self.wire.close()
-            if self.frames is not None:
-                self.frames.close()
+        """The run's end, however it came (the robot already at rest: the safety layer's stop): the bridge this run
+        started stopped, the link closed; SIGINT and SIGTERM held off meanwhile."""
+        with signals_held():
+            try:
+                stop_bridge(self.process)  # the bridge first: nothing below may leave it running
+            finally:
+                self.wire.close()
+                if self.frames is not None:
+                    self.frames.close()
 
 
 @hookimpl

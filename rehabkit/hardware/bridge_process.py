@@ -3,11 +3,15 @@ with the run."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
+from collections.abc import Iterator
 from dataclasses import asdict
 
 from rehabkit.core.kinds.interfaces import Context
@@ -36,7 +40,10 @@ def spawn_bridge(context: Context, config) -> tuple[subprocess.Popen, int]:
     # stderr to a file, never a pipe nobody reads: a full pipe would block the bridge mid-run
     log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (lives as long as the bridge process)
     # in the scenario's folder: the robot's files (a URDF beside the scenario) resolve there as on the host
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True, cwd=context.scenario_dir)
+    # in a session of its own: a terminal's Ctrl-C (sent to its whole foreground process group) reaches the host alone,
+    # which brings the robot to rest through the bridge, then stops it (it stops on its own once the host is gone)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True, cwd=context.scenario_dir,
+                            start_new_session=True)
     line = proc.stdout.readline()  # "bridge: <robot> on udp://host:port"
     if not line.startswith("bridge:"):
         proc.kill()
@@ -61,3 +68,19 @@ def stop_bridge(process: subprocess.Popen | None) -> None:
         process.wait()
     if process.stdout is not None:
         process.stdout.close()
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM ignored while a backend releases the robot at a run's end (a second Ctrl-C, a service
+    manager's SIGTERM, must not leave the drives powered or the bridge running); in the main thread, where Python
+    takes signals."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)

@@ -105,7 +105,12 @@ def run_sweep(scenario: str | Path, grid: Mapping[str, list[Any]] | Iterable[str
 
     if serial:
         for s in todo:
-            record(s, execute(str(path), s.overrides, timeout_s, run_dir(s)))
+            row = execute(str(path), s.overrides, timeout_s, run_dir(s))
+            record(s, row)
+            if row.get("ended", {}).get("how") == "interrupted":  # Ctrl-C, SIGTERM: the run recorded, the sweep stops
+                from rehabkit.core.run.runner import Terminated
+
+                raise Terminated() if row["ended"].get("signal") == "SIGTERM" else KeyboardInterrupt()
     elif todo:
         _on_ray(todo, str(path), timeout_s, address, workers, record, run_dir)
     bar.close()

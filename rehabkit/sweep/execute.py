@@ -44,6 +44,9 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
         setup = weakref.ref(runner.setup)
         del runner
         row["passed"] = result.passed
+        row["ended"] = ended = result.summary["ended"]  # (interrupted: Ctrl-C, SIGTERM; the sweep stops once recorded)
+        if ended["how"] == "interrupted":
+            row["error"] = f"interrupted ({ended.get('signal')}) at t={ended.get('t')} s"
         # NaN (a measure with nothing to measure) as None, as the stored rows have it
         row["metrics"] = {k: None if v != v else float(v) for k, v in result.metrics.items()
                           if isinstance(v, (int, float))}

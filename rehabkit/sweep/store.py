@@ -1,7 +1,8 @@
 """A sweep's directory: one file per finished run (so a killed sweep resumes), then the tables.
 
     DIR/sweep.json          what the sweep is (scenario, grid, seeds)
-    DIR/runs/<run id>.json  one row per finished run, written whole (temp file, then rename)
+    DIR/runs/<run id>.json  one row per finished run, written whole (temp file, then rename); a run Ctrl-C or
+                            SIGTERM cut short is recorded so ("ended") and run again when the sweep resumes
     DIR/results.parquet     all rows, in grid order (columnar: grid keys, seed, passed, error,
                             wall_time_s, metric.<name>, wall.<name> for wall-clock metrics,
                             expect.<metric>)
@@ -33,9 +34,11 @@ class RunStore:
             f = self.runs / f"{spec.run_id}.json"
             if f.exists():
                 try:
-                    out[spec.run_id] = json.loads(f.read_text())
+                    row = json.loads(f.read_text())
                 except (OSError, json.JSONDecodeError):  # not written whole (cannot happen with rename): rerun
                     continue
+                if row.get("ended", {}).get("how") != "interrupted":  # (cut short by Ctrl-C, SIGTERM: run again)
+                    out[spec.run_id] = row
         return out
 
     def save(self, spec: RunSpec, row: dict[str, Any]) -> None:
