@@ -59,6 +59,19 @@ def rng():
     return np.random.default_rng(12345)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _suite_state(tmp_path_factory):
+    """Runs made by module- and session-scoped fixtures keep their e-stop latches out of the user's state too (a
+    latch someone set by hand would refuse them)."""
+    before = os.environ.get("REHABKIT_STATE")
+    os.environ["REHABKIT_STATE"] = str(tmp_path_factory.mktemp("suite-state"))
+    yield
+    if before is None:
+        os.environ.pop("REHABKIT_STATE", None)
+    else:
+        os.environ["REHABKIT_STATE"] = before
+
+
 @pytest.fixture(autouse=True)
 def _own_state(tmp_path, monkeypatch):
     """Each test keeps its e-stop latches to itself (rehabkit.core.safety.estop: $REHABKIT_STATE)."""

@@ -9,6 +9,7 @@ import pytest
 
 from rehabkit.api import run_scenario
 from rehabkit.core.kinds.interfaces import Controller, StrictModel
+from rehabkit.core.log.safety_log import check
 from rehabkit.core.run.runner import Runner, SetupError
 from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
@@ -155,7 +156,7 @@ def test_no_rrd_when_logging_is_off(tmp_path):
     assert r.passed
 
 
-def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):
+def test_a_run_that_dies_after_its_loop_leaves_no_half_written_file(tmp_path, monkeypatch):
     from rehabkit.core.log.rerun_log import RerunLog
 
     def broken_flush(self):
@@ -164,7 +165,10 @@ def test_a_run_that_dies_leaves_no_half_written_file(tmp_path, monkeypatch):
     monkeypatch.setattr(RerunLog, "flush", broken_flush)
     with pytest.raises(OSError, match="disk full"):
         run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path)
-    assert list(tmp_path.iterdir()) == []
+    # no half-written recording or summary; the safety log stays, as it stood (the robot moved: its audit trail is
+    # kept, without its closing record, as a killed run's is)
+    assert [p.name for p in tmp_path.iterdir()] == ["safety_log.jsonl"]
+    assert not check(tmp_path / "safety_log.jsonl").finished
 
 
 @pytest.mark.parametrize("error", [ValueError("Value does not fit in specified type"), KeyboardInterrupt()])

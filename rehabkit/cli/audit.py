@@ -1,4 +1,8 @@
-"""``rehabkit audit RUN_DIR``: check a run's safety log (its hash chain) and print it."""
+"""``rehabkit audit RUN_DIR``: check a run's safety log (its hash chain) and print it.
+
+A run killed on the way (SIGKILL, the power gone) leaves a log written up to its last record: the chain is checked
+that far and the log said to end without its closing record; a last line cut short as it was written is left out,
+said so. Exit 0 when the chain holds, 1 when it does not (tampered), 2 without a log."""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import sys
 from pathlib import Path
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
-from rehabkit.core.log.safety_log import KEY_ENV, LOG, audit_key, verify
+from rehabkit.core.log.safety_log import KEY_ENV, LOG, audit_key, check
 
 
 def _link(link: dict | None) -> str:
@@ -43,15 +47,25 @@ def cmd_audit(args: argparse.Namespace) -> int:
     if not path.exists():
         print(f"{args.run_dir}: no {LOG} (a run writes one with --out)", file=sys.stderr)
         return EXIT_INVALID
-    records, problems = verify(path, audit_key())
+    log = check(path, audit_key())
+    records = log.records
     for record in records:
         print(f"{record.get('seq', '?'):>3}  {_line(record)}")
-    if problems:
-        for problem in problems:
+    if log.torn is not None:
+        print(f"torn     the last line is cut short ({log.torn!r}…): a write the process's end interrupted; "
+              "left out")
+    if records and not log.finished:
+        last = records[-1]
+        at = f" (t={last['t']:g} s)" if isinstance(last.get("t"), (int, float)) else ""
+        print(f"unfinished  the log ends without its closing record: the run did not finish (killed, or the machine "
+              f"stopped); checked up to its last record, {last.get('seq', '?')} ({last.get('kind')}{at})")
+    if log.problems:
+        for problem in log.problems:
             print(f"TAMPERED: {problem}", file=sys.stderr)
         return EXIT_FAILED
     keyed = f", keyed ({KEY_ENV})" if audit_key() is not None else ""
-    print(f"chain intact: {len(records)} records{keyed}; last hash {records[-1]['hash']}")
+    print(f"chain intact: {len(records)} records{keyed}{'' if log.finished else ' (up to where it ends)'}; "
+          f"last hash {records[-1]['hash']}")
     return EXIT_OK
 
 

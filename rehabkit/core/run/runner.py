@@ -20,7 +20,6 @@ import weakref
 from collections.abc import Callable
 from pathlib import Path
 
-import yaml
 from threadpoolctl import threadpool_limits
 
 from rehabkit.core.io import atomic_write_json, atomic_write_text
@@ -36,7 +35,6 @@ from rehabkit.core.run.session import RunSession, open_session
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.setup.assembly import Assembly, SetupError, assemble
 
-_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)  # libyaml's emitter where installed
 SNAPSHOT = "scenario.yaml"  # the scenario as run, in the run's folder: what `rehabkit replay` starts from
 
 __all__ = ["SNAPSHOT", "Runner", "RunResult", "SetupError", "finish"]
@@ -85,9 +83,10 @@ class Runner:
         return self.session
 
     def run(self, prepare: Callable[[RunSession], object] | None = None) -> RunResult:
-        """Build, run and finish; outputs are complete files or none. ``prepare(session)``: called with the session
-        standing at its start, before the loop (a forked replay puts the recorded session's state into it)."""
-        session = None
+        """Build, run and finish; outputs are complete files or none — but the safety log, written as the run goes,
+        which a run whose loop ran keeps (:mod:`~rehabkit.core.log.safety_log`). ``prepare(session)``: called with the
+        session standing at its start, before the loop (a forked replay puts the recorded session's state into it)."""
+        session = loop = None
         try:
             with _terminated_as_interrupt():
                 t_setup = time.perf_counter()
@@ -103,6 +102,8 @@ class Runner:
                 session.view.discard()
                 for tap in session.taps:
                     tap.discard()
+                if session.safety_log is not None:  # (written as it went: left as it stands once the loop ran)
+                    session.safety_log.discard() if loop is None else session.safety_log.abandon()
             raise
         else:
             session.setup.backend.close()  # (after the outputs are written; its own error is the run's)
@@ -255,14 +256,15 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
         outputs, recording_written = session.view.begin_close()
         try:
             summary["outputs"] = {**outputs, "scenario": SNAPSHOT, **a.backend.outputs()}
-            snapshot = (f"# {a.loaded.path} as this run used it (extends merged, profile inlined, --set applied); "
-                        "`rehabkit replay` reads it\n" + yaml.dump(a.loaded.source.data, Dumper=_DUMPER,
-                                                                    sort_keys=False))
+            log = session.safety_log  # (the text its run record hashed, made as the session opened)
+            snapshot = log.scenario if log is not None else safety_log.scenario_text(a)
             atomic_write_text(out_dir / SNAPSHOT, snapshot)
-            # the tamper-evident record of the run's safety (rehabkit audit), its last hash in the summary
+            # the tamper-evident record of the run's safety (rehabkit audit), written as the run went: its rest
+            # (the robot side's interventions, known now) and its end, the last hash in the summary
+            if log is None:  # (a session opened without a folder: written here, whole)
+                log = safety_log.open_log(a, session.safety, snapshot, out_dir)
             summary["outputs"]["safety_log"] = safety_log.LOG
-            summary["safety_log_hash"] = safety_log.write(out_dir / safety_log.LOG,
-                                                          safety_log.run_records(a, snapshot, summary))
+            summary["safety_log_hash"] = log.close(a.backend.interventions(), summary)
         finally:  # (waited for, however the rest went)
             recording_written()
         atomic_write_json(out_dir / "summary.json", summary)

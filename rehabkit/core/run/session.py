@@ -20,6 +20,7 @@ from rehabkit.core.kinds.metric import MetricCatalogue
 from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.log.archetypes import encode_images
 from rehabkit.core.log.run_view import NullView, RunView, open_view
+from rehabkit.core.log.safety_log import SafetyLog, open_log
 from rehabkit.core.run.plan_gate import PlanGate
 from rehabkit.core.run.plugin_fault import plugin_fault
 from rehabkit.core.run.reference import ReferenceBuffer
@@ -91,6 +92,7 @@ class RunSession:
     # keeps what was admitted; a run writes here)
     targets: dict[str, Target] = field(default_factory=dict)
     force: np.ndarray | None = None  # the interaction force the safety layer checked last (Context.interaction_force)
+    safety_log: SafetyLog | None = None  # written as the run goes, where it has a folder (the finish closes it)
 
     @property
     def first_refusal(self) -> PlanRefusal | None:
@@ -227,10 +229,14 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     session.threads = threads
     session.timeline = Timeline(a, view, threads, session.taps, session.targets, safety)
     try:
+        if a.out_dir is not None:  # the safety log from now on: the run and its limits on disk, then each trip
+            session.safety_log = open_log(a, safety)
         _first_plan(session)
     except BaseException:
         for tap in session.taps:
             tap.discard()
+        if session.safety_log is not None:  # (a run refused before it ran leaves none)
+            session.safety_log.discard()
         raise
     return session
 

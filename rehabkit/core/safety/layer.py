@@ -15,6 +15,7 @@ The layer runs on the host for every backend: a breach is the same event in simu
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -114,6 +115,9 @@ class SafetyLayer(RunState):
         # told when a yield begins and ends (True/False): a robot side that bridges gaps in the commands on its own
         # then bridges them yielding (the runner sets it for a backend that can: CompliantGaps)
         self.on_yield: Callable[[bool], None] | None = None
+        # told each trip before the layer acts on it (the run's safety log: on disk first); an error of its own is
+        # logged, and the stop goes on
+        self.on_event: Callable[[SafetyEvent], None] | None = None
         self._robot = robot
         self.saturated_steps = 0
         self._dt, self._gain_dt = dt, dt
@@ -334,12 +338,24 @@ class SafetyLayer(RunState):
     def _stop(self, t, q, qd, rule, name, value, limit, cause, data=None) -> None:
         """The stop a trip begins (its rule's category), as an event: a rule broken, or a reaction that ended in one."""
         category = self.stopping.category_of(rule)
-        self._record(SafetyEvent(t, rule, name, value, limit, f"t={t:.3f}s: {cause}; {WORDS[category]}",
-                                 {**(data or {}), "category": category}, cause=cause))
-        self.stopping.begin(t, category, q, qd)
+        try:
+            self._record(SafetyEvent(t, rule, name, value, limit, f"t={t:.3f}s: {cause}; {WORDS[category]}",
+                                     {**(data or {}), "category": category}, cause=cause))
+        finally:  # (recorded first; begun whatever the recording met: Ctrl-C as it wrote, say)
+            self.stopping.begin(t, category, q, qd)
 
     def _record(self, event: SafetyEvent) -> None:
-        """A trip: in the events and the interventions."""
+        """A trip: in the events and the interventions, and told to ``on_event`` before the layer acts on it."""
         self.events.append(event)
         self.interventions.append(event)
+        if self.on_event is not None:
+            try:
+                self.on_event(event)
+            except Exception:  # noqa: BLE001 (the record's trouble must not hold up the stop)
+                logging.getLogger(__name__).exception("telling the trip at t=%.3f s to the safety log failed", event.t)
+
+    @property
+    def growing(self) -> SafetyEvent | None:
+        """The torque-clipping episode under way, which may still grow (none once tripped: no clipping since)."""
+        return self._clipping.episode if self.tripped_at is None else None
 
