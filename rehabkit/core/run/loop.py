@@ -9,6 +9,7 @@ behind one integer comparison.
 from __future__ import annotations
 
 import gc
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -210,5 +211,7 @@ def bring_to_rest(session: RunSession, rule: str, message: str) -> None:
     except BackendFaultError as exc:  # (the robot side stops it on its own: its watchdogs)
         if safety.tripped_at is None:
             safety.trip(k * dt, trace.q[max(k - 1, 0)], "backend", str(exc))
+    except Exception:  # noqa: BLE001 (what failed the run fails the stop too: the backend's close releases the robot)
+        logging.getLogger(__name__).warning("the robot could not be brought to rest through the loop", exc_info=True)
     finally:
         st.k, st.stopped = k, True
