@@ -32,6 +32,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
     made = not out.exists()
+    from rehabkit.cli.recover import killed_leftovers
+
+    if left := killed_leftovers(out):  # (a run over it would overwrite what is left of the killed one)
+        _err(f"error: --out {out} holds a killed run that was not recovered ({', '.join(left)}): `rehabkit recover "
+             f"{out}` makes it a run folder; or choose another --out")
+        return EXIT_INVALID
     if (why := unwritable(out)) is not None:
         _err(why)
         return EXIT_INVALID
@@ -258,6 +264,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.cli.audit import add_parser as add_audit
 
     add_audit(sub)
+    from rehabkit.cli.recover import add_parser as add_recover
+
+    add_recover(sub)
     from rehabkit.cli.estop import add_parser as add_estop
 
     add_estop(sub)

@@ -12,6 +12,7 @@ with every plan and the executed path in it (each axis in its joint's own unit: 
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -25,6 +26,7 @@ from rehabkit.core.setup.assembly import Assembly
 NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
 LOG_FLUSH_SAMPLES = 2000  # log-rate samples buffered between column sends to a file
 LIVE_FLUSH_SAMPLES = 500  # ... and when a viewer shows the run as it goes
+FLUSH_EVERY_S = 1.0  # ... or this much wall time: a killed run's recording holds all but its last second
 
 
 def open_view(setup: Assembly, spawn: bool = False) -> RunView | NullView:
@@ -47,6 +49,7 @@ class RunView:
         patient = setup.patient
         self._draws = patient.drawing if patient is not None and type(patient).drawing is not Patient.drawing else None
         self.flush_samples = LIVE_FLUSH_SAMPLES if spawn else LOG_FLUSH_SAMPLES
+        self._flush_by = time.monotonic() + FLUSH_EVERY_S
         self._upto = 0
         self._joint_space = False
         sc, out = setup.sc, setup.out_dir
@@ -88,7 +91,7 @@ class RunView:
         if self._draws is not None:
             for name, shapes in self._draws().items():
                 log.drawing(t, f"world/patient/{name}", shapes)
-        if log.pending >= self.flush_samples:
+        if log.pending >= self.flush_samples or time.monotonic() >= self._flush_by:
             self.flush(trace, k + 1)
 
     def event(self, t: float, text: str, level: str = "INFO") -> None:
@@ -130,6 +133,7 @@ class RunView:
 
     def flush(self, trace: Trace, upto: int) -> None:
         """Send the joint series recorded since the last flush, at the log rate, and the buffered poses."""
+        self._flush_by = time.monotonic() + FLUSH_EVERY_S
         every = self.setup.schedule.log_every
         sel = slice(self._upto, upto, every)
         self.log.joint_series(trace.t[sel], trace.q[sel], trace.qd[sel], trace.tau[sel], trace.q_ref[sel])

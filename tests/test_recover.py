@@ -1,0 +1,51 @@
+"""A run killed outright (SIGKILL) leaves what ``rehabkit recover`` makes a run folder: the recording renamed and
+read by the Rerun SDK, the bag rewritten whole and read by rosbags, the safety log audited up to its last record, a
+summary from what the recording holds, marked ``killed (recovered)``; a run over the folder before that is refused."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from rosbags.highlevel import AnyReader
+
+from tests.conftest import SCENARIOS
+
+
+def _killed_run(out: Path) -> None:
+    """The HIT round trip for 300 s with its bag, killed once its recording holds its first columns (polled)."""
+    proc = subprocess.Popen([sys.executable, "-m", "rehabkit.cli", "run", str(SCENARIOS / "hit_roundtrip.yaml"),
+                             "--out", str(out), "--bag", "--set", "duration=300"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env={**os.environ, "MUJOCO_GL": "egl"})
+    deadline = time.monotonic() + 120
+    tmp = out / "run.rrd.tmp"
+    while not (tmp.exists() and tmp.stat().st_size > 200_000) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)  # (polling a file the run writes, with a deadline: not a synchronisation by sleeping)
+    proc.send_signal(signal.SIGKILL)
+    assert proc.wait(timeout=30) == -signal.SIGKILL
+
+
+def test_a_killed_runs_folder_is_recovered(tmp_path):
+    from rehabkit.cli.main import main
+
+    out = tmp_path / "run"
+    _killed_run(out)
+    assert {"run.rrd.tmp", ".run.mcap.part", "safety_log.jsonl"} <= {p.name for p in out.iterdir()}
+    assert main(["run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(out)]) == 2  # (it would overwrite it)
+    assert main(["recover", str(out)]) == 0
+    assert {p.name for p in out.iterdir()} == {"run.rrd", "run.mcap", "safety_log.jsonl", "summary.json"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ended"]["how"] == "killed (recovered)" and not summary["passed"]
+    recovered = summary["recovered"]
+    assert 15.0 < recovered["recording_until_s"] == summary["metrics"]["sim_time_s"] < 300.0
+    assert summary["metrics"]["tracking_rms_deg"] < 0.01  # (the HIT tracks its plan to a thousandth of a degree)
+    with AnyReader([out / "run.mcap"]) as bag:  # the bag whole again: rosbags reads it, up to the kill
+        stamps = [stamp for _, stamp, _ in bag.messages()]
+        assert len(stamps) == sum(recovered["bag_messages"].values()) > 1000
+    assert main(["audit", str(out)]) == 0
+    assert main(["recover", str(out)]) == 2  # (nothing left to recover)
