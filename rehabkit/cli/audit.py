@@ -2,13 +2,32 @@
 
 A run killed on the way (SIGKILL, the power gone) leaves a log written up to its last record: the chain is checked
 that far and the log said to end without its closing record; a last line cut short as it was written is left out,
-said so. Exit 0 when the chain holds, 1 when it does not (tampered), 2 without a log."""
+said so. Exit 0 when the chain holds, 1 when it does not (tampered), 2 without a log.
+
+``rehabkit recover RUN_DIR``: what a killed run left (kill -9, the power, the OOM killer) made a run folder.
+
+A run killed outright writes no summary and renames nothing: its folder holds the recording as ``run.rrd.tmp``
+(Rerun writes it as it goes), the bag as ``.run.mcap.part`` (its messages so far, without the index an MCAP file ends
+with), and the safety log without its closing record. Recovering:
+
+- the recording renamed ``run.rrd`` once the Rerun SDK reads it (up to its last whole chunk);
+- the bag rewritten whole as ``run.mcap``: every message up to the cut, read in order, written again with its
+  schemas, channels, chunks and index (what ``mcap recover`` does);
+- the safety log left as it is (``rehabkit audit`` verifies it up to its last record and says it ends unfinished);
+- ``summary.json`` computed from what the recording holds — how long the run went, each joint's tracking and range
+  of motion at the log rate — and the safety log's trips, marked ``ended: killed (recovered)``; what could not be
+  computed again (the task's outcome measures, the verdicts) is said.
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
 from rehabkit.core.log.safety_log import KEY_ENV, LOG, audit_key, check
@@ -73,3 +92,192 @@ def add_parser(sub) -> None:
     a = sub.add_parser("audit", help="check a run's safety log (hash chain) and print it")
     a.add_argument("run_dir", help="the run's folder (rehabkit run --out DIR)")
     a.set_defaults(func=cmd_audit)
+
+
+RECORDING, BAG = "run.rrd", "run.mcap"
+LEFT = {"recording": f"{RECORDING}.tmp", "bag": f".{BAG}.part"}
+
+
+def killed_leftovers(out: Path) -> list[str]:
+    """What a killed run left in ``out`` and nobody recovered (empty: none)."""
+    if not out.is_dir() or (out / "summary.json").exists() and not any((out / n).exists() for n in LEFT.values()):
+        return []
+    left = [name for name in LEFT.values() if (out / name).exists()]
+    if (out / LOG).exists() and not (out / "summary.json").exists():
+        from rehabkit.core.log.safety_log import check
+
+        if not check(out / LOG).finished:
+            left.append(LOG)
+    return left
+
+
+def _recording(path: Path) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Each joint's series in the recording: joint → {'measured_deg': (t, values), 'reference_deg': …}."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    series: dict[str, dict[str, list]] = {}
+    with warnings.catch_warnings():  # (a file cut short has no footer: read whole, as the SDK then says it does)
+        warnings.filterwarnings("ignore", "RRD file has no footer")
+        chunks = RrdReader(str(path)).stream().to_chunks()
+    for chunk in chunks:
+        parts = str(chunk.entity_path).strip("/").split("/")
+        if len(parts) != 3 or parts[0] != "joints" or "sim_time" not in chunk.timeline_names:
+            continue
+        batch = chunk.to_record_batch()
+        column = next((f.name for f in batch.schema if f.name.endswith(":scalars")), None)
+        if column is None:
+            continue
+        t = batch.column("sim_time").cast("int64").to_numpy() / 1e9
+        values = np.array([v[0] if v else np.nan for v in batch.column(column).to_pylist()], float)
+        series.setdefault(parts[1], {}).setdefault(parts[2], []).append((t, values))
+    out: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
+    for joint, kinds in series.items():
+        for kind, pieces in kinds.items():
+            t = np.concatenate([p[0] for p in pieces])
+            v = np.concatenate([p[1] for p in pieces])
+            order = np.argsort(t, kind="stable")
+            out.setdefault(joint, {})[kind] = (t[order], v[order])
+    return out
+
+
+def _metrics(series: dict) -> tuple[dict[str, float], dict[str, Any]]:
+    metrics: dict[str, float] = {}
+    per_joint: dict[str, Any] = {}
+    ends = [s[0][-1] for kinds in series.values() for s in kinds.values() if len(s[0])]
+    metrics["sim_time_s"] = float(max(ends)) if ends else 0.0
+    worst_rms, worst_max, unit = 0.0, 0.0, None
+    for joint, kinds in series.items():
+        measured = next((k for k in kinds if k.startswith("measured_")), None)
+        if measured is None:
+            continue
+        u = measured.split("_", 1)[1]  # (deg, or m for a prismatic joint)
+        t, q = kinds[measured]
+        metrics[f"rom_{u}_{joint}"] = float(np.nanmax(q) - np.nanmin(q)) if len(q) else 0.0
+        reference = kinds.get(f"reference_{u}")
+        if reference is not None and len(reference[0]) == len(t) and np.array_equal(reference[0], t):
+            err = q - reference[1]
+            rms, peak = float(np.sqrt(np.nanmean(err**2))), float(np.nanmax(np.abs(err)))
+            per_joint[joint] = {f"tracking_rms_{u}": rms, f"tracking_max_{u}": peak}
+            if u == "deg":
+                worst_rms, worst_max, unit = max(worst_rms, rms), max(worst_max, peak), u
+    if unit is not None:
+        metrics["tracking_rms_deg"], metrics["tracking_max_deg"] = worst_rms, worst_max
+    return metrics, per_joint
+
+
+def _rebuild_bag(part: Path, whole: Path) -> dict[str, Any]:
+    """The messages of a bag cut short, written again as a whole MCAP file (temp, then rename)."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import CompressionType, Writer
+
+    tmp = whole.with_name(whole.name + ".tmp")
+    schemas: dict[int, int] = {}
+    channels: dict[int, int] = {}
+    counts: dict[str, int] = {}
+    first = last = None
+    with open(part, "rb") as src, open(tmp, "wb") as dst:
+        writer = Writer(dst, compression=CompressionType.ZSTD)
+        writer.start(profile="ros2", library="rehabkit recover")
+        topics: dict[int, str] = {}
+        try:
+            for record in StreamReader(src, skip_magic=False).records:
+                if isinstance(record, Schema) and record.id not in schemas:
+                    schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+                elif isinstance(record, Channel) and record.id not in channels:
+                    channels[record.id] = writer.register_channel(record.topic, record.message_encoding,
+                                                                  schemas.get(record.schema_id, 0), record.metadata)
+                    topics[record.id] = record.topic
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                       record.publish_time, record.sequence)
+                    counts[topics[record.channel_id]] = counts.get(topics[record.channel_id], 0) + 1
+                    first = record.log_time if first is None else min(first, record.log_time)
+                    last = record.log_time if last is None else max(last, record.log_time)
+        except (McapError, EOFError, ValueError):  # (the cut: a record written halfway)
+            pass
+        writer.finish()
+        dst.flush()
+        os.fsync(dst.fileno())
+    os.replace(tmp, whole)
+    part.unlink()
+    return {"messages": counts, "until_s": (last - first) / 1e9 if first is not None else 0.0}
+
+
+def recover(out: Path) -> dict[str, Any]:
+    """Make ``out`` (a killed run's folder) a run folder; returns its summary (also written to ``summary.json``)."""
+    from rehabkit.core.io import atomic_write_json
+    from rehabkit.core.log.safety_log import check
+
+    log = check(out / LOG) if (out / LOG).exists() else None
+    run = next((r for r in log.records if r.get("kind") == "run"), {}) if log is not None else {}
+    said: list[str] = []
+    metrics: dict[str, float] = {}
+    per_joint: dict[str, Any] = {}
+    outputs: dict[str, str] = {}
+    recovered: dict[str, Any] = {}
+    if (out / LEFT["recording"]).exists():
+        try:
+            series = _recording(out / LEFT["recording"])
+            metrics, per_joint = _metrics(series)
+            os.replace(out / LEFT["recording"], out / RECORDING)
+            outputs["recording"] = RECORDING
+            recovered["recording_until_s"] = metrics["sim_time_s"]
+        except Exception as exc:  # noqa: BLE001 (said in the summary: the file is left as it was)
+            said.append(f"the recording could not be read ({type(exc).__name__}: {exc}); left as {LEFT['recording']}")
+    if (out / LEFT["bag"]).exists():
+        bag = _rebuild_bag(out / LEFT["bag"], out / BAG)
+        outputs["bag"] = BAG
+        recovered["bag_until_s"], recovered["bag_messages"] = bag["until_s"], bag["messages"]
+    events = [r for r in (log.records if log is not None else []) if r.get("kind") == "intervention"
+              and r.get("level") == "ERROR"]
+    if log is not None:
+        outputs["safety_log"] = LOG
+        recovered["safety_log_records"] = len(log.records)
+        if log.torn:
+            said.append("the safety log's last line was written halfway: left out")
+    said.append("not computed again: the task's outcome measures and the expectations' verdicts (the plans, the "
+                "targets and the person are not in the recording); replay the scenario for them")
+    metrics["safety_events"] = float(len(events))
+    scenario = run.get("scenario", {}).get("file", "")
+    summary = {
+        "scenario": scenario, "name": Path(scenario).stem if scenario else out.name,
+        "ended": {"how": "killed (recovered)", "reason": "the process was killed before it finished; this folder was "
+                                                         "made from what it left by `rehabkit recover`"},
+        "passed": False, "metrics": metrics, "per_joint": per_joint, "expectations": [],
+        "safety": {"tripped": bool(events), "events": events},
+        "plugins": run.get("plugins", {}), "seed": run.get("seed"), "outputs": outputs,
+        "recovered": {**recovered, "said": said},
+    }
+    atomic_write_json(out / "summary.json", summary)
+    return summary
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    out = Path(args.run_dir)
+    left = killed_leftovers(out)
+    if not left:
+        print(f"error: {out} holds no killed run to recover (it needs {LEFT['recording']}, {LEFT['bag']} or a "
+              f"{LOG} without its closing record, and no summary.json)", file=sys.stderr)
+        return EXIT_INVALID
+    summary = recover(out)
+    rec = summary["recovered"]
+    print(f"recovered {out}: " + ", ".join(
+        [f"the recording up to {rec['recording_until_s']:.3f} s"] * ("recording_until_s" in rec)
+        + [f"the bag up to {rec['bag_until_s']:.3f} s ({sum(rec['bag_messages'].values())} messages)"]
+        * ("bag_until_s" in rec)
+        + [f"the safety log's {rec['safety_log_records']} records"] * ("safety_log_records" in rec)))
+    for line in rec["said"]:
+        print(f"  {line}")
+    print(f"wrote {out / 'summary.json'} (ended: killed (recovered))")
+    return EXIT_OK
+
+
+def add_recover_parser(sub) -> None:
+    rp = sub.add_parser("recover", help="make a killed run's folder a run folder: the recording and the bag whole, "
+                                        "a summary from what the recording holds")
+    rp.add_argument("run_dir", metavar="DIR")
+    rp.set_defaults(func=cmd_recover)

@@ -32,7 +32,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path("out") / Path(args.scenario).stem
     made = not out.exists()
-    from rehabkit.cli.recover import killed_leftovers
+    from rehabkit.cli.audit import killed_leftovers
 
     if left := killed_leftovers(out):  # (a run over it would overwrite what is left of the killed one)
         _err(f"error: --out {out} holds a killed run that was not recovered ({', '.join(left)}): `rehabkit recover "
@@ -264,9 +264,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.cli.audit import add_parser as add_audit
 
     add_audit(sub)
-    from rehabkit.cli.recover import add_parser as add_recover
+    from rehabkit.cli.audit import add_recover_parser
 
-    add_recover(sub)
+    add_recover_parser(sub)
     from rehabkit.cli.estop import add_parser as add_estop
 
     add_estop(sub)
