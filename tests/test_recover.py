@@ -21,7 +21,8 @@ def _killed_run(out: Path) -> None:
     """The HIT round trip for 300 s with its bag, killed once its recording holds its first columns (polled)."""
     proc = subprocess.Popen([sys.executable, "-m", "rehabkit.cli", "run", str(SCENARIOS / "hit_roundtrip.yaml"),
                              "--out", str(out), "--bag", "--set", "duration=300"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env={**os.environ, "MUJOCO_GL": "egl"})
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env={**os.environ, "MUJOCO_GL": "egl"})
     deadline = time.monotonic() + 120
     tmp = out / "run.rrd.tmp"
     while not (tmp.exists() and tmp.stat().st_size > 200_000) and proc.poll() is None and time.monotonic() < deadline:
