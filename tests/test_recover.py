@@ -18,14 +18,19 @@ from tests.conftest import SCENARIOS
 
 
 def _killed_run(out: Path) -> None:
-    """The HIT round trip for 300 s with its bag, killed once its recording holds its first columns (polled)."""
+    """The HIT round trip for 300 s with its bag, killed once its recording holds its first columns and its bag its
+    first chunk (polled)."""
     proc = subprocess.Popen([sys.executable, "-m", "rehabkit.cli", "run", str(SCENARIOS / "hit_roundtrip.yaml"),
                              "--out", str(out), "--bag", "--set", "duration=300"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             env={**os.environ, "MUJOCO_GL": "egl"})
     deadline = time.monotonic() + 120
-    tmp = out / "run.rrd.tmp"
-    while not (tmp.exists() and tmp.stat().st_size > 200_000) and proc.poll() is None and time.monotonic() < deadline:
+    tmp, part = out / "run.rrd.tmp", out / ".run.mcap.part"
+
+    def written() -> bool:  # the recording's first columns and the bag's first chunk on disk
+        return tmp.exists() and tmp.stat().st_size > 200_000 and part.exists() and part.stat().st_size > 50_000
+
+    while not written() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)  # (polling a file the run writes, with a deadline: not a synchronisation by sleeping)
     proc.send_signal(signal.SIGKILL)
     assert proc.wait(timeout=30) == -signal.SIGKILL
