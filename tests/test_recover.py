@@ -55,3 +55,26 @@ def test_a_killed_runs_folder_is_recovered(tmp_path):
         assert len(stamps) == sum(recovered["bag_messages"].values()) > 100
     assert main(["audit", str(out)]) == 0
     assert main(["recover", str(out)]) == 2  # (nothing left to recover)
+
+
+def test_validate_and_run_say_the_folder_holds_a_killed_run_not_recovered(tmp_path, capsys):
+    from rehabkit.cli.main import main
+
+    scenario = str(SCENARIOS / "hit_roundtrip.yaml")
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "run.rrd.tmp").write_bytes(b"")  # (what a killed run leaves: its recording as it was being written)
+    (out / ".run.mcap.part").write_bytes(b"")
+    assert main(["validate", scenario, "--out", str(out)]) == 0  # (the scenario is fine: said, not refused)
+    said = capsys.readouterr().out.splitlines()
+    warning = next(line for line in said if line.strip().startswith("WARNING"))
+    assert str(out) in warning and f"`rehabkit recover {out}`" in warning
+    assert "run.rrd.tmp" in warning and ".run.mcap.part" in warning
+    assert main(["run", scenario, "--out", str(out)]) == 2  # refused: the leftovers kept
+    error = capsys.readouterr().err
+    assert f"`rehabkit recover {out}`" in error
+    assert {p.name for p in out.iterdir()} == {"run.rrd.tmp", ".run.mcap.part"}
+    (out / "run.rrd.tmp").unlink()
+    (out / ".run.mcap.part").unlink()
+    assert main(["validate", scenario, "--out", str(out)]) == 0
+    assert "WARNING" not in capsys.readouterr().out

@@ -169,6 +169,8 @@ def _metrics(series: dict) -> tuple[dict[str, float], dict[str, Any]]:
 
 def _rebuild_bag(part: Path, whole: Path) -> dict[str, Any]:
     """The messages of a bag cut short, written again as a whole MCAP file (temp, then rename)."""
+    import struct
+
     from mcap.exceptions import McapError
     from mcap.records import Channel, Message, Schema
     from mcap.stream_reader import StreamReader
@@ -197,7 +199,7 @@ def _rebuild_bag(part: Path, whole: Path) -> dict[str, Any]:
                     counts[topics[record.channel_id]] = counts.get(topics[record.channel_id], 0) + 1
                     first = record.log_time if first is None else min(first, record.log_time)
                     last = record.log_time if last is None else max(last, record.log_time)
-        except (McapError, EOFError, ValueError):  # (the cut: a record written halfway)
+        except (McapError, EOFError, ValueError, struct.error):  # (the cut: a record written halfway)
             pass
         writer.finish()
         dst.flush()

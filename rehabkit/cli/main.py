@@ -88,7 +88,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     for path in args.scenarios:
         try:
             loaded = load_scenario(path, args.set)
-            print(f"{path}: ok{_admission(loaded, args.joints)}")
+            print(f"{path}: ok{_admission(loaded, args.joints)}{_killed_note(args.out, path)}")
         except ScenarioError as exc:
             _debug_cause(exc)
             _err(str(exc))
@@ -97,6 +97,18 @@ def cmd_validate(args: argparse.Namespace) -> int:
             _err(f"{path}: {exc}")
             status = EXIT_INVALID
     return status
+
+
+def _killed_note(out: str | None, scenario: str) -> str:
+    """A warning line where the folder a run would write to (``--out``, else ``out/<scenario name>``) holds a killed
+    run that was not recovered: ``run`` refuses to write over it."""
+    from rehabkit.cli.audit import killed_leftovers
+
+    folder = Path(out) if out else Path("out") / Path(scenario).stem
+    if not (left := killed_leftovers(folder)):
+        return ""
+    return (f"\n  WARNING {folder} holds a killed run that was not recovered ({', '.join(left)}): `rehabkit recover "
+            f"{folder}` makes it a run folder; `rehabkit run` refuses to write over it until then")
 
 
 def _joint_table(setup) -> str:
@@ -247,6 +259,8 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     v.add_argument("--joints", action="store_true", help="list the robot's joints in the order a posture gives "
                                                           "them, each with its kind and limits in force")
+    v.add_argument("--out", metavar="DIR", help="the folder a run would write to (default: out/<scenario name>): "
+                                                 "warned of when it holds a killed run not yet recovered")
     v.set_defaults(func=cmd_validate)
     pl = sub.add_parser("plugins", help="list installed plugins and their settings")
     pl.add_argument("--json", action="store_true")
