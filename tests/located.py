@@ -25,3 +25,12 @@ SET = re.compile(r"^<--set (?P<set>[^>]+)>: (?P<path>[\w.\-]+): ", re.M)
 def set_located(text: str) -> list[tuple[str, str]]:
     """Every ``<--set KEY>: path: …`` line of ``text`` (an error in a ``--set`` override) as (KEY, path)."""
     return [(m["set"], m["path"]) for m in SET.finditer(text)]
+
+
+AT_BAG = re.compile(r"^(?P<bag>.+?): --topics (?P<role>\w+): ", re.M)
+
+
+def at_bag(text: str) -> list[tuple[str, str]]:
+    """Every ``BAG: --topics ROLE: …`` line of ``text`` (a bag that does not fit the replay, said at the ``--topics``
+    role concerned: a :class:`rehabkit.bags.bag_content.BagError`) as (BAG, ROLE)."""
+    return [(m["bag"], m["role"]) for m in AT_BAG.finditer(text)]

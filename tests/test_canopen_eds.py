@@ -138,8 +138,8 @@ def test_the_drives_own_pdos_count_in_the_bus_load_and_the_fix_is_named(tmp_path
     """Nanotec's TPDO3 and TPDO4 stay enabled (asynchronous, no event timer: at worst every cycle): at 500 Hz six
     of them do not fit; ``other_pdos: disable`` turns them off and the same rate fits."""
     diag = _validate(tmp_path, {"drives": _six("nanotec_C5-E-2-09.eds")}, rate=500)
-    assert diag.path == "rates.control_hz" and "of them the drives' own PDOs the run does not use" in diag.message
-    assert "backend.other_pdos: disable" in diag.message
+    assert diag.path == "rates.control_hz"
+    assert "backend.other_pdos: disable" in diag.message  # (the fix: named only when the drives' own PDOs count)
     assert _validate(tmp_path, {"drives": _six("nanotec_C5-E-2-09.eds"), "other_pdos": "disable"}, rate=500) is None
 
 
@@ -219,4 +219,7 @@ def test_a_fixed_mapping_without_what_the_run_needs_is_refused_at_the_drives_fil
     diag = _validate(tmp_path, {"drives": drives})
     assert diag.path == "backend.drives.2.eds"
     assert "no TPDO left to carry 0x6064 (position actual value), 0x606C (velocity actual value)" in diag.message
-    assert "0 of them with a mapping a master can write" in diag.message
+    d = read_dictionary(path, 3)
+    with pytest.raises(PdoPlanError) as refused:  # the first object left without a TPDO, none of them configurable
+        plan_pdos(d, 3, *needed(d, "cst"))
+    assert refused.value.index == 0x6064 and not any(s.configurable for s in d.tpdos)

@@ -7,11 +7,13 @@ import shlex
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import can
 import pytest
 
 from tests.conftest import ROOT
+from tests.located import located
 from tests.test_cli import cli
 
 README = (ROOT / "README.md").read_text()
@@ -47,7 +49,8 @@ def test_the_lab_robots_wiring_validates_and_its_mistakes_are_located(tmp_path):
     (tmp_path / "drives" / "wrist.eds").write_text(eds.replace("[6071]", "[6F71]"))  # no target torque
     bad = cli("validate", "lab_can.yaml", cwd=tmp_path)
     line = next(i for i, x in enumerate(text.splitlines(), 1) if "drives/wrist.eds" in x)
-    assert bad.returncode == 2 and f"lab_can.yaml:{line}:" in bad.stderr
+    assert bad.returncode == 2 and [(Path(f).name, n, at) for f, n, _, at in located(bad.stderr)] == [
+        ("lab_can.yaml", line, "backend.drives.4.eds")], bad.stderr
     assert "backend.drives.4.eds" in bad.stderr and "wrist.eds has no 0x6071 (target torque): the run maps it " \
         "into an RPDO every cycle" in bad.stderr
 

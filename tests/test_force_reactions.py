@@ -37,7 +37,7 @@ def _run(kind: str, **more):
 def test_a_yield_gives_way_along_the_push_within_its_speed_bound_and_the_ranges():
     result, a, k0, hands = _run("yield")
     (event,) = a.safety.events
-    assert event.rule == "interaction-force" and event.data["reaction"] == "yield" and "no stop" in event.message
+    assert event.rule == "interaction-force" and event.data["reaction"] == "yield"
     m = result.metrics
     assert np.isnan(m["stop_category"]) and m["joints_in_range"] == 1.0
     moved = (hands[-1] - hands[0]) @ PUSH

@@ -10,6 +10,7 @@ from plugins.robots.dh import DHRobot
 from rehabkit.core.setup.targets import axis_error_deg
 from rehabkit.models.dh import DHRobotSpec
 from tests.conftest import ROOT
+from tests.located import located
 from tests.test_cli import cli
 from tests.test_user_robot_errors import ARM3
 
@@ -108,5 +109,5 @@ def test_validate_locates_an_unreachable_cartesian_target(tmp_path):
     done = cli("validate", str(path))
     assert done.returncode == 2, done.stderr
     line = text.splitlines().index("    - {name: B, position: [1.5, 0.0, 0.3]}") + 1
-    assert f"far.yaml:{line}:" in done.stderr and "task.targets.1.position" in done.stderr
+    assert [(n, at) for _, n, _, at in located(done.stderr)] == [(line, "task.targets.1.position")], done.stderr
     assert "target 'B'" in done.stderr and "out of reach" in done.stderr and "mm away" in done.stderr

@@ -18,6 +18,7 @@ from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake
 from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key, new_key
 from rehabkit.hardware.security.session import ReplayWindow
 from tests.conftest import ROOT, SCENARIOS
+from tests.located import located
 from tests.test_cli import cli
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
@@ -42,7 +43,8 @@ def _shake(key, gate: BridgeGate, robot: int = 1, host_key=None):
 def test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret(key, tmp_path):
     assert stat.S_IMODE(key.path.stat().st_mode) == 0o600
     text = key.path.read_text()
-    assert f"id: {key.id}" in text and "robot: hit-1" in text
+    fields = {k: v for k, _, v in (line.partition(": ") for line in text.splitlines()[1:])}  # (after its headline)
+    assert (fields["id"], fields["robot"]) == (key.id, "hit-1")
     assert key.secret.hex() not in repr(key) + str(key)  # (a key printed in a log says its id, not its secret)
     assert load_key(key.path) == key
     with pytest.raises(KeyFileError) as exists:  # a rotation is deliberate: the file there is kept
@@ -55,9 +57,13 @@ def test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret
     assert (readable.value.path, readable.value.fix) == (str(key.path), f"chmod 600 {key.path}")
     with pytest.raises(KeyFileError) as missing:
         load_key(tmp_path / "none.key")
-    assert missing.value.path == str(tmp_path / "none.key")
-    with pytest.raises(KeyFileError, match="the key is for robot hit-1, this link is lexos-1"):
+    assert (missing.value.path, missing.value.fix) == (
+        str(tmp_path / "none.key"), "make one with `rehabkit keys new ROBOT-ID --out FILE` and give the same file to "
+        "the bridge")
+    with pytest.raises(KeyFileError) as other_robot:
         check_robot(key, "lexos-1")
+    assert (other_robot.value.path, other_robot.value.fix) == (
+        str(key.path), "use lexos-1's key (`rehabkit keys new lexos-1` makes one)")
 
 
 def test_the_window_takes_each_number_once_and_nothing_older_than_64():
@@ -259,12 +265,11 @@ def test_a_urdf_robot_runs_over_an_authenticated_link_and_validate_checks_its_ke
     scenario.write_text(f"extends: {ROOT}/examples/robots/urdf_arm4.yaml\n"
                         "backend: {type: hardware, clock: lockstep, key_file: keys/arm4.key}\n")
     missing = cli("validate", scenario)
-    assert missing.returncode == 2 and f"{scenario}:2:44: backend.key_file: backend 'hardware': " \
-        f"{tmp_path / 'keys' / 'arm4.key'}: no such file; make one with `rehabkit keys new ROBOT-ID --out FILE`" \
-        in missing.stderr
+    # (the key file's own error, its fix: test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret)
+    assert missing.returncode == 2 and located(missing.stderr) == [(str(scenario), 2, 44, "backend.key_file")]
     key = new_key("arm4-1", tmp_path / "keys" / "arm4.key")
     key.path.chmod(0o640)
-    assert f"readable by others (mode 640); chmod 600 {key.path}" in cli("validate", scenario).stderr
+    assert located(cli("validate", scenario).stderr) == [(str(scenario), 2, 44, "backend.key_file")]
     key.path.chmod(0o600)
     assert cli("validate", scenario).returncode == 0
     run = run_scenario(scenario)

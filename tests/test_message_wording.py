@@ -84,3 +84,46 @@ def test_a_cli_error_line_names_the_file_then_the_problem(capsys):
 
     assert main(["validate", "/nonexistent/s.yaml"]) == 2
     assert capsys.readouterr().err == "/nonexistent/s.yaml: no such file\n"
+
+
+def test_a_bag_error_is_said_at_the_bag_and_each_topics_role():
+    from rehabkit.bags.bag_content import BagError
+
+    err = BagError("s.mcap", "wrench", "no topic /wrench; the bag has /arm/joint_states (sensor_msgs/msg/JointState)",
+                   more=[("targets", "no topic /targets")])
+    assert str(err) == ("s.mcap: --topics wrench: no topic /wrench; the bag has /arm/joint_states "
+                        "(sensor_msgs/msg/JointState)\ns.mcap: --topics targets: no topic /targets")
+
+
+def test_a_key_file_error_names_the_file_its_problem_then_the_fix():
+    from rehabkit.hardware.config import LinkKeyError
+    from rehabkit.hardware.security.keys import KeyFileError
+
+    assert str(KeyFileError("k.key", "readable by others (mode 644)", "chmod 600 k.key")) == \
+        "key file k.key: readable by others (mode 644); chmod 600 k.key"
+    assert str(LinkKeyError("udp://10.0.0.2:7000", None, "the bridge needs a key (it was started with --key)")) == \
+        ("the bridge at udp://10.0.0.2:7000 refuses this host's session: the bridge needs a key (it was started with "
+         "--key); set backend.key_file to the robot's key file (the one the bridge was given)")
+
+
+def test_a_path_refused_at_an_end_says_where_that_end_lies():
+    from rehabkit.geometry.box_avoid import NoPathError, plan_path
+    from rehabkit.geometry.solids import Box
+
+    with pytest.raises(NoPathError) as inside:
+        plan_path([0, 0, 0], [1, 0, 0], [Box([0, 0, 0], [0.2, 0.2, 0.2], name="tray")], margin=0.0)
+    assert str(inside.value) == "start [0.0, 0.0, 0.0] lies inside obstacle 'tray' (margin 0.0 m)"
+    with pytest.raises(NoPathError) as below:
+        plan_path([0, 0, -0.1], [1, 0, 0], [], floor=([0, 0, 1], 0.0))
+    assert str(below.value) == "start [0.0, 0.0, -0.1] lies below the floor"
+
+
+def test_a_stops_event_says_when_its_cause_then_the_stop(hit):
+    from rehabkit.core.safety.layer import SafetyLayer
+    from rehabkit.core.scenario.safety import SafetyConfig
+
+    layer = SafetyLayer(hit.model, SafetyConfig(), gravity=hit.gravity_torque)
+    layer.trip(1.0, (hit.model.limits.lower + hit.model.limits.upper) / 2, "plan", "a test's own stop")
+    (e,) = layer.events
+    assert (e.rule, e.data["category"]) == ("plan", 2)
+    assert e.message == "t=1.000s: a test's own stop; controlled stop, then held (category 2)"

@@ -133,7 +133,7 @@ def test_the_lexos_adapts_its_segments_to_the_profile_unless_the_scenario_sets_t
 def test_a_plan_faster_than_the_patients_comfort_is_refused_before_it_runs(tmp_path):
     # the round trip's 2 s segments turn the wrist at ~35 °/s; this person is comfortable with 20 °/s
     path = _scenario(tmp_path, {"id": "P9", "side": "right", "comfort": {"max_speed_deg_s": 20}})
-    with pytest.raises(SetupError, match="planned trajectory: wrist_1 beyond its velocity limit") as err:
+    with pytest.raises(SetupError) as err:
         run_scenario(path, out_dir=tmp_path / "o")
     breach = err.value.breach  # what the message says, as fields
     assert (breach.quantity, breach.joint, breach.at_s) == ("velocity", "wrist_1", pytest.approx(0.25))

@@ -3,7 +3,7 @@
 import types
 
 import pytest
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 
 from rehabkit import hookimpl
 from rehabkit.core.plugins.registry import PluginConflictError, Provider, UnknownPluginError, load_plugins
@@ -26,8 +26,9 @@ def test_config_model_gets_a_type_literal_and_forbids_extra_keys():
     cfg = load_plugins().get("planner", "multi-cubic").config
     ok = cfg.model_validate({"type": "multi-cubic", "segment_durations": [1.0]})
     assert ok.type == "multi-cubic"
-    with pytest.raises(Exception, match="Extra inputs"):
+    with pytest.raises(ValidationError) as extra:
         cfg.model_validate({"type": "multi-cubic", "segment_durations": [1.0], "speed": 2})
+    assert [(e["type"], e["loc"]) for e in extra.value.errors()] == [("extra_forbidden", ("speed",))]
 
 
 class _Cfg(BaseModel):

@@ -16,6 +16,7 @@ import yaml
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from tests.conftest import ROOT
+from tests.located import located, set_located
 from tests.test_cli import cli
 from tests.test_recording_layout import _flat, read_layout, recording
 
@@ -113,11 +114,12 @@ def test_a_degrees_key_on_the_finger_and_a_metres_key_on_an_arm_joint_are_refuse
     lines = refused.stderr.splitlines()
     assert refused.returncode == 2 and len(lines) == 3, refused.stderr
     text = path.read_text().splitlines()
-    for line, key in zip(lines, ("panda_finger_joint1.range_deg", "panda_finger_joint1.torque_nm",
-                                 "panda_joint2.velocity_m_s")):
-        where, rest = line.split(": ", 1)
-        row, col = map(int, where.rsplit(":", 2)[1:])
-        assert rest.startswith(f"safety.joints.{key}: ") and text[row - 1][col - 1:].startswith(key.split(".")[1])
+    keys = ("panda_finger_joint1.range_deg", "panda_finger_joint1.torque_nm", "panda_joint2.velocity_m_s")
+    found = located(refused.stderr)
+    assert [at for *_, at in found] == [f"safety.joints.{key}" for key in keys]
+    for (_, row, col, _), key in zip(found, keys, strict=True):  # each at its key in the file
+        name = key.split(".")[1]
+        assert text[row - 1][col - 1:col - 1 + len(name)] == name, (row, col, name)
     assert lines[0].endswith("panda_finger_joint1 is a prismatic joint: range_deg [deg] is for a revolute joint; "
                              "write range_m instead, in m (the robot's own: [0, 0.04] m)")
     assert lines[1].endswith("write force_n instead, in N (the robot's own: 100 N)")
@@ -125,7 +127,8 @@ def test_a_degrees_key_on_the_finger_and_a_metres_key_on_an_arm_joint_are_refuse
                              "velocity_deg_s instead, in deg/s (the robot's own: 124.6 deg/s)")
     robot = {**PANDA, "limits": {"panda_finger_joint1": {"range_deg": [0, 0.03]}}}
     refused = cli("validate", _panda(tmp_path, robot=robot))
-    assert refused.returncode == 2 and ": robot.limits.panda_finger_joint1.range_deg: " in refused.stderr
+    assert refused.returncode == 2 and [at for *_, at in located(refused.stderr)] == [
+        "robot.limits.panda_finger_joint1.range_deg"]
     assert "joint 'panda_finger_joint1' is prismatic (metres): range_deg is for a revolute joint; write range_m " \
            "instead" in refused.stderr
     robot["limits"] = {"panda_finger_joint1": {"range_m": [0, 0.03], "velocity_m_s": 0.1, "effort": 20}}
@@ -149,7 +152,8 @@ def test_a_scara_s_quill_is_given_planned_limited_and_judged_in_metres(tmp_path)
                   if '"kind": "limits"' in line)["joints"]["quill"]
     assert (limits["lower_m"], limits["upper_m"], limits["velocity_m_s"], limits["effort_n"]) == (0.0, 0.18, 0.3, 150.0)
     refused = cli("validate", SCARA, "--set", "safety.joints.quill={range_deg: [0, 10]}")
-    assert refused.returncode == 2 and refused.stderr.startswith("<--set safety.joints.quill>: ")  # (where it is)
+    assert refused.returncode == 2 and set_located(refused.stderr) == [("safety.joints.quill",
+                                                                        "safety.joints.quill.range_deg")]
     assert "safety.joints.quill.range_deg: quill is a prismatic joint: range_deg [deg] is for a revolute joint; " \
            "write range_m instead, in m (the robot's own: [0, 0.2] m)" in refused.stderr
 

@@ -76,14 +76,16 @@ def test_a_run_killed_after_its_trip_leaves_a_log_audit_checks_up_to_the_trip(tm
     assert records[0]["scenario"]["file"].endswith("hit_range.yaml") and records[1]["joints"]["elbow_2"]
     done = cli("audit", str(out))
     assert done.returncode == 0, done.stderr
-    assert "ends without its closing record" in done.stdout and "checked up to its last record, 2 (intervention" \
-        in done.stdout
-    assert "chain intact: 3 records (up to where it ends)" in done.stdout
+    log = check(out / LOG)  # what the audit read: unfinished, intact up to its last record (2, the trip)
+    assert (log.finished, [r["seq"] for r in log.records], log.torn, log.problems) == (False, [0, 1, 2], None, [])
+    assert "chain intact: 3 records (up to where it ends)" in done.stdout  # (and says so)
     # a torn last line (a write cut short) is left out, said so; the chain still holds
     with (out / LOG).open("a") as f:
         f.write('{"seq": 3, "prev": "' + records[-1]["hash"][:20])
     done = cli("audit", str(out))
-    assert done.returncode == 0 and "cut short" in done.stdout and "chain intact: 3 records" in done.stdout
+    log = check(out / LOG)
+    assert done.returncode == 0 and log.torn is not None and (len(log.records), log.problems) == (3, [])
+    assert "cut short" in done.stdout  # (and says so)
     # an edit to a killed run's log is found as in a finished one's
     lines = (out / LOG).read_text().split("\n")
     lines[2] = lines[2].replace("elbow_2", "elbow_1")

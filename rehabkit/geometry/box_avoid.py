@@ -28,7 +28,13 @@ from rehabkit.geometry.solids import Box, Solid, _slab_interval, path_hits
 
 
 class NoPathError(RuntimeError):
-    """No collision-free path exists, or none is found by the deterministic method."""
+    """No collision-free path exists, or none is found by the deterministic method. ``end``: the end refused as it
+    lies (``"start"`` or ``"goal"``), when that is why; then ``obstacle``: the obstacle it lies inside (its name), or
+    None when it lies below the floor."""
+
+    def __init__(self, message: str, end: str | None = None, obstacle: str | None = None):
+        super().__init__(message)
+        self.end, self.obstacle = end, obstacle
 
 
 @dataclass(frozen=True)
@@ -246,13 +252,14 @@ def plan_path(
         floor = (np.asarray(floor[0], dtype=float), float(floor[1]))
         for label, p in (("start", start), ("goal", goal)):
             if p @ floor[0] < floor[1]:
-                raise NoPathError(f"{label} {np.round(p, 4).tolist()} lies below the floor")
+                raise NoPathError(f"{label} {np.round(p, 4).tolist()} lies below the floor", end=label)
     check = [o.inflated(margin) for o in obstacles]
     for label, p in (("start", start), ("goal", goal)):
         for o in check:
             if o.contains(p):
                 raise NoPathError(
-                    f"{label} {np.round(p, 4).tolist()} lies inside obstacle {o.name!r} (margin {margin} m)"
+                    f"{label} {np.round(p, 4).tolist()} lies inside obstacle {o.name!r} (margin {margin} m)",
+                    end=label, obstacle=o.name,
                 )
     boxes = [o.inflated(margin + clearance).bounding_box() for o in obstacles]
     merges = 0
