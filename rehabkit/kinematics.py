@@ -8,8 +8,9 @@ imports MuJoCo, building a chain does not).
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from rehabkit.core.plugins.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from rehabkit.models.chain import (
@@ -51,13 +52,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    for module, names in _FROM.items():
-        if name in names:
-            value = globals()[name] = getattr(importlib.import_module(module), name)
-            return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _FROM, __all__)

@@ -6,8 +6,9 @@ Each name loads its own module on first use (the bag reader imports ``rosbags`` 
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from rehabkit.core.plugins.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from rehabkit.bags.session_bag import BagError, SessionBag, read_session
@@ -21,13 +22,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    for module, names in _FROM.items():
-        if name in names:
-            value = globals()[name] = getattr(importlib.import_module(module), name)
-            return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _FROM, __all__)
