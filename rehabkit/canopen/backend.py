@@ -42,11 +42,11 @@ from rehabkit.core.kinds.capabilities import FollowsReference, Instruments
 from rehabkit.core.kinds.errors import SettingError
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.run.signals import signals_held
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, EStopLatch
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.core.safety.stopping import joint_inertia
 from rehabkit.hardware.bridge import HOLD_KD, HOLD_KP
-from rehabkit.hardware.bridge_process import signals_held
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
 from rehabkit.hardware.mirrored_scene import MirroredScene, SceneMirror

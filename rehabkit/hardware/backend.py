@@ -28,9 +28,10 @@ from rehabkit.core.kinds.capabilities import CompliantGaps, Instruments
 from rehabkit.core.kinds.interfaces import Backend, Context
 from rehabkit.core.kinds.sensor import INSTRUMENT_DIM
 from rehabkit.core.plugins.hookspecs import hookimpl
+from rehabkit.core.run.signals import signals_held
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.safety.event import SafetyEvent
-from rehabkit.hardware.bridge_process import signals_held, spawn_bridge, stop_bridge
+from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
 from rehabkit.hardware.bridge_says import hold_breach, hold_reason, latched_message
 from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
 from rehabkit.hardware.frame_server import FrameServer

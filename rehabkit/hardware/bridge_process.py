@@ -3,15 +3,11 @@ with the run."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import signal
 import subprocess
 import sys
 import tempfile
-import threading
-from collections.abc import Iterator
 from dataclasses import asdict
 
 from rehabkit.core.kinds.interfaces import Context
@@ -68,19 +64,3 @@ def stop_bridge(process: subprocess.Popen | None) -> None:
         process.wait()
     if process.stdout is not None:
         process.stdout.close()
-
-
-@contextlib.contextmanager
-def signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM ignored while a backend releases the robot at a run's end (a second Ctrl-C, a service
-    manager's SIGTERM, must not leave the drives powered or the bridge running); in the main thread, where Python
-    takes signals."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)

@@ -108,7 +108,7 @@ def run_sweep(scenario: str | Path, grid: Mapping[str, list[Any]] | Iterable[str
             row = execute(str(path), s.overrides, timeout_s, run_dir(s))
             record(s, row)
             if row.get("ended", {}).get("how") == "interrupted":  # Ctrl-C, SIGTERM: the run recorded, the sweep stops
-                from rehabkit.core.run.runner import Terminated
+                from rehabkit.core.run.signals import Terminated
 
                 raise Terminated() if row["ended"].get("signal") == "SIGTERM" else KeyboardInterrupt()
     elif todo:

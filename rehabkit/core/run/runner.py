@@ -11,10 +11,8 @@ them, and calls the extensions at setup and at the end.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import signal
-import threading
 import time
 import weakref
 from collections.abc import Callable
@@ -32,6 +30,7 @@ from rehabkit.core.results.record import RunRecord
 from rehabkit.core.results.summary import RunResult, summarize
 from rehabkit.core.run.loop import LoopResult, bring_to_rest, run_loop
 from rehabkit.core.run.session import RunSession, open_session
+from rehabkit.core.run.signals import Terminated, signals_held, terminated_as_interrupt
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.setup.assembly import Assembly, SetupError, assemble
 
@@ -88,13 +87,13 @@ class Runner:
         session standing at its start, before the loop (a forked replay puts the recorded session's state into it)."""
         session = loop = None
         try:
-            with _terminated_as_interrupt():
+            with terminated_as_interrupt():
                 t_setup = time.perf_counter()
                 session = self.start()
                 if prepare is not None:
                     prepare(session)
                 loop, ending = self._loop(session)
-                with _signals_held():  # (files closed whole: a second Ctrl-C waits for them)
+                with signals_held():  # (files closed whole: a second Ctrl-C waits for them)
                     result = finish(session, loop, loop.started - t_setup, self.out_dir, ending)
         except BaseException:
             if session is not None:
@@ -133,64 +132,22 @@ class Runner:
             name, rule, how = None, "plugin-error", "plugin-fault"
             said = f"{type(exc).__name__} out of the control loop: {exc}"
             logging.getLogger(__name__).debug("the run's loop raised", exc_info=True)
-        with _signals_held():
+        with signals_held():
             t = session.loop.k * session.setup.schedule.control_dt
             bring_to_rest(session, rule, said)
         loop = LoopResult(session.loop.k, time.perf_counter() - t0, session.loop.contact_steps, t0)
         return loop, RunEnding(how, said, t, session.setup.sc.duration, name, cut_short=True)
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (a service manager stopping the program), taken as Ctrl-C is: the robot brought to rest, the files
-    closed."""
-
-    signal = "SIGTERM"
-
-
-@contextlib.contextmanager
-def _terminated_as_interrupt():
-    """SIGTERM raises :class:`Terminated` in the main thread while a run goes (elsewhere, Python takes no signals)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def terminated(signum, frame):
-        raise Terminated()
-
-    previous = signal.signal(signal.SIGTERM, terminated)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-@contextlib.contextmanager
-def _signals_held():
-    """SIGINT and SIGTERM held off (in the main thread) while the robot is brought to rest and the files closed."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-
-
 def release_backend(backend) -> None:
     """The backend's end as at a normal finish (a robot brought to rest, its hardware released: its ``close``) after
     an error or Ctrl-C. A second Ctrl-C meanwhile does not cut the robot's stop short: SIGINT is held off until it
     is done (in the main thread, where Python takes signals)."""
-    held = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if held else None
-    try:
-        backend.close()
-    except Exception:  # noqa: BLE001 (the run's own error is what the user needs; the close's is logged)
-        logging.getLogger(__name__).exception("closing the backend after the run's error failed")
-    finally:
-        if held:
-            signal.signal(signal.SIGINT, previous)
+    with signals_held(signal.SIGINT):
+        try:
+            backend.close()
+        except Exception:  # noqa: BLE001 (the run's own error is what the user needs; the close's is logged)
+            logging.getLogger(__name__).exception("closing the backend after the run's error failed")
 
 
 class _Calls:
