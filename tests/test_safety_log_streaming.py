@@ -32,7 +32,8 @@ def _records(path):
 
 
 def _wait_for(predicate, what: str, proc=None, deadline_s: float = 120.0):
-    """Poll until ``predicate()`` holds (the only synchronisation: no sleeps standing in for it)."""
+    """Poll until ``predicate()`` holds: a killed run's file, written by another process, is all there is to watch (the
+    poll's pause is not a synchronisation; the predicate is)."""
     deadline = time.monotonic() + deadline_s
     while time.monotonic() < deadline:
         found = predicate()
@@ -146,15 +147,18 @@ def _event(t, rule, level="INFO", **data):
 def test_routine_records_are_batched_and_a_clipping_episode_waits_until_it_is_over(tmp_path):
     layer = _Layer()
     path = tmp_path / LOG
-    log = SafetyLog(path, layer, [{"kind": "run"}, {"kind": "limits"}], flush_s=0.01)
+    # (the interval's flushes made here, one by one: the flusher thread's own interval is an hour)
+    log = SafetyLog(path, layer, [{"kind": "run"}, {"kind": "limits"}], flush_s=3600.0)
     try:
         layer.interventions.append(_event(0.0, "ramp-in"))
-        _wait_for(lambda: len(_records(path)) == 3, "ramp-in record written by the interval flush")
+        log.flush_routine()
+        assert len(_records(path)) == 3  # the ramp-in record written by the interval's flush
         clip = _event(0.5, "torque-clip", "WARN", steps=1)
         layer.interventions.append(clip)
         layer.growing = clip
         layer.interventions.append(_event(0.6, "ramp-out"))
-        time.sleep(0.05)  # (not a synchronisation: five flushes' time, in which nothing may be written)
+        for _ in range(5):  # five flushes, in which nothing may be written
+            log.flush_routine()
         assert len(_records(path)) == 3  # (the episode may still grow: it and what follows it wait)
         clip.data["steps"] = 40  # (it grows)
         layer.interventions.append(trip := _event(0.7, "position", "ERROR", category=2))

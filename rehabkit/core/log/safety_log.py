@@ -324,16 +324,20 @@ class SafetyLog:
         self._written = start + len(pending)
         return bool(pending)
 
+    def flush_routine(self) -> None:
+        """The routine records so far written and on disk (a clipping episode still under way, and what came after
+        it, wait): what the flusher thread does every ``flush_s`` seconds while the run goes. Synced outside the lock:
+        a trip meanwhile waits for no disk but its own."""
+        with self._lock:
+            wrote = self._fd is not None and self._pending(everything=False)
+            fd = self._fd
+        if wrote and self._failed is None:
+            with contextlib.suppress(OSError):  # (the next trip's or the finish's sync says it)
+                os.fsync(fd)
+
     def _flusher(self, every: float) -> None:
-        """The routine records, written every ``every`` seconds while the run goes (synced outside the lock: a trip
-        meanwhile waits for no disk but its own)."""
         while not self._halt.wait(every):
-            with self._lock:
-                wrote = self._fd is not None and self._pending(everything=False)
-                fd = self._fd
-            if wrote and self._failed is None:
-                with contextlib.suppress(OSError):  # (the next trip's or the finish's sync says it)
-                    os.fsync(fd)
+            self.flush_routine()
 
     def _stop_flusher(self) -> None:
         self._halt.set()
