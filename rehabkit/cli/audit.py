@@ -31,6 +31,7 @@ import numpy as np
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
 from rehabkit.core.log.safety_log import KEY_ENV, LOG, audit_key, check
+from rehabkit.core.results.ending import RunEnding
 
 
 def _link(link: dict | None) -> str:
@@ -247,8 +248,8 @@ def recover(out: Path) -> dict[str, Any]:
     scenario = run.get("scenario", {}).get("file", "")
     summary = {
         "scenario": scenario, "name": Path(scenario).stem if scenario else out.name,
-        "ended": {"how": "killed (recovered)", "reason": "the process was killed before it finished; this folder was "
-                                                         "made from what it left by `rehabkit recover`"},
+        "ended": RunEnding("killed (recovered)", "the process was killed before it finished; this folder was made from "
+                           "what it left by `rehabkit recover`").as_dict(),
         "passed": False, "metrics": metrics, "per_joint": per_joint, "expectations": [],
         "safety": {"tripped": bool(events), "events": events},
         "plugins": run.get("plugins", {}), "seed": run.get("seed"), "outputs": outputs,

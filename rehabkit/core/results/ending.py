@@ -18,19 +18,18 @@ from typing import Literal
 How = Literal["completed", "stopped", "plugin-fault", "backend-fault", "interrupted", "killed (recovered)"]
 
 # the exit code of each ending (completed: 0 when every expectation is met, else 1)
-EXIT_CODES: dict[str, int] = {"stopped": 1, "plugin-fault": 3, "backend-fault": 4, "killed (recovered)": 5}
+EXIT_CODES: dict[str, int] = {"stopped": 1, "plugin-fault": 3, "backend-fault": 4}
 SIGNAL_EXITS = {"SIGINT": 130, "SIGTERM": 143}  # 128 + the signal's number, as shells report it
 
 
 @dataclass(frozen=True)
 class RunEnding:
-    """How the run ended (``how``), why (``reason``, for people), at what time [s] of how long, and the signal that
-    ended it where one did."""
+    """How the run ended (``how``), why (``reason``, for people), at what time [s], and the signal that ended it where
+    one did."""
 
     how: How
     reason: str = ""
     t: float | None = None
-    duration: float | None = None
     signal: str | None = None
     cut_short: bool = False  # the loop did not run its course (a signal, an error out of it): not a safety stop's end
 

@@ -136,7 +136,7 @@ class Runner:
             t = session.loop.k * session.setup.schedule.control_dt
             bring_to_rest(session, rule, said)
         loop = LoopResult(session.loop.k, time.perf_counter() - t0, session.loop.contact_steps, t0)
-        return loop, RunEnding(how, said, t, session.setup.sc.duration, name, cut_short=True)
+        return loop, RunEnding(how, said, t, name, cut_short=True)
 
 
 def release_backend(backend) -> None:
@@ -204,7 +204,7 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
                                             key=lambda e: e.t),
                        first_contact=session.loop.first_contact, safety=session.safety,
                        extension_states=session.extension_states)
-    summary = summarize(a, record, session.catalogue, session.view, ending or RunEnding("completed"))
+    summary = summarize(a, record, session.catalogue, session.view, ending)
     session.view.verdicts(float(trace.t[-1]) if k else 0.0, summary)
     if out_dir is not None:
         # the recording's file is finished in the background while the other files are written (its encoding

@@ -11,6 +11,7 @@ when a controller asks for one.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -70,6 +71,10 @@ class LoopState:
 @dataclass
 class RunSession:
     """A run in progress (see the module's docstring); ``setup`` is what it runs."""
+
+    # what of the session itself changes while it runs, as a snapshot takes it (core/run/snapshot.py): the rest it
+    # holds is the Assembly's, or a part taken on its own
+    RUN_STATE_FIELDS: ClassVar[tuple[str, ...]] = ("plans", "notes", "refusal", "targets", "force", "q0")
 
     setup: Assembly
     trace: Trace

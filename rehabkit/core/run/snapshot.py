@@ -25,9 +25,6 @@ from rehabkit.core.run.session import RunSession
 
 __all__ = ["SessionSnapshot", "SnapshotMismatchError", "restore", "snapshot"]
 
-# what of the session itself changes while it runs (the rest it holds is the Assembly's or a part taken on its own)
-_SESSION_FIELDS = ("plans", "notes", "refusal", "targets", "force", "q0")
-
 
 class SnapshotMismatchError(ValueError):
     """The snapshot can't be put back into this session: said why (``part``: what differs)."""
@@ -94,21 +91,11 @@ def snapshot(s: RunSession) -> SessionSnapshot:
     # (whole: a step not run yet may be read before it is written — an observation of the step before the first)
     trace = {name: value.copy() for name, value in vars(s.trace).items() if isinstance(value, np.ndarray)}
     return SessionSnapshot(
-        k, capture(s.loop), trace, {name: capture_value(getattr(s, name)) for name in _SESSION_FIELDS},
+        k, capture(s.loop), trace, capture(s),
         capture(s.ref), capture(s.gate), capture(s.timeline), s.safety.run_state(), backend,
         _settings(a.sc.backend),
         {role: (_settings(config), plugin.run_state()) for role, (plugin, config) in _plugins(s).items()},
         _parts(s))
-
-
-def capture_value(value: Any) -> Any:
-    """One value as :func:`~rehabkit.core.kinds.run_state.capture` takes an attribute."""
-    return capture(_Box(value))["value"]
-
-
-class _Box:
-    def __init__(self, value: Any):
-        self.value = value
 
 
 def restore(s: RunSession, snap: SessionSnapshot) -> list[str]:
@@ -152,7 +139,7 @@ def _restore(s: RunSession, snap: SessionSnapshot) -> list[str]:
         value = getattr(s.trace, name, None)
         if isinstance(value, np.ndarray) and value.shape == rows.shape:
             value[...] = rows
-    restore_state(s, {name: value for name, value in snap.session.items()})
+    restore_state(s, snap.session)
     restore_state(s.ref, snap.reference)
     restore_state(s.gate, snap.gate)
     restore_state(s.timeline, snap.timeline)
