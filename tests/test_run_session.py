@@ -67,7 +67,7 @@ def test_a_run_leaves_its_assembly_as_it_was_built():
 def test_a_session_restored_at_a_step_runs_on_bit_for_bit():
     """The HIT with the MyoArm strapped in (an embodied patient whose body is in the scene, muscles, noise streams):
     snapshot at 40 %, run to the end, restore, run again — the same trace to the last bit, the same events."""
-    session = Runner(load_scenario(SCENARIOS / "hit_myoarm.yaml", {"duration": 2.0, "expect": None})).start()
+    session = Runner(load_scenario(SCENARIOS / "hit_myoarm.yaml", {"duration": 1.0, "expect": None})).start()
     n = session.setup.schedule.steps
     run_loop(session, k_to=int(0.4 * n))
     snap = snapshot(session)
@@ -118,7 +118,7 @@ def test_a_gym_reset_restores_the_start_and_gives_the_fresh_episode_bit_for_bit(
     built environment's on seed 5, observation by observation; another seed gives another episode."""
     from rehabkit.gym.env import ScenarioEnv
 
-    def episode(env, seed, steps=40):
+    def episode(env, seed, steps=20):
         obs, info = env.reset(seed=seed)
         rng = np.random.default_rng(0)
         seen, rewards = [obs], []
