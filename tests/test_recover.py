@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import SCENARIOS
@@ -53,6 +54,11 @@ def test_a_killed_runs_folder_is_recovered(tmp_path):
     with AnyReader([out / "run.mcap"]) as bag:  # the bag whole again: rosbags reads it, up to the kill
         stamps = [stamp for _, stamp, _ in bag.messages()]
         assert len(stamps) == sum(recovered["bag_messages"].values()) > 100
+        # the trace's topics stream as the run goes (they were written at the finish only: a killed run had none)
+        joints = [c for c in bag.connections if c.topic == "/joint_states"]
+        states = [stamp for _, stamp, _ in bag.messages(connections=joints)]
+    assert len(states) == recovered["bag_messages"]["/joint_states"] > 500
+    assert np.all(np.diff(states) == 1_000_000)  # (every control step, none lost between the chunks)
     assert main(["audit", str(out)]) == 0
     assert main(["recover", str(out)]) == 2  # (nothing left to recover)
 

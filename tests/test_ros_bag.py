@@ -1,4 +1,4 @@
-"""Runs as ROS 2 bags: written with the mcap library's ROS 2 support, read back here by an independent reader
+"""Runs as ROS 2 bags: written as the run goes (mcap + rosbags' CDR), read back here by an independent reader
 (rosbags), checked against the run's trace, its summary and the robot itself."""
 
 from pathlib import Path
@@ -244,3 +244,26 @@ def test_a_joint_encoders_revolute_and_prismatic_joints_are_one_joint_state_in_s
                                 {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": ""}, "l1", lambda k, n: names[k]))
     assert [(topic, kind) for topic, kind, _ in out] == [("/sensors/enc/joint_states", "sensor_msgs/JointState")]
     assert out[0][2]["name"] == ["j1", "slide"] and out[0][2]["position"] == [0.5, 0.125]
+
+
+def test_a_coupled_joints_urdf_is_a_mimic_joint_that_moves_as_the_model_does():
+    """The ARM's mirrored finger (a joint coupled to the gripper's: Pinocchio's Mimic) is a URDF <mimic> joint:
+    Pinocchio, told to read mimics, builds the same robot from it — every body where the model has it at random
+    postures. (It had no URDF form: ``--bag`` on the ARM scenario ended in an internal error.)"""
+    from rehabkit_plugins.robots.arm import ArmConfig, ArmRobot
+
+    from rehabkit.ros.description import urdf_from_model
+
+    robot = ArmRobot(ArmConfig()).model
+    mine = robot.pin_model
+    urdf = urdf_from_model(mine, robot.name, robot.limits)
+    assert '<mimic joint="gripper" multiplier="1" offset="0"/>' in urdf
+    theirs = pin.buildModelFromXML(urdf, mimic=True)
+    assert theirs.nq == mine.nq == robot.dof
+    a, b = mine.createData(), theirs.createData()
+    for q in np.random.default_rng(1).uniform(robot.limits.lower, robot.limits.upper, (50, robot.dof)):
+        pin.forwardKinematics(mine, a, q)
+        pin.forwardKinematics(theirs, b, q)
+        for name in ("gripper", "gripper_mirror", "j6"):
+            i, j = mine.getJointId(name), theirs.getJointId(name)
+            np.testing.assert_allclose(b.oMi[j].homogeneous, a.oMi[i].homogeneous, atol=1e-12)

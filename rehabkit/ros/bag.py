@@ -1,5 +1,5 @@
-"""A run as a ROS 2 bag (MCAP, ROS 2's default storage since Iron; written with the ``mcap`` library's ROS 2 support):
-what Foxglove, PlotJuggler and ``ros2 bag`` open.
+"""A run as a ROS 2 bag (MCAP, ROS 2's default storage since Iron; written as the run goes by
+:mod:`rehabkit.ros.bag_writer`): what Foxglove, PlotJuggler and ``ros2 bag`` open.
 
 Topics: ``/robot_description`` (std_msgs/String, the URDF), ``/tf_static`` and ``/tf`` (the description's joint tree
 as ``robot_state_publisher`` publishes it, and where the scenario put the robot: :mod:`rehabkit.ros.tf_tree`),
@@ -17,7 +17,7 @@ Stamps: the run's start (``start_ns``, the Unix epoch; a replay's: the recorded 
 from __future__ import annotations
 
 import os
-from collections import Counter
+import time
 from pathlib import Path
 
 import numpy as np
@@ -26,10 +26,11 @@ from rehabkit.core.kinds.capabilities import BaseState
 from rehabkit.core.plugins.lifecycle import RunInfo, RunTap
 from rehabkit.models.hand_force import least_wrenches
 from rehabkit.ros.bag_sensors import reading_messages
-from rehabkit.ros.msgdefs import datatype, msgdef
+from rehabkit.ros.bag_writer import BagWriter
 from rehabkit.ros.tf_tree import TfTree, Transform
 
 LOG_LEVEL = {"DEBUG": 10, "INFO": 20, "WARN": 30, "ERROR": 40, "FATAL": 50}
+FLUSH_EVERY_S = 1.0  # the bag's messages reach the file at least this often (wall time): what a killed run loses
 
 
 def _stamp(ns: int) -> dict:
@@ -54,29 +55,6 @@ def _transform(t: Transform, ns: int) -> dict:
             "transform": {"translation": _xyz(m[:3, 3]), "rotation": _quat(m[:3, :3])}}
 
 
-class _Bag:
-    def __init__(self, path: Path):
-        from mcap_ros2.writer import Writer
-
-        self.file = open(path, "wb")  # noqa: SIM115 (closed in finish)
-        self.writer = Writer(self.file)
-        self.schemas: dict[str, object] = {}
-        self.counts: Counter = Counter()
-        self.types: dict[str, str] = {}
-
-    def put(self, topic: str, msg_type: str, message: dict, ns: int) -> None:
-        if msg_type not in self.schemas:
-            self.schemas[msg_type] = self.writer.register_msgdef(datatype(msg_type), msgdef(msg_type))
-        self.writer.write_message(topic, self.schemas[msg_type], message, log_time=ns, publish_time=ns,
-                                  sequence=self.counts[topic])
-        self.counts[topic] += 1
-        self.types[topic] = datatype(msg_type)
-
-    def finish(self) -> None:
-        self.writer.finish()
-        self.file.close()
-
-
 def _ros_frame(frame: str | None, base: str) -> str:
     """A sensor's frame as tf names it: a body's name as it is, the robot base as the robot's base link."""
     return base if frame in (None, "", "robot base", "base") else frame
@@ -84,8 +62,10 @@ def _ros_frame(frame: str | None, base: str) -> str:
 
 class BagRecorder(RunTap):
     """The run's bag as it goes: opened with the session (``.run.mcap.part``), each sensor reading as it is taken,
-    a floating robot's root at the log rate, the trace's topics when the run is over (:meth:`finish`, then renamed to
-    ``run.mcap``); dropped if the run fails."""
+    the trace's topics at each logged step for the rows run since (once the session lets it :meth:`follow` the
+    trace), the chunk under way written out at least every :data:`FLUSH_EVERY_S` of wall time — a killed run's bag
+    reads up to there (``rehabkit recover`` indexes it) — and the rest when the run is over (:meth:`finish`, then
+    renamed to ``run.mcap``); dropped if the run fails before its loop."""
 
     def __init__(self, path: Path, run: RunInfo, start_ns: int, description: str):
         self.path, self.start_ns = path, start_ns
@@ -103,25 +83,51 @@ class BagRecorder(RunTap):
             self.tree = TfTree(urdf_from_model(robot.pin_model, robot.name, robot.limits), robot, frames,
                                floating=self._root is not None)
         self.base = self.tree.base
-        self.bag = _Bag(self.part)
+        self.bag = BagWriter(self.part)
         self._frames = {name: _ros_frame(s.frame, self.base) for name, s in run.sensors.items()}
         self._channels = {name: s.channels for name, s in run.sensors.items()}
-        self.roots: dict[int, np.ndarray] = {}  # logged control step → the root's pose
+        self._names, self._model, self._hand = list(robot.joint_names), robot.pin_model, robot.ee_frame_id
+        self._every = max(1, run.schedule.log_every)
+        self._trace = None  # the session's trace, as the loop fills it (:meth:`follow`)
+        self._rows_done = 0  # the trace's rows in the bag
+        self._tf_next = 0  # the next logged step whose /tf is due
+        self._flush_by = time.monotonic() + FLUSH_EVERY_S
         self.bag.put("/robot_description", "std_msgs/String", {"data": description}, start_ns)
         self.bag.put("/tf_static", "tf2_msgs/TFMessage",
                      {"transforms": [_transform(t, start_ns) for t in self.tree.static()]}, start_ns)
 
+    def _ns(self, t: float) -> int:
+        return self.start_ns + round(t * 1e9)
+
+    def follow(self, trace) -> None:
+        self._trace = trace
+
     def logged(self, t: float, k: int) -> None:
+        tr = self._trace
+        if tr is None or k < self._rows_done:  # (not followed; or a session restored to an earlier step)
+            return
+        _rows(self.bag, tr, self._rows_done, k + 1, self.start_ns, self._names, self._model, self._hand)
+        self._rows_done = k + 1
+        root = None
         if self._root is not None:
             import pinocchio as pin
 
             position, (w, x, y, z), _, _ = self._root()
-            pose = np.eye(4)
-            pose[:3, :3], pose[:3, 3] = pin.Quaternion(w, x, y, z).toRotationMatrix(), position
-            self.roots[k] = pose
+            root = np.eye(4)
+            root[:3, :3], root[:3, 3] = pin.Quaternion(w, x, y, z).toRotationMatrix(), position
+        self._tf(k, t, tr.q[k], root)
+        if time.monotonic() >= self._flush_by:
+            self._flush_by = time.monotonic() + FLUSH_EVERY_S
+            self.bag.flush()
+
+    def _tf(self, k: int, t: float, q: np.ndarray, root: np.ndarray | None) -> None:
+        at = self._ns(t)
+        moved = self.tree.moving(q, root)
+        self.bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [_transform(m, at) for m in moved]}, at)
+        self._tf_next = k + self._every
 
     def reading(self, t: float, name: str, reading: dict) -> None:
-        ns = self.start_ns + round(t * 1e9)
+        ns = self._ns(t)
         header = {"stamp": _stamp(ns), "frame_id": ""}
         seen = reading.get("target_position")
         if seen is not None and not np.allclose(self.tree.base_to_frame, np.eye(4)):  # (in the bag's base frame)
@@ -136,9 +142,16 @@ class BagRecorder(RunTap):
         self.part.unlink(missing_ok=True)
 
     def finish(self, run: RunInfo, record) -> dict:
-        """The trace's topics, the bag closed and renamed; returns its topics with their types and message counts."""
+        """The rest of the trace's topics, the targets and ``/rosout``; the bag closed and renamed; returns its topics
+        with their types and message counts."""
         try:
-            _trace_topics(self.bag, run, record, self.start_ns, self)
+            tr = record.trace
+            _rows(self.bag, tr, self._rows_done, len(tr.t), self.start_ns, self._names, self._model, self._hand)
+            for k in range(self._tf_next, len(tr.t), self._every):  # (the steps the loop did not log: a stop's)
+                self._tf(k, float(tr.t[k]), tr.q[k], None)
+            ns = self.start_ns + np.rint(tr.t * 1e9).astype(np.int64)
+            _targets(self.bag, run, record, ns, self.tree)
+            _rosout(self.bag, record, self.start_ns)
             self.bag.finish()
             os.replace(self.part, self.path)
         except BaseException:
@@ -152,7 +165,7 @@ TARGETS = {"point": ("/targets", "geometry_msgs/PointStamped"), "pose": ("/targe
            "joints": ("/targets/joint_states", "sensor_msgs/JointState")}  # a target's topic and type, by kind
 
 
-def _targets(bag: _Bag, run: RunInfo, record, ns: np.ndarray, tree: TfTree) -> None:
+def _targets(bag: BagWriter, run: RunInfo, record, ns: np.ndarray, tree: TfTree) -> None:
     """Each movement's goal as it began, by what its target gives (:data:`TARGETS`): a posture's joint values as the
     task gives them, a hand pose (a position and the orientation the hand must take; as the plan reaches it where
     some axes are free), or where the hand goes; in the bag's base frame."""
@@ -181,37 +194,37 @@ def _targets(bag: _Bag, run: RunInfo, record, ns: np.ndarray, tree: TfTree) -> N
             bag.put(topic, msg_type, {"header": header, "point": _xyz(m[:3, :3] @ goal + m[:3, 3])}, at)
 
 
-def _trace_topics(bag: _Bag, run: RunInfo, record, start_ns: int, rec: BagRecorder) -> None:
-    """Joint states, reference, the person's wrench and the interaction force every control step, the targets as
-    each movement began, tf at the log rate, the safety layer's events and the notes."""
-    tr, robot = record.trace, run.robot.model
-    names = list(robot.joint_names)
-    ns = start_ns + np.rint(tr.t * 1e9).astype(np.int64)
-    person = tr.tau_h is not None and len(tr.t) and np.any(tr.tau_h)
-    model, hand = robot.pin_model, robot.ee_frame_id
-    # the person's wrench at the hand, in its axes: the least one whose joint torques are theirs
-    wrenches = least_wrenches(model, tr.q, tr.tau_h, hand) if person else None
-    for k in range(len(tr.t)):
-        stamp = {"stamp": _stamp(int(ns[k])), "frame_id": ""}
+def _rows(bag: BagWriter, tr, a: int, b: int, start_ns: int, names: list[str], model, hand: int) -> None:
+    """The trace's rows ``a:b``: the joint states, the reference, the interaction force and the person's wrench at
+    the hand (in its axes: the least one whose joint torques are theirs)."""
+    if b <= a:
+        return
+    ns = start_ns + np.rint(tr.t[a:b] * 1e9).astype(np.int64)
+    q, qd, tau, q_ref, qd_ref = tr.q[a:b], tr.qd[a:b], tr.tau[a:b], tr.q_ref[a:b], tr.qd_ref[a:b]
+    referenced = np.isfinite(q_ref).all(axis=1)
+    force = tr.f_h[a:b] if tr.f_h is not None else None
+    # (every step where there is a simulated person: a push of nothing is a wrench of zero)
+    wrenches = least_wrenches(model, q, tr.tau_h[a:b], hand) if tr.tau_h is not None else None
+    frame = model.frames[hand].name
+    for i in range(b - a):
+        at = int(ns[i])
+        stamp = {"stamp": _stamp(at), "frame_id": ""}
         bag.put("/joint_states", "sensor_msgs/JointState",
-                {"header": stamp, "name": names, "position": tr.q[k].tolist(), "velocity": tr.qd[k].tolist(),
-                 "effort": tr.tau[k].tolist()}, int(ns[k]))
-        if np.isfinite(tr.q_ref[k]).all():
+                {"header": stamp, "name": names, "position": q[i], "velocity": qd[i], "effort": tau[i]}, at)
+        if referenced[i]:
             bag.put("/reference/joint_states", "sensor_msgs/JointState",
-                    {"header": stamp, "name": names, "position": tr.q_ref[k].tolist(),
-                     "velocity": tr.qd_ref[k].tolist(), "effort": []}, int(ns[k]))
-        if tr.f_h is not None and np.isfinite(tr.f_h[k]):
-            bag.put("/interaction_force", "std_msgs/Float64", {"data": float(tr.f_h[k])}, int(ns[k]))
-        if person:
-            w = wrenches[k]
+                    {"header": stamp, "name": names, "position": q_ref[i], "velocity": qd_ref[i]}, at)
+        if force is not None and np.isfinite(force[i]):
+            bag.put("/interaction_force", "std_msgs/Float64", {"data": float(force[i])}, at)
+        if wrenches is not None:
+            w = wrenches[i]
             bag.put("/wrench", "geometry_msgs/WrenchStamped",
-                    {"header": {**stamp, "frame_id": model.frames[hand].name},
-                     "wrench": {"force": _xyz(w[:3]), "torque": _xyz(w[3:])}}, int(ns[k]))
-    _targets(bag, run, record, ns, rec.tree)
-    every = max(1, run.schedule.log_every)
-    for k in range(0, len(tr.t), every):
-        moved = rec.tree.moving(tr.q[k], rec.roots.get(k))
-        bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [_transform(t, int(ns[k])) for t in moved]}, int(ns[k]))
+                    {"header": {**stamp, "frame_id": frame}, "wrench": {"force": _xyz(w[:3]), "torque": _xyz(w[3:])}},
+                    at)
+
+
+def _rosout(bag: BagWriter, record, start_ns: int) -> None:
+    """The safety layer's events and interventions and the run's notes, in time order."""
     events = list(record.safety.events)
     said = [(e.t, "ERROR", f"SAFETY {e.message}") for e in events]
     trips = {(e.t, e.rule) for e in events}  # (each trip is among the interventions too: said once)

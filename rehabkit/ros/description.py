@@ -62,6 +62,16 @@ def _origin(m) -> str:
 
 def _joint_axis(joint) -> tuple[tuple[float, float, float], bool]:
     kind = joint.shortname().removeprefix("JointModel")
+    if kind == "Mimic":  # (its axis: the motion it makes, which Pinocchio gives scaled by its multiplier)
+        import numpy as np
+
+        mimic = joint.extract()
+        data = joint.createData()
+        joint.calc(data, np.zeros(max(joint.idx_q + joint.nq, 1)))
+        motion = np.asarray(data.S).ravel() / mimic.scaling
+        prismatic = not np.any(motion[3:])
+        axis = motion[:3] if prismatic else motion[3:]
+        return (float(axis[0]), float(axis[1]), float(axis[2])), prismatic
     if kind in AXES:
         return AXES[kind], kind.startswith("P")
     if kind in ("RevoluteUnaligned", "PrismaticUnaligned"):
@@ -117,12 +127,21 @@ def urdf_from_model(model, name: str, limits=None) -> str:
             model.lowerPositionLimit[i], model.upperPositionLimit[i])
         effort, speed = (limits.effort[v], limits.velocity[v]) if limits is not None else (
             model.effortLimit[v], model.velocityLimit[v])
+        mimic = []
+        if joint.shortname() == "JointModelMimic":  # (a joint coupled to another: URDF's <mimic>, its range the
+            m = joint.extract()  # leader's mapped through the coupling)
+            leader = next(k for k in range(1, model.njoints) if k != j and model.joints[k].idx_q == i
+                          and model.joints[k].shortname() != "JointModelMimic")
+            lower, upper = sorted((m.scaling * lower + m.offset, m.scaling * upper + m.offset))
+            speed *= abs(m.scaling)
+            mimic = [f'    <mimic joint={quoteattr(model.names[leader])} multiplier="{m.scaling:.17g}" '
+                     f'offset="{m.offset:.17g}"/>']
         out += [f'  <joint name={quoteattr(model.names[j])} type="{"prismatic" if prismatic else "revolute"}">',
                 f"    <parent link={quoteattr(parent)}/><child link={quoteattr(moved)}/>",
                 f"    {_origin(up.actInv(data.oMi[j]))}",
                 f'    <axis xyz="{axis[0]:.17g} {axis[1]:.17g} {axis[2]:.17g}"/>',
                 f'    <limit lower="{lower:.17g}" upper="{upper:.17g}" effort="{effort:.17g}" '
-                f'velocity="{speed:.17g}"/>',
+                f'velocity="{speed:.17g}"/>', *mimic,
                 "  </joint>"]
         if not at_joint:
             out += [f"  <link name={quoteattr(link.name)}/>"] + _fixed(moved, link.name,

@@ -87,6 +87,11 @@ class RunTap:
         """The run at a logged step (the log rate: control step ``k``, at ``t``), e.g. to ask the backend for what
         the trace does not hold (default: nothing)."""
 
+    def follow(self, trace: Any) -> None:
+        """The run's trace as the loop fills it (read-only), given once as the session opens: its rows up to a
+        logged step are final when :meth:`logged` is called for it, e.g. to write them as the run goes (default:
+        nothing)."""
+
     def discard(self) -> None:
         """The run failed: drop whatever was begun (default: nothing)."""
 
