@@ -1,6 +1,7 @@
 """Sweeps: the grid, serial against Ray row for row, resuming a killed sweep, failing and hanging runs."""
 
 import csv
+import json
 import os
 import re
 import signal
@@ -120,6 +121,32 @@ def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, m
     assert by[300]["error"].startswith("RunTimeoutError") and not by[300]["passed"]
     assert by[300]["wall_time_s"] < 30
     assert [a["errors"] for a in result.aggregate] == [0, 1]
+
+
+def test_a_ray_sweep_stopped_by_ctrl_c_records_the_run_under_way_as_interrupted(tmp_path, monkeypatch, running_ray):
+    """Ctrl-C while a run goes on Ray (raised where the driver waits, once the short run is recorded): the finished
+    run kept, the one under way recorded as interrupted and so left to run again on resuming, the Ctrl-C passed on.
+    (A Ray sweep lost its runs under way without a word.)"""
+    import ray
+
+    from rehabkit.sweep.grid import expand
+    from rehabkit.sweep.store import RunStore
+
+    wait = ray.wait
+
+    def interrupted_once_one_is_recorded(*args, **kwargs):
+        if list((tmp_path / "runs").glob("*.json")):
+            raise KeyboardInterrupt
+        return wait(*args, **kwargs)
+
+    monkeypatch.setattr(ray, "wait", interrupted_once_one_is_recorded)
+    with pytest.raises(KeyboardInterrupt):  # (300 s of HIT: seconds of wall time, under way at the Ctrl-C)
+        run_sweep(HIT, ["duration=0.2,300"], 1, tmp_path, workers=2)
+    rows = {r.point[0][1]: r for r in expand(HIT, {"duration": [0.2, 300]}, 1)}
+    short, cut = (json.loads((tmp_path / "runs" / f"{rows[d].run_id}.json").read_text()) for d in (0.2, 300))
+    assert short["error"] is None and short["metrics"]["sim_time_s"] == pytest.approx(0.2)
+    assert cut["ended"]["how"] == "interrupted" and cut["ended"]["signal"] == "SIGINT" and not cut["passed"]
+    assert set(RunStore(tmp_path).done(list(rows.values()))) == {rows[0.2].run_id}  # (resuming runs it again)
 
 
 @pytest.mark.parametrize("mode", ["serial", "ray"])

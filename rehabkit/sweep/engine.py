@@ -154,27 +154,49 @@ def _on_ray(todo: list[RunSpec], path: str, timeout_s: float, address: str | Non
         slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
         remote = ray.remote(num_cpus=1, max_retries=0)(execute)
         queue, running = deque(todo), {}
-        while queue or running:
-            while queue and len(running) < slots:
-                s = queue.popleft()
-                running[remote.remote(path, s.overrides, None, run_dir(s))] = (s, time.monotonic())
-            done, _ = ray.wait(list(running), num_returns=1, timeout=0.2)
-            for ref in done:
-                s, t_start = running.pop(ref)
-                try:
-                    row = ray.get(ref)
-                except Exception as exc:  # noqa: BLE001 (the worker died, the task failed: recorded)
-                    row = _failed(f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1][:500]}", t_start)
-                record(s, row)
-            now = time.monotonic()
-            for ref, (s, t_start) in list(running.items()):
-                if now - t_start > timeout_s:
-                    ray.cancel(ref, force=True)
-                    del running[ref]
-                    record(s, _failed(f"RunTimeoutError: timeout: still running after {timeout_s:g} s", t_start))
+        try:
+            _drain(queue, running, slots, remote, path, timeout_s, record, run_dir)
+        except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM: the runs under way recorded as cut short (run again on
+            said = getattr(exc, "signal", "SIGINT")  # resuming), the workers stopped with Ray, the sweep stops
+            for ref, (s, t_start) in running.items():
+                ray.cancel(ref, force=True)
+                record(s, _interrupted(said, t_start))
+            raise
     finally:
         if started:
             ray.shutdown()
+
+
+def _drain(queue: deque, running: dict, slots: int, remote, path: str, timeout_s: float,
+           record: Callable[[RunSpec, dict[str, Any]], None], run_dir: Callable[[RunSpec], str | None]) -> None:
+    """Keep ``slots`` runs going on Ray until ``queue`` is empty, recording each as it ends (a failed worker, a run
+    past ``timeout_s``: recorded as failed)."""
+    import ray
+
+    while queue or running:
+        while queue and len(running) < slots:
+            s = queue.popleft()
+            running[remote.remote(path, s.overrides, None, run_dir(s))] = (s, time.monotonic())
+        done, _ = ray.wait(list(running), num_returns=1, timeout=0.2)
+        for ref in done:
+            s, t_start = running.pop(ref)
+            try:
+                row = ray.get(ref)
+            except Exception as exc:  # noqa: BLE001 (the worker died, the task failed: recorded)
+                row = _failed(f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1][:500]}", t_start)
+            record(s, row)
+        now = time.monotonic()
+        for ref, (s, t_start) in list(running.items()):
+            if now - t_start > timeout_s:
+                ray.cancel(ref, force=True)
+                del running[ref]
+                record(s, _failed(f"RunTimeoutError: timeout: still running after {timeout_s:g} s", t_start))
+
+
+def _interrupted(signal: str, t_start: float) -> dict[str, Any]:
+    """A run under way on Ray when the sweep was stopped: recorded as cut short (the store runs it again)."""
+    return {**_failed(f"interrupted ({signal}): the sweep was stopped while it ran", t_start),
+            "ended": {"how": "interrupted", "signal": signal, "reason": "the sweep was stopped while it ran"}}
 
 
 def _failed(error: str, t_start: float) -> dict[str, Any]:
