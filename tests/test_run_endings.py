@@ -93,3 +93,29 @@ def test_each_ending_has_its_exit_code(how, code):
     from rehabkit.core.results.ending import RunEnding
 
     assert RunEnding(how).exit_code(passed=True) == code
+
+
+def test_sigterm_during_the_bags_write_is_taken_after_it_and_the_bag_reads_whole(tmp_path, monkeypatch):
+    """SIGTERM sent while the bag writes a message (the 600th, 0.3 s in): the message is written whole and the run ends
+    as SIGTERM ends it — the bag reads, every control step's joint state up to the end. (Raised inside the mcap
+    writer, it tore that record: the rest of its chunk unreadable by rosbags.)"""
+    from mcap.writer import Writer
+    from rosbags.highlevel import AnyReader
+
+    real, calls = Writer.add_message, {"n": 0}
+
+    def add_message(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 600:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(Writer, "add_message", add_message)
+    out = tmp_path / "run"
+    result = Runner(load_scenario(SCENARIOS / "hit_roundtrip.yaml", {"duration": 1.0, "ros": {"bag": True}}),
+                    out_dir=out).run()
+    assert result.summary["ended"]["signal"] == "SIGTERM" and result.exit_code == 143
+    with AnyReader([out / "run.mcap"]) as bag:
+        joints = [c for c in bag.connections if c.topic == "/joint_states"]
+        stamps = np.array([stamp for _, stamp, _ in bag.messages(connections=joints)])
+    assert len(stamps) == len(result.trace.t) and set(np.diff(stamps)) == {1_000_000}

@@ -20,6 +20,7 @@ from rehabkit.core.kinds.capabilities import Contacts, FollowsReference
 from rehabkit.core.kinds.interfaces import BackendFaultError, EmbodiedPatient
 from rehabkit.core.run.plugin_fault import NOTHING, plugin_fault
 from rehabkit.core.run.session import RunSession
+from rehabkit.core.run.signals import signals_deferred
 
 
 @dataclass(frozen=True)
@@ -162,8 +163,10 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
             if k == next_log:
                 next_log += log_every
                 view.record_step(t, k, q, trace)
-                for tap in taps:
-                    tap.logged(t, k)
+                if taps:
+                    with signals_deferred():  # (a tap's write whole: a Ctrl-C taken after it)
+                        for tap in taps:
+                            tap.logged(t, k)
             if deferred_log and log.queued:  # wall-clock run: one entity's columns a tick
                 log.send_one()
             if bar is not None and k % 1000 == 999:

@@ -9,7 +9,7 @@ import signal
 import threading
 from collections.abc import Iterator
 
-__all__ = ["Terminated", "signals_held", "terminated_as_interrupt"]
+__all__ = ["Terminated", "signals_deferred", "signals_held", "terminated_as_interrupt"]
 
 
 class Terminated(KeyboardInterrupt):
@@ -53,3 +53,27 @@ def signals_held(*signums: int) -> Iterator[None]:
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
+
+
+@contextlib.contextmanager
+def signals_deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM taken when the block is over instead of inside it: an extension's tap writing its file
+    (a bag's chunk) is not cut mid-record — Ctrl-C raised inside the mcap writer left a torn record in the chunk, and
+    every message after it in that chunk unreadable. The first signal that came is raised again at the end, to the
+    handler that was in place."""
+    if not _main_thread():
+        yield
+        return
+    came: list[int] = []
+
+    def later(signum, frame):
+        came.append(signum)
+
+    previous = {s: signal.signal(s, later) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if came:
+            signal.raise_signal(came[0])

@@ -18,6 +18,7 @@ from rehabkit.core.kinds.capabilities import scene_actions
 from rehabkit.core.kinds.sensor import Reading
 from rehabkit.core.run.plugin_fault import debug_traceback
 from rehabkit.core.run.sensor_threads import SensorThreads
+from rehabkit.core.run.signals import signals_deferred
 from rehabkit.core.setup.assembly import Assembly
 
 NO_REPLANS: list = []  # never appended to: what due() returns when no plan is due
@@ -176,8 +177,10 @@ class Timeline:
         """A sensor's reading (started at ``t_read``) into the readings and the log; 'moved' events."""
         self.readings[name] = Reading(name, t_read, reading, self._frames[name])
         self.view.sensor(t_read, name, reading)
-        for tap in self.taps:
-            tap.reading(t_read, name, reading)
+        if self.taps:
+            with signals_deferred():  # (a tap's write whole: a Ctrl-C taken after it)
+                for tap in self.taps:
+                    tap.reading(t_read, name, reading)
         if not self._watch:
             return
         for i, state in self._watch.items():
