@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from rosbags.highlevel import AnyReader
 
 from tests.conftest import SCENARIOS
@@ -42,11 +43,23 @@ def test_a_killed_runs_folder_is_recovered(tmp_path):
 
     out = tmp_path / "run"
     _killed_run(out)
-    assert {"run.rrd.tmp", ".run.mcap.part", "safety_log.jsonl"} <= {p.name for p in out.iterdir()}
+    # (the scenario as it ran is written as the session opens: a killed run keeps it, and replays from it)
+    assert {"run.rrd.tmp", ".run.mcap.part", "safety_log.jsonl", "scenario.yaml"} <= {p.name for p in out.iterdir()}
     assert main(["run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(out)]) == 2  # (it would overwrite it)
     assert main(["recover", str(out)]) == 0
-    assert {p.name for p in out.iterdir()} == {"run.rrd", "run.mcap", "safety_log.jsonl", "summary.json"}
+    assert {p.name for p in out.iterdir()} == {"run.rrd", "run.mcap", "safety_log.jsonl", "summary.json",
+                                                "scenario.yaml"}
     summary = json.loads((out / "summary.json").read_text())
+    # listed as a finished run's summary lists them: its name, its files, its bag, the log's last hash
+    assert summary["name"] == "hit-roundtrip"
+    assert summary["outputs"] == {"rrd": "run.rrd", "safety_log": "safety_log.jsonl", "scenario": "scenario.yaml"}
+    assert summary["bag"]["topics"]["/joint_states"]["type"] == "sensor_msgs/msg/JointState"
+    last = json.loads((out / "safety_log.jsonl").read_text().splitlines()[-1])
+    assert summary["safety_log_hash"] == last["hash"]
+    # the recording given the footer a killed run's file lacks: Rerun's own check passes it
+    verified = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(out / "run.rrd")],
+                              capture_output=True, text=True)
+    assert verified.returncode == 0, verified.stderr
     assert summary["ended"]["how"] == "killed (recovered)" and not summary["passed"]
     recovered = summary["recovered"]
     assert 0.5 < recovered["recording_until_s"] == summary["metrics"]["sim_time_s"] < 300.0  # (where the kill fell)
@@ -84,3 +97,27 @@ def test_validate_and_run_say_the_folder_holds_a_killed_run_not_recovered(tmp_pa
     (out / ".run.mcap.part").unlink()
     assert main(["validate", scenario, "--out", str(out)]) == 0
     assert "WARNING" not in capsys.readouterr().out
+
+
+def test_a_killed_run_without_a_bag_is_recovered_and_replays_from_its_folder(tmp_path, capsys):
+    """A killed run that kept no bag (made here from a finished 0.3 s run: its recording as the loop left it, its
+    scenario, its log without the closing record): recovered (its plugins listed as a finished run's summary lists
+    them), and ``rehabkit replay`` runs it again from the folder — the scenario as it ran is written as the session
+    opens. (Recover's report read the bag's figures it did not have, and replay had no scenario to start from.)"""
+    from rehabkit.cli.main import main
+
+    done, killed = tmp_path / "done", tmp_path / "killed"
+    run = ["run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(done), "--set", "duration=0.3"]
+    assert main(run) == 1  # (its task unfinished)
+    killed.mkdir()
+    (killed / "run.rrd.tmp").write_bytes((done / "run.rrd").read_bytes())
+    (killed / "scenario.yaml").write_text((done / "scenario.yaml").read_text())
+    lines = (done / "safety_log.jsonl").read_text().splitlines(keepends=True)
+    (killed / "safety_log.jsonl").write_text("".join(lines[:-1]))  # (no closing record: the process died)
+    capsys.readouterr()
+    assert main(["recover", str(killed)]) == 0
+    summary = json.loads((killed / "summary.json").read_text())
+    finished = json.loads((done / "summary.json").read_text())
+    assert "bag" not in summary and summary["plugins"] == finished["plugins"]
+    assert summary["recovered"]["recording_until_s"] == pytest.approx(0.299, abs=0.002)
+    assert main(["replay", str(killed), "--set", "duration=0.3"]) == 1  # (ran: its task unfinished again)

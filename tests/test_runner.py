@@ -169,14 +169,15 @@ def test_a_run_that_dies_after_its_loop_leaves_no_half_written_file(tmp_path, mo
         run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path)
     assert err.value is full  # the writer's own error, not another
     # no half-written recording or summary; the safety log stays, as it stood (the robot moved: its audit trail is
-    # kept, without its closing record, as a killed run's is)
-    assert [p.name for p in tmp_path.iterdir()] == ["safety_log.jsonl"]
+    # kept, without its closing record, as a killed run's is), and the scenario it ran (written whole as it opened)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["safety_log.jsonl", "scenario.yaml"]
     assert not check(tmp_path / "safety_log.jsonl").finished
 
 
 @pytest.mark.parametrize("error", [ValueError("Value does not fit in specified type"), KeyboardInterrupt()])
 def test_a_run_whose_backend_fails_at_its_reset_leaves_no_half_written_file(tmp_path, monkeypatch, error):
-    """The recording opens before the robot is reset; a reset that fails (a plugin's bug, Ctrl-C) takes it along."""
+    """The recording opens before the robot is reset; a reset that fails (a plugin's bug, Ctrl-C) takes it along — and
+    the folder the run made, which it leaves empty (an existing one is left as it was)."""
     from rehabkit.sim.mujoco import MujocoBackend
 
     def reset(self, q0):
@@ -185,6 +186,9 @@ def test_a_run_whose_backend_fails_at_its_reset_leaves_no_half_written_file(tmp_
     monkeypatch.setattr(MujocoBackend, "reset", reset)
     with pytest.raises(type(error)):
         run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(type(error)):
+        run_scenario(HIT, {"duration": 0.2, "expect": None}, out_dir=tmp_path / "made")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -22,6 +22,7 @@ with), and the safety log without its closing record. Recovering:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
-from rehabkit.core.log.safety_log import KEY_ENV, LOG, audit_key, check
+from rehabkit.core.log.safety_log import KEY_ENV, LOG, SNAPSHOT, audit_key, check
 from rehabkit.core.results.ending import RunEnding
 
 
@@ -181,19 +182,23 @@ def _rebuild_bag(part: Path, whole: Path) -> dict[str, Any]:
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     counts: dict[str, int] = {}
+    types: dict[str, str] = {}
     first = last = None
     with open(part, "rb") as src, open(tmp, "wb") as dst:
         writer = Writer(dst, compression=CompressionType.ZSTD)
         writer.start(profile="ros2", library="rehabkit recover")
         topics: dict[int, str] = {}
+        names: dict[int, str] = {}  # schema id → its type's name
         try:
             for record in StreamReader(src, skip_magic=False).records:
                 if isinstance(record, Schema) and record.id not in schemas:
                     schemas[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+                    names[record.id] = record.name
                 elif isinstance(record, Channel) and record.id not in channels:
                     channels[record.id] = writer.register_channel(record.topic, record.message_encoding,
                                                                   schemas.get(record.schema_id, 0), record.metadata)
                     topics[record.id] = record.topic
+                    types[record.topic] = names.get(record.schema_id, "")
                 elif isinstance(record, Message) and record.channel_id in channels:
                     writer.add_message(channels[record.channel_id], record.log_time, record.data,
                                        record.publish_time, record.sequence)
@@ -207,7 +212,42 @@ def _rebuild_bag(part: Path, whole: Path) -> dict[str, Any]:
         os.fsync(dst.fileno())
     os.replace(tmp, whole)
     part.unlink()
-    return {"messages": counts, "until_s": (last - first) / 1e9 if first is not None else 0.0}
+    return {"messages": counts, "types": types, "until_s": (last - first) / 1e9 if first is not None else 0.0}
+
+
+def _indexed(path: Path) -> bool:
+    """The recording given the footer a killed run's file lacks (Rerun's manifest of its chunks: ``rerun rrd
+    verify`` refuses a file without one), by Rerun's own ``rrd migrate`` (which keeps a backup: removed once the
+    migrated file is in place, put back if it failed)."""
+    import subprocess
+
+    backup = path.with_name(f"{path.stem}.backup{path.suffix}")
+    done = subprocess.run([sys.executable, "-m", "rerun", "rrd", "migrate", str(path)], capture_output=True,
+                          text=True, timeout=300)
+    if done.returncode == 0 and path.exists():
+        backup.unlink(missing_ok=True)
+        return True
+    if backup.exists():
+        os.replace(backup, path)
+    return False
+
+
+def _plugins(logged: dict[str, str], ran: dict) -> dict[str, Any]:
+    """The plugins as a finished run's summary lists them (kind → type, package, version; sensors by name), from the
+    safety log's ``kind:type → "package version"`` and the scenario as it ran (the sensors' names)."""
+    out: dict[str, Any] = {}
+    sensors = ran.get("sensors") if isinstance(ran, dict) else None
+    for key, said in logged.items():
+        kind, _, kind_type = key.partition(":")
+        package, _, version = str(said).partition(" ")
+        entry = {"type": kind_type, "package": package, "version": version}
+        if kind != "sensor":
+            out[kind] = entry
+        elif isinstance(sensors, dict):
+            for name, spec in sensors.items():
+                if isinstance(spec, dict) and spec.get("type") == kind_type:
+                    out.setdefault("sensors", {})[name] = {**entry, "entry_point": kind_type}
+    return out
 
 
 def recover(out: Path) -> dict[str, Any]:
@@ -227,13 +267,15 @@ def recover(out: Path) -> dict[str, Any]:
             series = _recording(out / LEFT["recording"])
             metrics, per_joint = _metrics(series)
             os.replace(out / LEFT["recording"], out / RECORDING)
-            outputs["recording"] = RECORDING
+            outputs["rrd"] = RECORDING
             recovered["recording_until_s"] = metrics["sim_time_s"]
+            if not _indexed(out / RECORDING):
+                said.append("the recording's footer (its index) could not be written: Rerun reads it whole, "
+                            "`rerun rrd verify` does not pass it")
         except Exception as exc:  # noqa: BLE001 (said in the summary: the file is left as it was)
             said.append(f"the recording could not be read ({type(exc).__name__}: {exc}); left as {LEFT['recording']}")
     if (out / LEFT["bag"]).exists():
         bag = _rebuild_bag(out / LEFT["bag"], out / BAG)
-        outputs["bag"] = BAG
         recovered["bag_until_s"], recovered["bag_messages"] = bag["until_s"], bag["messages"]
     events = [r for r in (log.records if log is not None else []) if r.get("kind") == "intervention"
               and r.get("level") == "ERROR"]
@@ -243,18 +285,31 @@ def recover(out: Path) -> dict[str, Any]:
         if log.torn:
             said.append("the safety log's last line was written halfway: left out")
     said.append("not computed again: the task's outcome measures and the expectations' verdicts (the plans, the "
-                "targets and the person are not in the recording); replay the scenario for them")
+                "targets and the person are not in the recording); `rehabkit replay` runs it again for them")
     metrics["safety_events"] = float(len(events))
     scenario = run.get("scenario", {}).get("file", "")
+    name, ran = Path(scenario).stem if scenario else out.name, {}
+    if (out / SNAPSHOT).exists():  # (the scenario as it ran, written as the session opened)
+        outputs["scenario"] = SNAPSHOT
+        import yaml
+
+        with contextlib.suppress(yaml.YAMLError, AttributeError, TypeError):
+            ran = yaml.safe_load((out / SNAPSHOT).read_text()) or {}
+            name = ran.get("name") or name
     summary = {
-        "scenario": scenario, "name": Path(scenario).stem if scenario else out.name,
+        "scenario": scenario, "name": name,
         "ended": RunEnding("killed (recovered)", "the process was killed before it finished; this folder was made from "
                            "what it left by `rehabkit recover`").as_dict(),
         "passed": False, "metrics": metrics, "per_joint": per_joint, "expectations": [],
         "safety": {"tripped": bool(events), "events": events},
-        "plugins": run.get("plugins", {}), "seed": run.get("seed"), "outputs": outputs,
+        "plugins": _plugins(run.get("plugins", {}), ran), "seed": run.get("seed"), "outputs": outputs,
         "recovered": {**recovered, "said": said},
     }
+    if "bag_messages" in recovered:  # (as a finished run's summary lists its bag)
+        summary["bag"] = {"file": BAG, "topics": {t: {"type": bag["types"].get(t, ""), "messages": n}
+                                                  for t, n in sorted(bag["messages"].items())}}
+    if log is not None and log.records:  # (the last hash: to keep elsewhere, as a finished run's)
+        summary["safety_log_hash"] = log.records[-1]["hash"]
     atomic_write_json(out / "summary.json", summary)
     return summary
 
@@ -268,11 +323,14 @@ def cmd_recover(args: argparse.Namespace) -> int:
         return EXIT_INVALID
     summary = recover(out)
     rec = summary["recovered"]
-    print(f"recovered {out}: " + ", ".join(
-        [f"the recording up to {rec['recording_until_s']:.3f} s"] * ("recording_until_s" in rec)
-        + [f"the bag up to {rec['bag_until_s']:.3f} s ({sum(rec['bag_messages'].values())} messages)"]
-        * ("bag_until_s" in rec)
-        + [f"the safety log's {rec['safety_log_records']} records"] * ("safety_log_records" in rec)))
+    kept = []
+    if "recording_until_s" in rec:
+        kept.append(f"the recording up to {rec['recording_until_s']:.3f} s")
+    if "bag_until_s" in rec:
+        kept.append(f"the bag up to {rec['bag_until_s']:.3f} s ({sum(rec['bag_messages'].values())} messages)")
+    if "safety_log_records" in rec:
+        kept.append(f"the safety log's {rec['safety_log_records']} records")
+    print(f"recovered {out}: " + ", ".join(kept))
     for line in rec["said"]:
         print(f"  {line}")
     print(f"wrote {out / 'summary.json'} (ended: killed (recovered))")

@@ -37,6 +37,9 @@ import yaml
 from rehabkit.core.io import atomic_write_text
 
 LOG = "safety_log.jsonl"
+# the scenario as it ran beside the log (the text its run record hashes), written as the session opens: what `rehabkit
+# replay` starts from, kept by a killed run too
+SNAPSHOT = "scenario.yaml"
 KEY_ENV = "REHABKIT_AUDIT_KEY"
 GENESIS = "0" * 64
 FLUSH_S = 1.0  # routine records wait at most this long (wall clock) to be written, unless a clipping episode lasts

@@ -11,6 +11,7 @@ them, and calls the extensions at setup and at the end.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
 import time
@@ -23,6 +24,7 @@ from threadpoolctl import threadpool_limits
 from rehabkit.core.io import atomic_write_json, atomic_write_text
 from rehabkit.core.kinds.interfaces import BackendFaultError
 from rehabkit.core.log import safety_log
+from rehabkit.core.log.safety_log import SNAPSHOT
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginRegistry, default_registry
 from rehabkit.core.results.ending import RunEnding, ending_of
@@ -33,8 +35,6 @@ from rehabkit.core.run.session import RunSession, open_session
 from rehabkit.core.run.signals import Terminated, signals_held, terminated_as_interrupt
 from rehabkit.core.scenario.loader import LoadedScenario
 from rehabkit.core.setup.assembly import Assembly, SetupError, assemble
-
-SNAPSHOT = "scenario.yaml"  # the scenario as run, in the run's folder: what `rehabkit replay` starts from
 
 __all__ = ["SNAPSHOT", "Runner", "RunResult", "SetupError", "finish"]
 
@@ -86,6 +86,7 @@ class Runner:
         which a run whose loop ran keeps (:mod:`~rehabkit.core.log.safety_log`). ``prepare(session)``: called with the
         session standing at its start, before the loop (a forked replay puts the recorded session's state into it)."""
         session = loop = None
+        made = self.out_dir is not None and not self.out_dir.exists()  # (a folder this run makes: gone if it never ran)
         try:
             with terminated_as_interrupt():
                 t_setup = time.perf_counter()
@@ -103,6 +104,11 @@ class Runner:
                     tap.discard()
                 if session.safety_log is not None:  # (written as it went: left as it stands once the loop ran)
                     session.safety_log.discard() if loop is None else session.safety_log.abandon()
+                if loop is None and self.out_dir is not None:  # a run that never ran leaves no folder
+                    (self.out_dir / SNAPSHOT).unlink(missing_ok=True)
+            if made and loop is None:
+                with contextlib.suppress(OSError):  # (only where it is empty: nothing of anyone's removed)
+                    self.out_dir.rmdir()
             raise
         else:
             session.setup.backend.close()  # (after the outputs are written; its own error is the run's)
@@ -213,9 +219,10 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
         outputs, recording_written = session.view.begin_close()
         try:
             summary["outputs"] = {**outputs, "scenario": SNAPSHOT, **a.backend.outputs()}
-            log = session.safety_log  # (the text its run record hashed, made as the session opened)
+            log = session.safety_log  # (the text its run record hashed, made and written as the session opened)
             snapshot = log.scenario if log is not None else safety_log.scenario_text(a)
-            atomic_write_text(out_dir / SNAPSHOT, snapshot)
+            if log is None or not (out_dir / SNAPSHOT).exists():
+                atomic_write_text(out_dir / SNAPSHOT, snapshot)
             # the tamper-evident record of the run's safety (rehabkit audit), written as the run went: its rest
             # (the robot side's interventions, known now) and its end, the last hash in the summary
             if log is None:  # (a session opened without a folder: written here, whole)

@@ -15,13 +15,14 @@ from typing import ClassVar
 
 import numpy as np
 
+from rehabkit.core.io import atomic_write_text
 from rehabkit.core.kinds.capabilities import NamedJoints, PassiveJoints
 from rehabkit.core.kinds.interfaces import BackendFaultError, Plan, PlanningError, Target
 from rehabkit.core.kinds.metric import MetricCatalogue
 from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.log.archetypes import encode_images
 from rehabkit.core.log.run_view import NullView, RunView, open_view
-from rehabkit.core.log.safety_log import SafetyLog, open_log
+from rehabkit.core.log.safety_log import SNAPSHOT, SafetyLog, open_log
 from rehabkit.core.run.plan_gate import PlanGate
 from rehabkit.core.run.plugin_fault import plugin_fault
 from rehabkit.core.run.reference import ReferenceBuffer
@@ -236,14 +237,16 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     session.threads = threads
     session.timeline = Timeline(a, view, threads, session.taps, session.targets, safety)
     try:
-        if a.out_dir is not None:  # the safety log from now on: the run and its limits on disk, then each trip
-            session.safety_log = open_log(a, safety)
+        if a.out_dir is not None:  # the safety log from now on: the run and its limits on disk, then each trip;
+            session.safety_log = open_log(a, safety)  # and the scenario as it runs (a killed run's folder keeps it)
+            atomic_write_text(a.out_dir / SNAPSHOT, session.safety_log.scenario)
         _first_plan(session)
     except BaseException:
         for tap in session.taps:
             tap.discard()
         if session.safety_log is not None:  # (a run refused before it ran leaves none)
             session.safety_log.discard()
+            (a.out_dir / SNAPSHOT).unlink(missing_ok=True)
         raise
     return session
 
