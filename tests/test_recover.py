@@ -71,6 +71,7 @@ def test_a_killed_runs_folder_is_recovered(tmp_path):
         joints = [c for c in bag.connections if c.topic == "/joint_states"]
         states = [stamp for _, stamp, _ in bag.messages(connections=joints)]
     assert len(states) == recovered["bag_messages"]["/joint_states"] > 500
+    assert recovered["bag_messages"]["/targets/pose"] >= 1  # (the first leg's goal, as it began: streamed too)
     assert np.all(np.diff(states) == 1_000_000)  # (every control step, none lost between the chunks)
     assert main(["audit", str(out)]) == 0
     assert main(["recover", str(out)]) == 2  # (nothing left to recover)

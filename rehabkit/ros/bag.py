@@ -89,6 +89,10 @@ class BagRecorder(RunTap):
         self._names, self._model, self._hand = list(robot.joint_names), robot.pin_model, robot.ee_frame_id
         self._every = max(1, run.schedule.log_every)
         self._trace = None  # the session's trace, as the loop fills it (:meth:`follow`)
+        self._movements = None  # ... and its movements so far
+        self._moves_done = 0  # the movements whose target is in the bag
+        self._run = run
+        self._sensed = {spec.name for spec in run.scenario.task.targets if spec.sensor}
         self._rows_done = 0  # the trace's rows in the bag
         self._tf_next = 0  # the next logged step whose /tf is due
         self._flush_by = time.monotonic() + FLUSH_EVERY_S
@@ -99,8 +103,8 @@ class BagRecorder(RunTap):
     def _ns(self, t: float) -> int:
         return self.start_ns + round(t * 1e9)
 
-    def follow(self, trace) -> None:
-        self._trace = trace
+    def follow(self, trace, movements) -> None:
+        self._trace, self._movements = trace, movements
 
     def logged(self, t: float, k: int) -> None:
         tr = self._trace
@@ -116,6 +120,7 @@ class BagRecorder(RunTap):
             root = np.eye(4)
             root[:3, :3], root[:3, 3] = pin.Quaternion(w, x, y, z).toRotationMatrix(), position
         self._tf(k, t, tr.q[k], root)
+        self._targets(self._movements(), k, tr.t)
         if time.monotonic() >= self._flush_by:
             self._flush_by = time.monotonic() + FLUSH_EVERY_S
             self.bag.flush()
@@ -125,6 +130,15 @@ class BagRecorder(RunTap):
         moved = self.tree.moving(q, root)
         self.bag.put("/tf", "tf2_msgs/TFMessage", {"transforms": [_transform(m, at) for m in moved]}, at)
         self._tf_next = k + self._every
+
+    def _targets(self, movements, k: int, t: np.ndarray) -> None:
+        """The goal of each movement begun by step ``k`` not yet in the bag (a movement begun is final: a replan
+        replaces only those not yet begun)."""
+        while self._moves_done < len(movements) and movements[self._moves_done].k0 <= k:
+            mv = movements[self._moves_done]
+            if mv.k0 < len(t):
+                _target(self.bag, self._run, mv, self._ns(float(t[mv.k0])), self.tree, self._sensed)
+            self._moves_done += 1
 
     def reading(self, t: float, name: str, reading: dict) -> None:
         ns = self._ns(t)
@@ -149,8 +163,7 @@ class BagRecorder(RunTap):
             _rows(self.bag, tr, self._rows_done, len(tr.t), self.start_ns, self._names, self._model, self._hand)
             for k in range(self._tf_next, len(tr.t), self._every):  # (the steps the loop did not log: a stop's)
                 self._tf(k, float(tr.t[k]), tr.q[k], None)
-            ns = self.start_ns + np.rint(tr.t * 1e9).astype(np.int64)
-            _targets(self.bag, run, record, ns, self.tree)
+            self._targets(record.movements, len(tr.t) - 1, tr.t)
             _rosout(self.bag, record, self.start_ns)
             self.bag.finish()
             os.replace(self.part, self.path)
@@ -165,33 +178,29 @@ TARGETS = {"point": ("/targets", "geometry_msgs/PointStamped"), "pose": ("/targe
            "joints": ("/targets/joint_states", "sensor_msgs/JointState")}  # a target's topic and type, by kind
 
 
-def _targets(bag: BagWriter, run: RunInfo, record, ns: np.ndarray, tree: TfTree) -> None:
-    """Each movement's goal as it began, by what its target gives (:data:`TARGETS`): a posture's joint values as the
+def _target(bag: BagWriter, run: RunInfo, mv, at: int, tree: TfTree, sensed: set[str]) -> None:
+    """A movement's goal as it began, by what its target gives (:data:`TARGETS`): a posture's joint values as the
     task gives them, a hand pose (a position and the orientation the hand must take; as the plan reaches it where
-    some axes are free), or where the hand goes; in the bag's base frame."""
-    tr, robot = record.trace, run.robot.model
+    some axes are free), or where the hand goes; in the bag's base frame (``sensed``: the targets a sensor places,
+    whose position is the movement's)."""
+    robot = run.robot.model
     names, m = list(robot.joint_names), tree.base_to_frame
-    sensed = {spec.name for spec in run.scenario.task.targets if spec.sensor}  # (their position: the movement's)
-    for mv in record.movements:
-        if mv.k0 >= len(tr.t):
-            continue
-        at = int(ns[mv.k0])
-        header = {"stamp": _stamp(at), "frame_id": tree.base}
-        target = run.targets.get(mv.name) if mv.name is not None else None
-        if target is not None and target.q is not None:  # (a posture stays one: a replay reaches it, not an IK's)
-            topic, msg_type = TARGETS["joints"]
-            bag.put(topic, msg_type, {"header": {**header, "frame_id": ""}, "name": names,
-                                      "position": [float(v) for v in target.q], "velocity": [], "effort": []}, at)
-        elif target is not None and target.pose is not None and not target.position_only:
-            pose = m @ (target.pose if not target.free_axes else robot.ee_pose(np.asarray(mv.target, float)))
-            topic, msg_type = TARGETS["pose"]
-            bag.put(topic, msg_type, {"header": header, "pose": {"position": _xyz(pose[:3, 3]),
-                                                                 "orientation": _quat(pose[:3, :3])}}, at)
-        else:
-            goal = target.pose[:3, 3] if target is not None and target.pose is not None and mv.name not in sensed \
-                else np.asarray(mv.goal, float)
-            topic, msg_type = TARGETS["point"]
-            bag.put(topic, msg_type, {"header": header, "point": _xyz(m[:3, :3] @ goal + m[:3, 3])}, at)
+    header = {"stamp": _stamp(at), "frame_id": tree.base}
+    target = run.targets.get(mv.name) if mv.name is not None else None
+    if target is not None and target.q is not None:  # (a posture stays one: a replay reaches it, not an IK's)
+        topic, msg_type = TARGETS["joints"]
+        bag.put(topic, msg_type, {"header": {**header, "frame_id": ""}, "name": names,
+                                  "position": [float(v) for v in target.q], "velocity": [], "effort": []}, at)
+    elif target is not None and target.pose is not None and not target.position_only:
+        pose = m @ (target.pose if not target.free_axes else robot.ee_pose(np.asarray(mv.target, float)))
+        topic, msg_type = TARGETS["pose"]
+        bag.put(topic, msg_type, {"header": header, "pose": {"position": _xyz(pose[:3, 3]),
+                                                             "orientation": _quat(pose[:3, :3])}}, at)
+    else:
+        goal = target.pose[:3, 3] if target is not None and target.pose is not None and mv.name not in sensed \
+            else np.asarray(mv.goal, float)
+        topic, msg_type = TARGETS["point"]
+        bag.put(topic, msg_type, {"header": header, "point": _xyz(m[:3, :3] @ goal + m[:3, 3])}, at)
 
 
 def _rows(bag: BagWriter, tr, a: int, b: int, start_ns: int, names: list[str], model, hand: int) -> None:

@@ -34,7 +34,7 @@ An extension's module is imported for every run: import heavy things inside the 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
@@ -87,10 +87,12 @@ class RunTap:
         """The run at a logged step (the log rate: control step ``k``, at ``t``), e.g. to ask the backend for what
         the trace does not hold (default: nothing)."""
 
-    def follow(self, trace: Any) -> None:
-        """The run's trace as the loop fills it (read-only), given once as the session opens: its rows up to a
-        logged step are final when :meth:`logged` is called for it, e.g. to write them as the run goes (default:
-        nothing)."""
+    def follow(self, trace: Any, movements: Callable[[], Sequence[Any]]) -> None:
+        """The run as the loop goes (read-only), given once as the session opens: ``trace`` the trace the loop fills
+        (:class:`~rehabkit.core.kinds.trace.Trace`), ``movements()`` the movements planned so far
+        (:class:`~rehabkit.core.results.record.Movement`: ``k0`` the step each begins). When :meth:`logged` is called
+        for step ``k``, the trace's rows up to ``k`` and the movements begun by then are final: e.g. to write them as
+        the run goes (default: nothing)."""
 
     def discard(self) -> None:
         """The run failed: drop whatever was begun (default: nothing)."""

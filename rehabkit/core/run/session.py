@@ -227,8 +227,8 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
     session = RunSession(a, trace, packed, ref, view, catalogue, PlanGate(a, a.space, catalogue), q0, safety,
                          notes=list(notes or []), targets=dict(a.targets))
     session.taps, session.extension_states = a.extensions.run_opened(a)
-    for tap in session.taps:  # (the trace as the loop fills it: a tap may write its rows as the run goes)
-        tap.follow(trace)
+    for tap in session.taps:  # (the trace as the loop fills it, the movements as plans make them: written as it goes)
+        tap.follow(trace, lambda: session.ref.movements)
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
         # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are)
