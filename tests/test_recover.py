@@ -75,6 +75,7 @@ def test_a_killed_runs_folder_is_recovered(tmp_path):
     assert np.all(np.diff(states) == 1_000_000)  # (every control step, none lost between the chunks)
     assert main(["audit", str(out)]) == 0
     assert main(["recover", str(out)]) == 2  # (nothing left to recover)
+    assert main(["recover", str(tmp_path / "elsewhere")]) == 2  # (no such folder: said so)
 
 
 def test_validate_and_run_say_the_folder_holds_a_killed_run_not_recovered(tmp_path, capsys):

@@ -316,6 +316,9 @@ def recover(out: Path) -> dict[str, Any]:
 
 def cmd_recover(args: argparse.Namespace) -> int:
     out = Path(args.run_dir)
+    if not out.is_dir():
+        print(f"error: {out}: no such folder (give the folder the killed run wrote, its --out)", file=sys.stderr)
+        return EXIT_INVALID
     left = killed_leftovers(out)
     if not left:
         print(f"error: {out} holds no killed run to recover (it needs {LEFT['recording']}, {LEFT['bag']} or a "
