@@ -2,8 +2,8 @@
 the path (tests/link_attacker.py) attacking in one way per row; then the decoder and the handshake fuzzed.
 
 Each row: a fresh bridge (lock-step, with the robot's key; real time in the last rows), the attacker between it and
-the host, one HIT round trip. Printed: datagrams the attacker sent (and answers it got: challenges and refusals,
-at most 20 a second), datagrams the bridge let in from anywhere but the host (accepted), what the bridge and the
+the host, one HIT round trip. Printed: datagrams the attacker sent (and answers it got: refusals, at most 5 a second
+to each of its sources), datagrams the bridge let in from anywhere but the host (accepted), what the bridge and the
 host dropped, by reason (beyond the unattacked run's), the largest joint deviation from the unattacked run, safety
 events, and the run's wall time. The first row is the unattacked run through the same relay (it is also the
 earlier session the others replay).
@@ -134,7 +134,8 @@ def fuzz(inputs: int) -> None:
     from hypothesis import strategies as st
 
     from rehabkit.hardware.link.protocol import COMMAND, STATE, Receiver, encode
-    from rehabkit.hardware.security.handshake import HANDSHAKE, BridgeGate, HostHandshake, peek_kind
+    from rehabkit.hardware.security.gate import BridgeGate
+    from rehabkit.hardware.security.handshake import HANDSHAKE, HostHandshake, peek_kind
 
     with tempfile.TemporaryDirectory() as tmp:
         key = new_key("hit-1", Path(tmp) / "hit-1.key")

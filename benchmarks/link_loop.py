@@ -9,8 +9,9 @@ expectations met, and tracking against the simulation. Repeat with ``--repeats``
 same scenario over the lock-step link (``backend.clock=lockstep``): its loop's wall time against
 the simulation's and the real-time link's, and its largest deviation from the simulated path.
 
-Then authentication (``--auth``, default on): the cost of sealing and opening one datagram in a session against the
-checksum of a link without a key [µs], and the HIT round trip in real time without a key and with one, alternating,
+Then authentication (``--auth``, default on): the cost of a handshake at each end and of refusing a stranger's
+datagram, the cost of sealing and opening one datagram in a session against the checksum of a link without a key
+[µs], and the HIT round trip in real time without a key and with one, alternating,
 side by side: deadline misses, tick lateness, round trips.
 
     python benchmarks/link_loop.py [--repeats N] [--scenarios hit_roundtrip lexos_reaching] [--no-auth]
@@ -44,13 +45,62 @@ def baseline(seconds: float) -> tuple[float, float]:
     return float(np.mean(late > 1.0)), float(np.percentile(late, 99))
 
 
+def handshake_cost(n: int = 500) -> None:
+    """A whole handshake in process, each end's share [us] (X25519 key pairs and exchange, HKDF, the proofs, MAC1),
+    the sizes of its messages [B], and what the bridge spends refusing a stranger's datagram [us]: a HELLO without
+    MAC1, a PROOF for no challenge, a datagram of the session from another address."""
+    import tempfile
+
+    from rehabkit.hardware.link.protocol import COMMAND, PLAIN, encode, pack_bytes
+    from rehabkit.hardware.security.gate import BridgeGate
+    from rehabkit.hardware.security.handshake import HELLO, PROOF, HostHandshake
+    from rehabkit.hardware.security.keys import new_key
+
+    with tempfile.TemporaryDirectory() as tmp:
+        key = new_key("hit-1", Path(tmp) / "hit-1.key")
+    at = ("127.0.0.1", 9)
+    host_s = bridge_s = 0.0
+    gate = BridgeGate(key, 1)
+    for i in range(n):
+        gate.end()
+        t0 = time.perf_counter()
+        host = HostHandshake(key, 1)
+        hello = host.next(1)
+        t1 = time.perf_counter()
+        challenge, _ = gate.reply(hello, at, float(i))
+        t2 = time.perf_counter()
+        host.take(challenge)
+        proof = host.next(2)
+        t3 = time.perf_counter()
+        welcome, _ = gate.reply(proof, at, float(i))
+        t4 = time.perf_counter()
+        assert host.take(welcome) is not None
+        t5 = time.perf_counter()
+        host_s += (t1 - t0) + (t3 - t2) + (t5 - t4)
+        bridge_s += (t2 - t1) + (t4 - t3)
+    print(f"{'handshake [us]':24s} host {1e6 * host_s / n:6.0f}   bridge {1e6 * bridge_s / n:6.0f}   sizes [B]: HELLO "
+          f"{len(hello)}, CHALLENGE {len(challenge)}, PROOF {len(proof)}, WELCOME {len(welcome)}")
+    stranger = ("127.0.0.1", 10)
+    junk = PLAIN.seal(pack_bytes(HELLO, 1, 1, bytes(64)))
+    wrong = PLAIN.seal(pack_bytes(PROOF, 1, 2, bytes(64)))
+    sealed = encode(COMMAND, 1, 10**6, np.zeros(6), link=gate.session)
+    for label, act in (("HELLO without MAC1", lambda j: gate.reply(junk, stranger, 1e6 + j)),
+                       ("PROOF, no challenge", lambda j: gate.reply(wrong, at, 1e6)),
+                       ("session's, elsewhere", lambda j: gate.open(sealed, stranger))):
+        t0 = time.perf_counter()
+        for j in range(20 * n):
+            act(j)
+        print(f"{'refusing ' + label:32s} {1e6 * (time.perf_counter() - t0) / (20 * n):6.2f} us")
+
+
 def datagram_cost(n: int = 20000) -> None:
     """Per datagram, a STATE of 6 joints (the bridge sends one a tick) and a COMMAND (the host's): encoded and taken
     in, without a key (CRC-32) and in a session (ChaCha20-Poly1305) [µs]."""
     import tempfile
 
     from rehabkit.hardware.link.protocol import COMMAND, STATE, Receiver, encode
-    from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake
+    from rehabkit.hardware.security.gate import BridgeGate
+    from rehabkit.hardware.security.handshake import HostHandshake
     from rehabkit.hardware.security.keys import new_key
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -112,6 +162,7 @@ def main() -> None:
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cpus, python {platform.python_version()}\n")
     if args.auth:
+        handshake_cost()
         datagram_cost()
         auth_side_by_side(args.repeats)
         print()

@@ -14,8 +14,7 @@ attack ``--count`` datagrams (the flood: ``--flood-s`` seconds):
              lock-step CLOCKs ahead of time to the bridge, states with 1000-rad joints to the host
   replayed   datagrams captured from this session (to where they went) and from an earlier one (``--earlier``)
   tampered   captured datagrams with one bit flipped
-  wrong-key  HELLOs under another key id, PROOFs with a wrong MAC to the bridge's own challenges, this session's
-             and an earlier session's PROOF and HELLO again
+  wrong-key  HELLOs with a MAC1 it cannot make, this session's and an earlier session's PROOF and HELLO again
   flood      as fast as one process can send, to the bridge's port: random bytes, replays, HELLOs (from a
              process of its own, while the others go on)
 
@@ -98,7 +97,7 @@ class Attacker:
         self.sock.setblocking(False)
         self.challenges: list[bytes] = []
         self.in_flight = 0  # datagrams still to tamper with in flight
-        self.hellos, self.since_hello = 0, 0  # the host's handshakes relayed, its datagrams since the newest
+        self.hellos, self.since_hello = 0, 0  # the host's sessions relayed (a new run: a new port), its datagrams since
         self.relayed = threading.Condition()  # the relay's thread says so each time it has passed one on
 
     def forward(self, data: bytes) -> bytes:
@@ -167,18 +166,17 @@ class Attacker:
         hellos = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == HELLO]
         proofs = [d for w, d in self.capture + self.earlier if w == 0 and peek_kind(d) == PROOF]
         for i in range(n if "wrong-key" in attacks else 0):  # wrong key
-            nonce = bytes(rng.integers(0, 256, 16, dtype=np.uint8))
-            self.send("wrong-key", PLAIN.seal(pack_bytes(HELLO, rid, 2 * i + 1, bytes(8) + nonce)), self.bridge)
-            if hellos:  # the right key id (it is public), then a proof it cannot make
+            hello = bytes(rng.integers(0, 256, 64, dtype=np.uint8))  # (a key, padding, a MAC1 it cannot make)
+            self.send("wrong-key", PLAIN.seal(pack_bytes(HELLO, rid, 2 * i + 1, hello)), self.bridge)
+            if hellos:  # the host's own, again (its challenge was proven: a replay)
                 self.send("wrong-key", hellos[i % len(hellos)], self.bridge)
-            for challenge in self.challenges[-4:]:
-                body = challenge[-(8 + 16 + 16 + 32 + 4):-4]
-                proof = body[:40] + bytes(rng.integers(0, 256, 32, dtype=np.uint8))
+            for challenge in self.challenges[-4:]:  # (a challenge it was given: none, without a MAC1)
+                proof = challenge[-(32 + 32 + 4):-4 - 32] + bytes(rng.integers(0, 256, 32, dtype=np.uint8))
                 self.send("wrong-key", PLAIN.seal(pack_bytes(PROOF, rid, 2 * i + 2, proof)), self.bridge)
             self.challenges.clear()
             for proof in proofs:
                 self.send("wrong-key", proof, self.bridge)
-            time.sleep(0.001)  # (the bridge answers 20 a second outside a session: some get a challenge)
+            time.sleep(0.001)  # (the bridge answers each source 5 times a second outside a session)
         if flood is not None:
             flood.join()
             self.report["flood"] = {"sent": int(sent.value), "seconds": a.flood_s, "from": start, "to": time.time()}
@@ -226,11 +224,12 @@ def main() -> None:
                     relay.sendto(attacker.forward(data), attacker.host)
                 attacker.capture.append((1, data))
             else:
+                # (a new run is a new socket: its port; a HELLO from the same one re-keys its session)
+                attacker.hellos, attacker.since_hello = (attacker.hellos + 1, 0) if addr != attacker.host else \
+                    (attacker.hellos, attacker.since_hello + 1)
                 attacker.host = addr
                 relay.sendto(attacker.forward(data), attacker.bridge)
                 attacker.capture.append((0, data))
-                attacker.hellos, attacker.since_hello = (attacker.hellos + 1, 0) if peek_kind(data) == HELLO else \
-                    (attacker.hellos, attacker.since_hello + 1)
             with attacker.relayed:
                 attacker.relayed.notify_all()
     finally:

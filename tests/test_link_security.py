@@ -4,17 +4,38 @@ attacked from a second process while it runs (tests/link_attacker.py): nothing f
 import json
 import os
 import select
+import shutil
 import signal
+import socket
 import stat
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 from rehabkit.api import run_scenario
-from rehabkit.hardware.link.protocol import COMMAND, ESTOPPED, HEADER, Receiver, encode
-from rehabkit.hardware.security.handshake import BridgeGate, HostHandshake
+from rehabkit.hardware.link.protocol import (
+    CLEAR,
+    COMMAND,
+    ESTOPPED,
+    HEADER,
+    NO_RIGHT,
+    Receiver,
+    encode,
+    pack,
+    pack_bytes,
+)
+from rehabkit.hardware.security.gate import LIVE_S, BridgeGate
+from rehabkit.hardware.security.handshake import (
+    BUSY,
+    NO_KEY,
+    OTHER_KEY,
+    HostHandshake,
+    LinkRefusedError,
+    handshake,
+)
 from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key, new_key
 from rehabkit.hardware.security.session import ReplayWindow
 from tests.conftest import ROOT, SCENARIOS
@@ -30,12 +51,14 @@ def key(tmp_path):
     return new_key("hit-1", tmp_path / "hit-1.key")
 
 
-def _shake(key, gate: BridgeGate, robot: int = 1, host_key=None):
-    """A handshake in process: host → gate → host → gate → host; the host's session (or None) and the gate's."""
+def _shake(key, gate: BridgeGate, robot: int = 1, host_key=None, addr=HOST, now: float = 0.0):
+    """A handshake in process: host → gate → host → gate → host (from ``addr``, at ``now``); the host's session (or
+    None) and the host's end."""
     host = HostHandshake(host_key or key, robot)
     seq = iter(range(1, 100))
+    session = None
     for _ in range(2):
-        reply, _why = gate.reply(host.next(next(seq)), HOST)
+        reply, _why = gate.reply(host.next(next(seq)), addr, now)
         session = host.take(reply) if reply is not None else None
     return session, host
 
@@ -60,6 +83,25 @@ def test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret
     assert (missing.value.path, missing.value.fix) == (
         str(tmp_path / "none.key"), "make one with `rehabkit keys new ROBOT-ID --out FILE` and give the same file to "
         "the bridge")
+    key.path.chmod(0o600)
+    made = new_key("hit-1", tmp_path / "keys" / "hit-1.key")  # a keys/ folder made for it: its owner's only
+    assert stat.S_IMODE(made.path.parent.stat().st_mode) == 0o700
+    made.path.parent.chmod(0o770)  # (others may write the folder: they could swap the key)
+    with pytest.raises(KeyFileError) as open_folder:
+        load_key(made.path)
+    assert (open_folder.value.path, open_folder.value.fix) == (str(made.path), f"chmod go-w {made.path.parent}")
+    made.path.parent.chmod(0o700)
+    link = tmp_path / "keys" / "link.key"
+    link.symlink_to(made.path)
+    with pytest.raises(KeyFileError) as symlink:  # (read with O_NOFOLLOW: a link could be pointed anywhere)
+        load_key(link)
+    assert symlink.value.problem == "a symbolic link"
+    with pytest.raises(KeyFileError):  # (nor written through one)
+        new_key("hit-1", link, replace=True)
+    os.chown(made.path, 1234, -1)  # (another user's file: as root the test can give it away)
+    with pytest.raises(KeyFileError) as theirs:
+        load_key(made.path)
+    assert theirs.value.problem == f"owned by user 1234, not this one ({os.geteuid()})"
     with pytest.raises(KeyFileError) as other_robot:
         check_robot(key, "lexos-1")
     assert (other_robot.value.path, other_robot.value.fix) == (
@@ -98,19 +140,26 @@ def test_a_session_opens_what_its_peer_sealed_once_and_nothing_altered(key):
         encode(COMMAND, 1, 9, np.zeros(3), link=session)  # (a repeated nonce would give the key away)
 
 
-def test_the_handshake_refuses_another_key_and_a_replayed_proof_and_a_new_one_ends_the_old_session(key, tmp_path):
+def test_the_handshake_refuses_another_key_and_a_replayed_proof_and_no_other_host_takes_a_live_session(key, tmp_path):
     gate = BridgeGate(key, 1)
     other = new_key("hit-1", tmp_path / "other.key")
     session, host = _shake(key, gate, host_key=other)
-    assert session is None and host.problem == f"the bridge holds another key (its key id {key.id}, this key's " \
-                                               f"{other.id})"
+    assert session is None and host.refusal == OTHER_KEY and gate.session is None  # (told; no key id)
     first, host = _shake(key, gate)
     proof = host.next(99)
-    assert gate.reply(proof, HOST) == (None, "stale-proof")  # each nonce proves once
-    second, _ = _shake(key, gate)
-    assert second.id != first.id and gate.session.id == second.id
-    assert gate.open(encode(COMMAND, 1, 50, np.zeros(3), link=first), HOST) == (None, "other-session")
-    assert _shake(key, BridgeGate(None, 1))[1].problem == "the bridge has no key (it was started without --key)"
+    assert gate.reply(proof, HOST, 0.0)[1] == "proof-again"  # (its WELCOME lost: the same one again, nothing new)
+    assert gate.session.id == first.id
+    elsewhere = ("127.0.0.1", 40003)
+    assert _shake(key, gate, addr=elsewhere, now=0.5)[0] is None and gate.session.id == first.id  # live: not taken
+    second, _ = _shake(key, gate, addr=elsewhere, now=0.5 + LIVE_S)  # (its host silent for LIVE_S: the next may)
+    assert second.id != first.id and gate.session.id == second.id and gate.peer == elsewhere
+    assert gate.open(encode(COMMAND, 1, 50, np.zeros(3), link=first), HOST) == (None, "other-address")
+    at = 0.5 + LIVE_S
+    assert _shake(key, gate, addr=HOST, now=at)[1].refusal == BUSY  # live again (just made): HOST's turn is over
+    gate.allow(at)  # the person at the bridge lets a new host in (the keypad's a): once
+    third, _ = _shake(key, gate, addr=HOST, now=at)
+    assert gate.session.id == third.id and _shake(key, gate, addr=elsewhere, now=at)[1].refusal == BUSY
+    assert _shake(key, BridgeGate(None, 1))[1].refusal == NO_KEY
 
 
 def _start(cmd, prefix, cwd=ROOT):
@@ -131,9 +180,9 @@ def _stop(proc, sig=signal.SIGINT):
     proc.stdout.close()
 
 
-def _over(port, key):
+def _over(port, key, **backend):
     return run_scenario(HIT, {"backend": {"type": "hardware", "clock": "lockstep", "spawn_bridge": False,
-                                          "port": port, "key_file": str(key.path)}})
+                                          "port": port, "key_file": str(key.path), **backend}})
 
 
 def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_nothing_of_the_attackers(key, tmp_path):
@@ -147,7 +196,8 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
                                  "--session", "2", "--count", "60", "--flood-s", "0.5",
                                  "--report", str(tmp_path / "attack.json")], "attacker:")
         try:
-            runs = [_over(port, key) for _ in range(2)]  # the first only captured: the earlier session replayed
+            # (the first only captured: the earlier session replayed); each re-keyed every second of the link's time
+            runs = [_over(port, key, rekey_s=1.0) for _ in range(2)]
             assert select.select([attacker.stdout], [], [], 30)[0] and attacker.stdout.readline() == "attacker: done\n"
         finally:
             _stop(attacker, signal.SIGTERM)
@@ -162,14 +212,14 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
     (host_at,) = stats["opened_from"]  # one address let in: the host's (through the relay)
     assert [(s["from"], s["key_id"]) for s in stats["sessions"]] == [(host_at, key.id)] * 2
     dropped = stats["dropped"]
-    for reason in ("unauthenticated", "replayed", "other-session", "handshake-other-key", "handshake-stale-proof"):
-        assert dropped[reason] > 0, dropped
-    # (the forged torques, resets, clears and clocks that reached it: the flood beside them overflows the socket's
-    # buffer, and the kernel drops what does not fit)
-    assert 0 < dropped["unauthenticated"] <= 4 * 60
+    assert stats["rekeys"] == 2 * 8  # (8.5 s of the link's time each: re-keyed after 1 s, 2 s, … 8 s, unbroken)
+    # what came from the attacker's own address (forged, replayed, the flood) was refused before anything was
+    # decrypted; replayed HELLOs and PROOFs made no challenge; what it tampered with in flight failed to open
+    for reason in ("other-address", "authentication", "handshake-other-key", "handshake-replayed-hello",
+                   "handshake-stale-proof"):
+        assert dropped.get(reason, 0) > 0, json.dumps(dropped)
     m = attacked.metrics
-    assert m["states_dropped_unauthenticated"] >= 60 and m["states_dropped_replayed"] > 0
-    assert m["states_dropped_authentication"] > 0  # (tampered in flight: the host asked again)
+    assert m["states_dropped_other_address"] >= 60 and m["states_dropped_authentication"] > 0
 
 
 def test_a_bridge_beyond_loopback_needs_a_key():
@@ -179,28 +229,61 @@ def test_a_bridge_beyond_loopback_needs_a_key():
 
 
 def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_name(key, tmp_path):
-    from rehabkit.cli.estop import clear_over_link
+    from rehabkit.cli.estop import ClearRefusedError, clear_over_link
     from rehabkit.core.safety.estop import EStopLatch
 
     latch = EStopLatch.for_robot("hit", 1, tmp_path / "hit-1.json")
     latch.press("e-stop at the robot", "robot")
+    security = tmp_path / "security.jsonl"
     bridge, port = _start([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--key", str(key.path),
-                           "--latch-file", str(latch.path), "--stats", str(tmp_path / "stats.json")], "bridge:")
+                           "--latch-file", str(latch.path), "--stats", str(tmp_path / "stats.json"),
+                           "--security-log", str(security)], "bridge:")
     try:
-        with pytest.raises(PermissionError, match="needs a key"):  # a clear without the key: refused, and said
+        with pytest.raises(ClearRefusedError) as keyless:  # a clear without the key: refused, and said
             clear_over_link("127.0.0.1", port, 1, "mallory", timeout=0.5)
+        assert (keyless.value.reason, keyless.value.bridge) == ("key-needed", f"udp://127.0.0.1:{port}")
+        # and written to the security log as it happened (the bridge still runs), rate-limited: 10 a second
+        logged = [json.loads(line) for line in security.read_text().splitlines()]
+        assert 1 <= len(logged) <= 10 + 5 and {(r["reason"], r["source"].split(":")[0]) for r in logged
+                                                if "reason" in r} == {("unauthenticated", "127.0.0.1")}
         assert latch.latched() is not None
         clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(key.path))
-        # its session's host gone (the bridge's states to it refused by the OS), the bridge serves the next one
+        # its session's host said BYE: the bridge serves the next one at once
         assert not clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(key.path)) & ESTOPPED
+        # the key rotated and the bridge told (SIGHUP): a session under the old key ends, the old key is refused
+        old = tmp_path / "old.key"
+        shutil.copy(key.path, old)
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        seq = iter(range(1, 1000))
+        held = handshake(sock, ("127.0.0.1", port), key, 1, lambda: next(seq))  # (live, never ended by its host)
+        new = new_key("hit-1", key.path, replace=True)
+        bridge.send_signal(signal.SIGHUP)
+        until = time.monotonic() + 5.0  # (polled: the bridge reads the file again at its loop's next turn)
+        while True:
+            try:
+                clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(key.path))
+                break
+            except LinkRefusedError as exc:
+                assert exc.reason == "other-key" and time.monotonic() < until
+        sock.sendto(held.seal(pack_bytes(CLEAR, 1, next(seq), b"mallory in the old session", held.id)),
+                    ("127.0.0.1", port))  # (read before the next HELLO: the same socket's queue at the bridge)
+        sock.close()
+        with pytest.raises(LinkRefusedError) as refused:
+            clear_over_link("127.0.0.1", port, 1, "Dr. Ana Ruiz", key_file=str(old))
+        assert (refused.value.reason, refused.value.key_id) == ("other-key", key.id)
         assert bridge.poll() is None
     finally:
         _stop(bridge)
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert [s["key_id"] for s in stats["sessions"]] == [key.id] * 3 + [new.id]
     record = json.loads(latch.path.read_text())
     assert not record["latched"] and record["cleared_by"] == "Dr. Ana Ruiz" and record["key_id"] == key.id
-    clears = json.loads((tmp_path / "stats.json").read_text())["estop_clears"]  # the bridge's own record of them
+    clears = stats["estop_clears"]  # the bridge's own record of them
     assert [(c["by"], c["latched"], c["key_id"]) for c in clears] == [("Dr. Ana Ruiz", True, key.id)] + \
-        [("Dr. Ana Ruiz", False, key.id)] * (len(clears) - 1)
+        [("Dr. Ana Ruiz", False, key.id)] * (len(clears) - 2) + [("Dr. Ana Ruiz", False, new.id)]
+    # (the old session's CLEAR: ended, not applied; refused as another session's, or from another address while the
+    # next clear's session was still open)
+    assert stats["dropped"].get("other-session", 0) + stats["dropped"].get("other-address", 0) >= 1
     assert os.stat(latch.path).st_size > 0
 
 
@@ -250,8 +333,9 @@ def test_the_readmes_lab_network_commands_run_as_written(tmp_path, monkeypatch):
         new = load_key(tmp_path / "keys" / "hit-1.key")
         assert rotated.returncode == 0 and new.id != key.id
         refused = run(run_cmd)  # the bridge still holds the old key: the host is told, with both ids and its file
-        assert refused.returncode == 2 and f"the bridge holds another key (its key id {key.id}, this key's {new.id})" \
-            in refused.stderr and str(tmp_path / "keys" / "hit-1.key") in refused.stderr
+        assert refused.returncode == 2 and f"the bridge holds another key (this key's id {new.id}; the bridge's is " \
+            "on its console and in its --stats)" in refused.stderr and str(tmp_path / "keys" / "hit-1.key") in \
+            refused.stderr and key.id not in refused.stderr  # (a refusal names no key id of the bridge's)
     finally:
         _stop(bridge)
     assert json.loads((tmp_path / "stats.json").read_text())["dropped"]["unauthenticated"] > 0
@@ -272,6 +356,67 @@ def test_a_urdf_robot_runs_over_an_authenticated_link_and_validate_checks_its_ke
     assert located(cli("validate", scenario).stderr) == [(str(scenario), 2, 44, "backend.key_file")]
     key.path.chmod(0o600)
     assert cli("validate", scenario).returncode == 0
+    beyond = tmp_path / "beyond.yaml"  # a bridge on another computer, and no key: refused at the host's line
+    beyond.write_text(f"extends: {ROOT}/examples/robots/urdf_arm4.yaml\n"
+                      "backend: {type: hardware, spawn_bridge: false, host: 192.168.1.20, port: 7000}\n")
+    refused = cli("validate", beyond)
+    assert refused.returncode == 2 and located(refused.stderr) == [(str(beyond), 2, 48, "backend.host")]
     run = run_scenario(scenario)
     assert run.passed and run.summary["notes"][0]["text"].endswith(f"key {key.id}")
     assert run.metrics["states_dropped"] == 0 and run.metrics["safety_events"] == 0
+
+
+def test_clearing_is_a_right_of_its_own_and_every_clear_is_kept_with_its_session_and_key(hit, key, tmp_path):
+    """A bridge given a clearing key takes a clear only in a session under it (which drives nothing); one declared
+    keypad-only takes none over the link; every clear is appended to the latch's history with the session and key
+    ids, none rewritten."""
+    from rehabkit.core.safety.estop import EStopLatch
+    from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.keypad import handle
+    from rehabkit.hardware.plant import MujocoPlant
+
+    clearing_key = new_key("hit-1", tmp_path / "clear.key")
+    latch = EStopLatch.for_robot("hit", 1, tmp_path / "hit-1.json")
+    latch.press("e-stop at the robot", "robot")
+    bridge = Bridge(MujocoPlant(hit), key=key, clear_key=clearing_key, latch=latch)
+    gate = bridge.link.gate
+
+    def clear(by: str, session) -> None:
+        bridge.receive(0.0, [(pack_bytes(CLEAR, 1, 5, by.encode(), session.id), HOST)])
+
+    driving, _ = _shake(key, gate)
+    clear("Dr. Ana Ruiz", driving)  # the robot's key drives; it does not clear
+    assert latch.latched() is not None and bridge.status & NO_RIGHT and bridge.rx.dropped["clear-right"] == 1
+    gate.end()  # (its host's BYE)
+    clearing, _ = _shake(clearing_key, gate)
+    bridge.receive(0.0, [(pack(COMMAND, 1, 6, np.ones(6), session=clearing.id), HOST)])
+    assert bridge.rx.dropped["clear-only"] == 1 and bridge.rx.accepted == 0  # (a clearing session drives nothing)
+    clear("Dr. Ana Ruiz", clearing)
+    clear("J. Doe", clearing)
+    assert latch.latched() is None and not bridge.status & NO_RIGHT
+    history = [(c["cleared_by"], c["was_latched"], c["session"], c["key_id"]) for c in latch.cleared()]
+    assert history == [("Dr. Ana Ruiz", True, f"{clearing.id:08x}", clearing_key.id),
+                       ("J. Doe", False, f"{clearing.id:08x}", clearing_key.id)]
+    keypad_only = Bridge(MujocoPlant(hit), key=key, latch=latch, clear_right="keypad")
+    latch.press("e-stop at the robot", "robot")
+    session, _ = _shake(key, keypad_only.link.gate)
+    keypad_only.receive(0.0, [(pack_bytes(CLEAR, 1, 5, b"Dr. Ana Ruiz", session.id), HOST)])
+    assert latch.latched() is not None and keypad_only.rx.dropped["clear-right"] == 1
+    handle(keypad_only, ["clear"], 0.0)
+    assert latch.latched() is None and latch.cleared()[-1]["cleared_by"] == "the keypad at the robot"
+
+
+def test_refused_attempts_are_logged_as_they_happen_at_most_ten_a_second(tmp_path):
+    from rehabkit.hardware.security.events import PER_S, SecurityLog
+
+    log = SecurityLog(tmp_path / "security" / "hit-1.jsonl")
+    for i in range(1000):  # a flood: 1000 refusals in 0.1 s, then one more a second later
+        log.refused(("10.0.0.9", 4000 + i % 3), "unauthenticated" if i % 2 else "handshake-other-key", now=i * 1e-4)
+    lines = [json.loads(line) for line in log.path.read_text().splitlines()]  # (written already: as they happened)
+    assert len(lines) == PER_S and lines[0]["source"] == "10.0.0.9:4000" and lines[0]["reason"] == \
+        "handshake-other-key" and "at" in lines[0]
+    log.refused(("10.0.0.9", 4000), "replayed", now=1.1)
+    log.close()
+    summary, last = [json.loads(line) for line in log.path.read_text().splitlines()][-2:]
+    assert summary["suppressed"] == 1000 - PER_S and sum(summary["by_reason"].values()) == summary["suppressed"]
+    assert last["reason"] == "replayed" and stat.S_IMODE(log.path.stat().st_mode) == 0o600

@@ -40,14 +40,27 @@ def cmd_bridge(args: argparse.Namespace) -> int:
         _err(f"error: {where}")
         return EXIT_INVALID
     host, port, key = where
+    clear_key = None
     if key is not None:
-        from rehabkit.hardware.security.keys import KeyFileError, check_robot
+        from rehabkit.hardware.security.keys import KeyFileError, check_robot, load_key
 
-        try:
-            check_robot(key, f"{robot.model.name}-{args.robot_id}")
-        except KeyFileError as exc:
-            _err(f"error: --key: {exc}")
+        for flag in ("--key", "--clear-key"):
+            try:
+                if flag == "--key":
+                    check_robot(key, f"{robot.model.name}-{args.robot_id}")
+                elif args.clear_key:  # the right to clear an e-stop: a second key, not the one that drives
+                    clear_key = load_key(args.clear_key)
+                    check_robot(clear_key, f"{robot.model.name}-{args.robot_id}")
+            except KeyFileError as exc:
+                _err(f"error: {flag}: {exc}")
+                return EXIT_INVALID
+        if clear_key is not None and clear_key.id == key.id:
+            _err("error: --clear-key is the robot's own key: the right to clear is a second key (`rehabkit keys new "
+                 f"{key.robot} --out FILE`)")
             return EXIT_INVALID
+    elif args.clear_key:
+        _err("error: --clear-key needs --key (a bridge without a key clears over loopback, or at its keypad)")
+        return EXIT_INVALID
     try:
         instruments = [Instrument(**{**i, "position": tuple(i["position"]), "bias": tuple(i.get("bias", (0, 0, 0)))})
                        for i in json.loads(args.instruments or "[]")]
@@ -81,13 +94,19 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     watchdog_ms = defaults["bridge_watchdog_ms"].default if args.watchdog_ms is None else args.watchdog_ms
     stale_ms = defaults["bridge_stale_ms"].default if args.stale_ms is None else args.stale_ms
     latch = EStopLatch.for_robot(robot.model.name, args.robot_id, args.latch_file)  # (as the host names it)
+    from rehabkit.core.safety.estop import state_dir
     from rehabkit.hardware.keypad import Keypad
+    from rehabkit.hardware.security.events import SecurityLog
 
+    name = f"{robot.model.name}-{args.robot_id}"
+    log = SecurityLog(args.security_log or state_dir() / "security" / f"{name}.jsonl")
     bridge = Bridge(plant, args.robot_id, port, host=host, watchdog_s=watchdog_ms / 1e3, stale_s=stale_ms / 1e3,
-                    limits=backstop, latch=latch, keypad=Keypad() if args.keypad else None, key=key)
+                    limits=backstop, latch=latch, keypad=Keypad() if args.keypad else None, key=key,
+                    clear_key=clear_key, clear_right=args.clear_with, log=log)
     print(f"bridge: {args.robot} on udp://{host}:{bridge.port}", flush=True)
     if key is not None:
         print(f"bridge: authenticated sessions only, {key}", file=sys.stderr, flush=True)
+    print(f"bridge: refused attempts go to {log.path}", file=sys.stderr, flush=True)
     from threadpoolctl import threadpool_limits
 
     from rehabkit.hardware.bridge_clocks import serve, serve_lockstep
@@ -96,6 +115,8 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     # SIGINT ignored unless it says otherwise)
     signal.signal(signal.SIGINT, _interrupt)
     signal.signal(signal.SIGTERM, _interrupt)
+    # SIGHUP: the key file read again (rotated: the sessions under the old key end), at the loop's next turn
+    signal.signal(signal.SIGHUP, lambda *_: setattr(bridge, "reload", True))
     try:
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
             (serve_lockstep if args.lockstep else serve)(bridge, args.duration, parent=args.parent_pid)
@@ -148,6 +169,12 @@ def add_parser(sub) -> None:
     b.add_argument("--listen", metavar="HOST:PORT", help="listen there instead (beyond loopback only with --key)")
     b.add_argument("--key", metavar="FILE", help="the robot's link key (`rehabkit keys new ROBOT-ID`): serve "
                    "authenticated sessions only")
+    b.add_argument("--clear-key", metavar="FILE", help="a second key, for clearing a latched e-stop over the link: "
+                   "then only a session under it clears (and does nothing else); one under --key does not")
+    b.add_argument("--clear-with", choices=["link", "keypad"], default="link", help="who may clear a latched e-stop: "
+                   "link (default: a session, under --clear-key if given), keypad (the keypad at the robot only)")
+    b.add_argument("--security-log", metavar="FILE", help="where refused attempts are written as they happen, a JSON "
+                   "line each, at most 10 a second (default: $REHABKIT_STATE/security/ROBOT-ID.jsonl)")
     b.add_argument("--stats", metavar="FILE", help="at exit, write what the link accepted and dropped (by reason) and "
                    "its sessions (key ids) as JSON")
     b.add_argument("--config", default="{}", help="the robot's settings as JSON (as in a scenario's robot section; "

@@ -13,41 +13,63 @@ from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK
 from rehabkit.core.safety.estop import EStopLatch, all_latches
 
 
+class ClearRefusedError(PermissionError):
+    """The bridge at ``bridge`` refused a clear: ``reason`` (key-needed: it has a key and this end none; no-right: the
+    session may not clear, as the bridge declares), ``words``."""
+
+    def __init__(self, bridge: str, reason: str, words: str):
+        self.bridge, self.reason, self.words = bridge, reason, words
+        super().__init__(f"the bridge at {bridge} refuses: {words}")
+
+
 def clear_over_link(host: str, port: int, robot_id: int, by: str, key_file: str | None = None,
                     timeout: float = 2.0) -> int:
     """Tell the bridge ``by`` (a person's name) clears its e-stop, in an authenticated session given the robot's
     key; wait for a state saying it is no longer latched. Its status (``CLEARED`` set where a latched e-stop was
-    cleared, unset where nothing was latched)."""
+    cleared, unset where nothing was latched); :class:`ClearRefusedError` if the bridge refuses."""
     from rehabkit.hardware.link.clock import wait_readable
-    from rehabkit.hardware.link.protocol import CLEAR, ESTOPPED, HEADER, PLAIN, STATE, pack_bytes
-    from rehabkit.hardware.security.handshake import handshake, peek_kind, refusal
+    from rehabkit.hardware.link.protocol import CLEAR, ESTOPPED, HEADER, NO_RIGHT, PLAIN, STATE, pack_bytes
+    from rehabkit.hardware.security.handshake import BYE, KEY_NEEDED, handshake, peek_kind, refusal_words, refused
     from rehabkit.hardware.security.keys import load_key
 
     key = load_key(key_file) if key_file else None
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setblocking(False)
     seq = iter(range(1, 1 << 31))
+    bridge = (socket.gethostbyname(host), port)  # (as its datagrams say where they came from)
+    link = PLAIN
     try:
-        link = handshake(sock, (host, port), key, robot_id, lambda: next(seq), timeout) if key else PLAIN
+        link = handshake(sock, bridge, key, robot_id, lambda: next(seq), timeout) if key else PLAIN
         until = time.monotonic() + timeout
+        # (the name padded to 16 bytes at least: the bridge's refusal is never bigger than what it answers)
+        name = by.encode().ljust(16)
         while time.monotonic() < until:
-            sock.sendto(link.seal(pack_bytes(CLEAR, robot_id, next(seq), by.encode(), link.id)), (host, port))
+            sock.sendto(link.seal(pack_bytes(CLEAR, robot_id, next(seq), name, link.id)), bridge)
             answer_by = time.monotonic() + 0.05
             while wait_readable(sock, answer_by - time.monotonic()):
                 try:
-                    data = sock.recv(65536)
+                    data, came_from = sock.recvfrom(65536)
                 except (BlockingIOError, ConnectionRefusedError):
                     break
+                if came_from != bridge:
+                    continue
                 if peek_kind(data) != STATE:
-                    if (why := refusal(data, robot_id, key)) is not None:
-                        raise PermissionError(f"the bridge at udp://{host}:{port} refuses: {why}; clear it with the "
-                                              "robot's key: --key FILE")
+                    if key is None and (got := refused(data, robot_id)) is not None and got[0] == KEY_NEEDED:
+                        raise ClearRefusedError(f"udp://{host}:{port}", "key-needed",
+                                                f"{refusal_words(KEY_NEEDED, None)}; clear it with the robot's key: "
+                                                "--key FILE")
                     continue
                 plain, _ = link.open(data)
-                if plain is not None and not HEADER.unpack_from(plain)[9] & ESTOPPED:
-                    return HEADER.unpack_from(plain)[9]
+                status = HEADER.unpack_from(plain)[9] if plain is not None else ESTOPPED
+                if status & NO_RIGHT:
+                    raise ClearRefusedError(f"udp://{host}:{port}", "no-right", "the bridge takes a clear only in a "
+                                            "session under its clearing key (--clear-key), or at its keypad")
+                if not status & ESTOPPED:
+                    return status
         raise TimeoutError(f"no state from the bridge at udp://{host}:{port} saying it is cleared within {timeout:g} s")
     finally:
+        if link is not PLAIN:  # (the session ends: a host's run may begin at once)
+            sock.sendto(link.seal(pack_bytes(BYE, robot_id, next(seq), b"", link.id)), bridge)
         sock.close()
 
 

@@ -91,7 +91,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             self.process, port = spawn_bridge(context, config)
         self.rx = Receiver(STATE, config.robot_id, self.n, measured=len(self.measured),
                            instruments=len(self.instruments), max_age=config.max_age_s)
-        self.wire = HostLink(config.host, port, config.robot_id, self.key, self.rx, config.timestep)
+        self.wire = HostLink(config.host, port, config.robot_id, self.key, self.rx, config.timestep,
+                             config.rekey_s)
         self.addr, self.tau = self.wire.addr, np.zeros(self.n)
         self.q, self.qd = np.zeros(self.n), np.zeros(self.n)
         self.applied = np.zeros(self.n)

@@ -49,6 +49,7 @@ from rehabkit.hardware.link.protocol import (
     ESTOPPED,
     HOLDING,
     LIMIT,
+    NO_RIGHT,
     RAMP_IN,
     STALE,
     STATE,
@@ -68,14 +69,18 @@ class Bridge:
 
     def __init__(self, plant: Plant, robot_id: int = 1, port: int = 0, host: str = "127.0.0.1",
                  watchdog_s: float = 0.005, stale_s: float = 0.010, limits: BridgeLimits | None = None,
-                 latch: EStopLatch | None = None, keypad: Keypad | None = None, key: LinkKey | None = None):
+                 latch: EStopLatch | None = None, keypad: Keypad | None = None, key: LinkKey | None = None,
+                 clear_key: LinkKey | None = None, clear_right: str = "link", log=None):
         self.plant, self.robot_id, self.watchdog_s, self.limits = plant, robot_id, watchdog_s, limits
         self.latch, self.keypad = latch, keypad
+        # who may clear a latched e-stop over the link: "link" any session, "key" one under ``clear_key`` only,
+        # "keypad" none (the keypad at the robot only)
+        self.clear_right = "key" if clear_key is not None else clear_right
         self.stale_ticks = max(1, round(stale_s / plant.timestep))
         self.since_command = 0  # plant ticks since the newest torque command
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
         self.held_ticks = 0  # since the reset, sent with each state
-        self.link = BridgeLink(robot_id, plant.joints, host, port, key)
+        self.link = BridgeLink(robot_id, plant.joints, host, port, key, clear_key, log)
         self.port, self.rx = self.link.port, self.link.rx
         self.peer = None
         self.tau = np.zeros(plant.joints)
@@ -89,12 +94,16 @@ class Bridge:
         self.repeated_ticks = 0  # lock-step ticks the host sent again (answered again, not done again)
         self.clears: list[dict] = []  # each e-stop clear: when, by whom, how (the link, its key id)
         self.trips: list[tuple[float, str]] = []  # (time, why) of each hold
+        self.watchdog_ms: list[float] = []  # each watchdog hold: how long without a valid command when it latched
+        self.lateness = None  # real time: how late its ticks began (bridge_clocks.serve keeps it)
+        self.reload = False  # SIGHUP came: read the key file again (at the loop's next turn, not in the handler)
         self.waiting = False  # reset done, no torque command yet: holding the start posture
         self.lockstep = False  # ticked by the host's clock (serve_lockstep), not the wall's
         self._state = np.zeros((3, plant.joints))  # the STATE message's rows, reused
         self._ramp_next = False  # the latch was cleared: the next session ramps in
         self.braked = False
         self.compliant = False  # the host yields (CMD_COMPLIANT): a gap in the commands is bridged without stiffness
+        plant.gravity(plant.read()[0])  # (its first call imports the dynamics: here, not in a tick)
         if latch is not None and latch.latched() is not None:  # latched before this bridge started
             self.status = HOLDING | ESTOPPED
             self.hold_q = plant.read()[0]
@@ -125,6 +134,7 @@ class Bridge:
             self.clears.append({"at": time.time(), "by": by, "latched": bool(self.status & ESTOPPED), **how})
             print(f"bridge: e-stop {'cleared' if latched else 'clear (not latched)'} by {by} "
                   f"({', '.join(f'{k} {v}' for k, v in how.items()) or 'here'})", file=sys.stderr, flush=True)
+        self.status &= ~NO_RIGHT
         if latched:  # its states say so until the next reset (a clear where nothing was latched: not latched)
             self.status |= CLEARED
         if self.status & ESTOPPED:
@@ -140,7 +150,15 @@ class Bridge:
                     self.rx.dropped["clear"] += 1
                     continue
                 self.peer = addr
-                self.clear_estop(name, via=f"the link from {addr[0]}", key_id=self.link.key_id)
+                if self.clear_right == "keypad" or self.clear_right == "key" and self.link.right != "clear":
+                    self.link.refused(addr, "clear-right")  # (its states say so: NO_RIGHT, until the next reset)
+                    self.status |= NO_RIGHT
+                    continue
+                self.clear_estop(name, via=f"the link from {addr[0]}", key_id=self.link.key_id,
+                                 session=self.link.session_id)
+                continue
+            if self.link.right != "drive":  # a clearing key's session clears, and does nothing else
+                self.link.refused(addr, "clear-only")
                 continue
             msg = self.rx.take(plain, now)
             if msg is None:
@@ -177,11 +195,13 @@ class Bridge:
                 self.tau = np.clip(msg.values, -self.plant.effort, self.plant.effort)
 
     def tick(self, now: float, inbox: list[tuple[bytes, tuple]] | None = None) -> bool:
-        """One cycle: commands in (what arrived, or ``inbox``: those a lock-step clock gathered), watchdog, torques,
-        plant step, state out (in lock-step carrying the clock's answer); False if there was no peer to send it."""
+        """One cycle: commands in (``inbox``: those gathered since the last tick, by the real-time loop or a lock-step
+        clock; else what arrived, read now for a bounded time), watchdog, torques, plant step, state out (in lock-step
+        carrying the clock's answer); False if there was no peer to send it."""
         self.receive(now, self.link.arrived() if inbox is None else inbox)
         if self.status & ENABLED and self.last_valid != np.inf and now - self.last_valid > self.watchdog_s:
-            self._hold(now, f"no valid command for {1e3 * (now - self.last_valid):.1f} ms", WATCHDOG)
+            self.watchdog_ms.append(1e3 * (now - self.last_valid))
+            self._hold(now, f"no valid command for {self.watchdog_ms[-1]:.1f} ms", WATCHDOG)
         q, qd = self.plant.read()
         if self.limits is not None and self.status & ENABLED and (why := self.limits.breach(q, qd)):
             self._hold(now, why, LIMIT)
@@ -217,6 +237,12 @@ class Bridge:
         self.link.send(self.answer, self.peer)
         return True
 
+    def reloaded(self) -> None:
+        """The key file read again if SIGHUP asked (the loop calls this each turn)."""
+        if self.reload:
+            self.reload = False
+            print(f"bridge: SIGHUP: {self.link.reload_key()}", file=sys.stderr, flush=True)
+
     def _hold_gains(self) -> tuple[np.ndarray, np.ndarray]:
         """The hold's PD gains per joint: HOLD_KP and HOLD_KD where the plant's tick can apply them stably for the
         joint's inertia where the hold began, less where it cannot (a light wrist held with a shoulder's damping
@@ -234,4 +260,6 @@ class Bridge:
 
     def link_stats(self) -> dict:
         """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""
-        return {**self.link.stats(), "repeated_ticks": self.repeated_ticks, "estop_clears": self.clears}
+        clock = {"clock": self.lateness.summary()} if self.lateness is not None else {}
+        return {**self.link.stats(), "repeated_ticks": self.repeated_ticks, "estop_clears": self.clears,
+                "watchdog_holds_ms": [round(ms, 3) for ms in self.watchdog_ms], **clock}

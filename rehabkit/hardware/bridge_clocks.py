@@ -11,26 +11,36 @@ import numpy as np
 
 from rehabkit.hardware.bridge import Bridge
 from rehabkit.hardware.keypad import handle
-from rehabkit.hardware.link.clock import wait_until
+from rehabkit.hardware.link.clock import SPIN_S, Lateness, wait_until
 from rehabkit.hardware.link.protocol import CLEAR, CLOCK, CMD_RESET, COMMAND, HEADER, link_tick
 
 
 def serve(bridge: Bridge, duration: float | None = None, parent: int | None = None) -> None:
-    """Tick in real time (sleep, then spin to the deadline) until ``duration``, interrupted, or — given ``parent`` —
-    once that process is gone (a bridge a host started must not outlive it)."""
+    """Tick in real time until ``duration``, interrupted, or — given ``parent`` — once that process is gone (a bridge a
+    host started must not outlive it). Each tick runs on its deadline with the commands gathered since the last one;
+    between ticks the link is read as datagrams come (at most ``PER_TICK`` a socket: whatever arrives, the next tick
+    is not late for it), then the loop spins to the deadline. How late each tick began: ``bridge.lateness``."""
     period = bridge.plant.timestep
+    bridge.lateness = lateness = Lateness(period)
     start = time.monotonic()
     deadline = start
     ticks = 0
+    inbox: list = []
     try:
         while duration is None or deadline - start < duration:
             ticks += 1
+            now = time.monotonic()
+            lateness.add(now - deadline)
+            # on its deadline first: the commands gathered since the last tick, watchdog, plant step, state out
+            bridge.tick(now, inbox)
             if parent is not None and ticks % 500 == 0 and os.getppid() != parent:
                 return
+            bridge.reloaded()
             if bridge.keypad is not None and ticks % 50 == 0:
                 handle(bridge, bridge.keypad.poll(), time.monotonic())
-            bridge.tick(time.monotonic())
             deadline += period
+            # then what comes until the next deadline, read as it comes (bounded per socket: a flood waits)
+            inbox = bridge.link.gather(deadline - SPIN_S)
             wait_until(deadline)
     finally:
         bridge.link.close()
@@ -54,6 +64,7 @@ def serve_lockstep(bridge: Bridge, duration: float | None = None, parent: int | 
     try:
         while True:
             got = link.next(0.5)
+            bridge.reloaded()
             if got is None:
                 if parent is not None and os.getppid() != parent:
                     return

@@ -52,6 +52,8 @@ class HardwareConfig(StrictModel):
     key_file: FilePath | None = Field(
         None, description="the robot's link key (`rehabkit keys new ROBOT-ID`; the same file at the bridge): the "
         "link then runs in authenticated sessions only. Needed for a bridge beyond this machine's loopback")
+    rekey_s: float = Field(120.0, gt=0, description="with a key: the session is re-keyed (a new handshake, new "
+                           "ephemeral keys, alongside the stream) after this long [s, the link's time]")
     timestep: float = Field(0.001, ge=0.0002, le=0.01, description="link period (the bridge's plant step too) [s]")
     # defaults for a host without a real-time kernel: this 2-core VM stalls a process by up to ~10-17 ms now
     # and then; with an RT kernel both can be far tighter (the watchdog tests run the bridge's at 5 ms)
@@ -73,8 +75,13 @@ class HardwareConfig(StrictModel):
                                        "state_timeout_s": beat.state_timeout_ms / 1e3})
 
     def key(self, context) -> LinkKey | None:
-        """The robot's link key, if the scenario names one: refused at ``key_file`` if unusable or another robot's."""
+        """The robot's link key, if the scenario names one: refused at ``key_file`` if unusable or another robot's,
+        and at ``host`` if there is none and the bridge is beyond this machine's loopback."""
         if self.key_file is None:
+            if not loopback(self.host):  # (anyone on that network could pose as the bridge, or drive the robot)
+                raise SettingError("host", f"{self.host} is beyond this machine's loopback, and the link has no key: "
+                                   "give both ends the robot's key (backend.key_file here, the bridge's --key there; "
+                                   f"`rehabkit keys new {context.robot.model.name}-{self.robot_id}` makes one)")
             return None
         try:
             key = load_key(context.resolve(self.key_file))
@@ -82,3 +89,13 @@ class HardwareConfig(StrictModel):
         except KeyFileError as exc:
             raise SettingError("key_file", f"{exc.path}: {exc.problem}; {exc.fix}") from None
         return key
+
+
+def loopback(host: str) -> bool:
+    """``host`` is this machine's loopback (an address in 127.0.0.0/8 or ::1, or ``localhost``)."""
+    import ipaddress
+
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return host == "localhost"

@@ -1,12 +1,14 @@
 """The bridge's keypad: keys typed at the robot (a line each on the bridge's standard input: ``e`` presses the
-e-stop, ``c`` clears a latched one), read without ever blocking a tick."""
+e-stop, ``c`` clears a latched one, ``a`` allows a new host to take a live session over), read without ever blocking
+a tick."""
 
 from __future__ import annotations
 
 import os
 import select
+import time
 
-KEYS = {"e": "estop", "estop": "estop", "c": "clear", "clear": "clear"}
+KEYS = {"e": "estop", "estop": "estop", "c": "clear", "clear": "clear", "a": "allow", "allow": "allow"}
 
 
 class Keypad:
@@ -33,6 +35,9 @@ def handle(bridge, keys: list[str], now: float) -> None:
         if key == "estop":
             bridge.press_estop(now, "the e-stop key of the keypad at the robot")
             print("keypad: e-stop pressed, latched", flush=True)
+        elif key == "allow":
+            bridge.link.gate.allow(time.monotonic())
+            print("keypad: a new host may take the session over (for 30 s)", flush=True)
         else:
             bridge.clear_estop("the keypad at the robot")
             print("keypad: e-stop cleared; the next session ramps in", flush=True)

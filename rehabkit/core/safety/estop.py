@@ -85,13 +85,37 @@ class EStopLatch:
             self._write({"latched": True, "since": _now(), "reason": reason, "by": by, "ramp_in_pending": False})
 
     def clear(self, by: str, **how: str) -> dict | None:
-        """Clear it, deliberately (``by``: who; ``how``: e.g. over which link, with which key id, kept with it); the
-        next session must ramp in. The press cleared, or None."""
+        """Clear it, deliberately (``by``: who; ``how``: e.g. over which link, in which session, with which key id,
+        kept with it); the next session must ramp in. The press cleared, or None. Every clear, and every try at one
+        where nothing was latched, is added to the latch's history (:attr:`history`), never rewritten."""
         was = self.latched()
         if was is not None:
             self._write({"latched": False, "cleared": _now(), "cleared_by": by, **how, "was": was,
                          "ramp_in_pending": True})
+        self._append({"at": _now(), "cleared_by": by, **how, "was_latched": was is not None,
+                      **({"latched_since": was.get("since"), "reason": was.get("reason")} if was else {})})
         return was
+
+    @property
+    def history(self) -> Path:
+        """The latch's clears, one JSON line each, appended only: ``<name>.history.jsonl`` beside it."""
+        return self.path.with_name(f"{self.path.stem}.history.jsonl")
+
+    def cleared(self) -> list[dict]:
+        """The latch's history: every clear, oldest first."""
+        try:
+            return [json.loads(line) for line in self.history.read_text().splitlines() if line.strip()]
+        except FileNotFoundError:
+            return []
+
+    def _append(self, record: dict) -> None:
+        self.path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        fd = os.open(self.history, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+        try:
+            os.write(fd, (json.dumps({**record, "name": self.name}) + "\n").encode())
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
     def take_ramp_in(self) -> bool:
         """Whether this session is the first after a clear (it must ramp in); marks that it has been."""

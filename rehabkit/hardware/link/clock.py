@@ -1,7 +1,9 @@
-"""Waiting on a general-purpose OS: for a loop's next deadline (host loop and bridge alike), and for a datagram."""
+"""Waiting on a general-purpose OS: for a loop's next deadline (host loop and bridge alike), and for a datagram; and
+how late a loop's ticks came (:class:`Lateness`)."""
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import socket
@@ -32,3 +34,30 @@ def wait_readable(sock: socket.socket | list[socket.socket], timeout: float, pol
             return True
     left = start + timeout - time.monotonic()
     return left > 0 and bool(select.select(socks, [], [], left)[0])
+
+
+class Lateness:
+    """How late a paced loop's ticks began after their deadlines, kept in 0.1 ms bins (a loop that runs for days keeps
+    a fixed few kilobytes): the count, the worst, the 99th percentile, the ticks a period or more late."""
+
+    BIN_S, BINS = 1e-4, 5000  # up to 0.5 s in bins; later than that is counted in the last one (the worst is exact)
+
+    def __init__(self, period: float):
+        self.period, self.bins, self.worst = period, [0] * self.BINS, 0.0
+
+    def add(self, late: float) -> None:
+        late = max(0.0, late)
+        self.bins[min(self.BINS - 1, int(late / self.BIN_S))] += 1
+        self.worst = max(self.worst, late)
+
+    def summary(self) -> dict:
+        ticks = sum(self.bins)
+        p99, seen = 0.0, 0
+        for i, n in enumerate(self.bins):
+            seen += n
+            if seen >= math.ceil(0.99 * ticks):
+                p99 = (i + 1) * self.BIN_S
+                break
+        over = sum(self.bins[min(self.BINS - 1, int(self.period / self.BIN_S)):])
+        return {"ticks": ticks, "late_max_ms": round(1e3 * self.worst, 3),
+                "late_p99_ms": round(1e3 * min(p99, self.worst), 3), "late_a_period": over}

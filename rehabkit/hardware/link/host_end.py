@@ -1,8 +1,11 @@
-"""The host's end of the robot link: its socket, the bridge's address, the session (with the robot's key), one
-sequence count for all it sends, and the lock-step clock's ticks, sent again when they go unanswered."""
+"""The host's end of the robot link: its socket, the bridge's address (nothing from elsewhere is read), the session
+(with the robot's key: re-keyed every ``rekey_s`` of the link's time by a new handshake alongside the stream, which
+switches to the new session once the bridge welcomes it; BYE at the end), one sequence count for all it sends, and
+the lock-step clock's ticks, sent again when they go unanswered."""
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import time
 from collections.abc import Callable
@@ -11,21 +14,41 @@ import numpy as np
 
 from rehabkit.hardware.config import LinkKeyError, LinkLostError
 from rehabkit.hardware.link.clock import wait_readable
-from rehabkit.hardware.link.protocol import CLOCK, PLAIN, TICK, Receiver, encode, link_tick
-from rehabkit.hardware.security.handshake import HANDSHAKE, LinkRefusedError, handshake, peek_kind, refusal
+from rehabkit.hardware.link.protocol import CLOCK, PLAIN, TICK, Receiver, encode, link_tick, pack_bytes
+from rehabkit.hardware.security.handshake import (
+    BYE,
+    CHALLENGE,
+    HANDSHAKE,
+    KEY_NEEDED,
+    RESTART_S,
+    HostHandshake,
+    LinkRefusedError,
+    handshake,
+    peek_kind,
+    refusal_words,
+    refused,
+)
 from rehabkit.hardware.security.keys import LinkKey
+from rehabkit.hardware.security.session import Session
 
 LOCKSTEP_REPLY_S = 2.0  # wall time a lock-step bridge may take to answer one tick before the link counts as lost
 RESEND_S = 0.05  # lock-step: a tick not answered within this (wall time) is sent again (it or its answer was lost)
+REKEY_S = 120.0  # a session is re-keyed after this long (the link's time), as WireGuard's
 
 
 class HostLink:
     """Datagrams to and from the bridge at ``host``:``port`` for robot ``robot_id``; with ``key``, in an authenticated
     session (:meth:`open_session`) and from the bridge's address only. ``rx`` counts what is dropped."""
 
-    def __init__(self, host: str, port: int, robot_id: int, key: LinkKey | None, rx: Receiver, timestep: float):
+    def __init__(self, host: str, port: int, robot_id: int, key: LinkKey | None, rx: Receiver, timestep: float,
+                 rekey_s: float = REKEY_S):
         self.addr = (socket.gethostbyname(host), port)  # (as datagrams from it say where they came from)
-        self.robot_id, self.key, self.rx, self.timestep = robot_id, key, rx, timestep
+        self.robot_id, self.key, self.rx, self.timestep, self.rekey_s = robot_id, key, rx, timestep, rekey_s
+        self.previous: Session | None = None  # the session before the newest re-key (its states may be in flight)
+        self._rekey: HostHandshake | None = None  # a re-key under way
+        self._keyed_at: float | None = None  # the link's time the session began (its first datagram)
+        self._rekey_sent = self._rekey_began = 0.0
+        self.rekeys = 0
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.link = PLAIN  # the session once the handshake is done
@@ -46,8 +69,9 @@ class HostLink:
         """The handshake with the bridge, with the robot's key: every datagram from now on is in the session."""
         try:
             self.link = handshake(self.sock, self.addr, self.key, self.robot_id, self.next_seq)
+            self.first_id = self.link.id
         except LinkRefusedError as exc:
-            raise LinkKeyError(self.where, str(self.key.path), str(exc)) from None
+            raise LinkKeyError(self.where, str(self.key.path), exc.words) from None
         except TimeoutError:
             raise LinkLostError(f"the bridge at {self.where} does not answer a handshake (is `rehabkit bridge` running "
                                 "there, for this robot and robot_id, with its --key?)") from None
@@ -58,6 +82,24 @@ class HostLink:
         if kind == CLOCK or status & TICK:
             self._last = what
         self._transmit(what)
+        if self.link is not PLAIN:
+            self._rekey_due(sent_at)
+
+    def _rekey_due(self, t: float) -> None:
+        """Re-key when the session is ``rekey_s`` old (``t``: the link's time now): a handshake alongside the stream,
+        its HELLO (then PROOF) sent again every ``RESEND_S`` until the bridge welcomes the new session."""
+        if self._keyed_at is None:
+            self._keyed_at = t
+        if self._rekey is None and t - self._keyed_at >= self.rekey_s or \
+                self._rekey is not None and self._rekey.pending is None and t - self._rekey_began > RESTART_S:
+            self._rekey, self._rekey_began, self._rekey_sent = HostHandshake(self.key, self.robot_id), t, -1e9
+        if self._rekey is not None and t - self._rekey_sent >= RESEND_S:
+            self._rekey_sent = t
+            self.sock.sendto(self._rekey.next(self.next_seq()), self.addr)
+
+    def _rekeyed(self, session: Session) -> None:
+        self.previous, self.link, self._rekey, self._keyed_at = self.link, session, None, None
+        self.rekeys += 1
 
     def _transmit(self, what: tuple) -> None:
         kind, values, sent_at, status = what
@@ -95,13 +137,13 @@ class HostLink:
             except (BlockingIOError, ConnectionRefusedError):
                 return out
             t = now()
-            if peek_kind(data) in HANDSHAKE:  # outside a handshake only a refusal matters: a bridge needing a key
-                if (why := refusal(data, self.robot_id, self.key)) is not None:
-                    self.refused = why
+            if came_from != self.addr:  # (checked first: nothing from elsewhere is opened, keyed or not)
+                self.rx.dropped["other-address"] += 1
                 continue
-            plain, why = self.link.open(data)
-            if plain is not None and self.key is not None and came_from != self.addr:
-                plain, why = None, "other-address"  # (authentic but raced from elsewhere: the session is the bridge's)
+            if peek_kind(data) in HANDSHAKE:
+                self._handshake(data)
+                continue
+            plain, why = self._open(data)
             if plain is None:
                 self.rx.dropped[why] += 1
                 continue
@@ -111,11 +153,41 @@ class HostLink:
                     continue
             out.append((plain, t))
 
+    def _handshake(self, data: bytes) -> None:
+        """Outside the first handshake: a re-key's answers, and a keyless host told that the bridge needs a key."""
+        if self._rekey is not None:
+            proven = self._rekey.pending
+            session = self._rekey.take(data)
+            if session is not None:
+                self._rekeyed(session)
+            elif proven is None and self._rekey.pending is not None and peek_kind(data) == CHALLENGE:
+                self._rekey_sent = -1e9  # (its PROOF goes with the next datagram)
+        elif self.key is None and (got := refused(data, self.robot_id)) is not None and got[0] == KEY_NEEDED:
+            self.refused = refusal_words(KEY_NEEDED, None)
+
+    def _open(self, data: bytes) -> tuple[bytes | None, str]:
+        """In the session, or the one before the newest re-key, or the one a re-key is making (its WELCOME lost)."""
+        plain, why = self.link.open(data)
+        if why == "other-session":
+            if self.previous is not None:
+                plain, why = self.previous.open(data)
+            if plain is None and self._rekey is not None and self._rekey.pending is not None:
+                plain, why = self._rekey.pending.open(data)
+                if plain is not None:
+                    self._rekeyed(self._rekey.pending)
+        return plain, why
+
     def provenance(self) -> dict[str, str]:
         """The bridge and the session's key id (the safety log's run record)."""
         if self.link is PLAIN:
             return {"bridge": self.where, "session": "none: a link without a key (loopback)"}
-        return {"bridge": self.where, "session": f"{self.link.id:08x}", "key_id": self.key.id}
+        return {"bridge": self.where, "session": f"{self.first_id:08x}", "key_id": self.key.id,
+                "rekeys": str(self.rekeys)}
 
     def close(self) -> None:
+        """The session ends with a BYE (the bridge need not wait to let the next host in), the socket closes."""
+        if self.link is not PLAIN:
+            with contextlib.suppress(OSError):
+                self.sock.sendto(self.link.seal(pack_bytes(BYE, self.robot_id, self.next_seq(), b"", self.link.id)),
+                                 self.addr)
         self.sock.close()

@@ -51,9 +51,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 7  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
+VERSION = 8  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
 # 5: instrument values in STATE; 6: the lock-step clock rides on COMMAND and STATE (TICK); 7: authenticated sessions,
-# CLEAR with a person's name
+# CLEAR with a person's name; 8: the handshake with ephemeral X25519 keys and MAC1, BYE
 STATE, COMMAND, CLOCK, CLEAR = 1, 2, 3, 4
 HEADER = struct.Struct("<2sBBIIddHHHHHI")
 SEQ = struct.Struct("<I")  # the sequence number, at SEQ_AT in the header
@@ -72,6 +72,9 @@ RAMP_IN = 64
 # a person cleared a latched e-stop since the last reset (a CLEAR where nothing was latched leaves it unset: "not
 # latched")
 CLEARED = 128
+# a CLEAR came in a session without the right to clear (the bridge takes clears under its clearing key, or at its
+# keypad only): the e-stop stays latched
+NO_RIGHT = 256
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
 # (8 was v6's e-stop clear: now a CLEAR datagram, with the person's name)

@@ -1,42 +1,64 @@
-"""The handshake proving both ends hold the robot's key, and the bridge's gate that keeps the session it opens.
+"""The handshake that opens an authenticated session, its messages and the host's end of it (the bridge's:
+:class:`~rehabkit.hardware.security.gate.BridgeGate`).
 
-Each message is a datagram of its own kind, its body bytes (``K`` the robot's key, ``id`` its key id)::
+Each message is a datagram of its own kind, its body bytes (``K`` the robot's key; ``Eh``, ``Eb`` the host's and the
+bridge's ephemeral X25519 public keys, fresh for each handshake; sizes in bytes with the 42-byte header)::
 
-    host   → bridge   HELLO      id · Nh                           a fresh 16-byte nonce of the host's
-    bridge → host     CHALLENGE  id · Nh · Nb · HMAC(K, "bridge" · robot · id · Nh · Nb)
-    host   → bridge   PROOF      id · Nh · Nb · HMAC(K, "host" · robot · id · Nh · Nb)
-    bridge → host     WELCOME    (empty, sealed in the new session: it holds the same keys)
-    bridge → host     REFUSED    why · the bridge's key id      (a key the bridge does not hold, or none at all)
+    host   → bridge   HELLO      Eh · 16 zero bytes · MAC1            110   MAC1: HMAC(HMAC(K, "mac1"), all before it)
+    bridge → host     CHALLENGE  Eb · the bridge's proof              110
+    host   → bridge   PROOF      Eh · the host's proof                110
+    bridge → host     WELCOME    (empty, sealed in the new session)    58
+    bridge → host     REFUSED    why · the first 8 bytes of the refused datagram's body (a HELLO's: Eh)   55
+    host   → bridge   BYE        (empty, sealed in the session: it ends; the next host need not wait)
 
-Both proofs bind both nonces, so neither can be replayed into another handshake; the bridge keeps the nonces it
-issued for a few seconds, each for one proof only. The session's keys and id:
-:func:`~rehabkit.hardware.security.session.session_for`. The bridge answers datagrams outside a session (challenges,
-refusals) at most ``ANSWERS_PER_S`` a second, never with more bytes than came.
+Both ends derive the session and the two proofs from ``K``, ``Eh``, ``Eb`` and the X25519 of the two
+(:func:`~rehabkit.hardware.security.session.session_for`); each drops its ephemeral private key once the session is
+made, so a key file stolen later opens no captured session (forward secrecy). A proof binds both ephemeral keys and
+the key: neither can be replayed into another handshake.
+
+What strangers cannot spend (WireGuard's MAC1 and cookie ideas, DTLS's "no answer bigger than the request"):
+
+- A HELLO's MAC1 is checked before anything else is done: only a key holder makes one; without it no CHALLENGE is
+  made, no state kept (a wrong MAC1 is at most told REFUSED, "another key", from its source's small budget).
+- Every answer outside a session (CHALLENGE, REFUSED) comes from a budget of its source's own address and port
+  (``ANSWERS_PER_S``): a flood from elsewhere spends its own, never the host's; none is bigger than its request
+  (the HELLO is padded), and no answer names a key id.
+- A CHALLENGE is tied to the address its HELLO came from and takes one PROOF (right or wrong): a PROOF from
+  elsewhere is refused before anything is computed, and a HELLO seen before (a replay) is answered only to its own
+  address, with the CHALLENGE already made (no new key pair).
+- The host takes a REFUSED only from the bridge's address, naming its own HELLO's ``Eh``.
 """
 
 from __future__ import annotations
 
 import hmac
-import secrets
 import time
-from collections import OrderedDict
 
 from rehabkit.hardware.link.clock import wait_readable
-from rehabkit.hardware.link.protocol import HEADER, MAGIC, PLAIN, SEQ, SESSION_AT, VERSION, pack_bytes
+from rehabkit.hardware.link.protocol import HEADER, MAGIC, PLAIN, VERSION, pack_bytes
 from rehabkit.hardware.security.keys import LinkKey
-from rehabkit.hardware.security.session import KEY_ID, MAC, NONCE, Session, proof, session_for
+from rehabkit.hardware.security.session import (
+    MAC,
+    MAC1,
+    PUBLIC,
+    Session,
+    ephemeral,
+    exchange,
+    mac1,
+    mac1_key,
+    session_for,
+)
 
-HELLO, CHALLENGE, PROOF, WELCOME, REFUSED = 5, 6, 7, 8, 9
+HELLO, CHALLENGE, PROOF, WELCOME, REFUSED, BYE = 5, 6, 7, 8, 9, 10
 HANDSHAKE = frozenset((HELLO, CHALLENGE, PROOF, WELCOME, REFUSED))
-PENDING = 16  # nonces issued and not yet proven, kept at most (a flood of HELLOs only rotates them)
-PENDING_S = 5.0  # how long an issued nonce may be proven
-ANSWERS_PER_S = 20.0  # answers (challenges, refusals) to datagrams not in a session, at most
-# REFUSED's reasons
-NO_KEY, OTHER_KEY, KEY_NEEDED = 1, 2, 3
-REFUSALS = {NO_KEY: "has no key (it was started without --key)", OTHER_KEY: "holds another key",
-            KEY_NEEDED: "needs a key (it was started with --key)"}
-_BODY = {HELLO: KEY_ID + NONCE, CHALLENGE: KEY_ID + 2 * NONCE + MAC, PROOF: KEY_ID + 2 * NONCE + MAC,
-         REFUSED: 1 + KEY_ID}
+PAD = 16  # a HELLO's zero bytes: it is as big as the CHALLENGE it asks for
+REF = 8  # a REFUSED names what it refuses by this many bytes of its body
+RESTART_S = 1.0  # a handshake not welcomed within this starts afresh (new ephemeral keys)
+# REFUSED's reasons, and the host's words for them
+NO_KEY, OTHER_KEY, KEY_NEEDED, BUSY = 1, 2, 3, 4
+REASONS = {NO_KEY: "no-key", OTHER_KEY: "other-key", KEY_NEEDED: "key-needed", BUSY: "busy"}
+_BODY = {HELLO: PUBLIC + PAD + MAC1, CHALLENGE: PUBLIC + MAC, PROOF: PUBLIC + MAC, REFUSED: 1 + REF}
+
 
 def handshake_body(plain: bytes, robot: int) -> tuple[int, bytes] | None:
     """Kind and body of an opened handshake datagram for ``robot`` of the right size, else None."""
@@ -54,127 +76,44 @@ def peek_kind(data: bytes) -> int:
     return data[3] if len(data) >= HEADER.size else 0
 
 
-class BridgeGate:
-    """The bridge's end: answers handshakes, keeps the newest proven session (a new one replaces it, as a new host's
-    reset took the link over before keys), opens datagrams in it, and counts what it refuses by reason."""
-
-    def __init__(self, key: LinkKey | None, robot: int):
-        self.key, self.robot = key, robot
-        self.session: Session | None = None
-        self.peer: tuple | None = None  # the address that proved the session
-        self._pending: OrderedDict[bytes, tuple[bytes, float]] = OrderedDict()  # Nb → (Nh, issued at)
-        self.seq = 0
-        self._budget, self._refilled = ANSWERS_PER_S, 0.0
-
-    def reply(self, data: bytes, addr: tuple, now: float | None = None) -> tuple[bytes | None, str]:
-        """A handshake datagram from ``addr`` (after :func:`peek_kind`): the reply to send back (or None) and, if it
-        was refused, why (counted by the caller); a proven PROOF opens a new session (:attr:`session`) with it."""
-        now = time.monotonic() if now is None else now
-        plain, why = PLAIN.open(data)
-        got = handshake_body(plain, self.robot) if plain is not None else None
-        if got is None:
-            return None, why or "handshake"
-        kind, body = got
-        if kind not in (HELLO, PROOF):
-            return None, "handshake"
-        key_id = body[:KEY_ID]
-        if self.key is None:
-            return self._refuse(NO_KEY) if self._spend(now) else None, "no-key"
-        if key_id != bytes.fromhex(self.key.id):
-            return self._refuse(OTHER_KEY) if self._spend(now) else None, "other-key"
-        nh = body[KEY_ID:KEY_ID + NONCE]
-        if kind == HELLO:
-            if not self._spend(now):
-                return None, "hello-rate"
-            nb = secrets.token_bytes(NONCE)
-            self._pending[nb] = (nh, now)
-            while len(self._pending) > PENDING:
-                self._pending.popitem(last=False)
-            return self._send(CHALLENGE, key_id + nh + nb + proof(self.key, b"bridge", self.robot, nh, nb)), ""
-        nb, mac = body[KEY_ID + NONCE:KEY_ID + 2 * NONCE], body[KEY_ID + 2 * NONCE:]
-        issued = self._pending.get(nb)
-        if issued is None or issued[0] != nh or now - issued[1] > PENDING_S:
-            return None, "stale-proof"
-        if not hmac.compare_digest(mac, proof(self.key, b"host", self.robot, nh, nb)):
-            return None, "bad-proof"
-        del self._pending[nb]  # (one proof per nonce: a replayed PROOF finds none)
-        self.session = session_for(self.key, self.robot, nh, nb, host=False)
-        self.peer = addr  # the session is the proven host's, at its address only
-        self.seq = 0
-        return self.seal(pack_bytes(WELCOME, self.robot, self.next_seq(), b"", self.session.id)), ""
-
-    def next_seq(self) -> int:
-        self.seq += 1
-        return self.seq
-
-    def seal(self, plain: bytes) -> bytes:
-        return (self.session or PLAIN).seal(plain)
-
-    def open(self, data: bytes, addr: tuple) -> tuple[bytes | None, str]:
-        """Header and body of a datagram from ``addr`` this bridge may read: in the session, from the host that
-        proved it, when it has a key; else intact."""
-        if self.key is None:
-            return PLAIN.open(data)
-        if self.session is None:
-            if len(data) < HEADER.size:
-                return None, "length"
-            return None, "other-session" if SEQ.unpack_from(data, SESSION_AT)[0] else "unauthenticated"
-        plain, why = self.session.open(data)
-        if plain is not None and addr != self.peer:  # authentic, and raced from elsewhere: not the host's copy
-            return None, "other-address"
-        return plain, why
-
-    @property
-    def id(self) -> int:
-        """The session id datagrams sealed now carry (0: none, a link without a key)."""
-        return self.session.id if self.session is not None else 0
-
-    def refuse_unauthenticated(self, now: float) -> bytes | None:
-        """A REFUSED telling a sender without the key that this bridge needs one (within the answers' budget)."""
-        return self._refuse(KEY_NEEDED) if self._spend(now) else None
-
-    def _spend(self, now: float) -> bool:
-        """One answer to an unauthenticated datagram, at most ``ANSWERS_PER_S`` a second: a flood of them gets
-        next to nothing back (the bridge is no amplifier, and its loop's time goes to its session)."""
-        self._budget = min(ANSWERS_PER_S, self._budget + (now - self._refilled) * ANSWERS_PER_S)
-        self._refilled = now
-        if self._budget < 1.0:
-            return False
-        self._budget -= 1.0
-        return True
-
-    def _refuse(self, why: int) -> bytes:
-        mine = bytes.fromhex(self.key.id) if self.key is not None else bytes(KEY_ID)
-        return self._send(REFUSED, bytes([why]) + mine)
-
-    def _send(self, kind: int, body: bytes) -> bytes:
-        return PLAIN.seal(pack_bytes(kind, self.robot, self.next_seq(), body))
+def refused(data: bytes, robot: int) -> tuple[int, bytes] | None:
+    """A REFUSED's reason and the bytes naming what it refuses, if ``data`` is one for ``robot``."""
+    plain, _ = PLAIN.open(data)
+    got = handshake_body(plain, robot) if plain is not None else None
+    if got is None or got[0] != REFUSED:
+        return None
+    return got[1][0], got[1][1:]
 
 
 class HostHandshake:
     """The host's end of a handshake: what to send next (:meth:`next`) and what a reply makes of it
-    (:meth:`take`): the session once the bridge welcomes it; a refusal or a bridge that cannot prove the key is
-    said with :attr:`problem`."""
+    (:meth:`take`): the session once the bridge welcomes it (or a datagram of it arrives first); a refusal is kept
+    as :attr:`refusal` (its reason), a bridge that cannot prove the key counted in :attr:`forged`."""
 
-    def __init__(self, key: LinkKey, robot: int):
+    def __init__(self, key: LinkKey, robot: int, mac_key: bytes | None = None):
         self.key, self.robot = key, robot
-        self.nh = secrets.token_bytes(NONCE)
+        self.mac_key = mac_key or mac1_key(key)
+        self._private, self.eh = ephemeral()
         self.pending: Session | None = None  # derived from a proven challenge, not yet welcomed
         self.proof = b""
-        self.problem: str | None = None  # the bridge refused: why, in words
+        self.refusal: int | None = None  # the bridge refused this HELLO: why (NO_KEY, OTHER_KEY, ...)
         self.forged = 0  # challenges that did not prove the key (another party's, or another key's)
+        self.started = time.monotonic()
 
     def next(self, seq: int) -> bytes:
         """The datagram to send now: the HELLO, or the PROOF once a challenge was proven."""
         if self.pending is None:
-            return PLAIN.seal(pack_bytes(HELLO, self.robot, seq, bytes.fromhex(self.key.id) + self.nh))
-        return PLAIN.seal(pack_bytes(PROOF, self.robot, seq, self.proof))
+            plain = pack_bytes(HELLO, self.robot, seq, self.eh + bytes(PAD) + bytes(MAC1))
+            return PLAIN.seal(plain[:-MAC1] + mac1(self.mac_key, plain[:-MAC1]))
+        return PLAIN.seal(pack_bytes(PROOF, self.robot, seq, self.eh + self.proof))
 
     def take(self, data: bytes) -> Session | None:
-        """A datagram from the bridge during the handshake: the session if it is the welcome."""
-        if self.pending is not None and peek_kind(data) == WELCOME:
+        """A datagram from the bridge's address during the handshake: the session if it is the welcome (or any
+        datagram sealed in it: the welcome was lost)."""
+        if self.pending is not None and peek_kind(data) not in (CHALLENGE, REFUSED):
             plain, _ = self.pending.open(data)
-            if plain is not None and HEADER.unpack_from(plain)[2] == WELCOME:
+            if plain is not None:
+                self._private = None  # (the session is made: nothing of the exchange is kept)
                 return self.pending
             return None
         plain, _ = PLAIN.open(data)
@@ -182,57 +121,82 @@ class HostHandshake:
         if got is None:
             return None
         kind, body = got
-        if kind == REFUSED:
-            self.problem = refusal(data, self.robot, self.key)
-        elif kind == CHALLENGE and body[KEY_ID:KEY_ID + NONCE] == self.nh and self.pending is None:
-            nb, mac = body[KEY_ID + NONCE:KEY_ID + 2 * NONCE], body[KEY_ID + 2 * NONCE:]
-            if not hmac.compare_digest(mac, proof(self.key, b"bridge", self.robot, self.nh, nb)):
+        if kind == REFUSED and body[1:] == self.eh[:REF]:  # (bound to this HELLO: a blind forger cannot name it)
+            self.refusal = body[0]
+        elif kind == CHALLENGE and self.pending is None:
+            eb, theirs = body[:PUBLIC], body[PUBLIC:]
+            dh = exchange(self._private, eb)
+            if dh is None:
                 self.forged += 1
                 return None
-            self.pending = session_for(self.key, self.robot, self.nh, nb, host=True)
-            self.proof = bytes.fromhex(self.key.id) + self.nh + nb + proof(self.key, b"host", self.robot, self.nh, nb)
+            session, bridge_proof, host_proof = session_for(self.key, self.robot, self.eh, eb, dh, host=True)
+            if not hmac.compare_digest(theirs, bridge_proof):
+                self.forged += 1
+                return None
+            self.pending, self.proof = session, host_proof
         return None
 
 
-def refusal(data: bytes, robot: int, key: LinkKey | None) -> str | None:
-    """Why the bridge refused a session, in words, if ``data`` is its REFUSED (``key``: this end's, if any)."""
-    plain, _ = PLAIN.open(data)
-    got = handshake_body(plain, robot) if plain is not None else None
-    if got is None or got[0] != REFUSED:
-        return None
-    why, theirs = got[1][0], got[1][1:].hex()
-    mine = f", this key's {key.id}" if key is not None else ""
-    return f"the bridge {REFUSALS.get(why, 'refused the session')}" + (f" (its key id {theirs}{mine})"
-                                                                        if why != NO_KEY else "")
+def refusal_words(reason: int, key: LinkKey | None) -> str:
+    """Why the bridge refused a session, in words (``key``: this end's, if any)."""
+    mine = f" (this key's id {key.id}; the bridge's is on its console and in its --stats)" if key else ""
+    return {NO_KEY: "the bridge has no key (it was started without --key)",
+            OTHER_KEY: f"the bridge holds another key{mine}",
+            KEY_NEEDED: "the bridge needs a key (it was started with --key)",
+            BUSY: "the bridge serves another host's live session: a new one is let in once it ends, or when the "
+                  "person at the robot allows it (its keypad's a)"}.get(reason, "the bridge refused the session")
 
 
 def handshake(sock, addr: tuple, key: LinkKey, robot: int, next_seq, timeout: float = 5.0,
               resend_s: float = 0.05) -> Session:
-    """Open a session with the bridge at ``addr`` over ``sock`` (``next_seq()``: this end's sequence numbers).
+    """Open a session with the bridge at ``addr`` over ``sock`` (``next_seq()``: this end's sequence numbers); what
+    comes from elsewhere is not read as the bridge's.
 
     Raises:
-        LinkRefusedError: the bridge refused (no key, another key), or could not prove it holds this key.
+        LinkRefusedError: the bridge refused (no key, another key; another host's live session still, at the
+            timeout), or could not prove it holds this key.
         TimeoutError: no answer within ``timeout`` (wall time).
     """
-    shake = HostHandshake(key, robot)
+    mac_key = mac1_key(key)
+    shake = HostHandshake(key, robot, mac_key)
     until = time.monotonic() + timeout
+    forged, busy = 0, False
     while time.monotonic() < until:
+        if shake.pending is None and time.monotonic() - shake.started > RESTART_S:  # afresh: new ephemeral keys
+            forged += shake.forged
+            shake = HostHandshake(key, robot, mac_key)
         sock.sendto(shake.next(next_seq()), addr)
+        proven = shake.pending is not None
         answer_by = min(until, time.monotonic() + resend_s)
         while wait_readable(sock, answer_by - time.monotonic()):
             try:
-                data = sock.recv(65536)
+                data, came_from = sock.recvfrom(65536)
             except (BlockingIOError, ConnectionRefusedError):
                 break
+            if came_from != addr:  # (a REFUSED or a CHALLENGE from elsewhere is no bridge's)
+                continue
             session = shake.take(data)
             if session is not None:
                 return session
-            if shake.problem is not None:
-                raise LinkRefusedError(shake.problem)
-    if shake.forged:
-        raise LinkRefusedError(f"the bridge could not prove it holds key {key.id} ({shake.forged} challenges failed)")
+            if shake.refusal == BUSY:  # another host's session: it may be ending (its BYE), or be let go at the
+                busy, shake.refusal = True, None  # robot: asked again until the timeout
+            elif shake.refusal is not None:
+                raise LinkRefusedError(REASONS.get(shake.refusal, "refused"), key.id,
+                                       refusal_words(shake.refusal, key))
+            if not proven and shake.pending is not None:
+                break  # (the challenge proven: the PROOF goes at once)
+    if forged + shake.forged:
+        raise LinkRefusedError("forged", key.id, f"the bridge could not prove it holds key {key.id} "
+                               f"({forged + shake.forged} challenges failed)")
+    if busy:
+        raise LinkRefusedError("busy", key.id, refusal_words(BUSY, key))
     raise TimeoutError(f"no answer to the handshake within {timeout:g} s")
 
 
 class LinkRefusedError(ValueError):
-    """The bridge and this end do not share a key (its words say which side lacks it, naming key ids)."""
+    """The bridge refused this end's session: ``reason`` (no-key, other-key, key-needed, busy; forged: it could
+    not prove the key), ``key_id`` (this end's), ``words`` (said so)."""
+
+    def __init__(self, reason: str, key_id: str | None, words: str):
+        self.reason, self.key_id, self.words = reason, key_id, words
+        super().__init__(words)

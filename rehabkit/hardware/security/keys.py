@@ -3,13 +3,16 @@ readable by its owner only, the same file at the host and at the bridge (``rehab
 
 The file says which robot the key is for and its key id (the first 8 bytes of a SHA-256 of the secret: safe to
 show, to log and to compare, it names the key without revealing it); the secret itself is never printed, logged
-or written anywhere else. A file others can read is refused, as ``ssh`` refuses such a private key.
+or written anywhere else. A key file is checked as ``ssh``'s StrictModes checks a private key (:func:`load_key`); a
+new one is written whole (temp, rename, the folder synced), its folder made owner-only if new.
 """
 
 from __future__ import annotations
 
 import base64
+import errno
 import hashlib
+import os
 import re
 import secrets
 import stat
@@ -70,29 +73,43 @@ def new_key(robot: str, out: str | Path, replace: bool = False) -> LinkKey:
         raise KeyFileError(out, f"'{robot}' is not a robot's link name", "name it ROBOT-ID as its e-stop latch is "
                            "named, e.g. hit-1 (robot hit, robot_id 1)")
     out = Path(out)
+    if out.is_symlink():
+        raise KeyFileError(out, "a symbolic link", "write the key to a file of its own (a link could point anywhere)")
     if out.exists() and not replace:
         raise KeyFileError(out, "exists", "pass --replace to rotate the key (then give the new file to both ends)")
+    out.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # (a keys/ folder made here: its owner's only)
     key = LinkKey(robot, secrets.token_bytes(KEY_BYTES), out)
     text = (f"{HEADLINE}\nrobot: {robot}\nid: {key.id}\ncreated: {datetime.now(UTC).isoformat(timespec='seconds')}\n"
             f"secret: {base64.urlsafe_b64encode(key.secret).decode()}\n")
     atomic_write_text(out, text, private=True)
+    folder = os.open(out.parent, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(folder)  # (the rename itself on disk: a power cut leaves the old key or the new, never none)
+    finally:
+        os.close(folder)
     return key
 
 
 def load_key(path: str | Path) -> LinkKey:
-    """The key in ``path``; refused (:class:`KeyFileError`) when missing, readable by others, or malformed."""
+    """The key in ``path``, checked as ``ssh``'s StrictModes checks a private key: refused (:class:`KeyFileError`)
+    when missing, a symbolic link, not this user's (or root's), readable by others, in a folder that is not this
+    user's (or root's) or that others may write (they could swap the key), or malformed."""
     path = Path(path).expanduser()
     try:
-        mode = path.stat().st_mode
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
     except FileNotFoundError:
         raise KeyFileError(path, "no such file", "make one with `rehabkit keys new ROBOT-ID --out FILE` and give "
                            "the same file to the bridge") from None
-    if not stat.S_ISREG(mode):
-        raise KeyFileError(path, "not a file", "name the key file itself")
-    if mode & 0o077:
-        raise KeyFileError(path, f"readable by others (mode {stat.S_IMODE(mode):o})", f"chmod 600 {path}")
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise KeyFileError(path, "a symbolic link", "name the key file itself (a link could be pointed "
+                               "elsewhere)") from None
+        raise KeyFileError(path, f"cannot be read ({exc.strerror})", "check the path") from None
+    with os.fdopen(fd, errors="replace") as f:
+        _strict(path, os.fstat(f.fileno()))
+        text = f.read()
     fields = {}
-    for line in path.read_text(errors="replace").splitlines():
+    for line in text.splitlines():
         name, sep, value = line.partition(":")
         if sep and not line.startswith("#"):
             fields[name.strip()] = value.strip()
@@ -109,6 +126,26 @@ def load_key(path: str | Path) -> LinkKey:
         raise KeyFileError(path, f"its id line says {fields['id']} but the secret's id is {key.id} (edited?)",
                            "make a new key")
     return key
+
+
+def _strict(path: Path, st: os.stat_result) -> None:
+    """The file's and its folder's owner and modes, as StrictModes checks them."""
+    me = os.geteuid()
+    if not stat.S_ISREG(st.st_mode):
+        raise KeyFileError(path, "not a file", "name the key file itself")
+    if st.st_uid not in (me, 0):
+        raise KeyFileError(path, f"owned by user {st.st_uid}, not this one ({me})",
+                           "make this user's own key (`rehabkit keys new ROBOT-ID`), or chown it")
+    if st.st_mode & 0o077:
+        raise KeyFileError(path, f"readable by others (mode {stat.S_IMODE(st.st_mode):o})", f"chmod 600 {path}")
+    folder = path.absolute().parent
+    fst = os.stat(folder)
+    if fst.st_uid not in (me, 0):
+        raise KeyFileError(path, f"its folder {folder} is owned by user {fst.st_uid}, not this one ({me}): its owner "
+                           "could swap the key", "keep keys in a folder of this user's own (chmod 700)")
+    if fst.st_mode & 0o022:
+        raise KeyFileError(path, f"its folder {folder} may be written by others (mode {stat.S_IMODE(fst.st_mode):o}): "
+                           "they could swap the key", f"chmod go-w {folder}")
 
 
 def check_robot(key: LinkKey, robot: str) -> None:

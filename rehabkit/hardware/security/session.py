@@ -1,5 +1,6 @@
-"""An authenticated session's cryptography: its keys from the robot's key and both ends' nonces, its datagrams sealed
-with ChaCha20-Poly1305 (the ``cryptography`` package) and an IPsec-style anti-replay window.
+"""An authenticated session's cryptography: its keys from the robot's key and an ephemeral X25519 exchange (forward
+secret), its datagrams sealed with ChaCha20-Poly1305 (all from the ``cryptography`` package) and an IPsec-style
+anti-replay window.
 
 A datagram is sealed with its body encrypted (a person's joint angles and forces are health data) and header and
 body authenticated; its nonce is the sequence number, which the sender never repeats in a session (one key per
@@ -16,7 +17,7 @@ import struct
 from rehabkit.hardware.link.protocol import HEADER, SEQ, SEQ_AT, SESSION_AT, VERSION
 from rehabkit.hardware.security.keys import LinkKey
 
-NONCE, MAC, KEY_ID = 16, 32, 8  # a handshake nonce, an HMAC-SHA256, a key id [bytes]
+PUBLIC, MAC, MAC1, KEY_ID = 32, 32, 16, 8  # an X25519 public key, an HMAC-SHA256, a HELLO's MAC1, a key id [bytes]
 TAG = 16  # Poly1305's
 WINDOW = 64  # sequence numbers the anti-replay window remembers behind the highest
 
@@ -51,6 +52,7 @@ class Session:
         from cryptography.hazmat.primitives.ciphers.aead import ChaCha20Poly1305
 
         self.id, self.key_id = sid, key_id
+        self.right = "drive"  # what the session may do: "drive" (the robot's key), or "clear" (a clearing key's)
         self._seal, self._open = ChaCha20Poly1305(send_key), ChaCha20Poly1305(receive_key)
         self._invalid = InvalidTag
         self.window = ReplayWindow()
@@ -89,19 +91,56 @@ def _nonce(seq: int) -> bytes:
     return struct.pack("<Q", seq) + b"\0\0\0\0"
 
 
-def proof(key: LinkKey, who: bytes, robot: int, nh: bytes, nb: bytes) -> bytes:
-    return hmac.digest(key.secret, who + struct.pack("<I", robot) + bytes.fromhex(key.id) + nh + nb, "sha256")
+def mac1_key(key: LinkKey) -> bytes:
+    """The key of a HELLO's MAC1 (the check any key holder passes, and no one else: made once per key)."""
+    return hmac.digest(key.secret, b"rehabkit link mac1", "sha256")
 
 
-def session_for(key: LinkKey, robot: int, nh: bytes, nb: bytes, host: bool) -> Session:
-    """The session both ends derive from the key and both nonces (``host``: the host's end of it)."""
+def mac1(mac_key: bytes, plain: bytes) -> bytes:
+    return hmac.digest(mac_key, plain, "sha256")[:MAC1]
+
+
+def session_for(key: LinkKey, robot: int, eh: bytes, eb: bytes, dh: bytes, host: bool) -> tuple[Session, bytes, bytes]:
+    """The session both ends derive from the robot's key, both ephemeral X25519 public keys (``eh`` the host's,
+    ``eb`` the bridge's) and their Diffie-Hellman result ``dh`` (``host``: the host's end of it), and the two
+    proofs of the handshake (the bridge's, the host's). Without ``dh`` — which no one keeps once the session is
+    made — the robot's key alone opens nothing captured: the sessions are forward secret."""
     from cryptography.hazmat.primitives import hashes
     from cryptography.hazmat.primitives.kdf.hkdf import HKDF
 
     info = b"rehabkit link v%d session" % VERSION + struct.pack("<I", robot) + bytes.fromhex(key.id)
-    keys = HKDF(algorithm=hashes.SHA256(), length=64, salt=nh + nb, info=info).derive(key.secret)
-    sid = int.from_bytes(hmac.digest(key.secret, b"session id" + nh + nb, "sha256")[:4], "little") | 1
-    to_bridge, to_host = keys[:32], keys[32:]
-    return Session(sid, key.id, *((to_bridge, to_host) if host else (to_host, to_bridge)))
+    okm = HKDF(algorithm=hashes.SHA256(), length=3 * 32 + 4, salt=eh + eb, info=info).derive(key.secret + dh)
+    to_bridge, to_host, confirm = okm[:32], okm[32:64], okm[64:96]
+    sid = int.from_bytes(okm[96:], "little") | 1
+    session = Session(sid, key.id, *((to_bridge, to_host) if host else (to_host, to_bridge)))
+    return session, hmac.digest(confirm, b"bridge", "sha256"), hmac.digest(confirm, b"host", "sha256")
 
 
+def ephemeral() -> tuple[object, bytes]:
+    """A fresh X25519 key pair: the private key (used once, then dropped) and its public bytes."""
+    from cryptography.hazmat.primitives.asymmetric.x25519 import X25519PrivateKey
+
+    private = X25519PrivateKey.generate()
+    return private, private.public_key().public_bytes_raw()
+
+
+def exchange(private, public: bytes) -> bytes | None:
+    """X25519 of our ``private`` key with the peer's ``public`` bytes, or None if they are no usable key (a
+    low-order point: a forger's)."""
+    from cryptography.hazmat.primitives.asymmetric.x25519 import X25519PublicKey
+
+    try:
+        return private.exchange(X25519PublicKey.from_public_bytes(public))
+    except ValueError:
+        return None
+
+
+def warm_up(key: LinkKey, robot: int) -> None:
+    """A handshake's cryptography done once and a datagram sealed and opened, then forgotten: the libraries' first
+    use (imports, their tables) costs milliseconds, which a real-time loop must not spend in its first handshake."""
+    from rehabkit.hardware.link.protocol import pack_bytes
+
+    (a, pa), (b, pb) = ephemeral(), ephemeral()
+    host, _, _ = session_for(key, robot, pa, pb, exchange(a, pb), host=True)
+    bridge, _, _ = session_for(key, robot, pa, pb, exchange(b, pa), host=False)
+    bridge.open(host.seal(pack_bytes(0, robot, 1, bytes(8), host.id)))
