@@ -34,3 +34,20 @@ def at_bag(text: str) -> list[tuple[str, str]]:
     """Every ``BAG: --topics ROLE: …`` line of ``text`` (a bag that does not fit the replay, said at the ``--topics``
     role concerned: a :class:`rehabkit.bags.bag_content.BagError`) as (BAG, ROLE)."""
     return [(m["bag"], m["role"]) for m in AT_BAG.finditer(text)]
+
+
+SUGGESTED = re.compile(r"did you mean ((?:'[^']+'(?: or )?)+)\?")
+
+
+def suggested(text: str) -> list[str]:
+    """Every name a ``did you mean 'a' or 'b'?`` of ``text`` offers (the fix :func:`rehabkit.core.kinds.names.suggest`
+    words), in order: a misspelt name's nearest ones, asserted as names rather than as the sentence around them."""
+    return [name for m in SUGGESTED.finditer(text) for name in re.findall(r"'([^']+)'", m[1])]
+
+
+def said(text: str) -> list[str]:
+    """What each ``file:line:col: path: …`` (or ``<--set KEY>: path: …``) line of ``text`` says after its place:
+    compared with an error's own rendering of the fields a test expects (``WrongUnitKey(...).describe()``), not with
+    words written in the test."""
+    found = sorted([*LOCATED.finditer(text), *SET.finditer(text)], key=lambda m: m.start())
+    return [text[m.end():].split("\n", 1)[0] for m in found]

@@ -17,6 +17,7 @@ from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.models import World
 from rehabkit.geometry.solids import path_hits
 from rehabkit.models.dh import PoseSpec
+from rehabkit.store import StoreError
 from rehabkit.testing import group
 from tests.conftest import ROOT, SCENARIOS
 from tests.located import where
@@ -87,8 +88,10 @@ def test_an_unreachable_or_buried_target_is_a_clear_planning_error(arm):
     planner = _planner(arm)
     inside = arm.fk(HOME)
     inside[:3, 3] = [0.32, 0.38, 0.0]  # inside the tray (base frame)
-    with pytest.raises(PlanningError, match="inside obstacle 'tray'"):
+    with pytest.raises(PlanningError) as refused:
         planner.plan(PlanRequest(0.0, HOME, np.zeros(8), [Target("t", pose=inside)], arm))
+    cause = refused.value.__cause__  # (the path planner's: which end lies where)
+    assert (refused.value.target, cause.end, cause.obstacle) == ("t", "goal", "tray")
     far = arm.fk(HOME)
     far[:3, 3] = [1.5, 0.0, 0.3]
     with pytest.raises(PlanningError, match="cannot reach"):
@@ -143,8 +146,10 @@ def test_a_foreign_store_is_refused_and_left_untouched(tmp_path):
     bad = tmp_path / "notes.sqlite"
     bad.write_bytes(b"not a database, somebody's notes" * 100)
     before = bad.read_bytes()
-    with pytest.raises(SetupError, match="not a rehabkit patch store"):
+    with pytest.raises(SetupError) as refused:
         run_scenario(SCENARIO, {"controller.store": str(bad), "duration": 1.0})
+    assert [d.path for d in refused.value.diagnostics] == ["controller.type"]  # (the keypad's, refused as it is built)
+    assert isinstance(refused.value.__cause__.__cause__, StoreError) and refused.value.__cause__.__cause__.path == bad
     assert bad.read_bytes() == before
 
 

@@ -113,9 +113,10 @@ def test_ur5_from_example_robot_data_as_its_package_ships_it(tmp_path, monkeypat
 def test_a_mesh_the_package_does_not_have_is_said_with_the_file(tmp_path):
     from rehabkit.models.files.ros_package import DescriptionError, resolve_uri
 
-    with pytest.raises(DescriptionError, match="no such file: .*rehab_arm_description/meshes/elbow.dae; check the "
-                                               "package's meshes folder"):
+    with pytest.raises(DescriptionError) as missing:
         resolve_uri("package://rehab_arm_description/meshes/elbow.dae", tmp_path, [DATA])
+    assert missing.value.uri == "package://rehab_arm_description/meshes/elbow.dae"
+    assert missing.value.problem.endswith(str(DATA / "rehab_arm_description" / "meshes" / "elbow.dae"))  # (the file)
 
 
 def test_the_readmes_package_example_is_the_tested_one():

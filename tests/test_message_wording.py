@@ -127,3 +127,64 @@ def test_a_stops_event_says_when_its_cause_then_the_stop(hit):
     (e,) = layer.events
     assert (e.rule, e.data["category"]) == ("plan", 2)
     assert e.message == "t=1.000s: a test's own stop; controlled stop, then held (category 2)"
+
+
+def test_a_misspelt_name_is_offered_the_nearest_ones_or_the_choices():
+    from rehabkit.core.kinds.names import suggest
+
+    said = [suggest("multicubic", ["multi-cubic", "min-jerk"]), suggest("elbow1", ["elbow_1", "elbow_2", "wrist_1"]),
+            suggest("handel", ["base", "elbow_1_link"])]
+    assert said == ["; did you mean 'multi-cubic'?", "; did you mean 'elbow_1' or 'elbow_2'?",
+                    "; choices: base, elbow_1_link"]
+
+
+def test_a_key_in_the_other_kind_of_joints_unit_names_the_key_to_write_and_the_robots_own_limit():
+    from rehabkit.core.setup.limits import WrongUnitKey
+
+    said = [WrongUnitKey("finger", "range_deg", "range_m", False, "[0, 0.04] m").describe(),
+            WrongUnitKey("elbow", "velocity_m_s", "velocity_deg_s", True, "124.6 deg/s").describe()]
+    assert said == ["finger is a prismatic joint: range_deg [deg] is for a revolute joint; write range_m instead, in m "
+                    "(the robot's own: [0, 0.04] m)",
+                    "elbow is a revolute joint: velocity_m_s [m/s] is for a prismatic joint; write velocity_deg_s "
+                    "instead, in deg/s (the robot's own: 124.6 deg/s)"]
+
+
+def test_a_broken_safety_log_chain_says_the_record_its_line_and_what_is_wrong():
+    from rehabkit.core.log.safety_log import ChainBreak
+
+    breaks = [ChainBreak(3, 2, "intervention", "edited"), ChainBreak(3, 2, "intervention", "edited", keyed=True),
+              ChainBreak(3, 3, "end", "out-of-order"), ChainBreak(5, None, None, "unreadable"),
+              ChainBreak(0, None, None, "empty")]
+    assert [str(b) for b in breaks] == [
+        "record 2 (intervention, line 3): its content does not match its hash (edited, or checked without the key it "
+        "was written with)",
+        "record 2 (intervention, line 3): its content does not match its hash (edited)",
+        "record 3 (end, line 3): does not follow the record before it (one removed, inserted or reordered)",
+        "line 5: not a record of this log",
+        "the log holds no records"]
+
+
+def test_a_latched_estop_says_since_when_why_and_the_command_that_clears_it(tmp_path):
+    from rehabkit.core.safety.estop import EStopLatch
+
+    latch = EStopLatch(tmp_path / "hit-1.json", "hit-1")
+    latch.press("the test's own press", by="robot")
+    since = latch.latched()["since"]
+    assert latch.refusal("the robot") == (f"the e-stop of the robot is latched (since {since}, the test's own press): "
+                                          "deal with its cause, then clear it with `rehabkit estop clear hit-1 --by "
+                                          "NAME`")
+
+
+def test_a_drive_in_fault_says_its_code_and_that_a_person_must_clear_the_latch():
+    from rehabkit.canopen.config import DriveFaultError
+    from rehabkit.canopen.drives.start_checks import check_no_fault
+
+    class _Master:  # (a drive's object dictionary as the master reads it: its error code, 0x603F)
+        states, ids = ["OPERATION_ENABLED", "FAULT"], [1, 2]
+        remotes = [None, type("Remote", (), {"sdo": {0x603F: type("Entry", (), {"raw": 0x2310})()}})()]
+
+    with pytest.raises(DriveFaultError) as err:
+        check_no_fault(_Master(), ["shoulder_1", "shoulder_2"], cleared=False, latch_name="hit-1")
+    assert str(err.value) == ("drive 2 (shoulder_2): is in FAULT (0x2310 continuous over-current): its fault is reset "
+                              "only once a person has cleared the robot's e-stop latch (`rehabkit estop clear hit-1 "
+                              "--by NAME`)")

@@ -15,8 +15,9 @@ import yaml
 
 from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
+from rehabkit.core.setup.limits import WrongUnitKey
 from tests.conftest import ROOT
-from tests.located import located, set_located
+from tests.located import located, said, set_located
 from tests.test_cli import cli
 from tests.test_recording_layout import _flat, read_layout, recording
 
@@ -120,11 +121,11 @@ def test_a_degrees_key_on_the_finger_and_a_metres_key_on_an_arm_joint_are_refuse
     for (_, row, col, _), key in zip(found, keys, strict=True):  # each at its key in the file
         name = key.split(".")[1]
         assert text[row - 1][col - 1:col - 1 + len(name)] == name, (row, col, name)
-    assert lines[0].endswith("panda_finger_joint1 is a prismatic joint: range_deg [deg] is for a revolute joint; "
-                             "write range_m instead, in m (the robot's own: [0, 0.04] m)")
-    assert lines[1].endswith("write force_n instead, in N (the robot's own: 100 N)")
-    assert lines[2].endswith("panda_joint2 is a revolute joint: velocity_m_s [m/s] is for a prismatic joint; write "
-                             "velocity_deg_s instead, in deg/s (the robot's own: 124.6 deg/s)")
+    # each with the key to write and the robot's own limit in the joint's unit (worded: tests/test_message_wording.py)
+    assert said(refused.stderr) == [k.describe() for k in (
+        WrongUnitKey("panda_finger_joint1", "range_deg", "range_m", False, "[0, 0.04] m"),
+        WrongUnitKey("panda_finger_joint1", "torque_nm", "force_n", False, "100 N"),
+        WrongUnitKey("panda_joint2", "velocity_m_s", "velocity_deg_s", True, "124.6 deg/s"))]
     robot = {**PANDA, "limits": {"panda_finger_joint1": {"range_deg": [0, 0.03]}}}
     refused = cli("validate", _panda(tmp_path, robot=robot))
     assert refused.returncode == 2 and [at for *_, at in located(refused.stderr)] == [
@@ -154,8 +155,7 @@ def test_a_scara_s_quill_is_given_planned_limited_and_judged_in_metres(tmp_path)
     refused = cli("validate", SCARA, "--set", "safety.joints.quill={range_deg: [0, 10]}")
     assert refused.returncode == 2 and set_located(refused.stderr) == [("safety.joints.quill",
                                                                         "safety.joints.quill.range_deg")]
-    assert "safety.joints.quill.range_deg: quill is a prismatic joint: range_deg [deg] is for a revolute joint; " \
-           "write range_m instead, in m (the robot's own: [0, 0.2] m)" in refused.stderr
+    assert said(refused.stderr) == [WrongUnitKey("quill", "range_deg", "range_m", False, "[0, 0.2] m").describe()]
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import pytest
 from rehabkit.api import run_scenario
 from rehabkit.core.run.runner import SetupError
 from tests.conftest import DATA
-from tests.located import located
+from tests.located import located, suggested
 
 COMMON = """\
     planner: {type: multi-cubic, segment_durations: [1.5, 1.5]}
@@ -201,7 +201,7 @@ def test_a_misspelt_end_effector_is_said_at_its_setting_with_the_names_nearest(t
     assert main(["validate", str(p)]) == 2
     said = capsys.readouterr().err
     assert [(f, line, at) for f, line, _, at in located(said)] == [(str(p), 2, "robot.ee_frame")]
-    assert "did you mean 'l2'" in said  # (the fix)
+    assert suggested(said) == ["l2"]  # (the fix)
 
 
 def test_pinocchios_file_of_a_robot_is_one_in_the_cache_per_variant(tmp_path, monkeypatch):

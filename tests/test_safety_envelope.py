@@ -150,5 +150,6 @@ def test_the_patients_comfort_force_stops_a_session_that_presses_too_hard():
 def test_a_force_limit_without_a_force_source_is_refused():
     from rehabkit.core.run.runner import SetupError
 
-    with pytest.raises(SetupError, match="needs a source of the force"):
+    with pytest.raises(SetupError) as refused:
         run_scenario(HIT, {"safety": {"interaction_force_n": 50}})
+    assert [d.path for d in refused.value.diagnostics] == ["safety.interaction_force_n"]

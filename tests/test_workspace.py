@@ -156,13 +156,15 @@ def test_greedy_searches_report_failure_instead_of_looping(greedy):
     ws = _cup()
     start, goal = ws.centre(np.array([18, 21, 2])), ws.centre(np.array([32, 21, 2]))
     assert path_length(astar(ws, start, goal)) > 0.4  # out through the opening and round the cup
-    with pytest.raises(SearchFailedError, match="stuck|no arrival"):
+    with pytest.raises(SearchFailedError) as failed:
         greedy(ws, start, goal, max_steps=80)
+    assert failed.value.kind in ("stuck", "no-arrival")
 
 
 def test_search_refuses_endpoints_outside_the_inner_workspace(ws):
-    with pytest.raises(SearchFailedError, match="not an inner voxel"):
+    with pytest.raises(SearchFailedError) as refused:
         astar(ws, np.array([5.0, 5.0, 5.0]), ws.inner_points()[0])
+    assert refused.value.kind == "not-inner"
 
 
 def test_decimation_keeps_ends():

@@ -136,7 +136,7 @@ class BoxAvoidPlanner(Planner):
             try:
                 result = plan_path(start[:3, 3], goal[:3, 3], self.obstacles, cfg.margin, cfg.clearance, self.floor)
             except NoPathError as exc:
-                raise PlanningError(f"target '{target.name}': {exc}", target=target.name) from None
+                raise PlanningError(f"target '{target.name}': {exc}", target=target.name) from exc
             path_ms += (time.perf_counter() - t_path) * 1e3
             a, b = start[:3, 3], goal[:3, 3]
             blocked |= {o.name for o in self.obstacles if o.inflated(cfg.margin).hits_segment(a, b)}

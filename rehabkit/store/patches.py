@@ -29,7 +29,11 @@ SCHEMA_VERSION = 1
 
 
 class StoreError(RuntimeError):
-    """The patch store can't be used (the message says which file and why)."""
+    """The patch store can't be used: ``path``, the file (the message says why)."""
+
+    def __init__(self, message: str, path: Path):
+        super().__init__(message)
+        self.path = path
 
 
 class Action(BaseModel):
@@ -89,7 +93,7 @@ class PatchStore:
                 self._create()
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"{self.path} is not a rehabkit patch store ({exc}); it was left untouched — "
-                             "move it away or set REHABKIT_DATA to another folder") from None
+                             "move it away or set REHABKIT_DATA to another folder", self.path) from None
 
     def run_state(self) -> list[tuple[int, str]]:
         """The patches as they are now (a run session's snapshot takes them with the keypad's state)."""
@@ -125,7 +129,7 @@ class PatchStore:
                 db.close()
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"{path} is not a rehabkit patch store ({exc}); it was left untouched — "
-                             "move it away or set REHABKIT_DATA to another folder") from None
+                             "move it away or set REHABKIT_DATA to another folder", Path(path)) from None
 
     def _create(self) -> None:
         with self._transaction():
@@ -138,13 +142,14 @@ class PatchStore:
         app = db.execute("PRAGMA application_id").fetchone()[0]
         if app != APPLICATION_ID:
             raise StoreError(f"{self.path} belongs to another program (SQLite application id {app:#x}); "
-                             "it was left untouched — move it away or set REHABKIT_DATA to another folder")
+                             "it was left untouched — move it away or set REHABKIT_DATA to another folder", self.path)
         version = db.execute("PRAGMA user_version").fetchone()[0]
         if version != SCHEMA_VERSION:
-            raise StoreError(f"{self.path} has patch-store schema {version}; this rehabkit reads {SCHEMA_VERSION}")
+            raise StoreError(f"{self.path} has patch-store schema {version}; this rehabkit reads {SCHEMA_VERSION}",
+                             self.path)
         problems = db.execute("PRAGMA integrity_check").fetchall()
         if problems != [("ok",)]:
-            raise StoreError(f"{self.path} is damaged ({problems[0][0]}); it was left untouched")
+            raise StoreError(f"{self.path} is damaged ({problems[0][0]}); it was left untouched", self.path)
 
     def _transaction(self):
         db = self.db
@@ -209,4 +214,4 @@ def open_store(where: str, out_dir: Path | None, resolve: Callable[[str], Path],
             return None
         return PatchStore(path)
     except StoreError as exc:
-        raise ValueError(str(exc)) from None
+        raise ValueError(str(exc)) from exc  # (the store's error, its file, kept as the cause)

@@ -25,7 +25,13 @@ from rehabkit.workspace.grid import INNER, NEIGHBOURS, VoxelWorkspace
 
 
 class SearchFailedError(RuntimeError):
-    """A search found no path; the message says why."""
+    """A search found no path; the message says why, ``kind`` which way: ``"not-inner"`` (an end outside the inner
+    workspace), ``"apart"`` (the ends in separate parts of it), ``"no-arrival"`` (a greedy search out of steps) or
+    ``"stuck"`` (a greedy search at a dead end)."""
+
+    def __init__(self, message: str, kind: str):
+        super().__init__(message)
+        self.kind = kind
 
 
 
@@ -35,7 +41,7 @@ def _setup(ws: VoxelWorkspace, start: np.ndarray, goal: np.ndarray) -> tuple[int
     s, g = ws.index(np.vstack([start, goal]))
     for name, i in (("start", s), ("goal", g)):
         if np.any(i < 0) or np.any(i >= labels.shape) or labels[tuple(i)] != INNER:
-            raise SearchFailedError(f"{name} {np.round(ws.centre(i), 3).tolist()} is not an inner voxel")
+            raise SearchFailedError(f"{name} {np.round(ws.centre(i), 3).tolist()} is not an inner voxel", "not-inner")
     ny, nz = labels.shape[1], labels.shape[2]
     offsets = [int(dx * ny * nz + dy * nz + dz) for dx, dy, dz in NEIGHBOURS]
     flat_s = int(np.ravel_multi_index(s, labels.shape))
@@ -79,7 +85,7 @@ def astar(ws: VoxelWorkspace, start: np.ndarray, goal: np.ndarray, weight: float
                 h = math.sqrt((x - gx) ** 2 + (y - gy) ** 2 + (z - gz) ** 2)
                 heapq.heappush(heap, (c + weight * h, nb))
     else:
-        raise SearchFailedError("start and goal are in separate parts of the inner workspace")
+        raise SearchFailedError("start and goal are in separate parts of the inner workspace", "apart")
     path = [g]
     while parent[path[-1]] != -1:
         path.append(parent[path[-1]])
@@ -95,12 +101,13 @@ def _greedy(ws: VoxelWorkspace, start: np.ndarray, goal: np.ndarray, cost, name:
     path, visited, node = [s], {s}, s
     while node != g:
         if len(path) > budget:
-            raise SearchFailedError(f"{name}: no arrival after {budget} steps (wandering in a concavity)")
+            raise SearchFailedError(f"{name}: no arrival after {budget} steps (wandering in a concavity)",
+                                    "no-arrival")
         candidates = [node + off for off in offsets]
         free = [c for c in candidates if labels[c] == INNER and c not in visited]
         if not free:
             raise SearchFailedError(f"{name}: stuck at {np.round(coords(node), 3).tolist()} (every neighbour "
-                                    "visited or outside the inner workspace)")
+                                    "visited or outside the inner workspace)", "stuck")
         here = coords(node)
         pts = ws.centre(np.column_stack(np.unravel_index(np.asarray(free), ws.shape)))
         node = free[int(np.argmin(cost(here, pts, goal_xyz)))]

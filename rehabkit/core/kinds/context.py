@@ -105,7 +105,7 @@ class Context:
         try:
             info = self.plugins.get(kind, section["type"])
         except Exception as exc:  # noqa: BLE001 (the registry's UnknownPluginError: its words, with suggestions)
-            raise ValueError(str(exc)) from None
+            raise ValueError(str(exc)) from exc
         try:
             config = info.config.model_validate(section)
         except ValidationError as exc:

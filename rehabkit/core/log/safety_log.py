@@ -72,12 +72,37 @@ def chain(records: list[dict[str, Any]], key: bytes | None = None) -> str:
 
 
 @dataclass(frozen=True)
+class ChainBreak:
+    """Where a log's chain does not hold: at ``line`` (1-based), record ``seq`` of ``kind`` (None: not a record),
+    and the ``fault``: ``"unreadable"`` (not a record of this log), ``"out-of-order"`` (it does not follow the record
+    before it), ``"edited"`` (its content does not match its hash; ``keyed``: checked with the audit key) or
+    ``"empty"`` (no records at all)."""
+
+    line: int
+    seq: Any
+    kind: Any
+    fault: str
+    keyed: bool = False
+
+    def __str__(self) -> str:
+        if self.fault == "empty":
+            return "the log holds no records"
+        if self.fault == "unreadable":
+            return f"line {self.line}: not a record of this log"
+        what = f"record {self.seq} ({self.kind}, line {self.line})"
+        if self.fault == "out-of-order":
+            return f"{what}: does not follow the record before it (one removed, inserted or reordered)"
+        return (f"{what}: its content does not match its hash (edited"
+                f"{'' if self.keyed else ', or checked without the key it was written with'})")
+
+
+@dataclass(frozen=True)
 class LogCheck:
     """A log checked: its records, what is wrong with its chain (nothing: intact), a torn last line left out (a
     write cut short: the process killed or the machine down while it wrote), and whether it has its ``end``."""
 
     records: list[dict[str, Any]]
-    problems: list[str]
+    problems: list[ChainBreak]
     torn: str | None = None  # the last line's start, when it was left out unfinished
 
     @property
@@ -86,7 +111,7 @@ class LogCheck:
         return bool(self.records) and self.records[-1].get("kind") == "end"
 
 
-def verify(path: Path, key: bytes | None = None) -> tuple[list[dict[str, Any]], list[str]]:
+def verify(path: Path, key: bytes | None = None) -> tuple[list[dict[str, Any]], list[ChainBreak]]:
     """The records of a log and what is wrong with its chain (nothing: intact); a torn last line is left out."""
     checked = check(path, key)
     return checked.records, checked.problems
@@ -111,18 +136,17 @@ def check(path: Path, key: bytes | None = None) -> LogCheck:
             body = {k: v for k, v in record.items() if k != "hash"}
             stated = record["hash"]
         except (ValueError, KeyError, AttributeError):
-            problems.append(f"line {number}: not a record of this log")
+            problems.append(ChainBreak(number, None, None, "unreadable"))
             continue
-        what = f"record {record.get('seq', '?')} ({record.get('kind', '?')}, line {number})"
+        seq, kind = record.get("seq", "?"), record.get("kind", "?")
         if record.get("prev") != prev:
-            problems.append(f"{what}: does not follow the record before it (one removed, inserted or reordered)")
+            problems.append(ChainBreak(number, seq, kind, "out-of-order"))
         if _digest(record.get("prev", ""), body, key) != stated:
-            problems.append(f"{what}: its content does not match its hash (edited"
-                            f"{', or checked without the key it was written with' if key is None else ''})")
+            problems.append(ChainBreak(number, seq, kind, "edited", key is not None))
         records.append(record)
         prev = stated
     if not records:
-        problems.append("the log holds no records")
+        problems.append(ChainBreak(0, None, None, "empty"))
     return LogCheck(records, problems, torn)
 
 

@@ -131,7 +131,8 @@ class PluginRegistry:
                       if e.provider.package != info.provider.package]
             if rival is not None or others:
                 a = rival.provider if rival is not None else others[0]
-                raise PluginConflictError(_conflict(info.kind, info.name, [a, info.provider]))
+                raise PluginConflictError(_conflict(info.kind, info.name, [a, info.provider]), info.kind, info.name,
+                                          (a, info.provider))
         for info in staged:
             self.plugins[info.kind][info.name] = info
         return staged
@@ -203,7 +204,8 @@ class PluginRegistry:
         if not entries:
             raise UnknownPluginError(kind, name, self.names(kind))
         if len({e.provider.package for e in entries}) > 1:
-            raise PluginConflictError(_conflict(kind, name, [e.provider for e in entries]))
+            providers = tuple(e.provider for e in entries)
+            raise PluginConflictError(_conflict(kind, name, list(providers)), kind, name, providers)
         return self._load(entries[0])
 
     def find(self, kind: str, name: str) -> PluginInfo | None:

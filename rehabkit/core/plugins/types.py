@@ -18,7 +18,11 @@ class PluginError(Exception):
 
 
 class PluginConflictError(PluginError):
-    """Two packages registered the same kind and name."""
+    """Two packages registered the same ``kind`` and ``name``: ``providers``, both of them."""
+
+    def __init__(self, message: str, kind: str = "", name: str = "", providers: tuple[Provider, ...] = ()):
+        super().__init__(message)
+        self.kind, self.name, self.providers = kind, name, tuple(providers)
 
 
 class UnknownPluginError(PluginError):
