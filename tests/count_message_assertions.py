@@ -5,6 +5,7 @@ TEXT  : pytest.raises(match=...); or an assert with a comparison (in / not in / 
         .startswith/.endswith/re.search between a string literal (str, f-string, concatenation) and a
         "textual" expression: str(...)/repr(...), .stderr/.stdout/.out/.err, capsys.readouterr(), .message,
         .cause, .reason, .describe(), .getvalue(), or a local name assigned from one of those.
+(A parse of a file's data, json.loads(...)/yaml.safe_load(...), is read as fields, not text.)
 FIELD : an assert that reads a field of an error/result: .diagnostics .mark .line .col .quantity .rule
         .breach .returncode .setting .at_s .located, or .joint/.limit/.path not being called,
         or a name `code`/`exit_code`/`rc` compared with an int, or a call of tests/located.py's readers
@@ -36,8 +37,25 @@ def is_str(n):
         and is_str(n.func.value)
 
 
+STRUCTURED = {"loads", "load", "safe_load", "read_json"}  # a parse of a file's data (JSON, YAML): fields, not text
+
+
+def _walk(n):
+    """ast.walk, not descending into a structured parse (``json.loads(p.read_text())["ended"]["how"]`` reads a
+    field of a summary, not a message)."""
+    todo = [n]
+    while todo:
+        s = todo.pop()
+        yield s
+        if isinstance(s, ast.Call):
+            f = s.func
+            if (f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else None) in STRUCTURED:
+                continue
+        todo.extend(ast.iter_child_nodes(s))
+
+
 def textual(n, names):
-    for s in ast.walk(n):
+    for s in _walk(n):
         if isinstance(s, ast.Attribute) and s.attr in TEXT_ATTRS:
             return True
         if isinstance(s, ast.Call):
