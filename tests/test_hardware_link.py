@@ -79,8 +79,10 @@ def test_hit_round_trip_over_a_real_time_link(scenario_run, tmp_path):
     assert [n["text"] for n in hw.summary["notes"]][0].endswith(f"key {key.id}")  # (said: the session's key id)
     m = hw.metrics
     assert m["link_ticks"] > 0 and sim.metrics["final_position_error_m"] < 0.005
-    if events := hw.summary["safety"]["events"]:  # a stall past the watchdogs: the link's stop, inside the ranges
-        assert {e["rule"] for e in events} == {"backend"} and m["joints_in_range"] == 1.0, events
+    if events := hw.summary["safety"]["events"]:  # a stall past the watchdogs: the link's stop, inside the ranges;
+        # or, where the bridge held the last torque through the stall (its watchdog: 200 ms here), a joint that sped
+        # past its limit, which the host's limit stopped (as a loaded CI machine once showed: 201 deg/s over 180)
+        assert {e["rule"] for e in events} <= {"backend", "velocity"} and m["joints_in_range"] == 1.0, events
     else:
         assert m["final_position_error_m"] < 0.005
 

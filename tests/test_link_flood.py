@@ -36,7 +36,8 @@ def test_a_flood_spoofing_the_hosts_address_makes_no_tick_late_and_the_watchdog_
     report = json.loads(done.stdout)
     bridge, rate = report["bridge"], report["sent"] / report["seconds"]
     ticks = bridge["clock"]["ticks"]
-    assert rate > 2 * PER_TICK * 1000  # faster than the bridge may read its two sockets: the bounds are what hold
+    # (its rate, ~0.4-0.8 million datagrams a second quiet, is a benchmark figure: a loaded machine sends fewer)
+    assert rate > PER_TICK * 1000  # faster than the bridge may read the session's socket: its bound is what holds
     # the flood reached the session's own socket (spoofed well), and each tick read at most its share of it
     assert 0 < bridge["dropped"]["authentication"] <= PER_TICK * ticks
     assert bridge["clock"]["late_max_ms"] <= LATE_MS, bridge["clock"]
