@@ -49,6 +49,10 @@ EXECUTED_ELSEWHERE = {
         "tests/test_bag_replay.py::test_bags_that_do_not_fit_are_said_at_the_bag",
     "rehabkit plugins --fields dh":
         "tests/test_cli.py::test_a_plugins_reference_gives_every_setting_with_units_and_defaults_and_its_metrics",
+    # the study section's block runs there line by line (short sessions), and these two with it
+    "rehabkit export bids":
+        "tests/test_bids_export.py::test_the_study_dataset_passes_the_validator_with_no_error_and_no_warning",
+    "rehabkit progress": "tests/test_bids_export.py::test_the_progress_page_draws_and_says_each_change",
 }
 MUSCLES = "tests/test_readme.py::test_the_musculoskeletal_commands_compare_controllers_and_severities"
 _MUSCLE_BLOCK = re.search(r"## A musculoskeletal patient.*?```bash\n(.*?)```", README, re.S)[1]

@@ -1,5 +1,5 @@
 """``rehabkit`` command line: run, sweep, replay, validate, plugins, schema, bridge, drives, audit, estop, assess,
-safety-report.
+safety-report, export, progress.
 
 Exit codes: 0 success (all expectations met), 1 an expectation failed or the
 run stopped on a safety event, 2 invalid input. Errors are printed as
@@ -61,11 +61,28 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.out and (why := unwritable(Path(args.out))) is not None:
         _err(why)
         return EXIT_INVALID
+    study = None
+    if args.bids_study and not args.bids:
+        _err("error: --bids-study describes the dataset --bids DATASET makes: give --bids too")
+        return EXIT_INVALID
+    if args.bids:  # (the dataset's folder and its study checked before anything runs)
+        from rehabkit.bids.run_folder import ExportError
+        from rehabkit.bids.sidecars import read_study
+
+        if (why := unwritable(Path(args.bids))) is not None:
+            _err(why.replace("--out", "--bids"))
+            return EXIT_INVALID
+        try:
+            study = read_study(args.bids_study) if args.bids_study else None
+        except ExportError as exc:
+            _err(f"error: {exc}")
+            return EXIT_INVALID
+    bag = args.bag or bool(args.bids)
     try:
         result = run_sweep(args.scenario, args.grid, args.seeds, args.out, address=args.address, workers=args.workers,
                            serial=args.serial, timeout_s=args.timeout, metrics=args.metric, progress=True,
-                           overrides=[*args.set, "ros.bag=true"] if args.bag else args.set,
-                           keep_runs=True if args.keep_runs or args.bag else None)
+                           overrides=[*args.set, "ros.bag=true"] if bag else args.set,
+                           keep_runs=True if args.keep_runs or bag else None)
     except ValueError as exc:  # a malformed --grid or --set
         _err(f"error: {exc}")
         return EXIT_INVALID
@@ -78,6 +95,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         print(f"  FAILED  {point + ', ' if point else ''}seed={rec['seed']}: {rec['error']}")
     print(f"wrote {result.out_dir / 'results.parquet'} and {result.out_dir / 'aggregate.csv'}"
           + (" (each run's outputs in runs/<run id>/: the run_dir column)" if result.keeps_runs else ""))
+    if args.bids:
+        from rehabkit.bids.commands import export_sweep
+        from rehabkit.bids.run_folder import ExportError
+
+        try:
+            done = export_sweep(result.records, result.out_dir, result.keys, args.bids, study)
+        except ExportError as exc:
+            _err(f"error: {exc}")
+            return EXIT_INVALID
+        print(f"wrote {args.bids}: {len(done['added'])} run(s) added, {len(done['skipped'])} already there")
     return EXIT_OK if not result.failed else EXIT_FAILED
 
 
@@ -249,6 +276,9 @@ def parser() -> argparse.ArgumentParser:
     w.add_argument("--serial", action="store_true", help="run one after the other in this process, no Ray")
     w.add_argument("--timeout", type=float, default=None, metavar="S", help="per-run limit [s]")
     w.add_argument("--metric", action="append", default=[], help="also show this metric in the aggregate")
+    w.add_argument("--bids", metavar="DATASET", help="the runs into a Motion-BIDS dataset, each simulated person a "
+                                                     "participant (keeps each run and its bag: --bag)")
+    w.add_argument("--bids-study", metavar="FILE", help="the dataset's study description (as export bids --study)")
     w.set_defaults(func=cmd_sweep)
     from rehabkit.cli.replay import add_parser as add_replay
 
@@ -293,6 +323,9 @@ def parser() -> argparse.ArgumentParser:
     from rehabkit.cli.safety_report import add_parser as add_safety_report
 
     add_safety_report(sub)
+    from rehabkit.bids.commands import add_parser as add_bids
+
+    add_bids(sub)
     return p
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from rehabkit.core.kinds.interfaces import StrictModel
 from rehabkit.core.kinds.patient import JointRom  # (a core kind's: a simulated person has its own)
@@ -30,6 +30,14 @@ class Comfort(StrictModel):
     max_interaction_force_n: float | None = Field(None, gt=0, description="largest force at the hand")
 
 
+class Impairment(StrictModel):
+    """What the person is treated for and how it was scored (a study's dataset lists it per participant)."""
+
+    condition: str = Field(description="e.g. 'post-stroke hemiparesis'")
+    scale: str | None = Field(None, description="the clinical scale scored, e.g. 'Fugl-Meyer upper extremity (0-66)'")
+    score: float | None = Field(None, description="the person's score on that scale")
+
+
 class PatientBase(StrictModel):
     """The plugin-independent part of a patient profile."""
 
@@ -41,8 +49,16 @@ class PatientBase(StrictModel):
     comfort: Comfort = Comfort()
     version: int = Field(1, ge=1, description="the profile's version (an assessment writes the next)")
     assessed: dict[str, str] | None = Field(None, description="how and when its ranges were measured")
+    impairment: Impairment | None = Field(None, description="what is treated, and its score on a clinical scale")
+    session: str | None = Field(None, pattern=r"^[A-Za-z0-9]+$", description="the session's label (letters and "
+                                "digits; a dataset's ses-<label>, else the run's date)")
     outside_rom: Literal["refuse", "nearest"] = Field(
         "refuse", description="a target outside the range: refuse the scenario, or use the nearest admissible point")
+
+    @field_validator("session", mode="before")
+    @classmethod
+    def _session_label(cls, v):  # (`--set patient.session=3`: YAML reads a number)
+        return str(v) if isinstance(v, int) and not isinstance(v, bool) else v
 
     @model_validator(mode="after")
     def _positive_segments(self) -> PatientBase:
