@@ -71,10 +71,13 @@ def _stop_outcome(m: dict) -> list[str]:
     out = m.get("joints_in_range") == 0
     if not (never or out):
         return []
+    travel = m.get("stop_distance_deg")
+    if never and not out and travel is not None and travel < 1e-6:  # (the run ended at the trigger: a link's fault)
+        return ["  STOP    the run ended as the stop began: the robot did not move after the trigger, its rest was "
+                "not watched to its end (the robot side held it)"]
     said = ["did not come to rest" if never else f"came to rest after {m['stop_time_s']:.3g} s"]
     if out:
         said.append("left the joints' ranges")
-    travel = m.get("stop_distance_deg")
     return [f"  STOP    the robot {' and '.join(said)} after the trigger"
             + (f" (a joint travelled {travel:.3g}° since)" if travel is not None else "")
             + ": the stop could not hold it (its drives' limits against its weight, or a push)"]
