@@ -180,3 +180,29 @@ def test_the_exporters_own_check_refuses_what_the_validator_does_not(tmp_path):
         (tmp_path / "b_motion.tsv").write_text(text)
         with pytest.raises(OutputError):
             read_motion(tmp_path / "b_motion.tsv", 2)
+
+
+def test_a_user_robots_run_exports_from_anywhere_with_its_targets_named_in_order(tmp_path, monkeypatch):
+    """The README's URDF arm run from another folder (its robot file relative to its scenario, not to the run
+    folder: the export built the robot from the wrong place and refused), its events naming the targets as the arm
+    goes to them — left, then right (the plan's start posture shown at the same instant was named instead of left)."""
+    from rehabkit.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    robot = ROOT / "examples" / "robots" / "urdf_arm4.yaml"
+    run = ["run", str(robot), "--bag", "--out", "run", "--set", "duration=4.5"]
+    assert main(run) == 1  # (its task takes 11 s: unfinished)
+    assert main(["export", "bids", "run", "--out", "ds", "--participant", "rig"]) == 0
+    (events,) = (tmp_path / "ds").glob("sub-rig/ses-*/motion/*_events.tsv")
+    rows = [line.split("\t") for line in events.read_text().splitlines()[1:]]
+    assert [(float(r[0]), r[3]) for r in rows if r[2] == "target_shown"] == [(0.0, "left"), (3.751, "right")]
+
+
+def test_the_progress_page_says_which_way_each_change_goes():
+    from rehabkit.bids.progress import MEASURES, _change
+
+    for name, first, last, words in (("path_length_ratio", 1.12, 1.18, "less straight — worse"),
+                                     ("time_to_target_s", 3.0, 2.0, "faster — better"),
+                                     ("sparc", -2.5, -2.0, "smoother — better")):
+        title, unit, better, up, down = MEASURES[name]
+        assert _change(title, unit, first, last, better, up, down, first).endswith(words)

@@ -93,7 +93,11 @@ def _shown(run: RunFolder, t_of) -> list[tuple[float, str]]:
         for stamp, q in zip(js.stamps, js.values):
             seen.append((t_of(stamp), ("joints", *np.round(q, 6))))
     order, at, shown = _targets(run), 0, []
-    for t, key in sorted(seen, key=lambda x: x[0]):
+
+    def rank(key: tuple) -> int:  # (targets shown at one time: in the task's order — a plan's start point first)
+        return next((j for j in range(len(order)) if key in order[j][1]), len(order))
+
+    for t, key in sorted(seen, key=lambda x: (x[0], rank(x[1]))):
         j = next((j for j in range(at, len(order)) if key in order[j][1]), None)
         if j is None:
             j = next((j for j in range(len(order)) if key in order[j][1]), None)

@@ -22,12 +22,12 @@ from rehabkit.bids.tables import read_tsv, write_file
 # measure → (title, unit, which way is better: +1 higher, -1 lower, 0 neither; words for up, down)
 MEASURES = {
     "sparc": ("Smoothness (SPARC)", "", +1, "smoother", "less smooth"),
-    "time_to_target_s": ("Time to target", "s", -1, "faster", "slower"),
+    "time_to_target_s": ("Time to target", "s", -1, "slower", "faster"),
     "assistance_ratio": ("Assistance ratio (robot's share of the work)", "", -1, "more help from the robot",
                          "less help from the robot"),
     "peak_interaction_force_n": ("Peak interaction force", "N", 0, "pushing harder against the robot",
                                  "pushing less against the robot"),
-    "path_length_ratio": ("Path-length ratio", "", -1, "straighter", "less straight"),
+    "path_length_ratio": ("Path-length ratio", "", -1, "less straight", "straighter"),
 }
 STILL = 0.02  # a change within 2 % of the first value (or of the range) is said to be steady
 

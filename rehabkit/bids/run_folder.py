@@ -114,11 +114,14 @@ def _robot(folder: Path, scenario: dict) -> Any:
         try:
             from rehabkit.core.setup.assembly import assemble
 
-            loaded = load_scenario(folder / SCENARIO)
+            # (its files where the run found them: relative to the scenario the run was given, as replay reads it)
+            ran = json.loads((folder / SUMMARY).read_text()).get("scenario") if (folder / SUMMARY).exists() else None
+            loaded = load_scenario(folder / SCENARIO, origin=Path(ran) if ran else None)
             _ROBOTS[key] = assemble(loaded, default_registry(), default_extensions(), upto="targets").robot
         except (ScenarioError, SetupError, ValueError) as exc:
             raise ExportError(folder / SCENARIO, f"the run's robot can't be built again ({exc})",
-                              "export on a machine with the plugins the run used installed") from exc
+                              "export where the run's robot files are, as the run found them, with the plugins it "
+                              "used installed") from exc
     return _ROBOTS[key]
 
 
