@@ -6,7 +6,7 @@ import zlib
 import numpy as np
 import pytest
 
-from rehabkit.hardware.link.protocol import COMMAND, HEADER, STATE, Receiver, encode, newer
+from rehabkit.hardware.link.protocol import COMMAND, HEADER, STATE, VERSION, Receiver, encode, newer
 
 
 def _state(seq, n=6, sent_at=100.0, robot=7):
@@ -58,7 +58,7 @@ def _forge(data: bytes, offset: int, fmt: str, value) -> bytes:
     (lambda d: _forge(d, HEADER.size - 4, "<I", 5), "authenticated"),  # sealed in a session: no key here to check it
     (lambda d: d[:30] + bytes([d[30] ^ 0xFF]) + d[31:], "checksum"),  # a flipped bit in the body
     (lambda d: _forge(d, 0, "<2s", b"XX"), "magic"),
-    (lambda d: _forge(d, 2, "<B", 9), "version"),
+    (lambda d: _forge(d, 2, "<B", VERSION + 1), "version"),
     (lambda d: _forge(d, 3, "<B", COMMAND), "kind"),
     (lambda d: _forge(d, 4, "<I", 8), "robot"),
     (lambda d: _forge(d, HEADER.size, "<d", float("nan")), "non-finite"),

@@ -276,6 +276,7 @@ def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_n
         _stop(bridge)
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert [s["key_id"] for s in stats["sessions"]] == [key.id] * 3 + [new.id]
+    assert (stats["key_id"], stats["clear_key_id"]) == (new.id, None)  # (the bridge's own, as rotated)
     record = json.loads(latch.path.read_text())
     assert not record["latched"] and record["cleared_by"] == "Dr. Ana Ruiz" and record["key_id"] == key.id
     clears = stats["estop_clears"]  # the bridge's own record of them
@@ -407,16 +408,107 @@ def test_clearing_is_a_right_of_its_own_and_every_clear_is_kept_with_its_session
 
 
 def test_refused_attempts_are_logged_as_they_happen_at_most_ten_a_second(tmp_path):
+    """At most 10 lines in each second of the wall clock, the summing-up of a flood included (a token bucket let
+    15-19 into one second)."""
+    from collections import Counter
+
     from rehabkit.hardware.security.events import PER_S, SecurityLog
 
     log = SecurityLog(tmp_path / "security" / "hit-1.jsonl")
-    for i in range(1000):  # a flood: 1000 refusals in 0.1 s, then one more a second later
-        log.refused(("10.0.0.9", 4000 + i % 3), "unauthenticated" if i % 2 else "handshake-other-key", now=i * 1e-4)
+    t0 = 1_800_000_000.5  # (the wall clock's time: half a second into a second)
+    for i in range(2500):  # a flood: 1000 refusals a second for 2.5 s, over three seconds of the wall clock
+        log.refused(("10.0.0.9", 4000 + i % 3), "unauthenticated" if i % 2 else "handshake-other-key",
+                    now=t0 + i * 1e-3)
     lines = [json.loads(line) for line in log.path.read_text().splitlines()]  # (written already: as they happened)
-    assert len(lines) == PER_S and lines[0]["source"] == "10.0.0.9:4000" and lines[0]["reason"] == \
-        "handshake-other-key" and "at" in lines[0]
-    log.refused(("10.0.0.9", 4000), "replayed", now=1.1)
-    log.close()
-    summary, last = [json.loads(line) for line in log.path.read_text().splitlines()][-2:]
-    assert summary["suppressed"] == 1000 - PER_S and sum(summary["by_reason"].values()) == summary["suppressed"]
-    assert last["reason"] == "replayed" and stat.S_IMODE(log.path.stat().st_mode) == 0o600
+    assert (lines[0]["source"], lines[0]["reason"], lines[0]["at"]) == ("10.0.0.9:4000", "handshake-other-key",
+                                                                        "2027-01-15T08:00:00.500+00:00")
+    log.close()  # (the rest summed up in the newest line's second: a line of each was kept for it)
+    lines = [json.loads(line) for line in log.path.read_text().splitlines()]
+    per_second = Counter(line["at"][:19] for line in lines)
+    assert sorted(per_second.values()) == [9, 9, 10] and max(per_second.values()) <= PER_S
+    summaries = [line for line in lines if "suppressed" in line]
+    refusals = [line for line in lines if "reason" in line]
+    assert len(summaries) == 3 and sum(s["suppressed"] for s in summaries) + len(refusals) == 2500
+    assert all(sum(s["by_reason"].values()) == s["suppressed"] for s in summaries) and "suppressed" in lines[-1]
+    assert stat.S_IMODE(log.path.stat().st_mode) == 0o600
+
+
+def _host(bridge, key):
+    """A host's end of the link to ``bridge`` in this process, its session made by hand (the bridge's end pumped:
+    ``arrived``; loopback delivers a datagram before ``sendto`` returns), and what else the bridge read meanwhile."""
+    from rehabkit.hardware.link.clock import wait_readable
+    from rehabkit.hardware.link.host_end import HostLink
+    from rehabkit.hardware.link.protocol import STATE
+
+    wire = HostLink("127.0.0.1", bridge.port, 1, key, Receiver(STATE, 1, 6), 0.001)
+    shake, read = HostHandshake(key, 1), []
+    for _ in range(2):  # HELLO → CHALLENGE, PROOF → WELCOME
+        wire.sock.sendto(shake.next(wire.next_seq()), wire.addr)
+        read += bridge.link.arrived()
+        assert wait_readable(wire.sock, 1.0)
+        session = shake.take(wire.sock.recv(65536))
+    wire.link, wire.first_id = session, session.id
+    return wire, read
+
+
+def test_a_session_taken_over_at_the_keypad_is_the_new_hosts_and_the_old_host_is_told(hit, key):
+    """After the keypad's a, a second host's session takes the robot over: its reset starts its run (a command of the
+    first host's read before the takeover, taken after it, set the sequence count back: every command of the new
+    host's was then out of order, "does not answer a reset"); the first host is told, in its own session, that it
+    was taken over at the keypad, and its run stops saying so (it stopped on "no valid state" after 100 ms)."""
+    from types import SimpleNamespace
+
+    from rehabkit.hardware.backend import HardwareBackend
+    from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.config import SessionTakenOverError
+    from rehabkit.hardware.keypad import handle
+    from rehabkit.hardware.link.protocol import CMD_RESET, ENABLED, HOLDING
+    from rehabkit.hardware.plant import MujocoPlant
+
+    q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
+    bridge = Bridge(MujocoPlant(hit), key=key, watchdog_s=1.0)
+    first = second = None
+    try:
+        first, _ = _host(bridge, key)
+        first.send(COMMAND, q0, 0.0, CMD_RESET)
+        for k in range(1, 6):  # its run: a command a tick
+            bridge.tick(k * 1e-3, bridge.link.arrived())
+            first.send(COMMAND, bridge.plant.gravity(q0), k * 1e-3)
+            assert len(first.arrived(lambda: 0.0, False)) == 1  # (its state)
+        handle(bridge, ["allow"], 0.006)  # the person at the robot: a (the first host's run still live)
+        second, read = _host(bridge, key)  # (its PROOF read after a command of the first host's: one tick's inbox)
+        bridge.tick(0.006, read)
+        second.send(COMMAND, q0, 0.0, CMD_RESET)
+        first.send(COMMAND, bridge.plant.gravity(q0), 0.007)  # (refused: its session has ended)
+        bridge.tick(0.007, bridge.link.arrived())
+        states = [HEADER.unpack_from(p)[9] for p, _ in second.arrived(lambda: 0.0, False)]
+        assert states and states[-1] & ENABLED and not states[-1] & HOLDING
+        assert bridge.rx.dropped["ended-session"] == 1 and bridge.rx.dropped["out-of-order"] == 0
+        assert first.arrived(lambda: 0.0, False) == [] and first.ended == "keypad"
+        with pytest.raises(SessionTakenOverError) as taken:  # (how the run's backend stops on it)
+            HardwareBackend._taken_over(SimpleNamespace(wire=first))
+        assert (taken.value.bridge, taken.value.allowed) == (first.where, "keypad")
+        assert [s["session"] for s in bridge.link.stats()["sessions"]] == [f"{w.link.id:08x}" for w in (first, second)]
+    finally:
+        for wire in (first, second):
+            if wire is not None:
+                wire.sock.close()
+        bridge.link.close()
+
+
+def test_a_host_refused_for_another_hosts_live_session_is_told_of_the_session_not_of_keys(key, monkeypatch):
+    """The keys match: the refusal says the bridge serves another host's live session and how a new one gets in (it
+    ended in "give both ends the same key file")."""
+    from rehabkit.hardware.config import LinkBusyError
+    from rehabkit.hardware.link import host_end
+    from rehabkit.hardware.security.handshake import refusal_words
+
+    def busy(*args, **kwargs):
+        raise LinkRefusedError("busy", key.id, refusal_words(BUSY, key))
+
+    monkeypatch.setattr(host_end, "handshake", busy)
+    wire = host_end.HostLink("127.0.0.1", 7000, 1, key, Receiver(COMMAND, 1, 6), 0.001)
+    with pytest.raises(LinkBusyError) as refused:
+        wire.open_session()
+    wire.close()
+    assert (refused.value.bridge, refused.value.problem) == ("udp://127.0.0.1:7000", refusal_words(BUSY, key))

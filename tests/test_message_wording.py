@@ -188,3 +188,33 @@ def test_a_drive_in_fault_says_its_code_and_that_a_person_must_clear_the_latch()
     assert str(err.value) == ("drive 2 (shoulder_2): is in FAULT (0x2310 continuous over-current): its fault is reset "
                               "only once a person has cleared the robot's e-stop latch (`rehabkit estop clear hit-1 "
                               "--by NAME`)")
+
+
+def test_the_links_refusals_say_what_applies_at_this_bridge():
+    """A bridge behind a latched e-stop names what clears it there (its clearing key, its keypad); a host refused for
+    another's live session, or taken over, is told so (not to match keys)."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from rehabkit.hardware.bridge_says import latched_message
+    from rehabkit.hardware.config import LinkBusyError, SessionTakenOverError
+    from rehabkit.hardware.link.protocol import CLEAR_AT_KEYPAD, CLEAR_BY_KEY, ESTOPPED
+
+    def link(status):
+        return SimpleNamespace(addr=("10.0.0.2", 7000), estop_name="hit-1", key=SimpleNamespace(path=Path("k.key")),
+                               process=None, status=ESTOPPED | status)
+
+    latched = "the e-stop of the robot behind the bridge at udp://10.0.0.2:7000 is latched: deal with its cause, " \
+        "then clear it with "
+    assert latched_message(link(0)) == latched + "`rehabkit estop clear hit-1 --by NAME --bridge 10.0.0.2:7000 --key " \
+        "k.key` while it runs, or the bridge's keypad"
+    assert latched_message(link(CLEAR_BY_KEY)) == latched + "`rehabkit estop clear hit-1 --by NAME --bridge " \
+        "10.0.0.2:7000 --key CLEAR_KEY_FILE` while it runs (the bridge's clearing key, its --clear-key file: it " \
+        "takes no clear under the robot's key), or the bridge's keypad"
+    assert latched_message(link(CLEAR_AT_KEYPAD)) == latched + "the bridge's keypad at the robot (c): it takes no " \
+        "clear over the link (--clear-with keypad)"
+    assert str(LinkBusyError("udp://10.0.0.2:7000", "the bridge serves another host's live session")) == \
+        "the bridge at udp://10.0.0.2:7000 refuses this host's session: the bridge serves another host's live session"
+    assert str(SessionTakenOverError("udp://10.0.0.2:7000", "keypad")) == (
+        "the session with the bridge at udp://10.0.0.2:7000 was taken over by another host (the person at the robot "
+        "allowed it on the bridge's keypad (a)): the robot is that host's now, and this run stops")

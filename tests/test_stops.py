@@ -4,8 +4,10 @@ HIT at its top planned speed, in simulation and over the link, and an e-stop tha
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -167,23 +169,99 @@ def test_clearing_a_running_bridge_where_nothing_is_latched_says_not_latched(hit
 
 
 def test_the_keypad_at_the_robot_presses_and_clears_the_estop(tmp_path):
+    """The keypad's e and c, each said once (a c where nothing is latched said both "clear (not latched)" and
+    "cleared"); the console says the keypad is on and who may clear; stopped by SIGTERM, the bridge says what it
+    wrote (it said "nothing was written" beside its --stats)."""
+    import signal
     import subprocess
     import sys
 
-    latch = tmp_path / "hit-1.json"
+    latch, stats = tmp_path / "hit-1.json", tmp_path / "stats.json"
     proc = subprocess.Popen([sys.executable, "-m", "rehabkit.cli", "bridge", "hit", "--keypad", "--duration", "20",
-                             "--latch-file", str(latch)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+                             "--latch-file", str(latch), "--stats", str(stats), "--security-log",
+                             str(tmp_path / "security.jsonl")], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().startswith("bridge:")
 
-        def record_after(key: str) -> dict:
+        def said_after(key: str) -> str:
             proc.stdin.write(key + "\n")
             proc.stdin.flush()
-            assert proc.stdout.readline().startswith("keypad: e-stop")  # (said once done)
-            return json.loads(latch.read_text())
+            return proc.stdout.readline()  # (said once done)
 
-        assert record_after("e")["reason"] == "the e-stop key of the keypad at the robot"
-        assert record_after("c")["cleared_by"] == "the keypad at the robot"
+        assert said_after("e") == "keypad: e-stop pressed, latched\n"
+        assert json.loads(latch.read_text())["reason"] == "the e-stop key of the keypad at the robot"
+        assert said_after("c") == "keypad: e-stop cleared; the next session ramps in\n"
+        assert json.loads(latch.read_text())["cleared_by"] == "the keypad at the robot"
+        assert said_after("c") == "keypad: e-stop not latched (nothing to clear)\n"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=10)
     finally:
         proc.kill()
         proc.wait()
+    lines = err.splitlines()
+    assert proc.returncode == 143 and lines[-1] == (f"bridge: stopped by SIGTERM; wrote --stats {stats}, the security "
+                                                    f"log {tmp_path / 'security.jsonl'} (0 lines)")
+    assert "bridge: a latched e-stop is cleared in any session" in lines and "bridge: keypad on standard input: e " \
+        "presses the e-stop, c clears it, a lets a new host take the session over" in lines
+    assert [c["latched"] for c in json.loads(stats.read_text())["estop_clears"]] == [True, False]
+
+
+def _lockstep_reset(port: int, key, q0: np.ndarray) -> tuple[object, int]:
+    """A host's session on a lock-step bridge: its reset at link time 0 (as every run's first tick); the host's link
+    and the status of the bridge's answer."""
+    from rehabkit.hardware.link.host_end import HostLink
+    from rehabkit.hardware.link.protocol import CMD_RESET, COMMAND, HEADER, STATE, TICK, Receiver
+
+    wire = HostLink("127.0.0.1", port, 1, key, Receiver(STATE, 1, 6), 0.001)
+    wire.open_session()
+    statuses = []
+    wire.send(COMMAND, q0, 0.0, CMD_RESET | TICK)
+    assert wire.tick_lockstep(lambda: statuses.extend(HEADER.unpack_from(p)[9] for p, _ in wire.arrived(
+        lambda: 0.0, True)), sent=True)
+    return wire, statuses[-1]
+
+
+def test_a_lockstep_bridge_cleared_of_its_estop_serves_the_next_host_and_reads_its_keypad_unticked(hit, tmp_path):
+    """The README's lab commands on a lock-step bridge (a new user's report): the keypad's e latches the e-stop with
+    no host ticking the bridge; a host is refused (the states declare that only the clearing key clears: the hint
+    says so); the clear under the clearing key answers "cleared", a second "not latched"; the next host's reset at
+    link time 0 — the same time as the refused host's — starts a session that ramps in (it was answered again with
+    the refused host's latched state: every later host refused until the bridge restarted)."""
+    from rehabkit.cli.estop import clear_over_link
+    from rehabkit.hardware.bridge import Bridge
+    from rehabkit.hardware.bridge_clocks import serve_lockstep
+    from rehabkit.hardware.bridge_says import clear_right
+    from rehabkit.hardware.keypad import Keypad
+    from rehabkit.hardware.link.protocol import CLEAR_BY_KEY, CLEARED, CLOCK, ENABLED, ESTOPPED, RAMP_IN
+    from rehabkit.hardware.plant import MujocoPlant
+    from rehabkit.hardware.security.keys import new_key
+
+    key, clearing = new_key("hit-1", tmp_path / "hit-1.key"), new_key("hit-1", tmp_path / "clear.key")
+    latch = EStopLatch.for_robot("hit", 1, tmp_path / "hit-1.json")
+    keys_in, keys_out = os.pipe()
+    bridge = Bridge(MujocoPlant(hit), key=key, clear_key=clearing, latch=latch, keypad=Keypad(keys_in))
+    thread = threading.Thread(target=serve_lockstep, args=(bridge, 1.0), daemon=True)
+    thread.start()
+    q0 = np.radians([0.0, 90.0, 90.0, 30.0, -90.0, 90.0])
+    try:
+        os.write(keys_out, b"e\n")  # at the robot, no host running
+        until = time.monotonic() + 5.0
+        while latch.latched() is None:  # (polled: the bridge reads its keypad between datagrams)
+            assert time.monotonic() < until, "the keypad's e was not read"
+            time.sleep(0.01)
+        assert latch.latched()["reason"] == "the e-stop key of the keypad at the robot"
+        refused, status = _lockstep_reset(bridge.port, key, q0)
+        refused.close()
+        assert status & ESTOPPED and status & CLEAR_BY_KEY and clear_right(status) == "key"
+        assert clear_over_link("127.0.0.1", bridge.port, 1, "Dr. Ana Ruiz", key_file=str(clearing.path)) & CLEARED
+        assert not clear_over_link("127.0.0.1", bridge.port, 1, "Dr. Ana Ruiz", key_file=str(clearing.path)) & CLEARED
+        wire, status = _lockstep_reset(bridge.port, key, q0)
+        assert status & ENABLED and status & RAMP_IN and not status & ESTOPPED
+        assert [(c["by"], c["latched"]) for c in bridge.clears] == [("Dr. Ana Ruiz", True), ("Dr. Ana Ruiz", False)]
+        wire.send(CLOCK, np.zeros(0), 1.0)  # (the link's time at the bridge's duration: it stops)
+        thread.join(5.0)
+        wire.close()
+    finally:
+        os.close(keys_out)
+    assert not thread.is_alive() and bridge.repeated_ticks == 0

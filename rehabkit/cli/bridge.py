@@ -8,7 +8,7 @@ import json
 import signal
 import sys
 
-from rehabkit.cli.exits import EXIT_INVALID, EXIT_OK
+from rehabkit.cli.exits import EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK
 
 
 def _err(msg: str) -> None:
@@ -107,6 +107,14 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     if key is not None:
         print(f"bridge: authenticated sessions only, {key}", file=sys.stderr, flush=True)
     print(f"bridge: refused attempts go to {log.path}", file=sys.stderr, flush=True)
+    clears = {"key": f"only in a session under its clearing key (--clear-key: key {clear_key.id})"
+              if clear_key is not None else "",
+              "keypad": "only at its keypad (--clear-with keypad)" + ("" if args.keypad else ": give it --keypad"),
+              "link": "in any session" + (" under its key" if key is not None else "")}[bridge.clear_right]
+    print(f"bridge: a latched e-stop is cleared {clears}", file=sys.stderr, flush=True)
+    print("bridge: keypad on standard input: e presses the e-stop, c clears it, a lets a new host take the session "
+          "over" if args.keypad else "bridge: no keypad (--keypad reads one from standard input)", file=sys.stderr,
+          flush=True)
     from threadpoolctl import threadpool_limits
 
     from rehabkit.hardware.bridge_clocks import serve, serve_lockstep
@@ -117,19 +125,29 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     # SIGHUP: the key file read again (rotated: the sessions under the old key end), at the loop's next turn
     signal.signal(signal.SIGHUP, lambda *_: setattr(bridge, "reload", True))
+    stopped_by = None
     try:
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: BLAS workers would only spin
             (serve_lockstep if args.lockstep else serve)(bridge, args.duration, parent=args.parent_pid)
+    except KeyboardInterrupt as exc:
+        stopped_by = getattr(exc, "signal", None) or "SIGINT"
     finally:
         if args.stats:
             from rehabkit.core.io import atomic_write_json
 
             atomic_write_json(args.stats, bridge.link_stats())
-    return EXIT_OK
+    if stopped_by is None:
+        return EXIT_OK
+    # (not main's "nothing was written": the bridge wrote its --stats and its security log)
+    print(f"bridge: stopped by {stopped_by}; wrote " + (f"--stats {args.stats}, " if args.stats else "")
+          + f"the security log {log.path} ({log.written} lines)", file=sys.stderr, flush=True)
+    return 143 if stopped_by == "SIGTERM" else EXIT_INTERRUPTED
 
 
 def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
+    exc = KeyboardInterrupt()
+    exc.signal = signal.Signals(signum).name
+    raise exc
 
 
 def _listen(args: argparse.Namespace, name: str) -> tuple[str, int, object] | str:
@@ -212,5 +230,6 @@ def add_parser(sub) -> None:
                    help="where the e-stop latch is kept across bridge restarts (default: under $REHABKIT_STATE, "
                         "per robot and robot id)")
     b.add_argument("--keypad", action="store_true",
-                   help="read keys at the robot from standard input, a line each: e presses the e-stop, c clears it")
+                   help="read keys at the robot from standard input, a line each: e presses the e-stop, c clears it, a "
+                        "lets a new host take a live session over (for 30 s); read whatever the clock (lock-step too)")
     b.set_defaults(func=cmd_bridge)

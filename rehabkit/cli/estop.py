@@ -28,7 +28,16 @@ def clear_over_link(host: str, port: int, robot_id: int, by: str, key_file: str 
     key; wait for a state saying it is no longer latched. Its status (``CLEARED`` set where a latched e-stop was
     cleared, unset where nothing was latched); :class:`ClearRefusedError` if the bridge refuses."""
     from rehabkit.hardware.link.clock import wait_readable
-    from rehabkit.hardware.link.protocol import CLEAR, ESTOPPED, HEADER, NO_RIGHT, PLAIN, STATE, pack_bytes
+    from rehabkit.hardware.link.protocol import (
+        CLEAR,
+        CLEAR_AT_KEYPAD,
+        ESTOPPED,
+        HEADER,
+        NO_RIGHT,
+        PLAIN,
+        STATE,
+        pack_bytes,
+    )
     from rehabkit.hardware.security.handshake import BYE, KEY_NEEDED, handshake, peek_kind, refusal_words, refused
     from rehabkit.hardware.security.keys import load_key
 
@@ -56,14 +65,17 @@ def clear_over_link(host: str, port: int, robot_id: int, by: str, key_file: str 
                 if peek_kind(data) != STATE:
                     if key is None and (got := refused(data, robot_id)) is not None and got[0] == KEY_NEEDED:
                         raise ClearRefusedError(f"udp://{host}:{port}", "key-needed",
-                                                f"{refusal_words(KEY_NEEDED, None)}; clear it with the robot's key: "
-                                                "--key FILE")
+                                                f"{refusal_words(KEY_NEEDED, None)}; clear it with the key it takes "
+                                                "clears under: --key FILE, the bridge's clearing key if it was started "
+                                                "with --clear-key, else the robot's key (or at its keypad)")
                     continue
                 plain, _ = link.open(data)
                 status = HEADER.unpack_from(plain)[9] if plain is not None else ESTOPPED
                 if status & NO_RIGHT:
-                    raise ClearRefusedError(f"udp://{host}:{port}", "no-right", "the bridge takes a clear only in a "
-                                            "session under its clearing key (--clear-key), or at its keypad")
+                    raise ClearRefusedError(f"udp://{host}:{port}", "no-right", "the bridge takes a clear only at its "
+                                            "keypad (--clear-with keypad)" if status & CLEAR_AT_KEYPAD else
+                                            "the bridge takes a clear only in a session under its clearing key: "
+                                            "--key its --clear-key file (not the robot's key), or at its keypad")
                 if not status & ESTOPPED:
                     return status
         raise TimeoutError(f"no state from the bridge at udp://{host}:{port} saying it is cleared within {timeout:g} s")
@@ -136,8 +148,9 @@ def add_parser(sub) -> None:
     e.add_argument("name", nargs="?", help="the latch: ROBOT-ID behind a bridge (hit-1), sim-ROBOT in simulation")
     e.add_argument("--by", help="who clears it (kept in the latch's record)")
     e.add_argument("--bridge", metavar="HOST:PORT", help="tell this running bridge to clear its latch")
-    e.add_argument("--key", metavar="FILE", help="the robot's link key: a bridge with a key clears only in an "
-                   "authenticated session")
+    e.add_argument("--key", metavar="FILE", help="with --bridge: the link key a bridge with a key takes clears "
+                   "under, in an authenticated session: the robot's key, or, if the bridge was started with "
+                   "--clear-key, that clearing key (the robot's key does not clear there)")
     e.set_defaults(func=cmd_estop)
 
 

@@ -32,8 +32,14 @@ from rehabkit.core.run.signals import signals_held
 from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S
 from rehabkit.core.safety.event import SafetyEvent
 from rehabkit.hardware.bridge_process import spawn_bridge, stop_bridge
-from rehabkit.hardware.bridge_says import hold_breach, hold_reason, latched_message
-from rehabkit.hardware.config import BridgeHoldError, HardwareConfig, LinkKeyError, LinkLostError
+from rehabkit.hardware.bridge_says import clear_right, hold_breach, hold_reason, latched_message
+from rehabkit.hardware.config import (
+    BridgeHoldError,
+    HardwareConfig,
+    LinkKeyError,
+    LinkLostError,
+    SessionTakenOverError,
+)
 from rehabkit.hardware.frame_server import FrameServer
 from rehabkit.hardware.link.clock import wait_until
 from rehabkit.hardware.link.host_end import LOCKSTEP_REPLY_S, HostLink
@@ -180,9 +186,11 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                 self._tick_lockstep(0.2, sent=True)
             if self.wire.refused is not None:
                 raise LinkKeyError(self.wire.where, None, self.wire.refused)
+            self._taken_over()
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
                 raise EStopLatchedError(latched_message(self), self.estop_name,
-                                        f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}")
+                                        f"the robot behind the bridge at udp://{self.addr[0]}:{self.addr[1]}",
+                                        None if self.process is not None else clear_right(self.status))
             if self._got and np.abs(self.q - q0).max() < 1e-3:  # one plant step after the reset
                 break
         else:
@@ -240,6 +248,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             if self.realtime:  # (lock-step: all that came before the bridge's answer is in)
                 self._receive()
             self.silent_ticks = 0 if self._got else self.silent_ticks + 1
+            self._taken_over()
             if self._fault is not None:
                 fault, self._fault = self._fault, None
                 raise fault
@@ -255,9 +264,15 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             wait_until(self.deadline)
             return time.monotonic() - self.deadline
         if not self._tick_lockstep(sent=sent):
+            self._taken_over()
             raise LinkLostError(f"no valid state from the bridge: it did not answer tick {self.wire.clock - 1} of the "
                                 f"lock-step clock within {LOCKSTEP_REPLY_S:g} s of wall time")
         return 0.0
+
+    def _taken_over(self) -> None:
+        """Stop if the bridge said another host's session took this one over (the robot is no longer this run's)."""
+        if self.wire.ended is not None:
+            raise SessionTakenOverError(self.wire.where, self.wire.ended)
 
     def estop(self) -> None:
         """Tell the bridge to hold the robot now (and latch its e-stop)."""

@@ -39,6 +39,8 @@ from rehabkit.hardware.keypad import Keypad
 from rehabkit.hardware.link.bridge_end import BridgeLink
 from rehabkit.hardware.link.protocol import (
     CLEAR,
+    CLEAR_AT_KEYPAD,
+    CLEAR_BY_KEY,
     CLEARED,
     CMD_BRAKE,
     CMD_COMPLIANT,
@@ -76,6 +78,10 @@ class Bridge:
         # who may clear a latched e-stop over the link: "link" any session, "key" one under ``clear_key`` only,
         # "keypad" none (the keypad at the robot only)
         self.clear_right = "key" if clear_key is not None else clear_right
+        # (declared in every state: a host refused at a latched e-stop says what clears it here)
+        self.declares = {"key": CLEAR_BY_KEY, "keypad": CLEAR_AT_KEYPAD}.get(self.clear_right, 0)
+        self._cleared_in = None  # (where from, session) of the clear that cleared a latched e-stop: CLEARED's
+        self._sessions = 0  # new hosts' sessions seen (BridgeLink.sessions): a new one has no peer until it speaks
         self.stale_ticks = max(1, round(stale_s / plant.timestep))
         self.since_command = 0  # plant ticks since the newest torque command
         self.stale_holds: list[tuple[float, int]] = []  # (time, ticks) of each gap bridged by holding
@@ -125,9 +131,11 @@ class Bridge:
         self._press(by, "robot")
         self._hold(now, "e-stop", ESTOPPED)
 
-    def clear_estop(self, by: str, **how: str) -> None:
-        """A person (``by``) cleared the e-stop (``how``: over which link, recorded with it): the robot stays held until
-        the host's next reset, which then ramps in."""
+    def clear_estop(self, by: str, source: tuple | None = None, **how: str) -> bool:
+        """A person (``by``) cleared the e-stop (``how``: over which link, recorded with it; ``source``: the address
+        the clear came from): the robot stays held until the host's next reset, which then ramps in. Whether a latched
+        e-stop was cleared (else nothing was latched: its states then say "not latched", unless the clear that did
+        clear it is sent again, its answer lost)."""
         was = self.latch.clear(by, **how) if self.latch is not None else None
         latched = bool(self.status & ESTOPPED) or was is not None
         if self.status & ESTOPPED or self.latch is not None:  # (the bridge's own record of who cleared it, how)
@@ -137,13 +145,22 @@ class Bridge:
         self.status &= ~NO_RIGHT
         if latched:  # its states say so until the next reset (a clear where nothing was latched: not latched)
             self.status |= CLEARED
+            self._cleared_in = (source, how.get("session"))
+        elif source is None or (source, how.get("session")) != self._cleared_in:
+            self.status &= ~CLEARED
         if self.status & ESTOPPED:
             self.status = (self.status & ~ESTOPPED) | HOLDING
             self.status &= ~ENABLED
             self._ramp_next = True
+        return latched
 
     def receive(self, now: float, inbox: list[tuple[bytes, tuple]]) -> None:
+        if len(self.link.sessions) != self._sessions:  # a new host's session: its states go to it once it speaks
+            self._sessions, self.peer = len(self.link.sessions), None
         for plain, addr in inbox:
+            if not self.link.current(plain):  # read in a session that has ended since (another host's took it over)
+                self.rx.dropped["ended-session"] += 1
+                continue
             if plain[3] == CLEAR:
                 name = clear_name(plain, self.robot_id)
                 if name is None:
@@ -154,7 +171,7 @@ class Bridge:
                     self.link.refused(addr, "clear-right")  # (its states say so: NO_RIGHT, until the next reset)
                     self.status |= NO_RIGHT
                     continue
-                self.clear_estop(name, via=f"the link from {addr[0]}", key_id=self.link.key_id,
+                self.clear_estop(name, addr, via=f"the link from {addr[0]}", key_id=self.link.key_id,
                                  session=self.link.session_id)
                 continue
             if self.link.right != "drive":  # a clearing key's session clears, and does nothing else
@@ -232,8 +249,8 @@ class Bridge:
         state = self._state
         state[0], state[1], state[2] = q, qd, tau
         self.answer = (STATE, state.copy() if self.lockstep else state, sent, self.echo,
-                        self.status | (TICK if self.lockstep else 0), self.held_ticks, self.plant.read_measured(),
-                        self.plant.read_instruments())
+                        self.status | self.declares | (TICK if self.lockstep else 0), self.held_ticks,
+                        self.plant.read_measured(), self.plant.read_instruments())
         self.link.send(self.answer, self.peer)
         return True
 
@@ -255,8 +272,8 @@ class Bridge:
     def status_to(self, addr: tuple) -> None:
         """The state as it stands (status bits up to date), outside the lock-step clock's ticks."""
         q, qd = self.plant.read()
-        self.link.send((STATE, np.stack([q, qd, self.tau]), None, self.echo, self.status, self.held_ticks,
-                        self.plant.read_measured(), self.plant.read_instruments()), addr)
+        self.link.send((STATE, np.stack([q, qd, self.tau]), None, self.echo, self.status | self.declares,
+                        self.held_ticks, self.plant.read_measured(), self.plant.read_instruments()), addr)
 
     def link_stats(self) -> dict:
         """What the link accepted and refused, and its sessions (``rehabkit bridge --stats``)."""

@@ -55,16 +55,21 @@ def _resets(plain: bytes) -> bool:
 def serve_lockstep(bridge: Bridge, duration: float | None = None, parent: int | None = None) -> None:
     """Tick when the host's clock says so, not the wall's: each tick from the host (a command carrying it, or a bare
     CLOCK) is one tick at the time it carries (with the commands that arrived before it), answered by the state
-    carrying the clock back (a bare CLOCK if the state goes elsewhere or nowhere). ``duration`` is link time; with
-    ``parent`` the bridge stops once that process is gone."""
+    carrying the clock back (a bare CLOCK if the state goes elsewhere or nowhere). A new host's reset starts the clock
+    afresh. The keypad is read between datagrams, whether a host ticks the bridge or not. ``duration`` is link time;
+    with ``parent`` the bridge stops once that process is gone."""
     bridge.lockstep = True
     inbox: list[tuple[bytes, tuple]] = []
     last_tick = -math.inf  # the newest tick done
+    owner = None  # whose clock that was: the host's address and session (a new host's reset starts a clock afresh)
     link = bridge.link
+    keypad = bridge.keypad
     try:
         while True:
-            got = link.next(0.5)
+            got = link.next(0.5, None if keypad is None or keypad.closed else keypad.fd)
             bridge.reloaded()
+            if keypad is not None:  # (read whether a host ticks or not: a person's keys are no clock's)
+                handle(bridge, keypad.poll(), last_tick if last_tick > -math.inf else 0.0)
             if got is None:
                 if parent is not None and os.getppid() != parent:
                     return
@@ -85,7 +90,9 @@ def serve_lockstep(bridge: Bridge, duration: float | None = None, parent: int | 
             now = tick[0]
             if duration is not None and now >= duration:
                 return
-            if now < last_tick and any(_resets(p) for p, _ in inbox):  # a new session's clock, afresh
+            # a new session's clock, afresh: one that goes back, or another host's (its first tick may be the same
+            # time as the last one done: a host refused at a latched e-stop, then the next after the clear)
+            if (now < last_tick or (addr, len(link.sessions)) != owner) and any(_resets(p) for p, _ in inbox):
                 last_tick = -math.inf
             if now <= last_tick:  # the host asks again (its tick or our answer was lost): answer again, the tick
                 inbox = []  # done once (its command, the same again, not applied twice)
@@ -93,9 +100,7 @@ def serve_lockstep(bridge: Bridge, duration: float | None = None, parent: int | 
                 if bridge.answer is not None:
                     link.send(bridge.answer, addr)
                 continue
-            last_tick = now
-            if bridge.keypad is not None:
-                handle(bridge, bridge.keypad.poll(), now)
+            last_tick, owner = now, (addr, len(link.sessions))
             answered = bridge.tick(now, inbox) and bridge.peer == addr
             inbox = []
             if not answered:

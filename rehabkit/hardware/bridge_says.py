@@ -4,7 +4,7 @@ e-stop (in the words of the run's refusal and its stop)."""
 from __future__ import annotations
 
 from rehabkit.core.safety.limit_breach import first_breach
-from rehabkit.hardware.link.protocol import ESTOPPED, LIMIT, WATCHDOG
+from rehabkit.hardware.link.protocol import CLEAR_AT_KEYPAD, CLEAR_BY_KEY, ESTOPPED, LIMIT, WATCHDOG
 
 
 def hold_breach(link, status: int):
@@ -31,13 +31,27 @@ def hold_reason(link, status: int) -> str:
     return why + "; it stays latched until a reset: the next run sends one"
 
 
+def clear_right(status: int) -> str:
+    """Who may clear the bridge's latched e-stop, as its states declare: "key" (a session under its clearing key,
+    --clear-key), "keypad" (its keypad only, --clear-with keypad), "link" (any session)."""
+    return "key" if status & CLEAR_BY_KEY else "keypad" if status & CLEAR_AT_KEYPAD else "link"
+
+
 def latched_message(link) -> str:
-    """Why no session starts at a latched robot, and the command that clears it (with the link's key, if keyed)."""
+    """Why no session starts at a latched robot, and what clears it, as the bridge declares (:func:`clear_right`):
+    a command with the link's key, or with the bridge's clearing key, or the bridge's keypad only."""
     where = f"udp://{link.addr[0]}:{link.addr[1]}"
     name = link.estop_name
-    key = f" --key {link.key.path}" if link.key else ""
-    how = (f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this machine)"
-           if link.process is not None else f"`rehabkit estop clear {name} --by NAME --bridge "
-           f"{link.addr[0]}:{link.addr[1]}{key}` while it runs, or the bridge's keypad")
+    command = f"`rehabkit estop clear {name} --by NAME --bridge {link.addr[0]}:{link.addr[1]}"
+    right = clear_right(link.status)
+    if link.process is not None:
+        how = f"`rehabkit estop clear {name} --by NAME` (the bridge this run starts reads its latch from this machine)"
+    elif right == "keypad":
+        how = "the bridge's keypad at the robot (c): it takes no clear over the link (--clear-with keypad)"
+    elif right == "key":
+        how = (f"{command} --key CLEAR_KEY_FILE` while it runs (the bridge's clearing key, its --clear-key file: it "
+               "takes no clear under the robot's key), or the bridge's keypad")
+    else:
+        how = f"{command}{f' --key {link.key.path}' if link.key else ''}` while it runs, or the bridge's keypad"
     return f"the e-stop of the robot behind the bridge at {where} is latched: deal with its cause, then clear it " \
            f"with {how}"

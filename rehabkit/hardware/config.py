@@ -16,6 +16,28 @@ class LinkLostError(BackendFaultError):
     """No valid state from the robot for longer than allowed."""
 
 
+class SessionTakenOverError(LinkLostError):
+    """The bridge ended this host's session: another host's took it over (the bridge's BYE, sealed in this session).
+    ``bridge`` (its address), ``allowed``: how — "keypad" (the person at the robot allowed it on the bridge's keypad,
+    ``a``, while this run was live) or "silent" (after this host's session fell silent)."""
+
+    def __init__(self, bridge: str, allowed: str):
+        self.bridge, self.allowed = bridge, allowed
+        how = ("the person at the robot allowed it on the bridge's keypad (a)" if allowed == "keypad" else
+               "this host's session had fallen silent")
+        super().__init__(f"the session with the bridge at {bridge} was taken over by another host ({how}): the robot "
+                         "is that host's now, and this run stops")
+
+
+class LinkBusyError(BackendFaultError):
+    """The bridge refuses this host's session for another host's live one (the keys match): ``bridge`` (its address),
+    ``problem`` (what it said, and how a new host gets in)."""
+
+    def __init__(self, bridge: str, problem: str):
+        self.bridge, self.problem = bridge, problem
+        super().__init__(f"the bridge at {bridge} refuses this host's session: {problem}")
+
+
 class LinkKeyError(BackendFaultError):
     """The bridge and this host do not share the robot's key: ``bridge`` (its address), ``key_file`` (this host's,
     or None), ``problem`` (which side lacks what, naming key ids)."""

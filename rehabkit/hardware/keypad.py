@@ -18,7 +18,7 @@ class Keypad:
         self.fd, self._buffer, self.closed = fd, b"", False
 
     def poll(self) -> list[str]:
-        """The keys typed since the last poll (``estop``/``clear``; anything else is ignored)."""
+        """The keys typed since the last poll (``estop``/``clear``/``allow``; anything else is ignored)."""
         if self.closed or not select.select([self.fd], [], [], 0)[0]:
             return []
         data = os.read(self.fd, 4096)
@@ -38,6 +38,7 @@ def handle(bridge, keys: list[str], now: float) -> None:
         elif key == "allow":
             bridge.link.gate.allow(time.monotonic())
             print("keypad: a new host may take the session over (for 30 s)", flush=True)
-        else:
-            bridge.clear_estop("the keypad at the robot")
+        elif bridge.clear_estop("the keypad at the robot"):
             print("keypad: e-stop cleared; the next session ramps in", flush=True)
+        else:
+            print("keypad: e-stop not latched (nothing to clear)", flush=True)

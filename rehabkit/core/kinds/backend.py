@@ -90,11 +90,13 @@ class BackendFaultError(RuntimeError):
 
 class EStopLatchedError(BackendFaultError):
     """No session starts: the robot's e-stop is latched (ISO 13850). ``latch`` names it as ``rehabkit estop clear``
-    takes it; ``where`` is the robot (simulated, or behind a bridge); the message says how to clear it."""
+    takes it; ``where`` is the robot (simulated, or behind a bridge); ``clear_right``, behind a bridge, who may clear
+    it as the bridge declares ("link": any session, "key": a session under its clearing key, "keypad": its keypad
+    only; None: this machine's ``rehabkit estop clear``); the message says how to clear it."""
 
-    def __init__(self, message: str, latch: str, where: str):
+    def __init__(self, message: str, latch: str, where: str, clear_right: str | None = None):
         super().__init__(message)
-        self.latch, self.where = latch, where
+        self.latch, self.where, self.clear_right = latch, where, clear_right
 
 
 class NotRestorableError(TypeError):

@@ -22,14 +22,15 @@ import time
 from collections import Counter
 
 from rehabkit.hardware.link.clock import wait_readable
-from rehabkit.hardware.link.protocol import CMD_RESET, COMMAND, Receiver, encode
+from rehabkit.hardware.link.protocol import CMD_RESET, COMMAND, SEQ, SESSION_AT, Receiver, encode, pack_bytes
 from rehabkit.hardware.security.events import SecurityLog
 from rehabkit.hardware.security.gate import BridgeGate
-from rehabkit.hardware.security.handshake import BYE, HANDSHAKE, peek_kind
+from rehabkit.hardware.security.handshake import BYE, HANDSHAKE, REPLACED, TAKEN_OVER, peek_kind
 from rehabkit.hardware.security.keys import LinkKey
 
 PER_TICK = 32  # datagrams read from each socket (the session's, the open one) at most, per tick
 READ_S = 2.5e-4  # a tick that reads what arrived (arrived()) reads for this long at most
+TOLD = 3  # a host whose session another host's took over is told so this many times at most
 
 
 class BridgeLink:
@@ -52,6 +53,7 @@ class BridgeLink:
         self.rx = Receiver(COMMAND, robot_id, joints, restart=0 if key is not None else CMD_RESET)
         self.sessions: list[dict] = []  # each authenticated session: when, from where, its id and key id
         self.opened_from: Counter = Counter()  # datagrams let in, by the address they came from
+        self._told: list | None = None  # [session, host, why, times told] of the session another host's took over
 
     @property
     def key_id(self) -> str:
@@ -74,13 +76,14 @@ class BridgeLink:
         until = time.monotonic() + READ_S if until is None else until
         out: list[tuple[bytes, tuple]] = []
         taken: Counter = Counter()
-        while time.monotonic() < until:
+        while True:  # (one round always: a process descheduled past ``until`` still takes what had arrived)
             socks = self._readable(taken)
             if not socks:
                 return out
             for sock in socks:
                 self._read_one(sock, taken, out)
-        return out
+            if time.monotonic() >= until:
+                return out
 
     def gather(self, until: float) -> list[tuple[bytes, tuple]]:
         """What comes until ``until`` (``time.monotonic``), read as it comes and opened, asleep between datagrams:
@@ -116,10 +119,11 @@ class BridgeLink:
         if (plain := self.open(data, addr)) is not None:
             out.append((plain, addr))
 
-    def next(self, timeout: float) -> tuple[bytes, tuple] | None:
-        """The next datagram to come (the session's first), waiting up to ``timeout``; None if none came."""
+    def next(self, timeout: float, also: int | None = None) -> tuple[bytes, tuple] | None:
+        """The next datagram to come (the session's first), waiting up to ``timeout``; None if none came, or if
+        ``also`` (a file descriptor: the keypad's) became readable first."""
         socks = [self.sock] if self.session_sock is None else [self.session_sock, self.sock]
-        if not wait_readable(socks, timeout):
+        if not wait_readable(socks if also is None else [*socks, also], timeout):
             return None
         for sock in socks:
             try:
@@ -150,6 +154,10 @@ class BridgeLink:
                                       "session": f"{self.gate.id:08x}", "key_id": self.key_id})
                 print(f"bridge: session {self.gate.id:08x} from {addr[0]}:{addr[1]} with key {self.key_id}",
                       file=sys.stderr, flush=True)
+                if (over := self.gate.taken_over) is not None:
+                    self.gate.taken_over = None
+                    self._told = [over[0], over[1], TAKEN_OVER if over[2] else REPLACED, 0]
+                    self._tell_ended()
             if reply is not None:
                 self.sock.sendto(reply, addr)
             return None
@@ -161,10 +169,35 @@ class BridgeLink:
             self.opened_from[f"{addr[0]}:{addr[1]}"] += 1
         else:
             self.refused(addr, why)
+            if why == "other-address" and self._told is not None and addr == self._told[1]:
+                self._tell_ended()  # (the host taken over still sends: told again, a few times at most)
             if why == "unauthenticated" and (refusal := self.gate.refuse_unauthenticated(data, addr,
                                                                                        time.monotonic())):
                 self.sock.sendto(refusal, addr)  # (a host without the key is told, not left waiting)
         return plain
+
+    def _tell_ended(self) -> None:
+        """Tell the host whose session another host's took over that it has ended, and why (a BYE sealed in its own
+        session, so no one else can say it): at the takeover, and again when its datagrams keep coming (``TOLD``
+        times at most)."""
+        session, peer, why, told = self._told
+        if told >= TOLD:
+            return
+        self._told[3] += 1
+        with contextlib.suppress(OSError):
+            self.sock.sendto(session.seal(pack_bytes(BYE, self.robot_id, self.gate.next_seq(), bytes([why]),
+                                                     session.id)), peer)
+
+    def current(self, plain: bytes) -> bool:
+        """An opened datagram is of the session in use (or the one its host re-keyed): not of one that has ended
+        since it was opened (another host's took it over, its host said BYE) — a datagram read before the change,
+        taken after it."""
+        if self.gate.key is None:
+            return True
+        sid = SEQ.unpack_from(plain, SESSION_AT)[0]
+        gate = self.gate
+        return gate.session is not None and (sid == gate.session.id or gate.previous is not None
+                                             and sid == gate.previous.id)
 
     def refused(self, addr: tuple, why: str) -> None:
         """A datagram refused: counted by reason, and written to the security log (a handshake's own repeats,
@@ -229,6 +262,9 @@ class BridgeLink:
 
     def stats(self) -> dict:
         """What the link accepted and refused (by reason), and its sessions: ``rehabkit bridge --stats``."""
-        return {"commands_accepted": self.rx.accepted, "dropped": dict(sorted(self.rx.dropped.items())),
+        gate = self.gate
+        return {"key_id": gate.key.id if gate.key is not None else None,  # the bridge's own, now (after a rotation too)
+                "clear_key_id": gate.clear_key.id if gate.clear_key is not None else None,
+                "commands_accepted": self.rx.accepted, "dropped": dict(sorted(self.rx.dropped.items())),
                 "dropped_total": sum(self.rx.dropped.values()), "sessions": self.sessions, "rekeys": self.gate.rekeys,
                 "opened_from": dict(self.opened_from)}

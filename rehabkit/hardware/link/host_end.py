@@ -12,12 +12,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from rehabkit.hardware.config import LinkKeyError, LinkLostError
+from rehabkit.hardware.config import LinkBusyError, LinkKeyError, LinkLostError
 from rehabkit.hardware.link.clock import wait_readable
-from rehabkit.hardware.link.protocol import CLOCK, PLAIN, TICK, Receiver, encode, link_tick, pack_bytes
+from rehabkit.hardware.link.protocol import CLOCK, HEADER, PLAIN, TICK, Receiver, encode, link_tick, pack_bytes
 from rehabkit.hardware.security.handshake import (
     BYE,
     CHALLENGE,
+    ENDINGS,
     HANDSHAKE,
     KEY_NEEDED,
     RESTART_S,
@@ -55,6 +56,9 @@ class HostLink:
         self.seq = 0
         self.clock, self.answered = 0, -1.0  # lock-step: ticks sent, the newest tick's end the bridge answered
         self.refused: str | None = None  # the bridge said it needs a key this host does not have
+        # the bridge ended this host's session (its BYE, sealed in it): another host's took it over, "keypad" (the
+        # person at the robot allowed it) or "silent" (after this host's fell silent)
+        self.ended: str | None = None
         self._last: tuple | None = None  # lock-step: what carried the newest tick, to send again if lost
 
     @property
@@ -71,6 +75,8 @@ class HostLink:
             self.link = handshake(self.sock, self.addr, self.key, self.robot_id, self.next_seq)
             self.first_id = self.link.id
         except LinkRefusedError as exc:
+            if exc.reason == "busy":  # (the keys match: another host's run holds the bridge)
+                raise LinkBusyError(self.where, exc.words) from None
             raise LinkKeyError(self.where, str(self.key.path), exc.words) from None
         except TimeoutError:
             raise LinkLostError(f"the bridge at {self.where} does not answer a handshake (is `rehabkit bridge` running "
@@ -119,7 +125,7 @@ class HostLink:
         until = time.monotonic() + timeout
         while self.answered < done:
             now = time.monotonic()
-            if now >= until:
+            if now >= until or self.ended is not None:
                 return False
             if not wait_readable(self.sock, min(until, now + RESEND_S) - now):
                 self._transmit(self._last)  # the same tick again: the bridge ticks once, answers again
@@ -146,6 +152,9 @@ class HostLink:
             plain, why = self._open(data)
             if plain is None:
                 self.rx.dropped[why] += 1
+                continue
+            if plain[3] == BYE:  # (sealed in this host's session: the bridge's word, no one else's)
+                self.ended = ENDINGS.get(plain[HEADER.size] if len(plain) > HEADER.size else 0, "ended")
                 continue
             if lockstep and (tick := link_tick(plain, self.robot_id)) is not None:
                 self.answered = max(self.answered, tick[0])

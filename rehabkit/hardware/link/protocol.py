@@ -51,9 +51,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MAGIC = b"RK"
-VERSION = 8  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
+VERSION = 9  # 2: measured-only joints (e.g. a passive pronation joint's encoder) in STATE; 3: held ticks; 4: CLOCK;
 # 5: instrument values in STATE; 6: the lock-step clock rides on COMMAND and STATE (TICK); 7: authenticated sessions,
-# CLEAR with a person's name; 8: the handshake with ephemeral X25519 keys and MAC1, BYE
+# CLEAR with a person's name; 8: the handshake with ephemeral X25519 keys and MAC1, BYE; 9: who may clear (status
+# bits), the bridge's BYE to a host whose session was taken over
 STATE, COMMAND, CLOCK, CLEAR = 1, 2, 3, 4
 HEADER = struct.Struct("<2sBBIIddHHHHHI")
 SEQ = struct.Struct("<I")  # the sequence number, at SEQ_AT in the header
@@ -75,6 +76,10 @@ CLEARED = 128
 # a CLEAR came in a session without the right to clear (the bridge takes clears under its clearing key, or at its
 # keypad only): the e-stop stays latched
 NO_RIGHT = 256
+# the bridge declares, in every state, who may clear its latched e-stop over the link: only a session under its
+# clearing key (--clear-key: the robot's key does not clear), or no session at all (--clear-with keypad: its keypad
+# only); neither bit: any session
+CLEAR_BY_KEY, CLEAR_AT_KEYPAD = 512, 1024
 # command flags, sent in the status field (host → bridge)
 CMD_ESTOP, CMD_HOLD, CMD_RESET = 1, 2, 4  # RESET: the values are joint positions to (re)start at
 # (8 was v6's e-stop clear: now a CLEAR datagram, with the person's name)

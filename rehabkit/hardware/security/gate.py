@@ -85,6 +85,9 @@ class BridgeGate:
         self.seq = 0
         self.rekeys = 0  # sessions re-keyed by their host
         self._opened = 0  # datagrams the session opened since it was made
+        # the session a new host's took over, its host, and whether it was live (the keypad allowed it), until the
+        # link has told that host (BridgeLink.open)
+        self.taken_over: tuple[Session, tuple, bool] | None = None
 
     @property
     def challenges(self) -> int:
@@ -131,6 +134,8 @@ class BridgeGate:
         if self.live(now) and addr != self.peer and now > self.allowed_until:
             return self._refuse(BUSY, body, addr, now), "busy"
         rekey = self.live(now) and addr == self.peer
+        if not rekey and self.session is not None and addr != self.peer:  # another host's: its host is to be told
+            self.taken_over = (self.session, self.peer, self.live(now))
         self.previous = self.session if rekey else None
         self.rekeys += rekey
         self.session, self.peer, self.heard, self._opened = pending.session, addr, now, 0

@@ -10,6 +10,7 @@ bridge's ephemeral X25519 public keys, fresh for each handshake; sizes in bytes 
     bridge → host     WELCOME    (empty, sealed in the new session)    58
     bridge → host     REFUSED    why · the first 8 bytes of the refused datagram's body (a HELLO's: Eh)   55
     host   → bridge   BYE        (empty, sealed in the session: it ends; the next host need not wait)
+    bridge → host     BYE        why (1 byte), sealed in the session another host's took over: it has ended
 
 Both ends derive the session and the two proofs from ``K``, ``Eh``, ``Eb`` and the X25519 of the two
 (:func:`~rehabkit.hardware.security.session.session_for`); each drops its ephemeral private key once the session is
@@ -57,6 +58,10 @@ RESTART_S = 1.0  # a handshake not welcomed within this starts afresh (new ephem
 # REFUSED's reasons, and the host's words for them
 NO_KEY, OTHER_KEY, KEY_NEEDED, BUSY = 1, 2, 3, 4
 REASONS = {NO_KEY: "no-key", OTHER_KEY: "other-key", KEY_NEEDED: "key-needed", BUSY: "busy"}
+# a bridge's BYE: why the session ended (another host's session took it over: allowed at the robot's keypad while it
+# was live, or after it fell silent)
+TAKEN_OVER, REPLACED = 1, 2
+ENDINGS = {TAKEN_OVER: "keypad", REPLACED: "silent"}
 _BODY = {HELLO: PUBLIC + PAD + MAC1, CHALLENGE: PUBLIC + MAC, PROOF: PUBLIC + MAC, REFUSED: 1 + REF}
 
 
