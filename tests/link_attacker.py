@@ -2,7 +2,7 @@
 
     python tests/link_attacker.py BRIDGE_PORT --joints N [--robot-id 1] [--count N] [--flood-s S] [--after N]
                                   [--earlier CAPTURE] [--save CAPTURE] [--report REPORT.json] [--seed S]
-                                  [--attacks forged,replayed,tampered,wrong-key,flood]
+                                  [--attacks forged,replayed,tampered,wrong-key,flood] [--key KEY_FILE]
 
 It sits on the path between host and bridge (the host is pointed at the port it prints, ``attacker: PORT``) and
 forwards every datagram unchanged both ways, keeping a copy: what a machine on the lab's network can capture.
@@ -17,6 +17,12 @@ attack ``--count`` datagrams (the flood: ``--flood-s`` seconds):
   wrong-key  HELLOs with a MAC1 it cannot make, this session's and an earlier session's PROOF and HELLO again
   flood      as fast as one process can send, to the bridge's port: random bytes, replays, HELLOs (from a
              process of its own, while the others go on)
+  wrong-proof  what a stranger can do to the handshake now that it gets no challenge (benchmarks/link_attacks.py):
+             as fast as one process can send, to the bridge's port, PROOFs with wrong MACs (naming the host's
+             captured HELLOs, and random ones) and HELLOs with a wrong MAC1 (a process of its own, as the flood)
+  takeover   a holder of the robot's key (``--key``) takes the live session over (benchmarks/link_attacks.py): a
+             handshake of its own from another port, then ``rehabkit estop clear --bridge ... --key`` as the README
+             gives it; the outcome of each in the report
 
 It says ``attacker: done`` when through; on SIGTERM it writes the report (datagrams sent and answers received
 per attack) and the capture (``--save``).
@@ -37,7 +43,17 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabkit.hardware.link.protocol import CLEAR, CLOCK, CMD_RESET, COMMAND, PLAIN, STATE, encode, pack_bytes
+from rehabkit.hardware.link.protocol import (
+    CLEAR,
+    CLOCK,
+    CMD_RESET,
+    COMMAND,
+    HEADER,
+    PLAIN,
+    STATE,
+    encode,
+    pack_bytes,
+)
 from rehabkit.hardware.security.handshake import CHALLENGE, HELLO, PROOF, peek_kind
 
 RECORD = struct.Struct("<BH")  # direction (0: host → bridge, 1: bridge → host), length
@@ -83,6 +99,53 @@ def flood_bridge(bridge: tuple, seconds: float, samples: list[bytes], hello: byt
                 pass
         n += len(pool)
     sent.value = n
+
+
+def flood_handshakes(bridge: tuple, seconds: float, ehs: list[bytes], rid: int, seed: int, sent, answers) -> None:
+    """As fast as it can for ``seconds``: PROOFs with wrong MACs (naming the HELLOs' ``ehs``, and random ones) and
+    HELLOs with a wrong MAC1, to the bridge's port (a process of its own); the answers it got counted at the end."""
+    rng = np.random.default_rng(seed)
+    pool = []
+    for i in range(512):
+        eh = ehs[i % len(ehs)] if ehs and i % 2 else rng.bytes(32)
+        pool.append(PLAIN.seal(pack_bytes(PROOF, rid, 2 * i + 1, eh + rng.bytes(32))))
+        pool.append(PLAIN.seal(pack_bytes(HELLO, rid, 2 * i + 2, rng.bytes(32) + bytes(16) + rng.bytes(16))))
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setblocking(False)
+    n, until = 0, time.monotonic() + seconds
+    while time.monotonic() < until:
+        for data in pool:
+            try:  # noqa: SIM105 (the fastest loop: no context manager per datagram)
+                sock.sendto(data, bridge)
+            except OSError:  # (a full send buffer: go on)
+                pass
+        n += len(pool)
+    sent.value = n
+    time.sleep(0.05)
+    while True:  # (refusals: at most 5 a second to a source; its socket's buffer holds them all)
+        try:
+            sock.recv(65536)
+        except (BlockingIOError, ConnectionRefusedError):
+            break
+        answers.value += 1
+
+
+class CountingSocket(socket.socket):
+    """A UDP socket that counts what it sent and what came to it (for the takeover's handshake)."""
+
+    def __init__(self):
+        super().__init__(socket.AF_INET, socket.SOCK_DGRAM)
+        self.setblocking(False)
+        self.sent = self.came = 0
+
+    def sendto(self, data: bytes, to: tuple) -> int:
+        self.sent += 1
+        return super().sendto(data, to)
+
+    def recvfrom(self, n: int) -> tuple[bytes, tuple]:
+        got = super().recvfrom(n)
+        self.came += 1
+        return got
 
 
 class Attacker:
@@ -141,6 +204,16 @@ class Attacker:
                 target=flood_bridge, args=(self.bridge, a.flood_s, samples, hellos[0] if hellos else b"", a.seed, sent))
             start = time.time()
             flood.start()
+        if a.flood_s > 0 and "wrong-proof" in attacks:  # a stranger's flood at the handshake, while the run goes on
+            ehs = [d[HEADER.size:HEADER.size + 32] for w, d in self.capture if w == 0 and peek_kind(d) == HELLO]
+            context = multiprocessing.get_context("fork")
+            sent, answers = context.Value("q", 0), context.Value("q", 0)
+            flood = context.Process(target=flood_handshakes, args=(self.bridge, a.flood_s, ehs, rid, a.seed, sent,
+                                                                   answers))
+            start = time.time()
+            flood.start()
+        if "takeover" in attacks:
+            self.take_over()
         for i in range(n if "forged" in attacks else 0):  # forged, without the key
             seq = 10**6 + i
             self.send("forged", encode(COMMAND, rid, seq, rng.uniform(-50, 50, j)), self.bridge)
@@ -180,8 +253,41 @@ class Attacker:
         if flood is not None:
             flood.join()
             self.report["flood"] = {"sent": int(sent.value), "seconds": a.flood_s, "from": start, "to": time.time()}
+            if "wrong-proof" in attacks:
+                self.report["flood"]["answers"] = int(answers.value)
         self.report["done"] = {"at": time.time()}
         print("attacker: done", flush=True)
+
+    def take_over(self) -> None:
+        """A key holder's handshake from a port of its own while the session is live, then the README's
+        ``rehabkit estop clear --bridge ... --key`` (each given 2 s): what each achieved."""
+        import subprocess
+        import sys
+
+        from rehabkit.hardware.security.handshake import LinkRefusedError, handshake
+        from rehabkit.hardware.security.keys import load_key
+
+        a = self.args
+        key = load_key(a.key)
+        sock, seq = CountingSocket(), iter(range(1, 1 << 31))
+        t0 = time.monotonic()
+        try:
+            session = handshake(sock, self.bridge, key, a.robot_id, lambda: next(seq), timeout=2.0)
+            got = f"session {session.id:08x}"
+        except LinkRefusedError as exc:
+            got = f"refused: {exc.reason}"
+        except TimeoutError:
+            got = "no answer"
+        self.report["takeover"] = {"sent": sock.sent, "answers": sock.came, "handshake": got,
+                                   "s": round(time.monotonic() - t0, 2)}
+        t0 = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "rehabkit.cli", "estop", "clear", f"{key.robot}", "--by",
+                               "mallory", "--bridge", f"{self.bridge[0]}:{self.bridge[1]}", "--key", a.key],
+                              capture_output=True, text=True, timeout=60)
+        said = (done.stderr.strip() or done.stdout.strip()).splitlines()
+        self.report["takeover"].update({"estop_clear_exit": done.returncode, "estop_clear_said": said[-1] if said
+                                        else "", "estop_clear_s": round(time.monotonic() - t0, 2)})
+        sock.close()
 
     def finish(self) -> None:
         if self.args.save:
@@ -208,13 +314,21 @@ def main() -> None:
     p.add_argument("--report", default=None)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--attacks", default="forged,replayed,tampered,wrong-key,flood", help="which, comma-separated")
+    p.add_argument("--key", default=None, help="the robot's key file (a key holder's takeover)")
     args = p.parse_args()
     attacker = Attacker(args)
     relay = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     relay.bind(("127.0.0.1", 0))
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(SystemExit(0)))
     print(f"attacker: {relay.getsockname()[1]}", flush=True)
-    threading.Thread(target=attacker.run, daemon=True).start()
+    def attack() -> None:
+        try:
+            attacker.run()
+        except Exception as exc:  # noqa: BLE001 (said in the report, and the relay ends: no silent hang)
+            attacker.report["failed"] = {"error": repr(exc)}
+            print(f"attacker: done (failed: {exc!r})", flush=True)
+
+    threading.Thread(target=attack, daemon=True).start()
     try:
         while True:
             data, addr = relay.recvfrom(65536)

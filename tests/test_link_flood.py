@@ -43,3 +43,15 @@ def test_a_flood_spoofing_the_hosts_address_makes_no_tick_late_and_the_watchdog_
     assert bridge["clock"]["late_max_ms"] <= LATE_MS, bridge["clock"]
     (held_after,) = bridge["watchdog_holds_ms"]  # the host's last command, then the flood alone: held on time
     assert WATCHDOG_MS <= held_after <= WATCHDOG_MS + LATE_MS
+
+
+def test_a_forged_refused_does_not_abort_the_handshake_even_as_the_bridge_naming_the_hello(tmp_path):
+    """REFUSEDs forged each way (16 answering each HELLO at once: from another address or spoofed as the bridge's,
+    blind or naming the HELLO, as one who watches the link can): every handshake is made — a refusal is taken only
+    if no proven challenge follows it (the bridge's own, right behind: 4 of 5 were aborted as the bridge said no
+    key)."""
+    key = new_key("hit-1", tmp_path / "keys" / "hit-1.key")
+    done = in_own_namespace(str(key.path), "--attack", "refused", "--tries", "2")
+    assert done.returncode == 0, done.stderr[-2000:]
+    ways = json.loads(done.stdout.strip().splitlines()[-1])
+    assert len(ways) == 4 and {w: (r["made"], r["aborted"]) for w, r in ways.items()} == {w: (2, 0) for w in ways}

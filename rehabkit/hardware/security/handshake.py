@@ -51,6 +51,7 @@ from rehabkit.hardware.security.session import (
 )
 
 HELLO, CHALLENGE, PROOF, WELCOME, REFUSED, BYE = 5, 6, 7, 8, 9, 10
+REFUSAL_GRACE_S = 0.25  # a REFUSED is taken once no proven challenge came this long after it
 HANDSHAKE = frozenset((HELLO, CHALLENGE, PROOF, WELCOME, REFUSED))
 PAD = 16  # a HELLO's zero bytes: it is as big as the CHALLENGE it asks for
 REF = 8  # a REFUSED names what it refuses by this many bytes of its body
@@ -166,13 +167,20 @@ def handshake(sock, addr: tuple, key: LinkKey, robot: int, next_seq, timeout: fl
     shake = HostHandshake(key, robot, mac_key)
     until = time.monotonic() + timeout
     forged, busy = 0, False
+    refused: tuple[int, float] | None = None  # the first refusal and when its grace ends
+
+    def refuse(reason: int) -> LinkRefusedError:
+        return LinkRefusedError(REASONS.get(reason, "refused"), key.id, refusal_words(reason, key))
+
     while time.monotonic() < until:
+        if refused is not None and time.monotonic() >= refused[1]:
+            raise refuse(refused[0])
         if shake.pending is None and time.monotonic() - shake.started > RESTART_S:  # afresh: new ephemeral keys
             forged += shake.forged
             shake = HostHandshake(key, robot, mac_key)
         sock.sendto(shake.next(next_seq()), addr)
         proven = shake.pending is not None
-        answer_by = min(until, time.monotonic() + resend_s)
+        answer_by = min(until, time.monotonic() + resend_s, refused[1] if refused is not None else until)
         while wait_readable(sock, answer_by - time.monotonic()):
             try:
                 data, came_from = sock.recvfrom(65536)
@@ -185,11 +193,15 @@ def handshake(sock, addr: tuple, key: LinkKey, robot: int, next_seq, timeout: fl
                 return session
             if shake.refusal == BUSY:  # another host's session: it may be ending (its BYE), or be let go at the
                 busy, shake.refusal = True, None  # robot: asked again until the timeout
-            elif shake.refusal is not None:
-                raise LinkRefusedError(REASONS.get(shake.refusal, "refused"), key.id,
-                                       refusal_words(shake.refusal, key))
+            elif shake.refusal is not None:  # (taken once no challenge proven came for REFUSAL_GRACE_S: one who
+                # can watch the link and spoof the bridge can forge a REFUSED naming the HELLO — the bridge's own
+                # challenge, right behind it, wins)
+                refused = refused or (shake.refusal, time.monotonic() + REFUSAL_GRACE_S)
+                shake.refusal = None
             if not proven and shake.pending is not None:
                 break  # (the challenge proven: the PROOF goes at once)
+    if refused is not None:
+        raise refuse(refused[0])
     if forged + shake.forged:
         raise LinkRefusedError("forged", key.id, f"the bridge could not prove it holds key {key.id} "
                                f"({forged + shake.forged} challenges failed)")
