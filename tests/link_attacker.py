@@ -84,21 +84,26 @@ def flip(data: bytes, rng: np.random.Generator) -> bytes:
     return bytes(flipped)
 
 
+def _send_all(sock: socket.socket, to: tuple, pool: list[bytes], seconds: float) -> int:
+    """``pool`` sent over and over to ``to`` as fast as it goes for ``seconds``; how many were sent."""
+    n, until = 0, time.monotonic() + seconds
+    while time.monotonic() < until:
+        for data in pool:
+            try:  # noqa: SIM105 (the fastest loop: no context manager per datagram)
+                sock.sendto(data, to)
+            except OSError:  # (a full send buffer: go on)
+                pass
+        n += len(pool)
+    return n
+
+
 def flood_bridge(bridge: tuple, seconds: float, samples: list[bytes], hello: bytes, seed: int, sent) -> None:
     """As fast as it can for ``seconds``: random bytes, replays, HELLOs (a process of its own)."""
     rng = np.random.default_rng(seed)
     junk = [bytes(rng.integers(0, 256, int(rng.integers(1, 200)), dtype=np.uint8)) for _ in range(256)]
     pool = junk + samples[:256] + [hello] * 16
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    n, until = 0, time.monotonic() + seconds
-    while time.monotonic() < until:
-        for data in pool:
-            try:  # noqa: SIM105 (the fastest loop: no context manager per datagram)
-                sock.sendto(data, bridge)
-            except OSError:  # (a full send buffer: go on)
-                pass
-        n += len(pool)
-    sent.value = n
+    sent.value = _send_all(sock, bridge, pool, seconds)
 
 
 def flood_handshakes(bridge: tuple, seconds: float, ehs: list[bytes], rid: int, seed: int, sent, answers) -> None:
@@ -112,15 +117,7 @@ def flood_handshakes(bridge: tuple, seconds: float, ehs: list[bytes], rid: int, 
         pool.append(PLAIN.seal(pack_bytes(HELLO, rid, 2 * i + 2, rng.bytes(32) + bytes(16) + rng.bytes(16))))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setblocking(False)
-    n, until = 0, time.monotonic() + seconds
-    while time.monotonic() < until:
-        for data in pool:
-            try:  # noqa: SIM105 (the fastest loop: no context manager per datagram)
-                sock.sendto(data, bridge)
-            except OSError:  # (a full send buffer: go on)
-                pass
-        n += len(pool)
-    sent.value = n
+    sent.value = _send_all(sock, bridge, pool, seconds)
     time.sleep(0.05)
     while True:  # (refusals: at most 5 a second to a source; its socket's buffer holds them all)
         try:

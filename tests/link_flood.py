@@ -32,6 +32,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +83,17 @@ def flood(src: tuple, dst: tuple, session: int, seconds: float) -> int:
     return n
 
 
+def _waiting(sock: socket.socket, rx) -> Iterator:
+    """The messages waiting in ``sock`` (not blocking) that ``rx`` accepts."""
+    while True:
+        try:
+            msg = rx.accept(sock.recv(65536))
+        except BlockingIOError:
+            return
+        if msg is not None:
+            yield msg
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("key")
@@ -123,14 +135,9 @@ def main() -> None:
             sock.sendto(encode(COMMAND, 1, next(seq), hold + 60 * (Q0 - q) - 6 * qd, link=session), addr)
             deadline += 1e-3
             wait_until(deadline)
-            while True:
-                try:
-                    msg = rx.accept(sock.recv(65536))
-                except BlockingIOError:
-                    break
-                if msg is not None:
-                    q, qd = msg.values[0], msg.values[1]
-                    driving = max(driving, float(np.degrees(np.abs(q - Q0)).max()))
+            for msg in _waiting(sock, rx):
+                q, qd = msg.values[0], msg.values[1]
+                driving = max(driving, float(np.degrees(np.abs(q - Q0)).max()))
         # (the states the bridge sends meanwhile wait in the host's socket, read after the flood: room for them all)
         sock.setsockopt(socket.SOL_SOCKET, getattr(socket, "SO_RCVBUFFORCE", 33), 1 << 23)
         t0 = time.monotonic()
@@ -141,14 +148,9 @@ def main() -> None:
             sent = flood(sock.getsockname(), addr, session.id, args.flood_s)  # and the host says no more
         seconds = time.monotonic() - t0
         during, states = 0.0, 0
-        while True:
-            try:
-                msg = rx.accept(sock.recv(65536))
-            except BlockingIOError:
-                break
-            if msg is not None:
-                states += 1
-                during = max(during, float(np.degrees(np.abs(msg.values[0] - Q0)).max()))
+        for msg in _waiting(sock, rx):
+            states += 1
+            during = max(during, float(np.degrees(np.abs(msg.values[0] - Q0)).max()))
         deviation = {"driving": driving, "flood": during, "states_during_flood": states}
     finally:
         bridge.send_signal(signal.SIGINT)

@@ -10,12 +10,12 @@ import csv
 import io
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from rehabkit.core.io import atomic_write_bytes
 
 
 class OutputError(RuntimeError):
@@ -45,18 +45,7 @@ def read_tsv(path: Path) -> list[dict[str, str]]:
 
 def write_file(path: Path, data: bytes | str) -> None:
     """``data`` in a temporary file beside ``path``, synced, then renamed onto it."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write_bytes(path, data.encode() if isinstance(data, str) else data)
 
 
 def write_json(path: Path, data: dict) -> None:

@@ -34,16 +34,22 @@ def load_yaml(text: str) -> Any:
 
 
 def atomic_write_text(path: Path, text: str, private: bool = False) -> None:
-    """Write ``text`` to a temporary file beside ``path``, then rename it into place (``private``: readable by its
-    owner only from the start, e.g. a key)."""
+    """Write ``text`` (UTF-8) to a temporary file beside ``path``, then rename it into place (``private``: readable
+    by its owner only from the start, e.g. a key)."""
+    atomic_write_bytes(path, text.encode(), private)
+
+
+def atomic_write_bytes(path: Path, data: bytes, private: bool = False) -> None:
+    """Write ``data`` to a temporary file beside ``path``, synced, then rename it into place (``private``: readable
+    by its owner only from the start)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")  # (created 0600)
     if not private:  # outputs are ordinary files
         os.fchmod(fd, 0o666 & ~_UMASK)
     try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)

@@ -219,13 +219,13 @@ def finish(session: RunSession, loop: LoopResult, setup_s: float, out_dir: Path 
         outputs, recording_written = session.view.begin_close()
         try:
             summary["outputs"] = {**outputs, "scenario": SNAPSHOT, **a.backend.outputs()}
-            log = session.safety_log  # (the text its run record hashed, made and written as the session opened)
-            snapshot = log.scenario if log is not None else safety_log.scenario_text(a)
-            if log is None or not (out_dir / SNAPSHOT).exists():
+            # the tamper-evident record of the run's safety (rehabkit audit), written as the run went, beside the
+            # scenario as it ran (both written as the session opened): its rest (the robot side's interventions,
+            # known now) and its end, the last hash in the summary
+            log = session.safety_log
+            if log is None:  # (a session opened without a folder: both written here, whole)
+                snapshot = safety_log.scenario_text(a)
                 atomic_write_text(out_dir / SNAPSHOT, snapshot)
-            # the tamper-evident record of the run's safety (rehabkit audit), written as the run went: its rest
-            # (the robot side's interventions, known now) and its end, the last hash in the summary
-            if log is None:  # (a session opened without a folder: written here, whole)
                 log = safety_log.open_log(a, session.safety, snapshot, out_dir)
             summary["outputs"]["safety_log"] = safety_log.LOG
             summary["safety_log_hash"] = log.close(a.backend.interventions(), summary)
