@@ -11,6 +11,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
+# hit_roundtrip.yaml's first round trip only, A → B → A in 4.5 s: for runs paced in real time (a worker asleep)
+FIRST_ROUND_TRIP = {"duration": 4.5, "planner.segment_durations": [2.0, 2.0],
+                    "task.targets": [{"name": "A", "joints_deg": [0, 90, 90, 30, -90, 90]},
+                                     {"name": "B", "position": [-0.45, -0.1, -0.3], "orientation_of": "A"},
+                                     {"name": "C", "same_as": "A"}]}
 DATA = Path(__file__).resolve().parent / "data"
 # hypothesis keeps a cache of the constants in the code it tests; in a folder of its own, not the work tree (the suite
 # leaves that as it found it)
