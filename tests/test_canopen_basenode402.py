@@ -37,6 +37,7 @@ def lab():
     channel = f"rehabkit-basenode402-{os.getpid()}-{next(CHANNEL)}"
     master, drives = canopen.Network(), canopen.Network()
     for net in (master, drives):
+        net.NOTIFIER_CYCLE = 0.05  # (its reader's wait for a frame: what disconnecting it waits for, 1 s by default)
         net.connect(interface="virtual", channel=channel, receive_own_messages=False)
     node = BaseNode402(1, str(EDS))
     master.add_node(node)

@@ -134,12 +134,13 @@ def test_the_generic_servo_drives_eds_holds_what_a_master_maps_and_sets_as_canop
 
 @pytest.fixture(scope="module")
 def bus():
-    """Two CANopen networks on one python-can virtual bus: the drives' side and the master's (disconnecting one
-    waits out its notifier's second: once for the module)."""
+    """Two CANopen networks on one python-can virtual bus: the drives' side and the master's (their readers wait
+    50 ms for a frame, not 1 s: what disconnecting one waits for)."""
     import canopen
 
     drive_net, master_net = canopen.Network(), canopen.Network()
     for net in (drive_net, master_net):
+        net.NOTIFIER_CYCLE = 0.05
         net.connect(interface="virtual", channel="rehabkit-cia402-test", receive_own_messages=False)
     yield drive_net, master_net
     drive_net.disconnect()

@@ -69,6 +69,7 @@ def cmd_drives(args: argparse.Namespace) -> int:
     if args.interface not in ("virtual", "udp_multicast"):
         kw["bitrate"] = args.bitrate
     network = canopen.Network()
+    network.NOTIFIER_CYCLE = 0.1  # (its reader's wait for a frame: the wait of its stop, 1 s by default, at the end)
     network.connect(**kw)
     try:
         plant = MujocoPlant(robot, args.timestep)
