@@ -1,7 +1,7 @@
 """Framework overhead: the full runner against a bare MuJoCo loop, measured side by side.
 
 Both run the HIT round-trip on the same compiled model with the same reference
-trajectory and the same control law (joint PD + Pinocchio RNEA feedforward) at
+trajectory and the same control law (joint PD + Pinocchio RNEA feedforward + the joints' declared damping) at
 1 kHz. The runner adds everything a scenario gets: event handling, sensors,
 the safety layer, the trace, contact checks and Rerun logging at 100 Hz (file
 finished and renamed). Repeats alternate the two so drift affects both alike;
@@ -43,13 +43,16 @@ SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "hit_roundtrip.ya
 
 
 def bare_loop(runner: Runner, ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
-    """Seconds for the plain loop: read state, PD + RNEA, write torque, mj_step."""
+    """Seconds for the plain loop: read state, PD + RNEA (+ the joints' declared damping, as the controller
+    compensates it), write torque, mj_step."""
     backend = runner.backend
     m, d = backend.model, backend.data
     cfg = runner.sc.controller
     kp, kd = np.asarray(cfg.kp, float), np.asarray(cfg.kd, float)
     pm = runner.robot.model.pin_model
     pdata = pm.createData()
+    damping = runner.robot.model.dissipation.damping  # (HIT's: 0.5-0.1 N·m·s/rad, in MuJoCo's model too)
+    assert not np.any(runner.robot.model.dissipation.friction)  # (else the law would compensate it as well)
     q_ref, qd_ref, qdd_ref = ref
     qs, vs = backend._q, backend._v
     backend.reset(q_ref[0])
@@ -57,6 +60,7 @@ def bare_loop(runner: Runner, ref: tuple[np.ndarray, np.ndarray, np.ndarray]) ->
     for k in range(len(q_ref)):
         q, qd = d.qpos[qs], d.qvel[vs]
         tau = kp * (q_ref[k] - q) + kd * (qd_ref[k] - qd) + pin.rnea(pm, pdata, q, qd_ref[k], qdd_ref[k])
+        tau += damping * qd_ref[k]
         d.qfrc_applied[vs] = tau
         mujoco.mj_step(m, d)
     elapsed = time.perf_counter() - t0

@@ -35,6 +35,7 @@ from rehabkit.models.robot_model import JointLimits, RobotModel
 
 # numpy's own count_nonzero: the public name's Python wrapper costs as much as the count (~0.3 us a step)
 _count_nonzero = getattr(np._core.multiarray, "count_nonzero", np.count_nonzero)
+_le = np.less_equal
 
 
 @dataclass(frozen=True)
@@ -123,12 +124,13 @@ class SafetyLayer(RunState):
         self._dt, self._gain_dt = dt, dt
         self._clipping = Clipping(self.names, self.effort, dt, self.interventions.append)
         self._box = KeepIn(config.keep_in, robot.base_pose, hand) if config.keep_in is not None else None
-        # the fast path tests |[q, qd, tau] - centre| <= bound in one go; NaN fails it too
+        # the fast path tests lower <= [q, qd, tau] <= upper in two comparisons (NaN fails both; an unbounded
+        # joint's infinite range passes), counted: ~0.6 µs a step against ~0.8 for |row - centre| <= half-width
         n = robot.dof
         self._n = n
-        self._centre = np.concatenate([(self.lo + self.hi) / 2, np.zeros(2 * n)])
-        self._bound = np.concatenate([(self.hi - self.lo) / 2, self.vmax, self.effort])
-        self._fast = (np.empty(3 * n), self._centre, self._bound, np.empty(3 * n, dtype=bool), 3 * n,
+        lower = np.concatenate([self.lo, -self.vmax, -self.effort])
+        upper = np.concatenate([self.hi, self.vmax, self.effort])
+        self._fast = (lower, upper, np.empty(3 * n, dtype=bool), np.empty(3 * n, dtype=bool), 6 * n,
                       slice(2 * n, None))
         self._plain = False  # set once the start is behind and no box or ramp needs a look each step
 
@@ -195,9 +197,9 @@ class SafetyLayer(RunState):
         The runner records rows straight into its trace, so checking costs no copy.
         """
         if self.tripped_at is None:
-            buf, centre, bound, ok, width, torque = self._fast
-            np.abs(np.subtract(row, centre, out=buf), out=buf)
-            if _count_nonzero(np.less_equal(buf, bound, out=ok)) == width:  # (all(): 2 µs more)
+            lower, upper, above, below, both, torque = self._fast
+            # (positional out= arguments: the keyword costs ~0.05 µs each; all(): 0.5 µs more than a count)
+            if _count_nonzero(_le(lower, row, above)) + _count_nonzero(_le(row, upper, below)) == both:
                 tau = row[torque]
                 if self._plain:  # no keep-in box, started, ramp-in over, no ramp-out: nothing else to do
                     return tau
