@@ -19,7 +19,7 @@ import can
 import canopen
 import numpy as np
 
-from rehabkit.canopen.bus.drive_dictionary import from_od
+from rehabkit.canopen.bus.drive_dictionary import from_od, object_dictionary
 from rehabkit.canopen.bus.pdo_codec import PdoCodec
 from rehabkit.canopen.bus.pdo_layout import SENSOR_TPDO
 from rehabkit.canopen.bus.pdo_maps import write_plan
@@ -53,8 +53,9 @@ class DriveMaster:
         self._follows = np.array([m != "cst" for m in self.modes])
         self._by_velocity = np.array([m == "csv" for m in self.modes])
         self.paths = [eds for _, eds in nodes]
-        self.remotes = [canopen.RemoteNode(node, eds) for node, eds in nodes]
-        self.sensors = [canopen.RemoteNode(node, eds) for node, eds, _ in sensors]  # (three-axis: CiA 404)
+        self.remotes = [canopen.RemoteNode(node, object_dictionary(eds, node)) for node, eds in nodes]
+        self.sensors = [canopen.RemoteNode(node, object_dictionary(eds, node))  # (three-axis: CiA 404)
+                        for node, eds, _ in sensors]
         for r in (*self.remotes, *self.sensors):
             network.add_node(r)
         n, m = len(self.remotes), len(self.sensors)

@@ -11,6 +11,7 @@ its file (``where``: ``file:line``), so a refusal names the line that says it.
 from __future__ import annotations
 
 import contextlib
+import pickle
 import re
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
@@ -78,6 +79,21 @@ class DriveDictionary:
         return self.value(0x6502)
 
 
+def object_dictionary(path: str | Path, node_id: int):
+    """A fresh copy of python-canopen's object dictionary of the EDS/DCF at ``path`` for node ``node_id`` (``$NODEID``
+    resolved): the file parsed once per version of it. Its parser takes 5-30 ms a file, a copy 0.3-0.7 ms, and a run
+    on six simulated drives wants twelve (the master's nodes and the drives'); each its own, as nodes add to theirs."""
+    stat = Path(path).stat()
+    return pickle.loads(_parsed(str(path), node_id, stat.st_mtime_ns, stat.st_size))
+
+
+@lru_cache(maxsize=64)
+def _parsed(path: str, node_id: int, mtime_ns: int, size: int) -> bytes:
+    import canopen
+
+    return pickle.dumps(canopen.import_od(path, node_id))  # (this process's own objects, read back by it alone)
+
+
 def read_dictionary(path: str | Path, node_id: int = 1) -> DriveDictionary:
     """The dictionary of the EDS/DCF at ``path`` for node ``node_id`` (``$NODEID`` resolved), read once per version
     of the file."""
@@ -89,11 +105,9 @@ def read_dictionary(path: str | Path, node_id: int = 1) -> DriveDictionary:
 def _read(path: str, node_id: int, mtime_ns: int, size: int) -> DriveDictionary:
     import warnings
 
-    import canopen
-
     with warnings.catch_warnings():  # (vendors' files carry what canopen warns of and reads anyway)
         warnings.simplefilter("ignore")
-        od = canopen.import_od(path, node_id)
+        od = object_dictionary(path, node_id)
     return from_od(od, path)
 
 

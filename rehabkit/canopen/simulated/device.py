@@ -26,6 +26,8 @@ import canopen
 from canopen.objectdictionary import NUMBER_TYPES, ODArray, ODVariable
 from canopen.sdo import SdoAbortedError
 
+from rehabkit.canopen.bus.drive_dictionary import object_dictionary
+
 NOT_MAPPABLE, PDO_TOO_LONG = 0x06040041, 0x06040042
 TOO_LONG, TOO_SHORT = 0x06070012, 0x06070013
 VALUE_TOO_HIGH, VALUE_TOO_LOW, INVALID_VALUE = 0x06090031, 0x06090032, 0x06090030
@@ -40,7 +42,7 @@ class Device(canopen.LocalNode):
     objects added to its dictionary (see the module's doc)."""
 
     def __init__(self, node_id: int, eds: Path | str, extra: Iterable[ODVariable] = ()):
-        od = canopen.import_od(str(eds), node_id)
+        od = object_dictionary(eds, node_id)
         for var in extra:
             od.add_object(var)
         super().__init__(node_id, od)
