@@ -270,8 +270,27 @@ def plugin_union(registry: PluginRegistry, kind: str):
     return Annotated[Union[configs], Field(discriminator="type")]  # noqa: UP007 (runtime-built union)
 
 
+# the Scenario models made, by the plugins' settings models and the extensions' sections they are made of: pydantic
+# takes ~5 ms to make one, and each load, validate and sweep point asked for it again
+_MODELS: dict[tuple, tuple[type[ScenarioBase], dict]] = {}
+
+
 def scenario_model(registry: PluginRegistry, extensions: Extensions | None = None) -> type[ScenarioBase]:
     """The full Scenario model for the installed plugins and the extensions' sections (default: the installed)."""
+    sections = (extensions or default_extensions()).sections(registry)
+    kinds = (*PLUGIN_SECTIONS.values(), "sensor")
+    key = (tuple(tuple(info.config for info in registry.plugins[kind].values()) for kind in kinds),
+           tuple((name, owner, id(section)) for name, (owner, section) in sections.items()))
+    made = _MODELS.get(key)
+    if made is None:
+        if len(_MODELS) >= 32:
+            _MODELS.clear()
+        # (the sections held with it: the ids in its key stay theirs)
+        made = _MODELS[key] = (_scenario_model(registry, sections), sections)
+    return made[0]
+
+
+def _scenario_model(registry: PluginRegistry, sections: dict) -> type[ScenarioBase]:
     fields = {}
     for section, kind in PLUGIN_SECTIONS.items():
         union = plugin_union(registry, kind)
@@ -284,7 +303,7 @@ def scenario_model(registry: PluginRegistry, extensions: Extensions | None = Non
     sensor_union = plugin_union(registry, "sensor")
     # no sensor plugin loaded: the scenario names none (a named one is loaded, or refused as unknown first)
     fields["sensors"] = (dict[str, sensor_union] if sensor_union is not None else dict[str, Any], {})
-    for name, (owner, section) in (extensions or default_extensions()).sections(registry).items():
+    for name, (owner, section) in sections.items():
         if name in ScenarioBase.model_fields or name in fields:
             raise ValueError(f"extension '{owner}' declares the scenario section '{name}', which is the core's")
         kind = section.model if section.default is not None else Optional[section.model]  # noqa: UP045
