@@ -50,14 +50,43 @@ def read_layout(rrd) -> tuple[list, dict[str, dict]]:
     return node(root_path), views
 
 
+class _Components(dict):
+    """An entity's components (name -> every logged value in order), each turned into Python values when first read:
+    a test reads a few of a recording's thousands of rows (turning them all took seconds of the suite)."""
+
+    def __getitem__(self, name: str) -> list:
+        value = super().__getitem__(name)
+        if not isinstance(value, list):  # (the chunks' arrow columns, in order)
+            value = [row for column in value.columns for row in column.to_pylist()]
+            super().__setitem__(name, value)
+        return value
+
+    def get(self, name: str, default=None):
+        return self[name] if name in self else default
+
+    def values(self):
+        return [self[name] for name in self]
+
+    def items(self):
+        return [(name, self[name]) for name in self]
+
+
+class _Columns:
+    def __init__(self):
+        self.columns: list = []
+
+
 def recording(rrd) -> dict[str, dict[str, list]]:
     """Each entity's static components and, for the rest, every logged value in order (path -> component -> list)."""
     reader = rc.RrdReader(rrd)
     (store,) = reader.recordings()
-    out: dict[str, dict[str, list]] = {}
+    out: dict[str, _Components] = {}
     for chunk in reader.stream(store=store).to_chunks():
-        for name, values in _columns(chunk).items():
-            out.setdefault(chunk.entity_path.strip("/"), {}).setdefault(name, []).extend(values)
+        batch, skip = chunk.to_record_batch(), set(chunk.timeline_names)
+        parts = out.setdefault(chunk.entity_path.strip("/"), _Components())
+        for name in batch.schema.names:
+            if name not in skip and not name.startswith("rerun."):
+                dict.setdefault(parts, name, _Columns()).columns.append(batch.column(name))
     return out
 
 
