@@ -370,6 +370,10 @@ def _debug_cause(exc: BaseException) -> None:
 
 def entry() -> None:
     """The ``rehabkit`` command: :func:`main`, then the exit, without the interpreter's last collections."""
+    # the engines' imports and a run's set-up make ~10^6 objects that live as long as the process: the collector's
+    # default thresholds walk them all again twice on the way (~40 ms of a 1 s run); its youngest generation is
+    # still swept, every 10^5 allocations, and a run's loop sweeps and freezes it as it starts
+    gc.set_threshold(100_000, 50, 1000)
     code = main()
     # the collections at interpreter exit walk every object the engines made: ~0.2 s of a 1.3 s run. Frozen, they
     # are left to the OS; atexit handlers (Ray, Rerun) still run, and every output is already whole and closed.
