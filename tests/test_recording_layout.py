@@ -62,7 +62,7 @@ class _Components(dict):
         return value
 
     def get(self, name: str, default=None):
-        return self[name] if name in self else default
+        return self[name] if name in self else default  # noqa: SIM401 (dict.get would skip the conversion)
 
     def values(self):
         return [self[name] for name in self]
