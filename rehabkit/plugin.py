@@ -54,7 +54,7 @@ from rehabkit.core.kinds.interfaces import (
     Trajectory,
 )
 from rehabkit.core.kinds.metric import Metric
-from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.names import nearest, suggest
 from rehabkit.core.kinds.trace import Trace
 from rehabkit.core.plugins.hookspecs import hookimpl
 from rehabkit.core.plugins.lifecycle import Contribution, RunTap, Section
@@ -102,8 +102,9 @@ __all__ = [
     # what a backend declares it can do, and a plugin ``requires``
     "ExternalTorques", "Contacts", "HostsBodies", "SceneGeometry", "SceneObjects", "HeldObjects", "Cameras",
     "Instruments", "BaseState", "NamedJoints",
-    # a plugin's own data files and messages: YAML with located errors, "did you mean" for a misspelt name
-    "load_yaml", "suggest",
+    # a plugin's own data files and messages: YAML with located errors, "did you mean" for a misspelt name (said
+    # after a message, or as an error's fix: SettingError(..., fix=nearest(name, names)))
+    "load_yaml", "suggest", "nearest",
     # describing metrics; extensions' contributions and limits
     "Metric", "Contribution", "RunTap", "Section", "Narrowing", "LimitBreach",
     # errors

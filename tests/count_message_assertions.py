@@ -7,7 +7,7 @@ TEXT  : pytest.raises(match=...); or an assert with a comparison (in / not in / 
         .cause, .reason, .describe(), .getvalue(), or a local name assigned from one of those.
 (A parse of a file's data, json.loads(...)/yaml.safe_load(...), is read as fields, not text.)
 FIELD : an assert that reads a field of an error/result: .diagnostics .mark .line .col .quantity .rule
-        .breach .returncode .setting .at_s .located, or .joint/.limit/.path not being called,
+        .breach .returncode .setting .at_s .located .fix, or .joint/.limit/.path not being called,
         or a name `code`/`exit_code`/`rc` compared with an int, or a call of tests/located.py's readers
         (located(), where(), set_located(): a CLI's `file:line:col: path:` lines / a ScenarioError's
         diagnostics read back as fields).
@@ -21,7 +21,7 @@ from pathlib import Path
 TEXT_ATTRS = {"stderr", "stdout", "out", "err", "message", "cause", "reason", "text", "output"}
 TEXT_CALLS = {"str", "repr", "readouterr", "describe", "getvalue", "read_text", "format_exc"}
 FIELD_ATTRS = {"diagnostics", "mark", "line", "col", "quantity", "rule", "breach", "returncode", "setting",
-               "at_s", "located", "joint", "limit", "path"}
+               "at_s", "located", "joint", "limit", "path", "fix"}
 CODE_NAMES = {"code", "exit_code", "rc", "status"}
 FIELD_READERS = {"located", "where", "set_located"}
 

@@ -51,3 +51,22 @@ def said(text: str) -> list[str]:
     words written in the test."""
     found = sorted([*LOCATED.finditer(text), *SET.finditer(text)], key=lambda m: m.start())
     return [text[m.end():].split("\n", 1)[0] for m in found]
+
+
+def refusal(scenario, *sets: str):
+    """What ``rehabkit validate SCENARIO --set SET …`` refuses, as the :class:`ScenarioError` it prints: the file,
+    then the run's setup but its backend, then its first plan, as validate checks them — its diagnostics' fields
+    (``.fix`` among them) asserted rather than its stderr's words (validate has no machine-readable output)."""
+    from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.core.scenario.loader import load_scenario
+    from rehabkit.core.setup.assembly import assemble
+    from rehabkit.core.setup.first_plan import check_first_plan
+
+    try:
+        check_first_plan(assemble(load_scenario(scenario, list(sets)), default_registry(), default_extensions(),
+                                  upto="plugins"))
+    except ScenarioError as exc:
+        return exc
+    raise AssertionError(f"validate accepts {scenario} {' '.join(sets)}")

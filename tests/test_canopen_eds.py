@@ -127,6 +127,7 @@ def test_a_dcf_for_node_1_given_to_node_2_is_refused_for_its_cob_ids(tmp_path):
     diag = _validate(tmp_path, {"drives": drives})
     assert diag.path == "backend.drives.1.eds" and "is a DCF commissioned for node 1 (maxon_EPOS4-Module-50-15_node1" \
         ".dcf:54: NodeID=1): its PDOs' COB-IDs are node 1's, not node 2's" in diag.message
+    assert diag.fix == "give this drive node_id: 1, or commission a DCF for node 2"
     text = (EDS / "maxon_EPOS4-Module-50-15_node1.dcf").read_text("latin-1").replace("NodeID=1\n", "NodeID=2\n")
     (tmp_path / "uncommissioned.dcf").write_text(text, "latin-1")  # (said to be node 2's: its COB-IDs are still 1's)
     drives[1]["eds"] = str(tmp_path / "uncommissioned.dcf")
@@ -139,7 +140,7 @@ def test_the_drives_own_pdos_count_in_the_bus_load_and_the_fix_is_named(tmp_path
     of them do not fit; ``other_pdos: disable`` turns them off and the same rate fits."""
     diag = _validate(tmp_path, {"drives": _six("nanotec_C5-E-2-09.eds")}, rate=500)
     assert diag.path == "rates.control_hz"
-    assert "backend.other_pdos: disable" in diag.message  # (the fix: named only when the drives' own PDOs count)
+    assert "backend.other_pdos: disable" in diag.fix  # (named only when the drives' own PDOs count)
     assert _validate(tmp_path, {"drives": _six("nanotec_C5-E-2-09.eds"), "other_pdos": "disable"}, rate=500) is None
 
 

@@ -10,7 +10,7 @@ import warnings
 
 from rehabkit.cli import main
 from tests.conftest import ROOT, SCENARIOS
-from tests.located import located, set_located, suggested
+from tests.located import located, refusal, set_located, suggested, where
 
 
 def cli(*args, cwd=ROOT):
@@ -80,17 +80,17 @@ def test_validate_checks_fixed_targets_against_the_patients_range():
     assert r.returncode == 2 and len(r.stderr.splitlines()) == 1  # (one error, no traceback)
     assert [(os.path.basename(f), *rest) for f, *rest in located(r.stderr)] == [
         ("hit_roundtrip.yaml", 30, 7, "task.targets.0")], r.stderr
-    assert "outside_rom: nearest" in r.stderr  # (the fix)
     assert "lexos_patient.yaml: ok (fixed targets within patient P01's ranges)" in r.stdout
+    (d,) = refusal(example).diagnostics  # (its fix, a field; the line as said: tests/test_message_wording.py)
+    assert d.fix == "move the target into the range, or set patient.outside_rom: nearest to use the nearest " \
+        "admissible point"
     r = cli("validate", example, "--set", "patient.outside_rom=nearest")
     assert r.returncode == 0
     assert "target 'A' outside the range of elbow_1: would be replaced by the nearest admissible posture" in r.stdout
     # the envelope's range without a patient: its own range is the fix to name (a profile's choice is not there)
-    r = cli("validate", str(SCENARIOS / "hit_roundtrip.yaml"),
-            "--set", "safety.joints={elbow_1: {range_deg: [20, 80]}}")
-    assert r.returncode == 2 and [x[1:] for x in located(r.stderr)] == [(30, 7, "task.targets.0")], r.stderr
-    assert r.stderr.rstrip().endswith("move the target into the range, or widen safety.joints.elbow_1.range_deg")
-    assert "outside_rom" not in r.stderr
+    refused = refusal(SCENARIOS / "hit_roundtrip.yaml", "safety.joints={elbow_1: {range_deg: [20, 80]}}")
+    assert where(refused) == [(30, 7, "task.targets.0")]
+    assert refused.diagnostics[0].fix == "move the target into the range, or widen safety.joints.elbow_1.range_deg"
 
 
 def test_missing_file_and_setup_errors_are_messages_not_tracebacks(tmp_path):

@@ -59,9 +59,9 @@ def test_a_layers_own_section_is_validated_located_and_in_the_schema(tmp_path):
     bad.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nfast_moves:\n  share: 3\nfast_move: {{}}\n")
     with pytest.raises(ScenarioError) as err:
         load_scenario(bad, extensions=exts)
-    found = {(d.path, d.mark.line, d.mark.col): d.message for d in err.value.diagnostics}
-    assert "less than or equal to 1" in found[("fast_moves.share", 3, 10)]
-    assert "did you mean 'fast_moves'" in found[("fast_move", 4, 1)]
+    found = {(d.path, d.mark.line, d.mark.col): d for d in err.value.diagnostics}
+    assert "less than or equal to 1" in found[("fast_moves.share", 3, 10)].message
+    assert found[("fast_move", 4, 1)].fix.startswith("did you mean 'fast_moves'")
     schema = scenario_model(default_registry(), exts).model_json_schema()
     assert schema["properties"]["fast_moves"]["description"] == "what counts as a fast move"
 

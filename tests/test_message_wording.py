@@ -24,6 +24,42 @@ def test_a_located_scenario_error_reads_file_line_col_path_message():
                          "arm3.yaml:25:11: duration: a number is needed here")
 
 
+def test_a_diagnostics_fix_is_said_after_its_message():
+    """The fix is a field of its own (tests elsewhere assert ``.fix``); said after the message, past a ``;``."""
+    d = Diagnostic(Mark("arm3.yaml", 9, 5), "planner.type", "unknown planner plugin 'multicubic'",
+                   "did you mean 'multi-cubic'?")
+    assert str(d) == "arm3.yaml:9:5: planner.type: unknown planner plugin 'multicubic'; did you mean 'multi-cubic'?"
+    assert d.text == "unknown planner plugin 'multicubic'; did you mean 'multi-cubic'?"
+
+
+def test_a_refusal_with_its_fix_reads_as_one_line_from_validate():
+    """The command line's one located line per problem, its fix after it (the example of examples/)."""
+    from tests.test_cli import cli
+
+    r = cli("validate", "examples/patient_out_of_range.yaml")
+    assert r.stderr == ("scenarios/hit_roundtrip.yaml:30:7: task.targets.0: target 'A': its joint values put elbow_1 "
+                        "beyond its position limit (90.0°, limit 80.0°): patient P03's passive range is [20.0, 80.0]°; "
+                        "move the target into the range, or set patient.outside_rom: nearest to use the nearest "
+                        "admissible point\n")
+
+
+def test_a_plugins_setting_or_planning_or_setup_error_says_its_fix_after_its_problem():
+    from rehabkit.core.kinds.errors import PlanningError, SettingError, apart
+
+    assert str(SettingError("bandwidth_hz", "100 is too high for a control period of 1 ms", fix="at most 48")) == \
+        "bandwidth_hz: 100 is too high for a control period of 1 ms; at most 48"
+    planning = PlanningError("target 'B': 37% of the way along the straight line 'hand' comes within 3 mm of "
+                             "'tray' (clearance_m 0.02)", target="B", fix="add a via point")
+    assert str(planning) == ("target 'B': 37% of the way along the straight line 'hand' comes within 3 mm of 'tray' "
+                             "(clearance_m 0.02); add a via point")
+    assert apart(planning) == ("target 'B': 37% of the way along the straight line 'hand' comes within 3 mm of 'tray' "
+                               "(clearance_m 0.02)", "add a via point")  # (how a refusal passes the fix on)
+    assert str(SetupError("task.start: target 'A' is Cartesian and the robot's IK gives no configuration for it "
+                          "within the joint ranges", fix="start from a joint-space target")) == (
+        "task.start: target 'A' is Cartesian and the robot's IK gives no configuration for it within the joint "
+        "ranges; start from a joint-space target")
+
+
 def test_a_plugins_refusal_names_the_plugin_then_its_reason(tmp_path):
     from rehabkit.core.run.runner import Runner
     from rehabkit.core.scenario.loader import load_scenario
@@ -130,12 +166,13 @@ def test_a_stops_event_says_when_its_cause_then_the_stop(hit):
 
 
 def test_a_misspelt_name_is_offered_the_nearest_ones_or_the_choices():
-    from rehabkit.core.kinds.names import suggest
+    from rehabkit.core.kinds.names import nearest, suggest
 
     said = [suggest("multicubic", ["multi-cubic", "min-jerk"]), suggest("elbow1", ["elbow_1", "elbow_2", "wrist_1"]),
             suggest("handel", ["base", "elbow_1_link"])]
     assert said == ["; did you mean 'multi-cubic'?", "; did you mean 'elbow_1' or 'elbow_2'?",
                     "; choices: base, elbow_1_link"]
+    assert nearest("multicubic", ["multi-cubic", "min-jerk"]) == "did you mean 'multi-cubic'?"  # (a fix field's)
 
 
 def test_a_key_in_the_other_kind_of_joints_unit_names_the_key_to_write_and_the_robots_own_limit():
@@ -147,6 +184,9 @@ def test_a_key_in_the_other_kind_of_joints_unit_names_the_key_to_write_and_the_r
                     "(the robot's own: [0, 0.04] m)",
                     "elbow is a revolute joint: velocity_m_s [m/s] is for a prismatic joint; write velocity_deg_s "
                     "instead, in deg/s (the robot's own: 124.6 deg/s)"]
+    finger = WrongUnitKey("finger", "range_deg", "range_m", False, "[0, 0.04] m")  # (a diagnostic's two fields)
+    assert (finger.problem, finger.fix) == ("finger is a prismatic joint: range_deg [deg] is for a revolute joint",
+                                            "write range_m instead, in m (the robot's own: [0, 0.04] m)")
 
 
 def test_a_broken_safety_log_chain_says_the_record_its_line_and_what_is_wrong():

@@ -17,7 +17,7 @@ from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.rehab.patient import PatientBase, effective_limits
 from tests.conftest import SCENARIOS
-from tests.located import located, suggested, where
+from tests.located import located, where
 
 HIT = SCENARIOS / "hit_roundtrip.yaml"
 
@@ -58,7 +58,8 @@ def test_a_joint_target_outside_the_patients_range_is_refused_with_its_place(tmp
         run_scenario(path)
     (d,) = err.value.diagnostics  # at target A (line 30 of the file it extends), which breaks elbow_1's range
     assert (Path(d.mark.file).name, d.mark.line, d.mark.col, d.path) == (HIT.name, 30, 7, "task.targets.0")
-    assert "outside_rom: nearest" in d.message  # (the fix, in the message)
+    assert d.fix == "move the target into the range, or set patient.outside_rom: nearest to use the nearest " \
+        "admissible point"
     assert main(["run", str(path), "--out", str(tmp_path / "o")]) == 2
     assert [x[1:] for x in located(capsys.readouterr().err)] == [(30, 7, "task.targets.0")]
     assert not (tmp_path / "o" / "summary.json").exists()  # refused before it runs: nothing written
@@ -93,7 +94,7 @@ def test_unknown_joint_names_are_located_with_suggestions(tmp_path):
     assert where(err.value) == [(6, 5, "patient.joints.elbow1"), (13, 5, "safety.joints.wrist2")]
     assert {Path(d.mark.file).name for d in err.value.diagnostics} == {"s.yaml"}
     elbow, wrist = err.value.diagnostics
-    assert (suggested(elbow.message)[0], suggested(wrist.message)[0]) == ("elbow_1", "wrist_2")  # (the fix: closest)
+    assert (elbow.fix, wrist.fix) == ("did you mean 'elbow_1' or 'elbow_2'?", "did you mean 'wrist_2' or 'wrist_1'?")
 
 
 def test_profile_in_its_own_file_errors_point_into_it(tmp_path):

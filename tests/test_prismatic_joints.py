@@ -17,7 +17,7 @@ from rehabkit.core.run.runner import Runner
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.setup.limits import WrongUnitKey
 from tests.conftest import ROOT
-from tests.located import located, said, set_located
+from tests.located import located, refusal, said, set_located
 from tests.test_cli import cli
 from tests.test_recording_layout import _flat, read_layout, recording
 
@@ -127,11 +127,8 @@ def test_a_degrees_key_on_the_finger_and_a_metres_key_on_an_arm_joint_are_refuse
         WrongUnitKey("panda_finger_joint1", "torque_nm", "force_n", False, "100 N"),
         WrongUnitKey("panda_joint2", "velocity_m_s", "velocity_deg_s", True, "124.6 deg/s"))]
     robot = {**PANDA, "limits": {"panda_finger_joint1": {"range_deg": [0, 0.03]}}}
-    refused = cli("validate", _panda(tmp_path, robot=robot))
-    assert refused.returncode == 2 and [at for *_, at in located(refused.stderr)] == [
-        "robot.limits.panda_finger_joint1.range_deg"]
-    assert "joint 'panda_finger_joint1' is prismatic (metres): range_deg is for a revolute joint; write range_m " \
-           "instead" in refused.stderr
+    (d,) = refusal(_panda(tmp_path, robot=robot)).diagnostics
+    assert (d.path, d.fix) == ("robot.limits.panda_finger_joint1.range_deg", "write range_m instead")
     robot["limits"] = {"panda_finger_joint1": {"range_m": [0, 0.03], "velocity_m_s": 0.1, "effort": 20}}
     assert cli("validate", _panda(tmp_path, robot=robot, safety=None)).returncode == 0
 

@@ -50,15 +50,16 @@ def test_the_plugin_guide_runs_as_written(tmp_path, capsys):
     names = recording(tmp_path / "out" / "run.rrd")["sensors/angles/angles"]["SeriesLines:names"][0]
     assert names == [f"{j} angles" for j in result.summary["per_joint"]]
     assert 0.04 < result.metrics["angle_noise_rms_deg"] < 0.06 and result.metrics["tracking_rms_deg"] < 0.6
-    for wrong, where, said in (("sensor: angles", "controller.sensor", "no sensor 'angle' in this scenario; did you "
-                                "mean 'angles'?"), ("kp: [900, 900, 150, 180, 16, 18]", "controller.kp",
-                                                    "give one gain or 6, one per joint")):
+    for wrong, where, said, fix in (("sensor: angles", "controller.sensor", "no sensor 'angle' in this scenario",
+                                     "did you mean 'angles'? (its sensors: encoders, angles)"),
+                                    ("kp: [900, 900, 150, 180, 16, 18]", "controller.kp",
+                                     "give one gain or 6, one per joint", "")):
         bad = tmp_path / "bad.yaml"
         bad.write_text(scenario.read_text().replace(wrong, "sensor: angle" if "sensor" in wrong else "kp: [900, 900]"))
         with pytest.raises(ScenarioError) as err:
             Runner(load_scenario(bad, registry=registry), registry=registry).build()  # (what `validate` does)
         (d,) = err.value.diagnostics
-        assert d.path == where and said in d.message, d
+        assert d.path == where and said in d.message and d.fix == fix, d
     test = re.search(r"```python\n(import pytest\n\n@pytest.mark.parametrize\(\"noise_deg\".*?)```", guide,
                      re.S).group(1)
     scope: dict = {}

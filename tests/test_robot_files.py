@@ -10,7 +10,7 @@ import pytest
 from rehabkit.api import run_scenario
 from rehabkit.core.run.runner import SetupError
 from tests.conftest import DATA
-from tests.located import located, suggested
+from tests.located import located, refusal
 
 COMMON = """\
     planner: {type: multi-cubic, segment_durations: [1.5, 1.5]}
@@ -97,8 +97,10 @@ def test_missing_limits_are_named(tmp_path):
     p = scenario(tmp_path, f"""\
         robot: {{type: mjcf, file: {DATA / 'arm3.xml'}, ee_frame: tool}}
         """, "task:\n  targets: [{name: a, joints_deg: [0, 0, 0]}]\n")
-    with pytest.raises(SetupError, match="joint 'yaw' has no speed limit; add limits.yaw.velocity_deg_s"):
+    with pytest.raises(SetupError) as refused:
         run_scenario(p)
+    (d,) = refused.value.diagnostics  # (said at the robot's type: the file lacks it)
+    assert (d.path, d.fix) == ("robot.type", "add limits.yaw.velocity_deg_s or default_velocity_deg_s")
 
 
 def test_dh_robot_written_in_yaml(tmp_path, rng):
@@ -191,17 +193,14 @@ def test_a_prismatic_joint_is_read_written_and_judged_in_metres(tmp_path):
     assert "write this posture as `joints: [...]`" in refused.stderr  # (the fix)
 
 
-def test_a_misspelt_end_effector_is_said_at_its_setting_with_the_names_nearest(tmp_path, capsys):
-    from rehabkit.cli.main import main
-
+def test_a_misspelt_end_effector_is_said_at_its_setting_with_the_names_nearest(tmp_path):
     p = tmp_path / "s.yaml"
     p.write_text(f"name: s\nrobot: {{type: urdf, file: {DATA / 'slide2.urdf'}, ee_frame: l2_e}}\n"
                  "planner: {type: multi-cubic, segment_durations: [1]}\ncontroller: {type: joint-pd}\n"
                  "task: {targets: [{name: A, joints: [0, 0.1]}]}\nduration: 1\n")
-    assert main(["validate", str(p)]) == 2
-    said = capsys.readouterr().err
-    assert [(f, line, at) for f, line, _, at in located(said)] == [(str(p), 2, "robot.ee_frame")]
-    assert suggested(said) == ["l2"]  # (the fix)
+    (d,) = refusal(p).diagnostics
+    assert (d.mark.file, d.mark.line, d.path) == (str(p), 2, "robot.ee_frame")
+    assert d.fix == "did you mean 'l2'? (its sites and bodies: base, l1, l2, rehabkit_base)"
 
 
 def test_pinocchios_file_of_a_robot_is_one_in_the_cache_per_variant(tmp_path, monkeypatch):

@@ -226,12 +226,11 @@ def test_a_one_joint_robots_wrench_is_the_least_one_with_its_torque():
     assert w[1, 5] == pytest.approx(-3.0 / (0.3**2 + 1))
 
 
-def test_a_bag_of_a_robot_with_closed_loops_is_refused_by_validate_at_its_setting(capsys):
-    from rehabkit.cli.main import main
+def test_a_bag_of_a_robot_with_closed_loops_is_refused_by_validate_at_its_setting():
+    from tests.located import refusal
 
-    assert main(["validate", str(ROOT / "scenarios" / "capaman_obstacle.yaml"), "--set", "ros.bag=true"]) == 2
-    said = capsys.readouterr().err
-    assert "ros.bag: robot 'capaman' has no tree model" in said and "without --bag" in said
+    (d,) = refusal(ROOT / "scenarios" / "capaman_obstacle.yaml", "ros.bag=true").diagnostics
+    assert (d.path, d.fix) == ("ros.bag", "run it without --bag / ros.bag")
 
 
 def test_a_joint_encoders_revolute_and_prismatic_joints_are_one_joint_state_in_si():

@@ -267,7 +267,7 @@ def test_a_controller_reads_a_sensor_by_the_name_in_its_settings(tmp_path):
         Runner(load_scenario(bad, registry=registry), registry=registry).build()
     (d,) = err.value.diagnostics
     assert (d.path, d.mark.line, d.mark.col) == ("controller.sensor", 4, 3)
-    assert suggested(d.message) == ["encoders"]
+    assert d.fix == "did you mean 'encoders'? (its sensors: encoders)"
 
 
 class _BuggyController(Controller):

@@ -22,7 +22,7 @@ from rehabkit.core.safety.layer import SafetyLayer
 from rehabkit.core.scenario.safety import SafetyConfig
 from rehabkit.core.setup.errors import SetupError
 from tests.conftest import SCENARIOS, checked
-from tests.located import set_located, suggested
+from tests.located import refusal, suggested
 
 ESTOP = SCENARIOS / "safety" / "hit_estop.yaml"
 LINK = {"backend": {"type": "hardware", "clock": "lockstep"}}
@@ -54,11 +54,10 @@ def test_each_category_sends_what_it_says(hit, category):
     assert layer.events[0].data["category"] == category
 
 
-def test_a_stop_category_for_an_unknown_rule_is_refused_where_written(capsys):
-    code = main(["validate", str(ESTOP), "--set", "safety.stop_category.estop=1"])
-    err = capsys.readouterr().err
-    assert (code, set_located(err)) == (2, [("safety.stop_category.estop", "safety.stop_category.estop")])
-    assert suggested(err) == ["e-stop"]  # (the fix)
+def test_a_stop_category_for_an_unknown_rule_is_refused_where_written():
+    (d,) = refusal(ESTOP, "safety.stop_category.estop=1").diagnostics
+    assert (d.mark.file, d.path) == ("<--set safety.stop_category.estop>", "safety.stop_category.estop")
+    assert d.fix == "did you mean 'e-stop'?"
 
 
 def _stop(category: int, link: bool = False) -> dict:

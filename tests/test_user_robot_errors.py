@@ -10,7 +10,7 @@ from rehabkit.core.scenario.errors import ScenarioError
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from tests.conftest import DATA, SCENARIOS
-from tests.located import located, suggested, where
+from tests.located import located, refusal, where
 from tests.test_cli import cli
 
 ARM3 = (DATA / "arm3_dh.yaml").read_text()  # a user's own 3-joint arm, written as a DH table
@@ -114,10 +114,9 @@ def test_gains_auto_refuses_hand_gains_and_a_bandwidth_the_control_rate_cannot_g
     done = cli("validate", str(_write(tmp_path, both)))
     assert (done.returncode, [x[1:] for x in located(done.stderr)]) == (2, [(19, 3, "controller.kp")]), done.stderr
     fast = ARM3.replace("  kp: [300, 300, 150]\n  kd: [20, 20, 8]\n", "  gains: auto\n  bandwidth_hz: 100\n")
-    done = cli("validate", str(_write(tmp_path, fast)))
-    assert (done.returncode, [x[1:] for x in located(done.stderr)]) == (2, [(19, 3, "controller.bandwidth_hz")]), \
-        done.stderr
-    assert "at most 48" in done.stderr  # (the bandwidth the control rate can give: the fix, in the message)
+    refused = refusal(_write(tmp_path, fast))
+    assert where(refused) == [(19, 3, "controller.bandwidth_hz")]
+    assert refused.diagnostics[0].fix == "at most 48"  # (the bandwidth the control rate can give)
 
 
 def test_every_plugins_refusal_is_said_at_once(tmp_path):
@@ -136,10 +135,9 @@ def test_every_plugins_refusal_is_said_at_once(tmp_path):
 def test_a_plan_past_a_speed_limit_names_where_the_limit_was_set_and_what_slows_the_plan():
     """validate refuses a first plan faster than the envelope lets a joint go: at the planner (it made the plan), with
     where the limit comes from and the settings that give the plan more time."""
-    out = cli("validate", str(SCENARIOS / "hit_roundtrip.yaml"),
-              "--set", "safety.joints={wrist_1: {velocity_deg_s: 10}}")
-    assert (out.returncode, [x[1:] for x in located(out.stderr)]) == (2, [(16, 3, "planner.type")]), out.stderr
-    assert out.stderr.rstrip().endswith(
+    refused = refusal(SCENARIOS / "hit_roundtrip.yaml", "safety.joints={wrist_1: {velocity_deg_s: 10}}")
+    assert where(refused) == [(16, 3, "planner.type")]
+    assert refused.diagnostics[0].fix == (
         "the limit is the safety envelope's (safety.joints.wrist_1): give the plan more time (the planner's timing "
         "settings, `rehabkit plugins --fields multi-cubic`) or the joint a higher speed limit there")
 
@@ -148,8 +146,9 @@ def test_an_unknown_joint_under_robot_limits_is_said_at_its_key_with_a_did_you_m
     p = tmp_path / "s.yaml"
     p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nrobot:\n  type: urdf\n"
                  f"  file: {DATA / 'arm2.urdf'}\n  ee_frame: l2\n  limits:\n    j11: {{effort: 5}}\n")
-    r = cli("validate", str(p))
-    assert (r.returncode, located(r.stderr), suggested(r.stderr)) == (2, [(str(p), 7, 5, "robot.limits.j11")], ["j1"])
+    (d,) = refusal(p).diagnostics
+    assert (d.mark.file, d.mark.line, d.mark.col, d.path) == (str(p), 7, 5, "robot.limits.j11")
+    assert d.fix == "did you mean 'j1'? (its joints: j1, j2)"
 
 
 def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
@@ -160,19 +159,20 @@ def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
                  "    - {name: A, joints_deg: [0, 1.5708, 1.5708, 0.5236, -1.5708, 1.5708]}\n"
                  "    - {name: B, position: [-0.45, -0.1, -0.3], orientation_of: A}\n    - {name: C, same_as: A}\n"
                  "    - {name: D, same_as: B}\n    - {name: E, same_as: A}\n")
-    r = cli("validate", str(p))
-    assert (r.returncode, located(r.stderr)) == (2, [(str(p), 5, 17, "task.targets.1.position")]), r.stderr
-    assert "out of reach: no pose solution within the joint limits; its orientation is A's, whose joint values are " \
-           "all within ±2π: written in radians? joints_deg takes degrees (joints_rad takes SI: radians, and " \
-           "metres)" in r.stderr
+    radians = "written in radians? joints_deg takes degrees (joints_rad takes SI: radians, and metres)"
+    (d,) = refusal(p).diagnostics
+    assert (d.mark.file, d.mark.line, d.mark.col, d.path) == (str(p), 5, 17, "task.targets.1.position")
+    assert d.message.endswith("out of reach: no pose solution within the joint limits")
+    assert d.fix == f"its orientation is A's, whose joint values are all within ±2π: {radians}"
     urdf = tmp_path / "knee.urdf"  # (a joint that cannot go below 0.5 rad, 28.6°)
     urdf.write_text((DATA / "arm2.urdf").read_text().replace('lower="-2" upper="2"', 'lower="0.5" upper="2"'))
     p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nrobot: {{type: urdf, file: {urdf}, ee_frame: l2}}\n"
                  "planner: {type: multi-cubic, segment_durations: [1.0]}\ntask:\n  targets:\n"
                  "    - {name: A, joints_deg: [45, 0]}\n    - {name: B, joints_deg: [1.2, 0.4]}\n")
-    r = cli("validate", str(p))
-    assert r.returncode == 2 and "task.targets.1.joints_deg: target 'B': its joint values put j1 beyond its position " \
-        "limit at t+0.000s (1.2°, limit 28.6°); its joint values are all within ±2π: written in radians?" in r.stderr
+    (d,) = refusal(p).diagnostics
+    assert d.path == "task.targets.1.joints_deg"
+    assert d.message == "target 'B': its joint values put j1 beyond its position limit at t+0.000s (1.2°, limit 28.6°)"
+    assert d.fix == f"its joint values are all within ±2π: {radians}"
 
 
 def test_a_task_whose_postures_all_look_like_radians_is_said_where_they_fit_the_ranges(tmp_path, capsys):

@@ -39,12 +39,12 @@ class JointPD(Controller):
             given = [k for k in ("kp", "kd") if k in config.model_fields_set]
             if given:
                 raise SettingError(given[0], f"{' and '.join(given)} {'are' if len(given) > 1 else 'is'} computed "
-                                 "from the model's inertia here (auto); leave it out, or ask for manual ones")
+                                 "from the model's inertia here (auto)", fix="leave it out, or ask for manual ones")
             w = 2 * np.pi * config.bandwidth_hz
             if w * context.control_dt > 0.3:  # a sampled PD this fast against its own period rings or diverges
                 most = 0.3 / context.control_dt / 2 / np.pi
                 raise SettingError("bandwidth_hz", f"{config.bandwidth_hz:g} is too high for a control period "
-                                 f"of {context.control_dt * 1000:g} ms; at most {most:.0f}")
+                                 f"of {context.control_dt * 1000:g} ms", fix=f"at most {most:.0f}")
             self.kp, self.kd = np.full(n, w * w), np.full(n, 2 * config.damping_ratio * w)  # per unit inertia
             # A joint's own damping d, compensated along the reference by the feedforward, still acts on the error
             # (d·ė): a light joint with a heavy drive (an xArm7 wrist: 1.4e-4 kg·m² against 2 N·m·s/rad) would

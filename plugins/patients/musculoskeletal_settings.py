@@ -10,7 +10,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from rehabkit.kinematics import Strap, Wearable
-from rehabkit.plugin import SettingError, StrictModel, suggest
+from rehabkit.plugin import SettingError, StrictModel, nearest, suggest
 
 Vec3 = tuple[float, float, float]
 
@@ -127,8 +127,8 @@ def per_group(values: dict[str, float], arm_groups: dict[str, tuple[str, ...]], 
     start = np.cumsum([0, *(len(m) for m in arm_groups.values())])
     for group, value in values.items():
         if group not in names:
-            raise SettingError((*what.split("."), group), f"no muscle group '{group}' in this arm"
-                               f"{suggest(group, arm_groups)}")
+            raise SettingError((*what.split("."), group), f"no muscle group '{group}' in this arm",
+                               fix=nearest(group, arm_groups))
         out[start[names[group]] : start[names[group] + 1]] = value
     return out
 
@@ -158,8 +158,8 @@ def wearable_for(config: MusculoskeletalConfig, cat, robot, profile) -> Wearable
                          ("contracture_deg", config.contracture_deg)):
         for name in names:
             if name not in cat.joints:
-                raise SettingError((*field.split("."), name),
-                                   f"no joint '{name}' in {config.model}{suggest(name, cat.joints)}")
+                raise SettingError((*field.split("."), name), f"no joint '{name}' in {config.model}",
+                                   fix=nearest(name, cat.joints))
     if config.synergy.elbow_per_shoulder > 0 and "shoulder_elevation" not in cat.joints:
         raise SettingError("synergy", f"{config.model} has no shoulder")
     return wearable

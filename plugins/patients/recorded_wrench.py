@@ -56,8 +56,8 @@ class RecordedWrench(Patient):
             frames = ", ".join(f.name for f in self.model.frames if f.name != "universe")
             where = "frame" if config.frame else "topic"
             raise SettingError(where, f"the wrench's frame '{name}' is not a frame of robot "
-                                      f"'{context.robot.model.name}' (its frames: {frames}); name the frame it "
-                                      "is given in and acts at: frame")
+                                      f"'{context.robot.model.name}' (its frames: {frames})",
+                               fix="name the frame it is given in and acts at: frame")
         self.frame = self.model.getFrameId(name)
         self.data = self.model.createData()
         self.t, self.w = w.t, (-1.0 if config.reaction else 1.0) * w.values

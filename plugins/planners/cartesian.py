@@ -114,7 +114,8 @@ class CartesianPlanner(Planner):
                 seg.append(self._follow(robot, want, seg[-1] if seg else qs[-1], free, target, s[i]))
             if target.q is not None and np.abs(seg[-1] - target.q).max() > np.radians(1):
                 raise PlanningError(f"target '{target.name}': the straight line ends in another posture than its "
-                                    "joint values (another IK branch); give it as a position", target=target.name)
+                                    "joint values (another IK branch)", target=target.name,
+                                    fix="give it as a position")
             seg = np.array(seg)
             T = cfg.segment_durations[k] if cfg.segment_durations else max(dist / cfg.speed_m_s,
                                                                            turn / cfg.turn_deg_s, 0.2)
@@ -151,16 +152,16 @@ class CartesianPlanner(Planner):
         jump = float(np.degrees(np.abs(q - prev).max()))
         if jump > self.config.jump_deg:
             raise PlanningError(f"target '{target.name}': {s:.0%} of the way along the straight line the arm must "
-                                f"turn a joint by {jump:.0f} deg at once (a singularity or a joint limit); add a via "
-                                "point or go in joint space", target=target.name)
+                                f"turn a joint by {jump:.0f} deg at once (a singularity or a joint limit)",
+                                target=target.name, fix="add a via point or go in joint space")
         if self.checker is not None:
             hits = self.checker.hits(q)
             if hits:
                 h = min(hits, key=lambda h: h.distance)
                 raise PlanningError(f"target '{target.name}': {s:.0%} of the way along the straight line "
                                     f"'{h.robot_geom}' comes within {max(h.distance, 0) * 1000:.0f} mm of "
-                                    f"'{h.world_geom}' (clearance_m {self.config.clearance_m}); add a via point",
-                                    target=target.name)
+                                    f"'{h.world_geom}' (clearance_m {self.config.clearance_m})",
+                                    target=target.name, fix="add a via point")
         return q
 
 

@@ -15,7 +15,7 @@ class MjcfRobot(Robot):
         except ModelFileError as exc:
             if exc.setting is None:
                 raise
-            raise SettingError(exc.setting, str(exc)) from None
+            raise SettingError(exc.setting, exc.problem, fix=exc.fix) from None
 
 
 @hookimpl

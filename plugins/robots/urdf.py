@@ -39,13 +39,13 @@ class UrdfRobot(Robot):
             path = (resolve_uri(config.file, context.scenario_dir, packages, what="description") if "://" in config.file
                     else context.resolve(config.file))
         except DescriptionError as exc:
-            raise SettingError("file", str(exc)) from None
+            raise SettingError("file", f"{exc.uri}: {exc.problem}", fix=exc.fix) from None
         if not path.exists():
             raise SettingError("file", f"no such file: {path}")
         try:
             path = prepared(path, packages, config.xacro_args)
         except DescriptionError as exc:
-            raise SettingError("file", str(exc)) from None
+            raise SettingError("file", f"{exc.uri}: {exc.problem}", fix=exc.fix) from None
         if (left := visual_only(path)) is not None and context.note is not None:
             context.note(0.0, left)
         velocity, effort = {}, {}
@@ -60,7 +60,7 @@ class UrdfRobot(Robot):
         except ModelFileError as exc:
             if exc.setting is None:
                 raise
-            raise SettingError(exc.setting, str(exc)) from None
+            raise SettingError(exc.setting, exc.problem, fix=exc.fix) from None
 
 
 def _radians(urdf, jid: int, path) -> None:

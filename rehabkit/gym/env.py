@@ -228,7 +228,7 @@ class ScenarioEnv(gym.Env):
 def _learning(loaded: LoadedScenario):
     if loaded.model.learning is None:
         raise PluginSetupError(loaded.source, (), f"{loaded.path.name} has no learning: section (the policy's "
-                               "action, observation, reward and rate); add one to use it as an environment")
+                               "action, observation, reward and rate)", fix="add one to use it as an environment")
     return loaded.model.learning
 
 

@@ -40,13 +40,15 @@ class LinkBusyError(BackendFaultError):
 
 class LinkKeyError(BackendFaultError):
     """The bridge and this host do not share the robot's key: ``bridge`` (its address), ``key_file`` (this host's,
-    or None), ``problem`` (which side lacks what, naming key ids)."""
+    or None), ``problem`` (which side lacks what, naming key ids), ``fix`` (what gives both ends the same key)."""
 
     def __init__(self, bridge: str, key_file: str | None, problem: str):
         self.bridge, self.key_file, self.problem = bridge, key_file, problem
-        fix = (f"give both ends the same key file (the bridge's --key, this scenario's backend.key_file: {key_file})"
-               if key_file else "set backend.key_file to the robot's key file (the one the bridge was given)")
-        super().__init__(f"the bridge at {bridge} refuses this host's session: {problem}; {fix}")
+        self.fix = (f"give both ends the same key file (the bridge's --key, this scenario's backend.key_file: "
+                    f"{key_file})" if key_file else
+                    "set backend.key_file to the robot's key file (the one the bridge was given)")
+        self.said = f"the bridge at {bridge} refuses this host's session: {problem}"
+        super().__init__(f"{self.said}; {self.fix}")
 
 
 class BridgeHoldError(BackendFaultError):
@@ -109,7 +111,7 @@ class HardwareConfig(StrictModel):
             key = load_key(context.resolve(self.key_file))
             check_robot(key, f"{context.robot.model.name}-{self.robot_id}")
         except KeyFileError as exc:
-            raise SettingError("key_file", f"{exc.path}: {exc.problem}; {exc.fix}") from None
+            raise SettingError("key_file", f"{exc.path}: {exc.problem}", fix=exc.fix) from None
         return key
 
 

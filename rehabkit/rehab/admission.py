@@ -43,14 +43,15 @@ def adapt_segments(robot_cfg: StrictModel, profile: PatientBase | None, source) 
     return robot_cfg.model_copy(update=update), notes
 
 
-def sliding_rom(name: str, model: RobotModel) -> str | None:
-    """The message for a range of motion given for a prismatic joint (a person's is in degrees), else None."""
+def sliding_rom(name: str, model: RobotModel) -> tuple[str, str] | None:
+    """The message for a range of motion given for a prismatic joint (a person's is in degrees) and its fix, else
+    None."""
     j = model.joint_names.index(name)
     if model.revolute[j]:
         return None
     lo, hi = model.limits.lower[j], model.limits.upper[j]
     return (f"{name} is a prismatic joint: a range of motion (passive_deg, active_deg, max_speed_deg_s) is a revolute "
-            f"joint's, in degrees; limit a prismatic joint in the safety envelope instead, in metres (safety.joints."
+            "joint's, in degrees", f"limit a prismatic joint in the safety envelope instead, in metres (safety.joints."
             f"{name}: {{range_m: [{lo:.4g}, {hi:.4g}], velocity_m_s: ...}}: the robot's own range)")
 
 
@@ -59,10 +60,10 @@ def profile_narrowings(model: RobotModel, profile: PatientBase, source) -> list[
     (:class:`ScenarioError`)."""
     problems = []
     for name in profile.joints:
-        msg = unknown_joint(name, model) or sliding_rom(name, model)
-        if msg is not None:
+        said = unknown_joint(name, model) or sliding_rom(name, model)
+        if said is not None:
             path = ("patient", "joints", name)
-            problems.append(Diagnostic(source.key_marks.get(path, source.value_marks[()]), ".".join(path), msg))
+            problems.append(Diagnostic(source.key_marks.get(path, source.value_marks[()]), ".".join(path), *said))
     if problems:
         raise ScenarioError(problems)
     return patient_narrowings(model, profile)
@@ -159,9 +160,9 @@ def admit_targets(targets: dict[str, Target], task: TaskSpec, robot: Robot, robo
                    f"widen safety.joints.{names[j]}.range_{'deg' if turns else 'm'}")
             span = (f"[{math.degrees(limits.lower[j]):.1f}, {math.degrees(limits.upper[j]):.1f}]°" if turns else
                     f"[{limits.lower[j]:.4g}, {limits.upper[j]:.4g}] m")
-            problems.append(Diagnostic(mark, ".".join(map(str, path)), (
-                f"target '{spec.name}': {how} {breach.describe()}: {whose} is {span}; move the target into "
-                f"the range, or {fix}")))
+            problems.append(Diagnostic(mark, ".".join(map(str, path)),
+                                       f"target '{spec.name}': {how} {breach.describe()}: {whose} is {span}",
+                                       f"move the target into the range, or {fix}"))
     if problems:
         raise ScenarioError(problems)
     for spec in task.targets:  # aliases of a replaced target go where it went

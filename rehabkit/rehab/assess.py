@@ -216,11 +216,12 @@ def assessed_joints(model: RobotModel, profile: PatientBase, joints: list[str] |
     turning = [n for n, turns in zip(model.joint_names, model.revolute, strict=True) if turns]
     if not joints:
         return [j for j in turning if j in profile.joints] or turning
+    from rehabkit.core.kinds.errors import with_fix
     from rehabkit.core.setup.limits import unknown_joint
 
     for name in joints:
-        if (msg := unknown_joint(name, model)) is not None:
-            raise ValueError(f"--joints: {msg}")
+        if (said := unknown_joint(name, model)) is not None:
+            raise ValueError(f"--joints: {with_fix(*said)}")
         if name not in turning:
             raise ValueError(f"--joints: {name} is a prismatic joint: an assessment measures a person's range of "
                              f"motion on revolute joints (in degrees); leave it out (its revolute joints: "

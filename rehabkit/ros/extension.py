@@ -48,8 +48,8 @@ def rehabkit_narrow_limits(scenario, source, model) -> list:
 
         mark = source.key_marks.get(("ros", "bag")) or source.value_marks.get(("ros", "bag")) or source.value_marks[()]
         raise ScenarioError([Diagnostic(mark, "ros.bag", f"robot '{model.name}' has no tree model for a "
-                                        f"bag's /robot_description and /tf (a closed kinematic loop: {exc}); run it "
-                                        "without --bag / ros.bag")]) from None
+                                        f"bag's /robot_description and /tf (a closed kinematic loop: {exc})",
+                                        "run it without --bag / ros.bag")]) from None
     return []
 
 

@@ -50,8 +50,8 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, cont
     if d.commissioned is not None and d.commissioned[0] != spec.node_id:
         node, line = d.commissioned
         raise SettingError(where, f"{path.name} is a DCF commissioned for node {node} ({path.name}:{line}: NodeID="
-                           f"{node}): its PDOs' COB-IDs are node {node}'s, not node {spec.node_id}'s; give this drive "
-                           f"node_id: {node}, or commission a DCF for node {spec.node_id}")
+                           f"{node}): its PDOs' COB-IDs are node {node}'s, not node {spec.node_id}'s",
+                           fix=f"give this drive node_id: {node}, or commission a DCF for node {spec.node_id}")
     missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in (SENSOR_SET if sensor else SET) if not d.has(x, s)]
     if missing:
         what = "a CiA 404 device's EDS" if sensor else "a CiA 402 drive's EDS"
@@ -137,12 +137,13 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
         what = f"{len(specs)} drives" + (f" and {len(sensors)} sensors" if sensors else "")
         step = config.timestep if config.bus is None or config.bus.simulated else 1e-4
         raise SettingError(("rates", "control_hz"), f"the CAN bus cannot carry {what} at {rate:g} Hz: "
-                           f"{load.describe()}; set rates.control_hz: {_fitting(load, step)} (the highest rate that "
-                           f"fits{_steps(step)}; the bus carries up to {math.floor(load.highest_rate_hz())} Hz), "
+                           f"{load.describe()}", root=True, fix=f"set rates.control_hz: {_fitting(load, step)} (the "
+                           f"highest rate that fits{_steps(step)}; the bus carries up to "
+                           f"{math.floor(load.highest_rate_hz())} Hz), "
                            + ("turn off the drives' own PDOs the run does not use (backend.other_pdos: disable), "
                               if load.others_bits else "")
                            + (f"raise backend.bitrate (now {config.bitrate}; CAN's top: 1000000), "
-                              if config.bitrate < 1_000_000 else "") + "or put fewer nodes on this bus", root=True)
+                              if config.bitrate < 1_000_000 else "") + "or put fewer nodes on this bus")
     return specs, sensors, load
 
 

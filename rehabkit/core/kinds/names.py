@@ -6,10 +6,18 @@ import difflib
 from collections.abc import Iterable
 
 
-def suggest(name: str, candidates: Iterable[str]) -> str:
-    """``"; did you mean 'x'?"`` for the closest candidates, or the list of choices."""
+def nearest(name: str, candidates: Iterable[str]) -> str:
+    """``"did you mean 'x'?"`` for the closest candidates, or the list of choices ("" where there are none): the fix
+    of a misspelt name, as an error's ``fix`` field holds it."""
     candidates = sorted(candidates)
     close = difflib.get_close_matches(name, candidates, n=3, cutoff=0.5)
     if close:
-        return "; did you mean " + " or ".join(f"'{c}'" for c in close) + "?"
-    return f"; choices: {', '.join(candidates)}" if candidates else ""
+        return "did you mean " + " or ".join(f"'{c}'" for c in close) + "?"
+    return f"choices: {', '.join(candidates)}" if candidates else ""
+
+
+def suggest(name: str, candidates: Iterable[str]) -> str:
+    """``"; did you mean 'x'?"`` for the closest candidates, or the list of choices: :func:`nearest` said after a
+    message."""
+    fix = nearest(name, candidates)
+    return f"; {fix}" if fix else ""

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rehabkit.core.kinds.errors import with_fix
+
 
 @dataclass(frozen=True)
 class Mark:
@@ -19,15 +21,22 @@ class Mark:
 
 @dataclass(frozen=True)
 class Diagnostic:
-    """One problem in a scenario."""
+    """One problem in a scenario: where (``mark``, the setting's ``path``), what is wrong (``message``) and, where
+    there is one, how to put it right (``fix``: kept out of the message, so it is read as a field, not parsed out)."""
 
     mark: Mark
     path: str
     message: str
+    fix: str = ""
+
+    @property
+    def text(self) -> str:
+        """The message as a person reads it: its fix after it."""
+        return with_fix(self.message, self.fix)
 
     def __str__(self) -> str:
         where = f"{self.path}: " if self.path else ""
-        return f"{self.mark}: {where}{self.message}"
+        return f"{self.mark}: {where}{self.text}"
 
 
 class ScenarioError(Exception):

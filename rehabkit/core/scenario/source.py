@@ -78,7 +78,7 @@ def read_yaml(path: Path) -> Source:
         line = raw.count(b"\n", 0, exc.start) + 1
         col = exc.start - (raw.rfind(b"\n", 0, exc.start) + 1) + 1
         raise ScenarioError([Diagnostic(Mark(name, line, col), "", f"the file is not UTF-8 text (byte "
-                                        f"0x{raw[exc.start]:02x}); save it as UTF-8")]) from None
+                                        f"0x{raw[exc.start]:02x})", "save it as UTF-8")]) from None
     loader = YAML_LOADER(text)  # libyaml's parser where installed: the same marks
     try:
         node = loader.get_single_node()

@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.names import nearest
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
 from rehabkit.core.plugins.registry import PluginError, PluginRegistry
 from rehabkit.core.scenario.errors import Diagnostic, Mark, ScenarioError
@@ -74,16 +74,17 @@ def _fields_at(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str] | None
     return sorted({f for m in models for f in m.model_fields if f != "type"}) if models else None
 
 
-def _describe(err: dict[str, Any]) -> str:
-    msg = err["msg"]
+def _describe(err: dict[str, Any]) -> tuple[str, str]:
+    """A pydantic error's message and, for a misspelt choice, its fix (the nearest choices)."""
+    msg, fix = err["msg"], ""
     if err["type"] not in ("missing", "extra_forbidden") and "input" in err:
         value = err["input"]
         if not isinstance(value, (dict, list)):
             msg += f" (got {value!r})"
             if err["type"] == "literal_error" and isinstance(value, str):  # a misspelt choice: the nearest
                 choices = re.findall(r"'([^']*)'", err.get("ctx", {}).get("expected", ""))
-                msg += suggest(value, choices)
-    return msg
+                fix = nearest(value, choices)
+    return msg, fix
 
 
 def _check_plugin_types(src: Source, registry: PluginRegistry, slots: dict[tuple[str, str], str]) -> list[Diagnostic]:
@@ -120,7 +121,8 @@ def _check_plugin_types(src: Source, registry: PluginRegistry, slots: dict[tuple
                 Diagnostic(
                     src.key_marks.get(path, src.value_marks[()]),
                     _dotted(path),
-                    f"missing 'type'; installed {kind} plugins: {', '.join(names)}",
+                    "missing 'type'",
+                    f"installed {kind} plugins: {', '.join(names)}",
                 )
             )
         elif node["type"] not in names:
@@ -129,7 +131,8 @@ def _check_plugin_types(src: Source, registry: PluginRegistry, slots: dict[tuple
                 Diagnostic(
                     src.value_marks.get(tpath, src.value_marks[()]),
                     _dotted(tpath),
-                    f"unknown {kind} plugin '{node['type']}'{suggest(str(node['type']), names)}",
+                    f"unknown {kind} plugin '{node['type']}'",
+                    nearest(str(node["type"]), names),
                 )
             )
         else:
@@ -158,10 +161,10 @@ def validate_source(src: Source, registry: PluginRegistry, file: Path,
                 continue  # already reported as an unknown plugin type
             is_key = err["type"] in ("extra_forbidden", "missing")
             path, mark = _locate(src, loc, key=is_key)
-            msg = _describe(err)
+            msg, fix = _describe(err)
             if err["type"] == "extra_forbidden":
                 allowed = _fields_at(model, loc[:-1]) or []
-                msg = f"unknown field '{loc[-1]}'{suggest(str(loc[-1]), allowed)}"
+                msg, fix = f"unknown field '{loc[-1]}'", nearest(str(loc[-1]), allowed)
             elif err["type"] == "missing" and isinstance(loc[-1], int):  # a fixed-length list one short
                 msg = f"too few values: {loc[-1]} given, value {loc[-1] + 1} is missing"
                 is_key = False
@@ -170,7 +173,7 @@ def validate_source(src: Source, registry: PluginRegistry, file: Path,
                 msg = f"missing required field '{loc[-1]}'"
             # the path as the YAML spells it: pydantic's union tags (plugin names) left out
             shown = _dotted(path + (loc[-1],) if is_key and path[-1:] != (loc[-1],) else path) or _dotted(loc)
-            problems.append(Diagnostic(mark, shown, msg))
+            problems.append(Diagnostic(mark, shown, msg, fix))
         if not problems:
             problems.append(Diagnostic(Mark(str(file), 0, 0), "", str(exc)))
     else:
@@ -191,7 +194,7 @@ def _event_planner_problems(src: Source, scenario: ScenarioBase) -> list[Diagnos
         if "type" in ev.planner:
             path, mark = _locate(src, (*base, "type"), key=True)
             out.append(Diagnostic(mark, _dotted((*base, "type")), "an event's planner settings are for the "
-                                  f"scenario's planner ('{scenario.planner.type}'); leave out 'type'"))
+                                  f"scenario's planner ('{scenario.planner.type}')", "leave out 'type'"))
             continue
         model = type(scenario.planner)
         try:
@@ -201,7 +204,7 @@ def _event_planner_problems(src: Source, scenario: ScenarioBase) -> list[Diagnos
                 loc = (*base, *err["loc"])
                 unknown = err["type"] == "extra_forbidden"
                 _, mark = _locate(src, loc, key=unknown)
-                msg = (f"unknown field '{loc[-1]}' of planner '{scenario.planner.type}'"
-                       f"{suggest(str(loc[-1]), list(model.model_fields))}" if unknown else _describe(err))
-                out.append(Diagnostic(mark, _dotted(loc), msg))
+                said = (f"unknown field '{loc[-1]}' of planner '{scenario.planner.type}'",
+                        nearest(str(loc[-1]), list(model.model_fields))) if unknown else _describe(err)
+                out.append(Diagnostic(mark, _dotted(loc), *said))
     return out

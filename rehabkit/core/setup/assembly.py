@@ -23,6 +23,7 @@ from typing import Any, Literal
 
 from rehabkit.core.kinds.capabilities import CompliantGaps
 from rehabkit.core.kinds.context import Seeds
+from rehabkit.core.kinds.errors import apart
 from rehabkit.core.kinds.interfaces import (
     Backend,
     Context,
@@ -35,7 +36,7 @@ from rehabkit.core.kinds.interfaces import (
     Sensor,
     Target,
 )
-from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.names import nearest
 from rehabkit.core.plugins.lifecycle import Extensions
 from rehabkit.core.plugins.registry import PluginRegistry
 from rehabkit.core.safety.layer import SafetySetup
@@ -180,7 +181,8 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     try:
         a.targets = resolve_targets(sc.task, a.robot, sc.seed)
     except PlanningError as exc:
-        raise at_target(a, exc, "task") or SetupError(f"task: {exc}") from exc
+        said, fix = apart(exc)
+        raise at_target(a, exc, "task") or SetupError(f"task: {said}", fix=fix) from exc
     extensions.admit_targets(a)
     check_joint_targets(a)
     check_duration(a)
@@ -217,12 +219,12 @@ def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Exten
     if a.planner.space != takes:
         raise PluginSetupError(a.loaded.source, ("controller", "type"),
                                f"planner '{sc.planner.type}' plans in {a.planner.space} space but controller "
-                               f"'{sc.controller.type}' takes {takes} references; pick a matching pair")
+                               f"'{sc.controller.type}' takes {takes} references", fix="pick a matching pair")
     a.space = reference_space(a)
     for t in sc.task.targets:
         if t.sensor and t.sensor not in a.sensors:
-            raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'"
-                             f"{suggest(t.sensor, a.sensors)}")
+            raise SetupError(f"target '{t.name}' follows sensor '{t.sensor}', which is not in 'sensors'",
+                             fix=nearest(t.sensor, a.sensors))
     person_and_safety(a)
     if upto == "run":  # last: a backend may start processes (a hardware link's bridge); its scene holds the
         # sensors' instruments and an embodied patient's body
@@ -249,19 +251,19 @@ def _narrow_limits(a: Assembly) -> None:
     """Robot ∩ extensions ∩ envelope, set on the robot model; joint names the robot lacks refused where written."""
     sc, model, source = a.sc, a.robot.model, a.loaded.source
     problems = [Diagnostic(source.key_marks.get(("safety", "joints", n), source.value_marks[()]),
-                           f"safety.joints.{n}", msg) for n in sc.safety.joints if (msg := unknown_joint(n, model))]
+                           f"safety.joints.{n}", *said) for n in sc.safety.joints if (said := unknown_joint(n, model))]
     # a revolute joint's limits in degrees, a prismatic joint's in metres: the other kind's key refused where written
     problems += [Diagnostic(source.key_marks.get(("safety", "joints", w.joint, w.key),
                                                  source.key_marks.get(("safety", "joints", w.joint),
                                                                       source.value_marks[()])),
-                            f"safety.joints.{w.joint}.{w.key}", w.describe())
+                            f"safety.joints.{w.joint}.{w.key}", w.problem, w.fix)
                  for w in wrong_unit_keys({n: env.given() for n, env in sc.safety.joints.items()}, model)]
     # a setting for every joint of a kind the robot lacks (wall_m on a robot whose joints all turn), where written
     written = {("safety",): _written(sc.safety),
                **{("safety", "reactions", rule): _written(r) for rule, r in sc.safety.reactions.items()}}
     for path, keys in written.items():
-        problems += [Diagnostic(_nearest_mark(source, (*path, key)), ".".join((*path, key)), msg)
-                     for key, msg in wrong_kind_settings(keys, model).items()]
+        problems += [Diagnostic(_nearest_mark(source, (*path, key)), ".".join((*path, key)), *said)
+                     for key, said in wrong_kind_settings(keys, model).items()]
     try:
         asked = a.extensions.narrow_limits(a)
     except ScenarioError as exc:  # every misnamed joint at once, the extensions' and the envelope's

@@ -10,9 +10,10 @@ from typing import Any
 import numpy as np
 
 from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
+from rehabkit.core.kinds.errors import apart
 from rehabkit.core.kinds.interfaces import PlanningError
 from rehabkit.core.kinds.metric import CORE_METRICS, MetricCatalogue
-from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.names import nearest
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 from rehabkit.core.setup.errors import PluginSetupError, SetupError
 from rehabkit.models.robot_model import RobotModel
@@ -58,7 +59,7 @@ def check_scene_names(a: Assembly) -> None:
                 f"the robot's {robot[item.name]}" if item.name in robot else None)
             if owner:
                 raise PluginSetupError(a.loaded.source, ("world", kind, i, "name"),
-                                       f"world.{kind}: the name '{item.name}' is taken by {owner}; rename it")
+                                       f"world.{kind}: the name '{item.name}' is taken by {owner}", fix="rename it")
 
 
 def scene_bodies(a: Assembly) -> list[str]:
@@ -79,13 +80,13 @@ def check_loads(a: Assembly) -> None:
             if ins.body not in bodies:
                 cfg = a.sc.sensors[name]
                 at = ("sensors", name, "body") if getattr(cfg, "body", None) == ins.body else ("sensors", name)
-                raise PluginSetupError(a.loaded.source, at, f"sensor '{name}': no body '{ins.body}' in the "
-                                       f"scene{suggest(ins.body, bodies)}")
+                raise PluginSetupError(a.loaded.source, at, f"sensor '{name}': no body '{ins.body}' in the scene",
+                                       fix=nearest(ins.body, bodies))
     for i, load in enumerate(a.sc.world.loads):
         if load.body not in bodies:
-            raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"),
-                                   f"world.loads '{load.name}': no body '{load.body}' in the scene"
-                                   f"{suggest(load.body, bodies)} (a robot body, or a force-torque sensor's name)")
+            said, fix = misnamed(f"world.loads '{load.name}': no body '{load.body}' in the scene", load.body, bodies,
+                                 " (a robot body, or a force-torque sensor's name)")
+            raise PluginSetupError(a.loaded.source, ("world", "loads", i, "body"), said, fix=fix)
 
 
 def check_duration(a: Assembly) -> None:
@@ -99,7 +100,14 @@ def check_duration(a: Assembly) -> None:
         mark = a.loaded.source.key_marks.get(("duration",), a.loaded.source.value_marks[()])
         raise ScenarioError([Diagnostic(mark, "duration", f"{sc.duration:g} s at {sc.rates.control_hz:g} Hz is "
                             f"{steps:.3g} control steps, whose record needs ~{need / 2**30:.3g} GiB (this machine has "
-                            f"{have / 2**30:.3g} GiB); shorten the run or split it")])
+                            f"{have / 2**30:.3g} GiB)", "shorten the run or split it")])
+
+
+def misnamed(said: str, name: str, candidates, then: str = "") -> tuple[str, str]:
+    """A misnamed thing's message and fix (the names nearest ``name``), ``then`` said after both (after the message
+    where no name is near): a diagnostic's ``message`` and ``fix``, read as they always were."""
+    fix = nearest(name, candidates)
+    return (said, fix + then) if fix else (said + then, "")
 
 
 def has(backend: Any, capability: type) -> bool:
@@ -117,9 +125,9 @@ def check_joint_targets(a: Assembly) -> None:
         breach = first_breach(model.limits, model.joint_names, target.q[None], None, np.zeros(1),
                               revolute=model.revolute)
         if breach is not None:
-            hint = f"; {target.hint}" if target.hint else ""
-            why = PlanningError(f"target '{name}': its joint values put {breach.describe()}{hint}", target=name)
-            raise at_target(a, why, "task") or SetupError(str(why))
+            said = f"target '{name}': its joint values put {breach.describe()}"
+            why = PlanningError(said, target=name, fix=target.hint or "")
+            raise at_target(a, why, "task") or SetupError(said, fix=why.fix)
 
 
 def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetupError | None:
@@ -133,7 +141,8 @@ def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetup
     key = next(k for k in ("position", "joints_deg", "joints_rad", "joints", "same_as", "random", "sensor")
                if getattr(spec, k) is not None)
     prefix = f"planner '{a.sc.planner.type}': " if kind == "planner" else ""
-    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), f"{prefix}{exc}")
+    text, fix = apart(exc)
+    return PluginSetupError(a.loaded.source, ("task", "targets", index, key), f"{prefix}{text}", fix=fix)
 
 
 def check_sensor_settings(a: Assembly) -> None:
@@ -146,8 +155,9 @@ def check_sensor_settings(a: Assembly) -> None:
         for loc, name in marked_settings(config, SENSOR_SETTING, path):
             if name not in a.sc.sensors:
                 have = ", ".join(a.sc.sensors) or "none"
-                raise PluginSetupError(a.loaded.source, loc, f"no sensor '{name}' in this scenario"
-                                       f"{suggest(name, a.sc.sensors)} (its sensors: {have})")
+                said, fix = misnamed(f"no sensor '{name}' in this scenario", name, a.sc.sensors,
+                                     f" (its sensors: {have})")
+                raise PluginSetupError(a.loaded.source, loc, said, fix=fix)
 
 
 def metric_catalogue(a: Assembly) -> MetricCatalogue:
@@ -165,9 +175,9 @@ def check_expectations(a: Assembly) -> None:
     catalogue = a.catalogue if a.catalogue is not None else metric_catalogue(a)
     for name in a.sc.expect:
         if not catalogue.known(name):
-            raise PluginSetupError(a.loaded.source, ("expect", name),
-                                   f"expect: no plugin of this run reports a metric '{name}'"
-                                   f"{suggest(name, catalogue.names())} (see `rehabkit plugins` for each plugin's)")
+            said, fix = misnamed(f"expect: no plugin of this run reports a metric '{name}'", name, catalogue.names(),
+                                 " (see `rehabkit plugins` for each plugin's)")
+            raise PluginSetupError(a.loaded.source, ("expect", name), said, fix=fix)
 
 
 def check_robot_model(a: Assembly) -> None:

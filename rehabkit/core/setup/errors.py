@@ -4,20 +4,23 @@ from __future__ import annotations
 
 from typing import Any
 
-from rehabkit.core.kinds.errors import PlanningError, SettingError
+from rehabkit.core.kinds.errors import PlanningError, SettingError, apart, with_fix
 from rehabkit.core.scenario.errors import Diagnostic, ScenarioError
 
 
 class SetupError(RuntimeError):
-    """The scenario is valid but its plugins can't be put together (message says why).
+    """The scenario is valid but its plugins can't be put together (message says why, ``fix`` how to go on where
+    there is a way; said after the message).
 
     ``breach`` is set (a :class:`rehabkit.core.setup.limits.LimitBreach`) when the reason is a joint limit a plan
     would break.
     """
 
-    def __init__(self, message: str, breach: Any = None):
-        super().__init__(message)
-        self.breach = breach
+    fix = ""  # (a PluginSetupError's fixes are its diagnostics')
+
+    def __init__(self, message: str, breach: Any = None, fix: str = ""):
+        super().__init__(with_fix(message, fix))
+        self.breach, self.said, self.fix = breach, message, fix
 
 
 class PluginSetupError(ScenarioError, SetupError):
@@ -25,7 +28,7 @@ class PluginSetupError(ScenarioError, SetupError):
     ``setting``), else at its section's ``type``. Both a :class:`ScenarioError` (the CLI's exit 2 with
     ``file:line:col``) and a :class:`SetupError`."""
 
-    def __init__(self, source: Any, path: tuple[str, ...], message: str, setting: tuple = ()):
+    def __init__(self, source: Any, path: tuple[str, ...], message: str, setting: tuple = (), fix: str = ""):
         at = path
         for n in range(len(setting), 0, -1):  # the deepest part of the setting the file writes
             if (*path, *setting[:n]) in source.key_marks:
@@ -34,21 +37,22 @@ class PluginSetupError(ScenarioError, SetupError):
         else:
             at = (*path, "type") if setting == () and (*path, "type") in source.key_marks else path
         mark = source.key_marks.get(at) or source.value_marks.get(path) or source.value_marks[()]
-        ScenarioError.__init__(self, [Diagnostic(mark, ".".join(map(str, at)), message)])
+        ScenarioError.__init__(self, [Diagnostic(mark, ".".join(map(str, at)), message, fix)])
         self.breach = None
         self.setting = setting
 
     @classmethod
     def refused(cls, source: Any, path: tuple[str, ...], kind: str, config: Any, exc: Exception) -> PluginSetupError:
         """Plugin ``config.type`` of ``kind`` (its section at ``path``) refused with ``exc``: named once, located
-        at the setting a :class:`SettingError` names."""
+        at the setting a :class:`SettingError` names; the error's fix (a field) kept the diagnostic's."""
         setting = exc.setting if isinstance(exc, (SettingError, PlanningError)) else ()
         if isinstance(exc, SettingError) and exc.root:  # (a scenario setting the plugin cannot live with)
             path = ()
-        text = str(exc).removeprefix(f"{config.type}: ")  # plugins often name themselves
+        text, fix = apart(exc)
+        text = text.removeprefix(f"{config.type}: ")  # plugins often name themselves
         if isinstance(exc, SettingError) and (*path, *setting) in source.key_marks:
             text = exc.problem  # (located at the setting, which the diagnostic names)
-        return cls(source, path, f"{kind} '{config.type}': {text}", setting)
+        return cls(source, path, f"{kind} '{config.type}': {text}", setting, fix)
 
     @classmethod
     def together(cls, errors: list[PluginSetupError]) -> PluginSetupError:

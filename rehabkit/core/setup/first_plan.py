@@ -30,7 +30,7 @@ def start_posture(a: Assembly) -> np.ndarray:
     inside = [s for s in solutions if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
     if not inside:
         raise SetupError(f"task.start: target '{name}' is Cartesian and the robot's IK gives no configuration "
-                         "for it within the joint ranges; start from a joint-space target")
+                         "for it within the joint ranges", fix="start from a joint-space target")
     return inside[0]
 
 
@@ -98,23 +98,24 @@ def outlasting(a: Assembly, plan_s: float) -> str | None:
 
 
 def _fix(a: Assembly, breach) -> str:
-    """What puts a plan within a limit it breaks: where the limit was set, and for a speed, the planner's timing."""
+    """What puts a plan within a limit it breaks: where the limit was set, and for a speed, the planner's timing (a
+    refusal's ``fix``)."""
     source = a.limit_sources.by_joint.get(breach.joint, {}).get(
         breach.quantity if breach.quantity == "velocity" else ("lower" if breach.value < breach.limit else "upper"))
     where = {"safety": f"the safety envelope's (safety.joints.{breach.joint})",
              "patient": "the patient profile's"}.get(source[0], f"{source[0]}'s") if source else "the robot's own"
     if breach.quantity == "velocity":
-        return (f"; the limit is {where}: give the plan more time (the planner's timing settings, `rehabkit plugins "
+        return (f"the limit is {where}: give the plan more time (the planner's timing settings, `rehabkit plugins "
                 f"--fields {a.sc.planner.type}`) or the joint a higher speed limit there")
-    return f"; the limit is {where}: plan through postures inside it (other targets or via points) or widen it there"
+    return f"the limit is {where}: plan through postures inside it (other targets or via points) or widen it there"
 
 
 def breach_refusal(a: Assembly, breach) -> PluginSetupError:
     """The first plan breaking a limit in force, located and with its fix: the same words from ``validate`` and
     from a run (which said it unlocated, blaming a patient's profile where there was none)."""
     small = all_small(a)  # (radians under joints_deg break a range of 0° by a hair: the units are the cause)
-    refusal = first_plan_refusal(a, f"planned trajectory: {breach.describe()}{_fix(a, breach)}"
-                                    + (f"; but {small}" if small else ""))
+    refusal = first_plan_refusal(a, PlanningError(f"planned trajectory: {breach.describe()}",
+                                                  fix=_fix(a, breach) + (f"; but {small}" if small else "")))
     refusal.breach = breach  # (what it says, as fields)
     return refusal
 

@@ -17,7 +17,7 @@ from typing import Literal
 
 import numpy as np
 
-from rehabkit.core.kinds.names import suggest
+from rehabkit.core.kinds.names import nearest
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 Key = Literal["lower", "upper", "velocity", "effort"]
@@ -47,11 +47,11 @@ class LimitSources:
         return bool({"lower", "upper"} & set(self.by_joint.get(joint, {})))
 
 
-def unknown_joint(name: str, robot: RobotModel) -> str | None:
-    """The message for a joint name the robot doesn't have, with the closest ones (``None`` if it has it)."""
+def unknown_joint(name: str, robot: RobotModel) -> tuple[str, str] | None:
+    """The message for a joint name the robot doesn't have and its fix, the closest ones (``None`` if it has it)."""
     if name in robot.joint_names:
         return None
-    return f"no joint '{name}' on robot '{robot.name}'{suggest(name, robot.joint_names)}"
+    return f"no joint '{name}' on robot '{robot.name}'", nearest(name, robot.joint_names)
 
 
 def narrow(robot: RobotModel, narrowings: Iterable[Narrowing]) -> tuple[JointLimits, LimitSources]:
@@ -93,23 +93,32 @@ class WrongUnitKey:
     Attributes:
         joint: The joint's name.
         key: The key as written.
-        fix: The key its joint takes (``range_m``).
+        takes: The key its joint takes (``range_m``).
         revolute: Whether the joint is revolute.
         robot_value: The robot's own limit that key sets, in the joint's unit (``[0, 0.04] m``).
     """
 
     joint: str
     key: str
-    fix: str
+    takes: str
     revolute: bool
     robot_value: str
 
-    def describe(self) -> str:
-        """``finger is a prismatic joint: range_deg [deg] is for a revolute joint; write range_m instead, in m (the
-        robot's own: [0, 0.04] m)``."""
+    @property
+    def problem(self) -> str:
+        """``finger is a prismatic joint: range_deg [deg] is for a revolute joint``."""
         kind, other = ("revolute", "prismatic") if self.revolute else ("prismatic", "revolute")
-        return (f"{self.joint} is a {kind} joint: {self.key} [{KEY_UNITS[self.key]}] is for a {other} joint; write "
-                f"{self.fix} instead, in {KEY_UNITS[self.fix]} (the robot's own: {self.robot_value})")
+        return f"{self.joint} is a {kind} joint: {self.key} [{KEY_UNITS[self.key]}] is for a {other} joint"
+
+    @property
+    def fix(self) -> str:
+        """``write range_m instead, in m (the robot's own: [0, 0.04] m)``."""
+        return f"write {self.takes} instead, in {KEY_UNITS[self.takes]} (the robot's own: {self.robot_value})"
+
+    def describe(self) -> str:
+        """The problem, then its fix: ``finger is a prismatic joint: range_deg [deg] is for a revolute joint; write
+        range_m instead, in m (the robot's own: [0, 0.04] m)``."""
+        return f"{self.problem}; {self.fix}"
 
 
 def wrong_unit_keys(given: dict[str, list[str]], model: RobotModel) -> list[WrongUnitKey]:
@@ -144,11 +153,11 @@ SETTING_UNITS = {"position_margin_deg": "deg", "stop_decel_deg_s2": "deg/s²", "
                  "wall_m": "m", "retreat_speed_m_s": "m/s"}
 
 
-def wrong_kind_settings(given: Iterable[str], model: RobotModel) -> dict[str, str]:
+def wrong_kind_settings(given: Iterable[str], model: RobotModel) -> dict[str, tuple[str, str]]:
     """The settings among ``given`` (keys written) that hold for a kind of joint the robot has none of — a degrees
-    one on a robot whose joints all slide, a metres one on a robot whose joints all turn — each with its message:
-    ``robot 'hit' has no prismatic joint: wall_m [m] is for prismatic joints; write wall_deg instead, in deg, for
-    its revolute joints``."""
+    one on a robot whose joints all slide, a metres one on a robot whose joints all turn — each with its message and
+    fix: ``robot 'hit' has no prismatic joint: wall_m [m] is for prismatic joints``, ``write wall_deg instead, in
+    deg, for its revolute joints``."""
     metres = {v: k for k, v in KIND_SETTINGS.items()}
     has = {True: bool(np.any(model.revolute)), False: not bool(np.all(model.revolute))}
     out = {}
@@ -160,7 +169,7 @@ def wrong_kind_settings(given: Iterable[str], model: RobotModel) -> dict[str, st
             continue
         fix = KIND_SETTINGS[key] if turns else metres[key]
         kind, other = ("revolute", "prismatic") if turns else ("prismatic", "revolute")
-        out[key] = (f"robot '{model.name}' has no {kind} joint: {key} [{SETTING_UNITS[key]}] is for {kind} joints; "
+        out[key] = (f"robot '{model.name}' has no {kind} joint: {key} [{SETTING_UNITS[key]}] is for {kind} joints",
                     f"write {fix} instead, in {SETTING_UNITS[fix]}, for its {other} joints")
     return out
 

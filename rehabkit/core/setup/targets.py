@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rehabkit.core.kinds.capabilities import RandomReach
+from rehabkit.core.kinds.errors import with_fix
 from rehabkit.core.kinds.interfaces import PlanningError, Robot, Target
 from rehabkit.core.scenario.models import TaskSpec
 from rehabkit.models.chain import rpy_to_matrix
@@ -58,9 +59,9 @@ def resolve_targets(task: TaskSpec, robot: Robot, seed: int = 0) -> dict[str, Ta
                 names = robot.model.joint_names
                 sliding = spec.joints_deg is not None and not np.all(robot.model.revolute)  # (then: joints)
                 raise PlanningError(f"target '{name}' has {len(q)} joint values; robot '{robot.model.name}' has "
-                                    f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}"
-                                    + ("; with a prismatic joint among them, as `joints: [...]` (degrees for the "
-                                       "revolute ones, metres for the prismatic)" if sliding else ""), target=name)
+                                    f"{robot.model.dof} joints, one value each in this order: {', '.join(names)}",
+                                    target=name, fix="with a prismatic joint among them, as `joints: [...]` (degrees "
+                                    "for the revolute ones, metres for the prismatic)" if sliding else "")
             hint = radians_hint(spec.joints_deg if spec.joints_deg is not None else spec.joints, robot.model.revolute,
                                 "joints_deg" if spec.joints_deg is not None else "joints")
             tgt = Target(name, q=q, pose=robot.fk(q), hint=f"its joint values {hint}" if hint else "")
@@ -126,10 +127,11 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray,
             try:
                 sols = robot.solve_ik(tgt.pose, reference=prev, free=tgt.free)
             except NotImplementedError as exc:  # no IK of its own and a model Pinocchio can't load
-                raise PlanningError(f"target '{tgt.name}' is Cartesian: {exc}; give it as joint values",
-                                    target=tgt.name) from exc
+                raise PlanningError(f"target '{tgt.name}' is Cartesian: {exc}", target=tgt.name,
+                                    fix="give it as joint values") from exc
             if not sols:
-                raise PlanningError(unreachable(tgt, robot), target=tgt.name)
+                said, fix = _unreachable(tgt, robot)
+                raise PlanningError(said, target=tgt.name, fix=fix)
             sols = [prev + angular_distance(s, prev) for s in sols]
             inside = [s for s in sols if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
             if not inside:
@@ -178,6 +180,11 @@ def axis_error_deg(reached: np.ndarray, wanted: np.ndarray, free: str = "") -> f
 
 def unreachable(target: Target, robot: Robot) -> str:
     """Why ``target`` has no joint solution, with how near the numeric IK came when it tried."""
+    return with_fix(*_unreachable(target, robot))
+
+
+def _unreachable(target: Target, robot: Robot) -> tuple[str, str]:
+    """:func:`unreachable`'s message and its fix (the target's hint, where it has one) apart."""
     where = np.round(target.pose[:3, 3], 4).tolist()
     what = "position" if target.position_only else "pose"
     closest = robot.ik_closest_m
@@ -185,9 +192,9 @@ def unreachable(target: Target, robot: Robot) -> str:
         closest > 1e-3 else ""
     if target.hint:
         return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
-                f"limits{near}; {target.hint}")
+                f"limits{near}", target.hint)
     return (f"target '{target.name}' at {where} m is out of reach: no {what} solution within the joint "
-            f"limits{near} (base frame; check the robot's base and the target's units)")
+            f"limits{near} (base frame; check the robot's base and the target's units)", "")
 
 
 def posture_si(name: str, spec, model) -> np.ndarray:

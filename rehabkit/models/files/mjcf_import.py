@@ -58,12 +58,12 @@ ROOT_JOINT = "root"  # a floating robot's free joint (simulated and measured; Pi
 
 
 class ModelFileError(ValueError):
-    """A model file that can't be a robot as configured; ``setting`` names the plugin setting to change (None: the
-    file itself)."""
+    """A model file that can't be a robot as configured: what is wrong (``problem``), ``setting`` names the plugin
+    setting to change (None: the file itself) and ``fix`` how (if given: said after the problem)."""
 
-    def __init__(self, message: str, setting: str | tuple | None = None):
-        self.setting = setting
-        super().__init__(message)
+    def __init__(self, message: str, setting: str | tuple | None = None, fix: str = ""):
+        self.problem, self.said, self.setting, self.fix = message, message, setting, fix
+        super().__init__(f"{message}; {fix}" if fix else message)
 
 
 def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str, floating: bool = False,
@@ -115,9 +115,10 @@ def _rerooted_xml(spec: mujoco.MjSpec, model_dir: Path, ee_frame: str, floating:
         if body is None:
             names = sorted(n for n in sites | {b.get("name") for b in root.iter("body")} if n)
             close = difflib.get_close_matches(ee_frame, names, n=3, cutoff=0.5)
-            mean = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
-            raise ModelFileError(f"ee_frame '{ee_frame}' is neither a site nor a body of the file{mean} (its sites and "
-                                 f"bodies: {', '.join(names)})", "ee_frame")
+            listed = f" (its sites and bodies: {', '.join(names)})"  # (after the fix, where there is one)
+            mean = f"did you mean {' or '.join(repr(c) for c in close)}?{listed}" if close else ""
+            raise ModelFileError(f"ee_frame '{ee_frame}' is neither a site nor a body of the file"
+                                 + ("" if close else listed), "ee_frame", fix=mean)
         ET.SubElement(body, "site", {"name": f"{ee_frame}_ee", "size": "0.01"})
     return ET.tostring(root, encoding="unicode"), free, support
 
@@ -171,8 +172,9 @@ def robot_from_file(
     unknown = sorted(set(config.limits) - set(names))
     if unknown:
         close = difflib.get_close_matches(unknown[0], names, n=1, cutoff=0.5)
-        raise ModelFileError(f"{path.name} has no joint '{unknown[0]}'" + (f"; did you mean '{close[0]}'?" if close
-                             else "") + f" (its joints: {', '.join(names)})", setting=("limits", unknown[0]))
+        listed = f" (its joints: {', '.join(names)})"  # (after the fix, where there is one)
+        raise ModelFileError(f"{path.name} has no joint '{unknown[0]}'" + ("" if close else listed),
+                             setting=("limits", unknown[0]), fix=f"did you mean '{close[0]}'?{listed}" if close else "")
     motor_effort: dict[int, float] = {}
     for a in range(model.nu):
         if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and model.actuator_ctrllimited[a]:
@@ -186,16 +188,16 @@ def robot_from_file(
         if wrong := [(m, deg) if revolute else (deg, m) for deg, m in pairs
                      if getattr(o, m if revolute else deg) is not None]:
             kind, other = ("revolute (degrees)", "prismatic") if revolute else ("prismatic (metres)", "revolute")
-            raise ModelFileError(f"joint '{name}' is {kind}: {wrong[0][0]} is for a {other} joint; write "
-                                 f"{wrong[0][1]} instead", setting=("limits", name, wrong[0][0]))
+            raise ModelFileError(f"joint '{name}' is {kind}: {wrong[0][0]} is for a {other} joint",
+                                 setting=("limits", name, wrong[0][0]), fix=f"write {wrong[0][1]} instead")
         rng = o.range_deg if revolute else o.range_m
         if rng is not None:
             lo, hi = np.radians(rng) if revolute else rng
         elif model.jnt_limited[j]:
             lo, hi = model.jnt_range[j]
         else:
-            raise ValueError(f"joint '{name}' has no range in {path.name}; add limits.{name}.range_"
-                             f"{'deg' if revolute else 'm'}")
+            raise ModelFileError(f"joint '{name}' has no range in {path.name}",
+                                 fix=f"add limits.{name}.range_{'deg' if revolute else 'm'}")
         v = o.velocity_deg_s if revolute else o.velocity_m_s
         if v is not None:
             v = np.radians(v) if revolute else v
@@ -204,8 +206,8 @@ def robot_from_file(
         elif config.default_velocity_deg_s is not None:
             v = np.radians(config.default_velocity_deg_s)
         else:
-            raise ValueError(f"joint '{name}' has no speed limit; add limits.{name}.velocity_"
-                             f"{'deg_s' if revolute else 'm_s'} or default_velocity_deg_s")
+            raise ModelFileError(f"joint '{name}' has no speed limit", fix=f"add limits.{name}.velocity_"
+                                 f"{'deg_s' if revolute else 'm_s'} or default_velocity_deg_s")
         e = o.effort
         if e is None and model.jnt_actfrclimited[j]:
             e = float(np.abs(model.jnt_actfrcrange[j]).max())
@@ -214,7 +216,8 @@ def robot_from_file(
         if e is None:
             e = motor_effort.get(j, config.default_effort)
         if e is None:
-            raise ValueError(f"joint '{name}' has no effort limit; add limits.{name}.effort or default_effort")
+            raise ModelFileError(f"joint '{name}' has no effort limit",
+                                 fix=f"add limits.{name}.effort or default_effort")
         lower.append(float(lo))
         upper.append(float(hi))
         vel.append(float(v))
