@@ -69,6 +69,60 @@ def bare_loop(runner: Runner, ref: tuple[np.ndarray, np.ndarray, np.ndarray]) ->
     return elapsed
 
 
+def floor_loop(scenario: Path) -> float:
+    """Seconds for the bare loop plus what no run may leave out: each step's ``[q, qd, tau]`` row in a trace and the
+    safety layer's check of it, its torque the one sent (the runner's own layer, set up as a run sets it up)."""
+    runner = Runner(load_scenario(scenario))
+    session = runner.start()
+    backend = runner.backend
+    m, d = backend.model, backend.data
+    cfg = runner.sc.controller
+    kp, kd = np.asarray(cfg.kp, float), np.asarray(cfg.kd, float)
+    pm = runner.robot.model.pin_model
+    pdata = pm.createData()
+    damping, n = runner.robot.model.dissipation.damping, runner.robot.model.dof
+    q_ref, qd_ref, qdd_ref = session.ref.views()
+    qs, vs = backend._q, backend._v
+    packed = np.zeros_like(session.packed)
+    tq, tqd, ttau = packed[:, :n], packed[:, n : 2 * n], packed[:, 2 * n :]
+    check, dt = session.safety.check_row, session.setup.schedule.control_dt
+    backend.reset(q_ref[0])
+    t0 = time.perf_counter()
+    for k in range(len(q_ref)):
+        q, qd = d.qpos[qs], d.qvel[vs]
+        tq[k], tqd[k] = q, qd
+        tau = kp * (q_ref[k] - q) + kd * (qd_ref[k] - qd) + pin.rnea(pm, pdata, q, qd_ref[k], qdd_ref[k])
+        tau += damping * qd_ref[k]
+        ttau[k] = tau
+        d.qfrc_applied[vs] = check(k * dt, packed[k])
+        mujoco.mj_step(m, d)
+    elapsed = time.perf_counter() - t0
+    assert session.safety.tripped_at is None
+    return elapsed
+
+
+def recording_floor(trace) -> float:
+    """Seconds to record a finished run's joint series as the runner's recording holds them (each joint's measured
+    and reference position, the speeds, efforts and errors: 15 entities of one row a control step) in an ``.rrd``
+    file, and close it: the least a recorded run adds after its loop."""
+    import rerun as rr
+
+    t, q, qd, tau = trace.t, np.degrees(trace.q), np.degrees(trace.qd), trace.tau
+    ref = np.degrees(trace.q_ref)
+    with tempfile.TemporaryDirectory() as out:
+        rec = rr.RecordingStream("rehabkit-floor")
+        rec.save(Path(out) / "floor.rrd")
+        t0 = time.perf_counter()
+        time_column = rr.TimeColumn("sim_time", duration=t)
+        series = [(f"joints/{j}/{name}", values[:, j]) for j in range(q.shape[1])
+                  for name, values in (("measured", q), ("reference", ref))]
+        for path, values in [*series, ("joints/speed", qd), ("joints/effort", tau), ("joints/error", ref - q)]:
+            rec.send_columns(path, indexes=[time_column], columns=rr.Scalars.columns(scalars=values))
+        rec.flush()
+        rec.disconnect()
+        return time.perf_counter() - t0
+
+
 def full_run(scenario: Path) -> tuple[float, float, Runner]:
     """(loop seconds, loop + finishing the log and summary, runner) for one complete run."""
     with tempfile.TemporaryDirectory() as out:
@@ -121,7 +175,9 @@ def main() -> None:
     bag_file.write_text(yaml.safe_dump({**yaml.safe_load(SCENARIO.read_text()), "ros": {"bag": True}}))
     variants = {"runner (no sensors)": bare_file, "runner (scenario as written, 500 Hz encoder)": SCENARIO,
                 "runner (as written + ROS 2 bag, streamed)": bag_file}
-    best: dict[str, list[float]] = {"bare MuJoCo loop": []} | {k: [] for k in variants}
+    best: dict[str, list[float]] = {"bare MuJoCo loop": [], "floor: bare + trace row + safety check": []} | {
+        k: [] for k in variants}
+    floor_finish: list[float] = []
     best_total: dict[str, list[float]] = {k: [] for k in variants}
     sim_time = None
     for _ in range(args.repeats):
@@ -131,6 +187,8 @@ def main() -> None:
             best_total[name].append(total)
             sim_time = runner.sc.duration
         best["bare MuJoCo loop"].append(bare_loop(runner, runner.session.ref.views()))
+        best["floor: bare + trace row + safety check"].append(floor_loop(bare_file))
+        floor_finish.append(recording_floor(runner.session.trace.trimmed(runner.session.loop.k)))
     bare = min(best["bare MuJoCo loop"])
     steps = int(round(sim_time * 1000))
     print(f"HIT round-trip, {sim_time} s simulated, {steps} steps at 1 kHz; best of {args.repeats}")
@@ -144,6 +202,9 @@ def main() -> None:
         t = min(times)
         print(f"{name + ' incl. log/summary close':46} {t:8.3f} {t / steps * 1e6:8.1f} {sim_time / t:12.1f} "
               f"{t / bare:7.2f}")
+    t = min(best["floor: bare + trace row + safety check"]) + min(floor_finish)
+    print(f"{'floor incl. recording the joint series':46} {t:8.3f} {t / steps * 1e6:8.1f} {sim_time / t:12.1f} "
+          f"{t / bare:7.2f}   (the recording alone: {min(floor_finish) * 1e3:.1f} ms)")
     job, floor, lazy = end_to_end(max(3, args.repeats))
     print(f"end to end (process start to exit, median of {max(3, args.repeats)}): `rehabkit run "
           f"scenarios/hit_roundtrip.yaml` {job:.2f} s, importing the engines alone {floor:.2f} s, ratio "
