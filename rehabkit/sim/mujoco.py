@@ -68,6 +68,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         for body in self.bodies:
             body.bind(self.model, self.data)
         self.loads = LoadApplier(self.model, context.world.loads if context.world is not None else ())
+        self._pushed = bool(self.loads)  # (asked each step: a plain attribute, not the applier's __bool__)
         self._errors = InstrumentErrors(context.instruments, context.seed or 0, rng=context.seeds.generator(
             InstrumentErrors.KEY) if context.seeds is not None else None)
         self._latch = EStopLatch.named(self.latch_name.format(robot=robot.name))  # (a rehearsal's latches as a robot's)
@@ -189,7 +190,7 @@ class MujocoBackend(SceneView, Backend, Contacts, SceneGeometry, SceneObjects, H
         self.data.qfrc_applied[self._v] += tau  # on top of the command just sent
 
     def step(self, n: int = 1) -> None:
-        if self.loads:  # (held over the control period: a rig's push changes slowly)
+        if self._pushed:  # (held over the control period: a rig's push changes slowly)
             self.loads.apply(self.data, self.data.time)
         if n == 1:
             mujoco.mj_step(self.model, self.data)  # the nstep keyword alone costs ~0.5 us
