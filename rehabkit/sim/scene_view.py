@@ -108,7 +108,8 @@ class SceneView:
         return self.data.cam_xpos[cid].copy(), mj_rot @ np.diag([1.0, -1.0, -1.0]), np.radians(self.model.cam_fovy[cid])
 
     def body_poses(self) -> BodyPoses:
-        return BodyPoses(self._drawn_names, self.data.xpos[self._drawn], self.data.xquat[self._drawn])
+        d = self.data  # (every body but the world: a slice copied, ~3x cheaper than taking them by index)
+        return BodyPoses(self._drawn_names, d.xpos[1:].copy(), d.xquat[1:].copy())
 
     def visual_geoms(self) -> list[GeomVisual]:
         m = self.model
