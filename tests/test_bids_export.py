@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rehabkit.bids.run_folder import ExportError, peek_run
 from rehabkit.testing import group
 from tests.conftest import ROOT, SCENARIOS
 from tests.test_cli import cli
@@ -160,7 +161,12 @@ def test_bad_input_is_refused_with_exit_2_before_anything_is_written(study, tmp_
     shutil.copytree(tmp / "study" / "ses1", folder)
     (folder / "run.mcap").unlink()
     done = cli("export", "bids", str(folder), "--out", str(tmp_path / "ds"))
-    assert done.returncode == 2 and "--bag" in done.stderr and "run.mcap" in done.stderr
+    assert done.returncode == 2
+    with pytest.raises(ExportError) as no_bag:  # what it says: the bag missing, and to run with --bag
+        peek_run(folder)
+    assert (no_bag.value.where, no_bag.value.fix) == (str(folder / "run.mcap"), f"run with --bag (`rehabkit replay "
+                                                      f"{folder} --bag` makes a simulated session again, same seed "
+                                                      "and inputs)")
     assert not list((tmp_path / "ds").glob("sub-*"))
     assert cli("export", "bids", str(tmp_path / "none"), "--out", str(tmp_path / "ds")).returncode == 2
     assert cli("progress", str(tmp / "study" / "bids"), "--participant", "P99").returncode == 2

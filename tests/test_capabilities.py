@@ -46,9 +46,7 @@ def test_several_missing_capabilities_are_named_together():
                              "sensors": {"b": {"type": "balance", "support_frames": ["a", "b", "c"]}}})
     with pytest.raises(SetupError) as err:
         Runner(sc).build()
-    text = str(err.value)
-    assert "planner 'voxel-astar' needs a robot that has a workspace look-up table" in text
-    assert "sensor 'balance' needs a robot that has a floating base" in text
+    assert err.value.missing == {("planner", "voxel-astar"): (WorkspaceTable,), ("sensor", "balance"): (FloatingBase,)}
 
 
 def test_the_built_in_robots_and_backends_declare_what_they_have(hit, lexos):

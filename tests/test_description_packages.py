@@ -101,7 +101,12 @@ def test_ur5_from_example_robot_data_as_its_package_ships_it(tmp_path, monkeypat
     line = next(i for i, x in enumerate(scenario.read_text().splitlines(), 1) if x.strip().startswith("file:"))
     assert (refused.returncode, [(f, n, at) for f, n, _, at in located(refused.stderr)]) == (
         2, [("nowhere.yaml", line, "robot.file")]), refused.stderr
-    assert "cmeel.prefix/share" in refused.stderr  # (where it looked, pip's prefixes among them)
+    from rehabkit.models.files.ros_package import DescriptionError, prepared
+
+    with pytest.raises(DescriptionError) as nowhere_found:  # what it says there: where it looked
+        prepared(nowhere)
+    assert nowhere_found.value.uri.startswith("package://no_such_package/")
+    assert any(Path(p).parent.name == "cmeel.prefix" for p in nowhere_found.value.looked)  # (pip's prefixes too)
     robot = _robot({"type": "urdf", "file": str(urdf), "ee_frame": "tool0"}, tmp_path)
     assert robot.model.dof == 6
     distance, mass = _agreement(robot)
@@ -116,7 +121,7 @@ def test_a_mesh_the_package_does_not_have_is_said_with_the_file(tmp_path):
     with pytest.raises(DescriptionError) as missing:
         resolve_uri("package://rehab_arm_description/meshes/elbow.dae", tmp_path, [DATA])
     assert missing.value.uri == "package://rehab_arm_description/meshes/elbow.dae"
-    assert missing.value.problem.endswith(str(DATA / "rehab_arm_description" / "meshes" / "elbow.dae"))  # (the file)
+    assert missing.value.file == DATA / "rehab_arm_description" / "meshes" / "elbow.dae"  # (the file)
 
 
 def test_the_readmes_package_example_is_the_tested_one():

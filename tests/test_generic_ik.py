@@ -7,10 +7,11 @@ import pytest
 import yaml
 
 from plugins.robots.dh import DHRobot
+from rehabkit.core.kinds.errors import PlanningError
 from rehabkit.core.setup.targets import axis_error_deg
 from rehabkit.models.dh import DHRobotSpec
 from tests.conftest import ROOT
-from tests.located import located
+from tests.located import located, refusal
 from tests.test_cli import cli
 from tests.test_user_robot_errors import ARM3
 
@@ -110,4 +111,5 @@ def test_validate_locates_an_unreachable_cartesian_target(tmp_path):
     assert done.returncode == 2, done.stderr
     line = text.splitlines().index("    - {name: B, position: [1.5, 0.0, 0.3]}") + 1
     assert [(n, at) for _, n, _, at in located(done.stderr)] == [(line, "task.targets.1.position")], done.stderr
-    assert "target 'B'" in done.stderr and "out of reach" in done.stderr and "mm away" in done.stderr
+    cause = refusal(path).__cause__  # what validate says there: the planner's refusal of B (its words: unreachable())
+    assert (type(cause), cause.target) == (PlanningError, "B")

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 from rehabkit.api import run_scenario
+from rehabkit.core.setup.errors import SetupError
+from rehabkit.hardware.config import LinkKeyError
 from rehabkit.hardware.link.protocol import (
     CLEAR,
     COMMAND,
@@ -327,19 +329,30 @@ def test_the_readmes_lab_network_commands_run_as_written(tmp_path, monkeypatch):
             f"{port}\n", cleared.stderr
         (tmp_path / "keyless.yaml").write_text(lab.replace(", key_file: keys/hit-1.key", ""))
         keyless = run("rehabkit run keyless.yaml --out keyless")
-        assert keyless.returncode == 2 and f"the bridge at udp://127.0.0.1:{port} refuses this host's session: the " \
-            "bridge needs a key (it was started with --key)" in keyless.stderr and "set backend.key_file" in \
-            keyless.stderr and not (tmp_path / "keyless" / "summary.json").exists()
+        assert keyless.returncode == 2 and not (tmp_path / "keyless" / "summary.json").exists()
+        said = refused_by_link(tmp_path / "keyless.yaml")  # what it says: the bridge needs a key, and where to set it
+        assert (said.bridge, said.reason, said.key_file, said.key_id) == (f"udp://127.0.0.1:{port}", "key-needed",
+                                                                         None, None)
+        assert said.fix == "set backend.key_file to the robot's key file (the one the bridge was given)"
         rotated = run("rehabkit keys new hit-1 --out keys/hit-1.key --replace")
         new = load_key(tmp_path / "keys" / "hit-1.key")
         assert rotated.returncode == 0 and new.id != key.id
-        refused = run(run_cmd)  # the bridge still holds the old key: the host is told, with both ids and its file
-        assert refused.returncode == 2 and f"the bridge holds another key (this key's id {new.id}; the bridge's is " \
-            "on its console and in its --stats)" in refused.stderr and str(tmp_path / "keys" / "hit-1.key") in \
-            refused.stderr and key.id not in refused.stderr  # (a refusal names no key id of the bridge's)
+        refused = run(run_cmd)  # the bridge still holds the old key: the host is told, with its key's id and file
+        assert refused.returncode == 2 and key.id not in refused.stderr  # (a refusal names no key id of the bridge's)
+        said = refused_by_link(tmp_path / "lab_hit.yaml")
+        assert (said.reason, said.key_id, said.key_file) == ("other-key", new.id, str(tmp_path / "keys" / "hit-1.key"))
     finally:
         _stop(bridge)
     assert json.loads((tmp_path / "stats.json").read_text())["dropped"]["unauthenticated"] > 0
+
+
+def refused_by_link(scenario) -> LinkKeyError:
+    """The :class:`LinkKeyError` a run of ``scenario`` is refused with, in this process (the refusal `rehabkit run`
+    says, as fields)."""
+    with pytest.raises(SetupError) as refused:  # (the backend's fault as the session opens: a setup error, exit 2)
+        run_scenario(scenario)
+    assert isinstance(refused.value.__cause__, LinkKeyError), refused.value
+    return refused.value.__cause__
 
 
 def test_a_urdf_robot_runs_over_an_authenticated_link_and_validate_checks_its_key_file(tmp_path, monkeypatch):

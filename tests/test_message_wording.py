@@ -258,3 +258,50 @@ def test_the_links_refusals_say_what_applies_at_this_bridge():
     assert str(SessionTakenOverError("udp://10.0.0.2:7000", "keypad")) == (
         "the session with the bridge at udp://10.0.0.2:7000 was taken over by another host (the person at the robot "
         "allowed it on the bridge's keypad (a)): the robot is that host's now, and this run stops")
+
+
+def test_an_unreachable_target_says_where_it_is_and_how_near_the_hand_came():
+    from types import SimpleNamespace
+
+    from rehabkit.core.kinds.interfaces import Target
+    from rehabkit.core.setup.targets import unreachable
+
+    far = np.eye(4)
+    far[:3, 3] = [1.5, 0.0, 0.3]
+    assert unreachable(Target("B", pose=far, position_only=True), SimpleNamespace(ik_closest_m=0.998)) == (
+        "target 'B' at [1.5, 0.0, 0.3] m is out of reach: no position solution within the joint limits; the closest "
+        "the hand came is 998 mm away (base frame; check the robot's base and the target's units)")
+
+
+def test_a_plugin_that_does_not_load_or_is_installed_twice_names_the_packages():
+    """What its import raised and the package to fix or uninstall; the two packages of one name (tests elsewhere
+    assert ``PluginLoadError.provider``/``failure`` and ``PluginConflictError.providers``)."""
+    from rehabkit.core.plugins.registry import Entry, PluginConflictError, PluginLoadError, PluginRegistry, Provider
+
+    def missing():
+        raise ModuleNotFoundError("No module named 'xyz'", name="xyz")
+
+    exo = PluginRegistry([Entry("robot", "exo", missing, Provider("rehabkit-exo-driver", "1.2.3", "exo"))])
+    with pytest.raises(PluginLoadError) as broken:
+        exo.get("robot", "exo")
+    assert str(broken.value) == ("ModuleNotFoundError: No module named 'xyz' (package rehabkit-exo-driver 1.2.3; fix "
+                                 "or uninstall it)")
+    twice = PluginRegistry([Entry("planner", "multi-cubic", missing, Provider("rehabkit", "0.1.0", "planners")),
+                            Entry("planner", "multi-cubic", missing, Provider("fancy-planners", "1.2.3", "fancy"))])
+    with pytest.raises(PluginConflictError) as conflict:
+        twice.get("planner", "multi-cubic")
+    assert str(conflict.value) == ("planner 'multi-cubic' is registered twice: by rehabkit 0.1.0 (entry point "
+                                   "'planners') and by fancy-planners 1.2.3 (entry point 'fancy'); uninstall one of "
+                                   "them or rename its plugin")
+
+
+def test_an_object_a_drive_cannot_map_says_where_its_file_says_so_and_the_abort():
+    from rehabkit.canopen.bus.drive_dictionary import read_dictionary
+    from rehabkit.canopen.bus.pdo_plan import PdoPlanError, plan_pdos
+
+    dcf = DATA / "canopen_eds" / "elmo_Gold-Drive.dcf"
+    line = dcf.read_text("latin-1").splitlines().index("[6072]") + 1
+    with pytest.raises(PdoPlanError) as refused:
+        plan_pdos(read_dictionary(dcf, 1), 1, [(0x6040, 0, 16), (0x6072, 0, 16)], [])
+    assert str(refused.value) == (f"0x6072 cannot be mapped into a PDO (PDOMapping=0 at elmo_Gold-Drive.dcf:{line}; "
+                                  "CiA 301 abort 0x06040041)")

@@ -296,10 +296,10 @@ def test_a_patient_s_comfort_speed_is_degrees_on_revolute_joints_and_metres_on_a
                              value_marks={(): Mark("p.yaml", 0, 0)})
     with pytest.raises(ScenarioError) as refused:
         profile_narrowings(model, patient, source)
-    assert str(refused.value) == (
-        "p.yaml:4:3: patient.joints.slide: slide is a prismatic joint: a range of motion (passive_deg, active_deg, "
-        "max_speed_deg_s) is a revolute joint's, in degrees; limit a prismatic joint in the safety envelope instead, "
-        "in metres (safety.joints.slide: {range_m: [0, 0.2], velocity_m_s: ...}: the robot's own range)")
+    (d,) = refused.value.diagnostics  # at the slide's entry, with where to limit it instead: the robot's own range
+    assert (d.mark, d.path) == (Mark("p.yaml", 4, 3), "patient.joints.slide")
+    assert d.fix == ("limit a prismatic joint in the safety envelope instead, in metres (safety.joints.slide: "
+                     "{range_m: [0, 0.2], velocity_m_s: ...}: the robot's own range)")
 
 
 def test_an_assessment_cues_in_si_and_measures_the_revolute_joints_only(slide2):

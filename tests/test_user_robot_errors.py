@@ -3,6 +3,7 @@ plan fails passes no expectation."""
 
 import json
 
+import numpy as np
 import pytest
 
 from rehabkit.core.run.runner import Runner
@@ -49,8 +50,8 @@ def test_a_run_whose_first_plan_fails_passes_no_expectation_and_validate_refuses
     summary = json.loads((out / "summary.json").read_text())
     assert summary["passed"] is False
     assert [v["passed"] for v in summary["expectations"]] == [False, False]
-    assert all(v["reason"].startswith("no plan ran (planner failed: multi-cubic: 2 via points (A, B) need 1 segment")
-               for v in summary["expectations"])
+    # why: no plan ran, the planner's refusal stopped the robot where it stood (the verdicts' reason says so)
+    assert summary["plans"] == [] and [(e["rule"], e["t"]) for e in summary["safety"]["events"]] == [("plan", 0.0)]
     verdicts = {w[1]: w[0] for w in map(str.split, r.stdout.splitlines())
                 if w[:1] in (["PASS"], ["FAIL"])}  # (the report's rows)
     assert set(verdicts.values()) == {"FAIL"} and "final_joint_error_deg" in verdicts
@@ -169,9 +170,12 @@ def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
     p.write_text(f"extends: {SCENARIOS / 'hit_roundtrip.yaml'}\nrobot: {{type: urdf, file: {urdf}, ee_frame: l2}}\n"
                  "planner: {type: multi-cubic, segment_durations: [1.0]}\ntask:\n  targets:\n"
                  "    - {name: A, joints_deg: [45, 0]}\n    - {name: B, joints_deg: [1.2, 0.4]}\n")
-    (d,) = refusal(p).diagnostics
+    refused = refusal(p)
+    (d,) = refused.diagnostics
     assert d.path == "task.targets.1.joints_deg"
-    assert d.message == "target 'B': its joint values put j1 beyond its position limit at t+0.000s (1.2°, limit 28.6°)"
+    b = refused.breach  # j1 at 1.2 (degrees meant, radians taken) below its 0.5 rad
+    assert (b.quantity, b.joint, b.at_s, b.value, b.limit) == ("position", "j1", 0.0, pytest.approx(np.radians(1.2)),
+                                                               0.5)
     assert d.fix == f"its joint values are all within ±2π: {radians}"
 
 

@@ -185,7 +185,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             else:
                 self._tick_lockstep(0.2, sent=True)
             if self.wire.refused is not None:
-                raise LinkKeyError(self.wire.where, None, self.wire.refused)
+                raise LinkKeyError(self.wire.where, None, self.wire.refused, "key-needed")  # (a keyless host's)
             self._taken_over()
             if self._got and self.status & ESTOPPED:  # latched at the robot: no session starts
                 raise EStopLatchedError(latched_message(self), self.estop_name,

@@ -40,10 +40,14 @@ class LinkBusyError(BackendFaultError):
 
 class LinkKeyError(BackendFaultError):
     """The bridge and this host do not share the robot's key: ``bridge`` (its address), ``key_file`` (this host's,
-    or None), ``problem`` (which side lacks what, naming key ids), ``fix`` (what gives both ends the same key)."""
+    or None), ``problem`` (which side lacks what, naming key ids), ``fix`` (what gives both ends the same key);
+    ``reason``: the bridge's refusal as its code (``no-key``, ``other-key``, ``key-needed``; ``forged``: it could not
+    prove the key), where known; ``key_id``: this host's key's id (None without a key)."""
 
-    def __init__(self, bridge: str, key_file: str | None, problem: str):
+    def __init__(self, bridge: str, key_file: str | None, problem: str, reason: str | None = None,
+                 key_id: str | None = None):
         self.bridge, self.key_file, self.problem = bridge, key_file, problem
+        self.reason, self.key_id = reason, key_id
         self.fix = (f"give both ends the same key file (the bridge's --key, this scenario's backend.key_file: "
                     f"{key_file})" if key_file else
                     "set backend.key_file to the robot's key file (the one the bridge was given)")

@@ -19,14 +19,19 @@ Entry = tuple[int, int, int]  # (index, subindex, bits)
 NAMES = {0x6040: "controlword", 0x6041: "statusword", 0x6071: "target torque", 0x607A: "target position",
          0x60FF: "target velocity", 0x60B2: "torque offset", 0x6064: "position actual value",
          0x606C: "velocity actual value", 0x6077: "torque actual value", 0x7130: "analogue input"}
+NOT_MAPPABLE = 0x06040041  # CiA 301's SDO abort: "object cannot be mapped to the PDO"
 PREDEFINED = {False: 0x200, True: 0x180}  # CiA 301's predefined connection set: PDO k at base + 0x100 (k-1) + node
 
 
 class PdoPlanError(ValueError):
-    """The drive cannot carry the run's process data: ``index`` the object (0: none in particular), ``what`` why."""
+    """The drive cannot carry the run's process data: ``index`` the object (0: none in particular), ``what`` why.
+    ``objects``: every object it cannot carry (``index`` first; ``(index,)`` unless more are left without a PDO);
+    ``where``: the ``file:line`` of the drive's file it points at ('' for none); ``abort``: the CiA 301 SDO abort
+    code a drive answers the mapping with (0 for none)."""
 
-    def __init__(self, what: str, index: int = 0):
-        self.what, self.index = what, index
+    def __init__(self, what: str, index: int = 0, objects: tuple[int, ...] = (), where: str = "", abort: int = 0):
+        self.what, self.index, self.where, self.abort = what, index, where, abort
+        self.objects = tuple(objects) or ((index,) if index else ())
         super().__init__(what)
 
 
@@ -79,7 +84,8 @@ def check_mappable(d: DriveDictionary, needed: Sequence[Entry], tx: bool) -> Non
                                "every cycle", index)
         if (index, sub) not in d.mappable:
             raise PdoPlanError(f"{_name(index)} cannot be mapped into a PDO (PDOMapping=0 at {d.where(index)}; "
-                               "CiA 301 abort 0x06040041)", index)
+                               f"CiA 301 abort 0x{NOT_MAPPABLE:08X})", index, where=d.where(index),
+                               abort=NOT_MAPPABLE)
         if not bits or bits > 64:
             raise PdoPlanError(f"{_name(index)} is {bits} bits wide: no PDO carries it", index)
 
@@ -142,8 +148,9 @@ def _direction(d: DriveDictionary, node_id: int, needed: list[Entry], slots: Seq
             what = ", ".join(_name(i) for i, _, _ in left)
             kind = "TPDO" if tx else "RPDO"
             have = sum(1 for s in slots if s.configurable)
+            at = d.where(0x1A00 if tx else 0x1600)
             raise PdoPlanError(f"no {kind} left to carry {what}: the drive has {len(slots)} {kind}s, {have} of them "
-                               f"with a mapping a master can write ({d.where(0x1A00 if tx else 0x1600)})", left[0][0])
+                               f"with a mapping a master can write ({at})", left[0][0], tuple(e[0] for e in left), at)
         slot = free.pop(0)
         take, bits = [], 0
         for e in list(left):

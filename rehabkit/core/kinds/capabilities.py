@@ -234,21 +234,26 @@ BACKEND_ABILITY: dict[type, str] = {
 }
 
 
-def missing_capabilities(requires: Iterable[type], robot: Any, backend: Any = None) -> list[str]:
-    """What a plugin that ``requires`` these capabilities (its declaration, ``PluginInfo.declared.requires``) needs
-    of ``robot`` and ``backend`` (an instance or its class: these protocols hold methods only) that they lack, in
-    words."""
-    missing = []
+def lacking(requires: Iterable[type], robot: Any, backend: Any = None) -> list[type]:
+    """The capabilities of ``requires`` (a plugin's declaration, ``PluginInfo.declared.requires``) that ``robot``
+    and ``backend`` (an instance or its class: these protocols hold methods only) lack, as the protocols."""
+    out = []
     for cap in requires:
         if cap in BACKEND_ABILITY:
             if backend is None:
                 continue
-            ok = issubclass(backend, cap) if isinstance(backend, type) else isinstance(backend, cap)
-            if not ok:
-                missing.append(f"a backend that {BACKEND_ABILITY[cap]}")
+            if not (issubclass(backend, cap) if isinstance(backend, type) else isinstance(backend, cap)):
+                out.append(cap)
         elif not isinstance(robot, cap):
-            missing.append(f"a robot that {ABILITY.get(cap) or _ability(cap)}")
-    return missing
+            out.append(cap)
+    return out
+
+
+def missing_capabilities(requires: Iterable[type], robot: Any, backend: Any = None) -> list[str]:
+    """What a plugin that ``requires`` these capabilities needs of ``robot`` and ``backend`` that they lack
+    (:func:`lacking`), in words."""
+    return [f"a backend that {BACKEND_ABILITY[cap]}" if cap in BACKEND_ABILITY else
+            f"a robot that {ABILITY.get(cap) or _ability(cap)}" for cap in lacking(requires, robot, backend)]
 
 
 def _ability(cap: type) -> str:

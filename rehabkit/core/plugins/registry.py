@@ -111,7 +111,7 @@ class PluginRegistry:
             self._entries[e.kind].setdefault(e.name, []).append(e)
         self._current = Provider("?", "?", "?")
         self._staged: list[PluginInfo] = []
-        self._failed: dict[tuple[str, str], str] = {}
+        self._failed: dict[tuple[str, str], PluginLoadError] = {}
         self._pm = pluggy.PluginManager(hookspecs.PROJECT)
         self._pm.add_hookspecs(hookspecs)
         if trace:
@@ -158,30 +158,33 @@ class PluginRegistry:
             self.broken.append(BrokenPlugin(provider, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
             if self._pm.get_plugin(name) is not None:
                 self._pm.unregister(name=name)
-            raise PluginLoadError(f"{type(exc).__name__}: {exc}") from exc
+            raise PluginLoadError(f"{type(exc).__name__}: {exc}", provider, exc) from exc
 
     def _load(self, entry: Entry) -> PluginInfo:
         key = (entry.kind, entry.name)
         if key in self._failed:
-            raise PluginLoadError(self._failed[key])
+            failed = self._failed[key]
+            raise PluginLoadError(str(failed), failed.provider, failed.failure)
         p = entry.provider
         try:
             try:
                 obj = entry.load()
             except Exception as exc:  # noqa: BLE001 (recorded: the others keep working)
                 self.broken.append(BrokenPlugin(p, f"{type(exc).__name__}: {exc}", traceback.format_exc()))
-                raise PluginLoadError(f"{type(exc).__name__}: {exc}") from exc
+                raise PluginLoadError(f"{type(exc).__name__}: {exc}", p, exc) from exc
             self.register(obj, p)
             info = self.plugins[entry.kind].get(entry.name)
             if info is None or info.provider.package != p.package:
                 made = [i.name for i in self.plugins[entry.kind].values() if i.provider == p] or "nothing"
                 error = f"its entry point promises {entry.kind} '{entry.name}' but the module registered {made}"
                 self.broken.append(BrokenPlugin(p, error, ""))
-                raise PluginLoadError(error)
+                raise PluginLoadError(error, p)
             return info
         except PluginError as exc:
-            self._failed[key] = f"{exc} (package {p.package} {p.version}; fix or uninstall it)"
-            raise PluginLoadError(self._failed[key]) from None
+            failure = exc.failure if isinstance(exc, PluginLoadError) else exc
+            said = f"{exc} (package {p.package} {p.version}; fix or uninstall it)"
+            self._failed[key] = PluginLoadError(said, p, failure)  # (said again, fields and all, if asked again)
+            raise PluginLoadError(said, p, failure) from None
 
     # -- lookup ---------------------------------------------------------------
 

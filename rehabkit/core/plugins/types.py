@@ -116,4 +116,11 @@ class BrokenPlugin:
 
 
 class PluginLoadError(PluginError):
-    """A named plugin's module failed to import or to register what its entry point promised."""
+    """A named plugin's module failed to import or to register what its entry point promised: ``provider`` the
+    distribution that installed it (a :class:`Provider`, where known), ``failure`` what its module raised (the
+    import's ``ModuleNotFoundError``, the registration's error; None where it imported and registered something
+    else than its entry point promised)."""
+
+    def __init__(self, message: str, provider: Provider | None = None, failure: BaseException | None = None):
+        super().__init__(message)
+        self.provider, self.failure = provider, failure

@@ -149,7 +149,7 @@ class Assembly:
             raise PluginSetupError(self.loaded.source, (*path, "type"), (
                 f"{kind} '{config.type}' failed while it was built: {type(exc).__name__}: {exc} (a bug in the "
                 f"plugin, package {info.provider.package} {info.provider.version}; `rehabkit --debug …` shows "
-                "its traceback)")) from exc
+                "its traceback)"), provider=info.provider) from exc
 
 
 def assemble(loaded: LoadedScenario, registry: PluginRegistry, extensions: Extensions, out_dir: Path | None = None,

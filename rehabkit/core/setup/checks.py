@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabkit.core.kinds.capabilities import SceneObjects, missing_capabilities
+from rehabkit.core.kinds.capabilities import SceneObjects, lacking, missing_capabilities
 from rehabkit.core.kinds.errors import apart
 from rehabkit.core.kinds.interfaces import PlanningError
 from rehabkit.core.kinds.metric import CORE_METRICS, MetricCatalogue
@@ -29,19 +29,24 @@ def check_capabilities(a: Assembly) -> None:
     backend = a.registry.get("backend", sc.backend.type).factory  # checked on the class: not built yet
     named = [("planner", sc.planner), ("controller", sc.controller), *(("sensor", c) for c in sc.sensors.values())]
     paths = {"planner": ("planner", "type"), "controller": ("controller", "type")}
-    problems, at = [], None
+    problems, at, lacked = [], None, {}
     for kind, cfg in named:
-        missing = missing_capabilities(a.registry.get(kind, cfg.type).declared.requires, a.robot, backend)
+        requires = a.registry.get(kind, cfg.type).declared.requires
+        missing = missing_capabilities(requires, a.robot, backend)
         if missing:
             problems.append(f"{kind} '{cfg.type}' needs {' and '.join(missing)}")
+            lacked[(kind, cfg.type)] = tuple(lacking(requires, a.robot, backend))
             section = paths.get(kind) or ("sensors", next(n for n, c in sc.sensors.items() if c is cfg), "type")
             at = at or section
     if any(e.action == "move" for e in sc.task.events) and not has(backend, SceneObjects):
         problems.append("task events that 'move' objects need a backend with scene objects")
+        lacked[("task", "events")] = (SceneObjects,)
         at = at or ("backend",)
     if problems:
-        raise PluginSetupError(a.loaded.source, at, f"{'; '.join(problems)} (robot '{sc.robot.type}', "
-                               f"backend '{sc.backend.type}')")
+        refused = PluginSetupError(a.loaded.source, at, f"{'; '.join(problems)} (robot '{sc.robot.type}', "
+                                   f"backend '{sc.backend.type}')")
+        refused.missing = lacked  # (what it says, as fields)
+        raise refused
 
 
 SCENE_NAMES = ("floor", "key_light")  # what the scene adds besides the robot and the world's objects
@@ -127,7 +132,9 @@ def check_joint_targets(a: Assembly) -> None:
         if breach is not None:
             said = f"target '{name}': its joint values put {breach.describe()}"
             why = PlanningError(said, target=name, fix=target.hint or "")
-            raise at_target(a, why, "task") or SetupError(said, fix=why.fix)
+            refused = at_target(a, why, "task") or SetupError(said, fix=why.fix)
+            refused.breach = breach  # (what it says, as fields: as a first plan's refusal carries its breach)
+            raise refused
 
 
 def at_target(a: Assembly, exc: Exception, kind: str = "planner") -> PluginSetupError | None:

@@ -26,9 +26,14 @@ class SetupError(RuntimeError):
 class PluginSetupError(ScenarioError, SetupError):
     """A plugin refused its settings when it was built: located at the setting it names (a ``SettingError``'s
     ``setting``), else at its section's ``type``. Both a :class:`ScenarioError` (the CLI's exit 2 with
-    ``file:line:col``) and a :class:`SetupError`."""
+    ``file:line:col``) and a :class:`SetupError`. ``provider`` (a :class:`rehabkit.core.plugins.types.Provider`):
+    the package whose plugin failed with a bug of its own while it was built (the one to report it to), else None.
+    ``missing``: what each plugin needs that the robot or the backend lacks, ``{(kind, type): (capability, …)}``
+    (the capability protocols of :mod:`rehabkit.core.kinds.capabilities`; the task's events that move objects under
+    ``("task", "events")``), when that is why; else empty."""
 
-    def __init__(self, source: Any, path: tuple[str, ...], message: str, setting: tuple = (), fix: str = ""):
+    def __init__(self, source: Any, path: tuple[str, ...], message: str, setting: tuple = (), fix: str = "",
+                 provider: Any = None):
         at = path
         for n in range(len(setting), 0, -1):  # the deepest part of the setting the file writes
             if (*path, *setting[:n]) in source.key_marks:
@@ -39,7 +44,8 @@ class PluginSetupError(ScenarioError, SetupError):
         mark = source.key_marks.get(at) or source.value_marks.get(path) or source.value_marks[()]
         ScenarioError.__init__(self, [Diagnostic(mark, ".".join(map(str, at)), message, fix)])
         self.breach = None
-        self.setting = setting
+        self.setting, self.provider = setting, provider
+        self.missing: dict[tuple[str, str], tuple[type, ...]] = {}
 
     @classmethod
     def refused(cls, source: Any, path: tuple[str, ...], kind: str, config: Any, exc: Exception) -> PluginSetupError:
@@ -61,5 +67,6 @@ class PluginSetupError(ScenarioError, SetupError):
             return errors[0]
         combined = cls.__new__(cls)
         ScenarioError.__init__(combined, [d for e in errors for d in e.diagnostics])
-        combined.breach, combined.setting = None, ()
+        combined.breach, combined.setting, combined.provider = None, (), None
+        combined.missing = {k: v for e in errors for k, v in e.missing.items()}
         return combined

@@ -77,7 +77,7 @@ class HostLink:
         except LinkRefusedError as exc:
             if exc.reason == "busy":  # (the keys match: another host's run holds the bridge)
                 raise LinkBusyError(self.where, exc.words) from None
-            raise LinkKeyError(self.where, str(self.key.path), exc.words) from None
+            raise LinkKeyError(self.where, str(self.key.path), exc.words, exc.reason, exc.key_id) from None
         except TimeoutError:
             raise LinkLostError(f"the bridge at {self.where} does not answer a handshake (is `rehabkit bridge` running "
                                 "there, for this robot and robot_id, with its --key?)") from None

@@ -21,10 +21,13 @@ CONVERTED = (".dae", ".ply")  # mesh formats MuJoCo cannot read, converted to ST
 
 
 class DescriptionError(ValueError):
-    """A description's part that cannot be used: ``uri`` (as written), ``problem`` and the ``fix``."""
+    """A description's part that cannot be used: ``uri`` (as written), ``problem`` and the ``fix``; for a package
+    not found, ``looked``: the folders it was looked for in (in order); for a file the URI names that is not
+    there, ``file``: that path."""
 
-    def __init__(self, uri: str, problem: str, fix: str):
+    def __init__(self, uri: str, problem: str, fix: str, looked: Sequence[str] = (), file: Path | None = None):
         self.uri, self.problem, self.fix = uri, problem, fix
+        self.looked, self.file = tuple(looked), file
         super().__init__(f"{uri}: {problem}; {fix}")
 
 
@@ -85,7 +88,7 @@ def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = (), what: str =
             where = ", ".join(looked) or "nothing: no packages, ROS_PACKAGE_PATH, AMENT_PREFIX_PATH or pip's prefixes"
             raise DescriptionError(uri, f"no package '{parsed.netloc}' found (looked in: {where})",
                                    "name its folder in the robot's packages, or set ROS_PACKAGE_PATH / source the "
-                                   "workspace that has it")
+                                   "workspace that has it", looked=looked)
         path = folder / unquote(parsed.path).lstrip("/")
     elif parsed.scheme == "file":
         path = Path(unquote(parsed.path))
@@ -97,7 +100,7 @@ def resolve_uri(uri: str, base: Path, packages: Sequence[Path] = (), what: str =
     if not path.is_file():
         fix = "check the package's meshes folder" if what == "mesh" else "check the path after the package's name: " \
             "it is relative to the package's folder (where its package.xml is)"
-        raise DescriptionError(uri, f"no such file: {path}", fix)
+        raise DescriptionError(uri, f"no such file: {path}", fix, file=path)
     return path.resolve()
 
 
