@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import struct
 import sys
 from pathlib import Path
 from typing import Any
@@ -215,6 +216,33 @@ def _rebuild_bag(part: Path, whole: Path) -> dict[str, Any]:
     return {"messages": counts, "types": types, "until_s": (last - first) / 1e9 if first is not None else 0.0}
 
 
+RRD_MAGIC, RRD_HEADER, RRD_FRAME = b"RRF2", 12, struct.Struct("<QQ")  # (Rerun's file header; a message's kind, length)
+
+
+def _whole_messages(path: Path) -> int:
+    """Cut a killed run's recording after its last whole message (Rerun's file: a 12-byte header, then messages of a
+    16-byte header — kind, length — and that many bytes): a kill during a write leaves the last one torn, which Rerun's
+    reader refuses whole ("payload exceeds file size"). Returns how many bytes were cut off (0: none)."""
+    size = path.stat().st_size
+    with open(path, "r+b") as f:
+        if f.read(4) != RRD_MAGIC:
+            return 0
+        at = RRD_HEADER
+        while at + RRD_FRAME.size <= size:
+            f.seek(at)
+            kind, length = RRD_FRAME.unpack(f.read(RRD_FRAME.size))
+            if kind == 0:  # (the end message: a footer may follow it)
+                return 0
+            if at + RRD_FRAME.size + length > size:
+                break
+            at += RRD_FRAME.size + length
+        if at == size:
+            return 0
+        f.truncate(at)
+        os.fsync(f.fileno())
+        return size - at
+
+
 def _indexed(path: Path) -> bool:
     """The recording given the footer a killed run's file lacks (Rerun's manifest of its chunks: ``rerun rrd
     verify`` refuses a file without one), by Rerun's own ``rrd migrate`` (which keeps a backup: removed once the
@@ -264,6 +292,9 @@ def recover(out: Path) -> dict[str, Any]:
     recovered: dict[str, Any] = {}
     if (out / LEFT["recording"]).exists():
         try:
+            if torn := _whole_messages(out / LEFT["recording"]):
+                recovered["recording_torn_bytes"] = torn
+                said.append(f"the recording's last message was written halfway: its {torn} bytes left out")
             series = _recording(out / LEFT["recording"])
             metrics, per_joint = _metrics(series)
             os.replace(out / LEFT["recording"], out / RECORDING)
