@@ -87,3 +87,19 @@ def checked(layer, t: float, q, qd, tau) -> np.ndarray:
     """The torque the safety ``layer`` sends for state ``q``, ``qd`` and command ``tau`` at ``t`` (its check of the
     packed row the loop hands it)."""
     return layer.check_row(t, np.concatenate((q, qd, tau)))
+
+
+# the suite's longest units of work first: pytest-xdist hands the units (an xdist_group, else a test) to its workers
+# in collection order, and a long one handed out last keeps the other worker idle to the end. In order: the paced
+# real-time tests (one after the other, mostly asleep), the Ray sweeps, the safety report (27 runs), then the
+# scenarios whose shared run several tests read
+LONGEST_FIRST = ("realtime", "ray", "tests/test_safety_report.py", "scenario:coman_juggling",
+                 "scenario:lexos_reaching", "scenario:lexos_patient", "scenario:lexos_myoarm")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    def rank(item: pytest.Item) -> int:
+        unit = next((m.args[0] for m in item.iter_markers("xdist_group") if m.args), item.nodeid)
+        return next((i for i, name in enumerate(LONGEST_FIRST) if unit.startswith(name)), len(LONGEST_FIRST))
+
+    items.sort(key=rank)  # (stable: the rest in the order they were collected)
