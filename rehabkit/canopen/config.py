@@ -161,6 +161,9 @@ class CanopenConfig(StrictModel):
                                    "2-core VM: rehabkit.canopen.deadlines)")
     tpdo_timeout_ms: float = Field(50.0, gt=0, description="a drive whose TPDOs have not come for this long stops "
                                    "the run (a non-real-time host may answer a cycle late now and then) [ms]")
+    sdo_timeout_ms: float = Field(1000.0, gt=0, description="how long the host waits for a drive's answer to each "
+                                  "SDO request while it sets the drives up [ms] (python-canopen's own default, 300, "
+                                  "was missed by simulated drives sharing a busy 2-core machine)")
     other_pdos: Literal["keep", "disable"] = Field(
         "keep", description="the drives' PDOs the run does not use: keep, as each drive has them (the ones it sends "
         "count in the bus load); disable, turned off at the set-up")

@@ -58,6 +58,7 @@ class DriveMaster:
                         for node, eds, _ in sensors]
         for r in (*self.remotes, *self.sensors):
             network.add_node(r)
+            r.sdo.RESPONSE_TIMEOUT = config.sdo_timeout_ms * 1e-3  # (python-canopen's SdoClient setting: its wait)
         n, m = len(self.remotes), len(self.sensors)
         # every node: the drives (joint i), then the sensors (instrument k at n + k)
         self.ids = [r.id for r in (*self.remotes, *self.sensors)]
@@ -122,10 +123,15 @@ class DriveMaster:
         self.missed_limit = max(1, math.ceil(cfg.tpdo_timeout_ms * 1e-3 / period_s - 1e-9))
         self.plans = []
         for i, r in enumerate(self.remotes):
-            self._communication(r, period_s)
-            setup = set_up_drive(r, self.paths[i], self.names[i], self.units[i], self.modes[i], limits, i, period_s,
-                                 cfg.torque_actual, self._read_rated[i], self.by_pdo[i],
-                                 cfg.other_pdos == "keep")
+            try:
+                self._communication(r, period_s)
+                setup = set_up_drive(r, self.paths[i], self.names[i], self.units[i], self.modes[i], limits, i,
+                                     period_s, cfg.torque_actual, self._read_rated[i], self.by_pdo[i],
+                                     cfg.other_pdos == "keep")
+            except canopen.SdoCommunicationError:  # (it answered a moment ago: the bus or the drive stalled)
+                raise DriveFaultError(f"stopped answering SDO requests while it was set up (none within "
+                                      f"{cfg.sdo_timeout_ms:g} ms: backend.sdo_timeout_ms)", r.id, self.names[i],
+                                      observable=False) from None
             self.units[i] = u = setup.units
             self._scale[i] = u.position * u.direction
             self._vscale[i] = u.velocity * u.direction
