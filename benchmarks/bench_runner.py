@@ -42,20 +42,24 @@ from rehabkit.core.scenario.loader import load_scenario
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "hit_roundtrip.yaml"
 
 
+def _law(runner: Runner) -> tuple:
+    """What the hand-written loops need of a built run: MuJoCo's model and data, the joint-pd law's gains, Pinocchio's
+    model and data, the joints' declared damping, the joints' qpos and qvel spans."""
+    backend, model = runner.backend, runner.robot.model
+    cfg = runner.sc.controller
+    pm = model.pin_model
+    assert not np.any(model.dissipation.friction)  # (else the law would compensate it as well)
+    # (HIT's damping: 0.5-0.1 N·m·s/rad, in MuJoCo's model too)
+    return (backend.model, backend.data, np.asarray(cfg.kp, float), np.asarray(cfg.kd, float), pm, pm.createData(),
+            model.dissipation.damping, backend._q, backend._v)
+
+
 def bare_loop(runner: Runner, ref: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
     """Seconds for the plain loop: read state, PD + RNEA (+ the joints' declared damping, as the controller
     compensates it), write torque, mj_step."""
-    backend = runner.backend
-    m, d = backend.model, backend.data
-    cfg = runner.sc.controller
-    kp, kd = np.asarray(cfg.kp, float), np.asarray(cfg.kd, float)
-    pm = runner.robot.model.pin_model
-    pdata = pm.createData()
-    damping = runner.robot.model.dissipation.damping  # (HIT's: 0.5-0.1 N·m·s/rad, in MuJoCo's model too)
-    assert not np.any(runner.robot.model.dissipation.friction)  # (else the law would compensate it as well)
+    m, d, kp, kd, pm, pdata, damping, qs, vs = _law(runner)
     q_ref, qd_ref, qdd_ref = ref
-    qs, vs = backend._q, backend._v
-    backend.reset(q_ref[0])
+    runner.backend.reset(q_ref[0])
     t0 = time.perf_counter()
     for k in range(len(q_ref)):
         q, qd = d.qpos[qs], d.qvel[vs]
@@ -74,19 +78,13 @@ def floor_loop(scenario: Path) -> float:
     safety layer's check of it, its torque the one sent (the runner's own layer, set up as a run sets it up)."""
     runner = Runner(load_scenario(scenario))
     session = runner.start()
-    backend = runner.backend
-    m, d = backend.model, backend.data
-    cfg = runner.sc.controller
-    kp, kd = np.asarray(cfg.kp, float), np.asarray(cfg.kd, float)
-    pm = runner.robot.model.pin_model
-    pdata = pm.createData()
-    damping, n = runner.robot.model.dissipation.damping, runner.robot.model.dof
+    m, d, kp, kd, pm, pdata, damping, qs, vs = _law(runner)
+    n = runner.robot.model.dof
     q_ref, qd_ref, qdd_ref = session.ref.views()
-    qs, vs = backend._q, backend._v
     packed = np.zeros_like(session.packed)
     tq, tqd, ttau = packed[:, :n], packed[:, n : 2 * n], packed[:, 2 * n :]
     check, dt = session.safety.check_row, session.setup.schedule.control_dt
-    backend.reset(q_ref[0])
+    runner.backend.reset(q_ref[0])
     t0 = time.perf_counter()
     for k in range(len(q_ref)):
         q, qd = d.qpos[qs], d.qvel[vs]
