@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from rehabkit.core.kinds.errors import SettingError
+from rehabkit.core.kinds.errors import SettingError, with_fix
 from rehabkit.core.kinds.interfaces import BackendFaultError, StrictModel
 from rehabkit.hardware.security.keys import KeyFileError, LinkKey, check_robot, load_key
 from rehabkit.models.strict import FilePath
@@ -52,7 +52,7 @@ class LinkKeyError(BackendFaultError):
                     f"{key_file})" if key_file else
                     "set backend.key_file to the robot's key file (the one the bridge was given)")
         self.said = f"the bridge at {bridge} refuses this host's session: {problem}"
-        super().__init__(f"{self.said}; {self.fix}")
+        super().__init__(with_fix(self.said, self.fix))
 
 
 class BridgeHoldError(BackendFaultError):

@@ -57,8 +57,7 @@ class SceneView:
     def _init_view(self, ee_site: str) -> None:
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._ee_site = self.model.site(ee_site).id
-        self._drawn = np.arange(1, self.model.nbody)
-        self._drawn_names = [self.model.body(int(b)).name for b in self._drawn]
+        self._drawn_names = [self.model.body(b).name for b in range(1, self.model.nbody)]  # (every body but the world)
         self._body_ids: dict[str, int] = {}  # model.body(name) makes a named view each call (~2 us)
 
     def ee_position(self) -> np.ndarray:

@@ -252,8 +252,13 @@ def lacking(requires: Iterable[type], robot: Any, backend: Any = None) -> list[t
 def missing_capabilities(requires: Iterable[type], robot: Any, backend: Any = None) -> list[str]:
     """What a plugin that ``requires`` these capabilities needs of ``robot`` and ``backend`` that they lack
     (:func:`lacking`), in words."""
+    return in_words(lacking(requires, robot, backend))
+
+
+def in_words(caps: Iterable[type]) -> list[str]:
+    """Capabilities a plugin needs, each as what it needs: ``a robot that …``, ``a backend that …``."""
     return [f"a backend that {BACKEND_ABILITY[cap]}" if cap in BACKEND_ABILITY else
-            f"a robot that {ABILITY.get(cap) or _ability(cap)}" for cap in lacking(requires, robot, backend)]
+            f"a robot that {ABILITY.get(cap) or _ability(cap)}" for cap in caps]
 
 
 def _ability(cap: type) -> str:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabkit.core.kinds.capabilities import SceneObjects, lacking, missing_capabilities
+from rehabkit.core.kinds.capabilities import SceneObjects, in_words, lacking
 from rehabkit.core.kinds.errors import apart
 from rehabkit.core.kinds.interfaces import PlanningError
 from rehabkit.core.kinds.metric import CORE_METRICS, MetricCatalogue
@@ -31,11 +31,10 @@ def check_capabilities(a: Assembly) -> None:
     paths = {"planner": ("planner", "type"), "controller": ("controller", "type")}
     problems, at, lacked = [], None, {}
     for kind, cfg in named:
-        requires = a.registry.get(kind, cfg.type).declared.requires
-        missing = missing_capabilities(requires, a.robot, backend)
-        if missing:
-            problems.append(f"{kind} '{cfg.type}' needs {' and '.join(missing)}")
-            lacked[(kind, cfg.type)] = tuple(lacking(requires, a.robot, backend))
+        lack = lacking(a.registry.get(kind, cfg.type).declared.requires, a.robot, backend)
+        if lack:
+            problems.append(f"{kind} '{cfg.type}' needs {' and '.join(in_words(lack))}")
+            lacked[(kind, cfg.type)] = tuple(lack)
             section = paths.get(kind) or ("sensors", next(n for n, c in sc.sensors.items() if c is cfg), "type")
             at = at or section
     if any(e.action == "move" for e in sc.task.events) and not has(backend, SceneObjects):
