@@ -20,9 +20,16 @@ def fake_dist(site, name, group, entry_name, module, source):
     (site / f"{module}.py").write_text(source)
 
 
-def rehabkit(site, *args):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-m", "rehabkit.cli", *args], capture_output=True, text=True, env=env)
+def rehabkit(site, monkeypatch, *args):
+    """``rehabkit ARGS`` as a process with ``site`` on its path sees the installed plugins: run in this process (a
+    Python per call cost ~1 s of the suite each), the process-wide registry discovered afresh with ``site`` on the
+    path, and put back after the test."""
+    from rehabkit.core.plugins import registry
+    from tests.test_cli import cli
+
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setattr(registry, "_DEFAULT", None)
+    return cli(*args)
 
 
 def registry_seeing(site, monkeypatch):
@@ -38,20 +45,20 @@ def registry_seeing(site, monkeypatch):
 def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path, monkeypatch):
     site = tmp_path / "site"
     fake_dist(site, "rehabkit-exo-driver", "rehabkit.robots", "exo", "exo_driver", "import not_a_real_module_xyz\n")
-    listed = rehabkit(site, "plugins")
+    listed = rehabkit(site, monkeypatch, "plugins")
     assert listed.returncode == 0
     broken = [line for line in listed.stdout.splitlines() if line.startswith("BROKEN")]
     assert broken and "rehabkit-exo-driver 1.2.3" in broken[0] and "not_a_real_module_xyz" in broken[0]
     assert "multi-cubic" in listed.stdout
-    run = rehabkit(site, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path / "out"),
+    run = rehabkit(site, monkeypatch, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", str(tmp_path / "out"),
                    "--set", "duration=0.5", "--set", "expect=null")
     assert run.returncode == 0, run.stderr
     # naming it is a located refusal with its cause, before anything runs
-    named = rehabkit(site, "validate", str(SCENARIOS / "hit_roundtrip.yaml"), "--set", "robot.type=exo")
+    named = rehabkit(site, monkeypatch, "validate", str(SCENARIOS / "hit_roundtrip.yaml"), "--set", "robot.type=exo")
     assert named.returncode == 2 and "Traceback" not in named.stderr
     assert set_located(named.stderr) == [("robot.type", "robot.type")]
     # its reference: installed, and why it does not load (not "no plugin named 'exo'; did you mean 'exo'")
-    fields = rehabkit(site, "plugins", "--fields", "exo")
+    fields = rehabkit(site, monkeypatch, "plugins", "--fields", "exo")
     assert fields.returncode == 2 and suggested(fields.stderr) == []
     # what both say: the distribution that installed it and the module its import did not find
     with pytest.raises(PluginLoadError) as not_loaded:
@@ -62,19 +69,23 @@ def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path, monkeyp
 
 
 def test_a_run_imports_only_the_plugins_it_names(tmp_path):
-    """Discovery reads metadata; the HIT round trip imports its robot, planner, controller, sensor and backend,
-    and none of the engines other plugins need."""
-    code = ("import sys, json; from rehabkit.api import run_scenario; "
-            f"run_scenario({str(SCENARIOS / 'hit_roundtrip.yaml')!r}, ['duration=0.2', 'expect={{}}']); "
-            "print(json.dumps(sorted(sys.modules)))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    """Discovery reads metadata; ``rehabkit run`` of the HIT round trip imports its robot, planner, controller,
+    sensor and backend, and none of the engines other plugins need."""
+    code = ("import atexit, json, runpy, sys; atexit.register(lambda: print(json.dumps(sorted(sys.modules)))); "
+            "runpy.run_module('rehabkit.cli', run_name='__main__')")  # (the command as a user runs it, to its exit)
+    done = subprocess.run([sys.executable, "-c", code, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out",
+                           str(tmp_path), "--set", "duration=0.2", "--set", "expect=null"], capture_output=True,
+                          text=True, env={**os.environ, "MUJOCO_GL": "egl"})
     assert done.returncode == 0, done.stderr
     loaded = set(json.loads(done.stdout.splitlines()[-1]))
+    assert (tmp_path / "run.rrd").stat().st_size > 0
     plugins = {m for m in loaded if m.count(".") == 2 and m.startswith("rehabkit_plugins.")}  # modules, not packages
     assert plugins == {"rehabkit_plugins.robots.hit", "rehabkit_plugins.planners.multi_cubic",
                        "rehabkit_plugins.controllers.joint_pd", "rehabkit_plugins.sensors.joint_encoder"}, plugins
+    # (nor pandas: pyarrow, under Rerun, would import it at its first array only to ask whether it is a pandas
+    # object: ~0.2 s of the ~1.1 s main job)
     for heavy in ("ompl", "cv2", "numba", "qpsolvers", "proxsuite", "daqp", "scipy.spatial", "ray",
-                  "rehabkit.sweep.engine", "rehabkit.hardware.backend"):
+                  "rehabkit.sweep.engine", "rehabkit.hardware.backend", "pandas"):
         assert heavy not in loaded, heavy
 
 
@@ -91,7 +102,7 @@ class Cfg(BaseModel):
 def rehabkit_register_planners(registry):
     registry.add("multi-cubic", config=Cfg, factory=lambda config, context: None)
 """)
-    r = rehabkit(site, "validate", str(SCENARIOS / "hit_roundtrip.yaml"))
+    r = rehabkit(site, monkeypatch, "validate", str(SCENARIOS / "hit_roundtrip.yaml"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     with pytest.raises(PluginConflictError) as twice:  # what it says: the plugin, and both packages
         registry_seeing(site, monkeypatch).get("planner", "multi-cubic")
