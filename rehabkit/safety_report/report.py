@@ -148,11 +148,16 @@ def run_skill(path: Path, backend: str, reaction: str | None = None) -> SkillRun
             except SetupError as exc:
                 latched = isinstance(exc.__cause__, EStopLatchedError)
                 notes.append("the next session was refused: e-stop latched" if latched else str(exc))
-            from rehabkit.core.safety.estop import all_latches
+            from rehabkit.core.safety.estop import RAMP_IN_AFTER_CLEAR_S, all_latches
 
             for latch in all_latches():
                 latch.clear("safety-report (validation protocol)")
-            ramp = [e["data"].get("duration_s") for e in run_scenario(path, overrides, out_dir=None)
+            # the session after the clear runs through its ramp-in (at least RAMP_IN_AFTER_CLEAR_S), not the whole
+            # scenario again: what it is run for is that ramp, and going on would press the e-stop again, latching
+            # the robot the protocol has just cleared (and, over the link, a second of lock-step ticks for nothing)
+            ramp_s = max(RAMP_IN_AFTER_CLEAR_S, sc.safety.ramp_in_s)
+            after = {**overrides, "duration": min(sc.duration, ramp_s)}
+            ramp = [e["data"].get("duration_s") for e in run_scenario(path, after, out_dir=None)
                     .summary["safety"]["interventions"] if e["rule"] == "ramp-in"]
             notes.append(f"cleared, then ramped in over {ramp[0]:g} s" if ramp else "cleared, no ramp-in")
     m = result.summary["metrics"]
