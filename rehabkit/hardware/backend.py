@@ -84,7 +84,9 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         self.limits, self.joint_names = robot.model.limits, robot.model.joint_names
         self.revolute = robot.model.revolute
         self.mirror = SceneMirror(robot.model, context.world)
-        self.frames = FrameServer(self.mirror.model) if context.world is not None and context.world.cameras else None
+        # (on the lock-step clock the loop waits for each frame: rendered at normal priority, not idle)
+        self.frames = FrameServer(self.mirror.model, idle=self.realtime) \
+            if context.world is not None and context.world.cameras else None
         self.measured = np.zeros(self.mirror.measured_count)
         # the instruments' readings each state carries (3 values each, in the run's order), read by name
         self._instrument_at = {i.name: slice(INSTRUMENT_DIM * k, INSTRUMENT_DIM * (k + 1))

@@ -5,8 +5,11 @@ in the host process it would stall a real-time control loop by as much, whatever
 asks for it. The server (``python -m rehabkit.hardware.frame_server``, started by
 :class:`FrameServer`) gets the scene's compiled model once; a frame request sends the pose
 (``qpos`` and the kinematic objects) and waits for the pixels on a pipe, so the loop runs
-meanwhile. Requests are serialised by a lock. The server runs as an idle-priority task with one
-rasteriser thread: frames yield to the control loop and to the robot's bridge.
+meanwhile. Requests are serialised by a lock. The server runs with one rasteriser thread and, for a
+real-time loop, as an idle-priority task: frames yield to the control loop and to the robot's bridge. A loop on the
+lock-step clock waits for each frame (it has no deadline to keep), so there the server runs at normal priority: at
+idle priority a machine with every core busy starved it, and every frame held the loop up by as long (measured on
+this 2-core VM beside three busy processes: 30-370 ms a frame at idle priority, 8-18 ms at normal).
 """
 
 from __future__ import annotations
@@ -24,11 +27,12 @@ from threadpoolctl import threadpool_limits
 from rehabkit.sim.scene_view import camera_renderer
 
 
-def _serve(inp, out) -> None:  # pragma: no cover - runs in the server process
-    try:  # frames run only when nothing else wants the CPU: a waking control loop preempts them at once
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    except (AttributeError, OSError):  # not Linux: the next best thing
-        os.nice(10)
+def _serve(inp, out, idle: bool = True) -> None:  # pragma: no cover - runs in the server process
+    if idle:
+        try:  # frames run only when nothing else wants the CPU: a waking control loop preempts them at once
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        except (AttributeError, OSError):  # not Linux: the next best thing
+            os.nice(10)
     os.environ.setdefault("LP_NUM_THREADS", "1")  # read when the first GL context is made, below
     threadpool_limits(limits=1, user_api="blas")  # nothing here is BLAS work worth a spinning thread
     model: mujoco.MjModel = pickle.load(inp)
@@ -61,11 +65,12 @@ def _serve(inp, out) -> None:  # pragma: no cover - runs in the server process
 
 
 class FrameServer:
-    """A rendering process for one compiled scene."""
+    """A rendering process for one compiled scene; ``idle``: at idle priority (beside a real-time loop), else at
+    normal priority (a loop that waits for its frames)."""
 
-    def __init__(self, model: mujoco.MjModel):
-        self._proc = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
-                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    def __init__(self, model: mujoco.MjModel, idle: bool = True):
+        self._proc = subprocess.Popen([sys.executable, "-m", __name__, *([] if idle else ["--normal-priority"])],
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         pickle.dump(model, self._proc.stdin)
         self._proc.stdin.flush()
         self._lock = threading.Lock()
@@ -108,4 +113,4 @@ class FrameServer:
 
 
 if __name__ == "__main__":
-    _serve(sys.stdin.buffer, sys.stdout.buffer)
+    _serve(sys.stdin.buffer, sys.stdout.buffer, idle="--normal-priority" not in sys.argv[1:])
