@@ -110,10 +110,11 @@ def test_a_killed_sweep_resumes_without_redoing_finished_runs(tmp_path):
 
 @pytest.fixture(scope="module")
 def running_ray():
-    """One local Ray for the module's later Ray sweeps (its start-up and shut-down take seconds each), started
-    as a sweep starts it; sweeps use a running Ray and leave it running. The serial-against-Ray test above
-    starts and stops its own. Both workers have run a short HIT run first: a worker's first run also imports
-    the plugins, which on this loaded VM took the 0.5 s run past the hanging-run test's timeout (then 5 s)."""
+    """One local Ray for the module's Ray sweeps (its start-up and shut-down take seconds each), started as a sweep
+    starts it; sweeps use a running Ray and leave it running (a sweep's own start and stop:
+    test_a_sweep_stops_the_ray_it_started_and_only_that). Both workers have run a short HIT run first: a worker's
+    first run also imports the plugins, which on this loaded VM took a 0.5 s run past the hanging-run test's
+    timeout (then 5 s)."""
     import ray
 
     from rehabkit.sweep.engine import start_ray
@@ -125,46 +126,6 @@ def running_ray():
         [warm.remote(str(HIT), {"duration": 0.05, "logging.rrd": False}) for _ in range(2)]))
     yield
     ray.shutdown()
-
-
-@pytest.mark.realtime  # (a wall-clock timeout, and its bound: what only real time shows)
-@pytest.mark.parametrize("mode", ["serial", "ray"])
-def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode, request):
-    if mode == "ray":
-        request.getfixturevalue("running_ray")
-    # 300 s of simulated HIT take far longer than the 3 s allowed; the 0.5 s run finishes (in ~0.5 s)
-    result = run_sweep(HIT, ["duration=0.5,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=3)
-    by = {r["duration"]: r for r in result.records}  # (a grid of numbers: a column of numbers)
-    assert by[0.5]["error"] is None and by[0.5]["metric.sim_time_s"] == pytest.approx(0.5)
-    assert by[300]["error"].startswith("RunTimeoutError") and not by[300]["passed"]
-    assert by[300]["wall_time_s"] < 30
-    assert [a["errors"] for a in result.aggregate] == [0, 1]
-
-
-def test_a_ray_sweep_stopped_by_ctrl_c_records_the_run_under_way_as_interrupted(tmp_path, monkeypatch, running_ray):
-    """Ctrl-C while a run goes on Ray (raised where the driver waits, once the short run is recorded): the finished
-    run kept, the one under way recorded as interrupted and so left to run again on resuming, the Ctrl-C passed on.
-    (A Ray sweep lost its runs under way without a word.)"""
-    import ray
-
-    from rehabkit.sweep.grid import expand
-    from rehabkit.sweep.store import RunStore
-
-    wait = ray.wait
-
-    def interrupted_once_one_is_recorded(*args, **kwargs):
-        if list((tmp_path / "runs").glob("*.json")):
-            raise KeyboardInterrupt
-        return wait(*args, **kwargs)
-
-    monkeypatch.setattr(ray, "wait", interrupted_once_one_is_recorded)
-    with pytest.raises(KeyboardInterrupt):  # (300 s of HIT: seconds of wall time, under way at the Ctrl-C)
-        run_sweep(HIT, ["duration=0.2,300"], 1, tmp_path, workers=2)
-    rows = {r.point[0][1]: r for r in expand(HIT, {"duration": [0.2, 300]}, 1)}
-    short, cut = (json.loads((tmp_path / "runs" / f"{rows[d].run_id}.json").read_text()) for d in (0.2, 300))
-    assert short["error"] is None and short["metrics"]["sim_time_s"] == pytest.approx(0.2)
-    assert cut["ended"]["how"] == "interrupted" and cut["ended"]["signal"] == "SIGINT" and not cut["passed"]
-    assert set(RunStore(tmp_path).done(list(rows.values()))) == {rows[0.2].run_id}  # (resuming runs it again)
 
 
 @pytest.mark.parametrize("mode", ["serial", "ray"])
@@ -219,3 +180,50 @@ def test_a_finished_run_is_freed_without_a_full_collection_and_a_failed_one_is_c
     assert ok["error"] is None and [g for g in full if not g] == []
     failed = execute(str(TRIAL), {"controller": {"type": "qp-stack", "levels": [{"tasks": [{"type": "com"}]}]}})
     assert "floating base" in failed["error"] and [g for g in full if not g] == [()]
+
+
+# The two tests below stop a run under way on Ray, and Ray stops it by killing its worker: a worker started in its place
+# imports Ray, rehabkit and the plugins again (seconds of CPU each). So they come last, the run stopped by Ctrl-C
+# last of all (the hanging-run test's short run must find its worker warm, within its timeout); the Ray sweeps
+# before them (pytest runs a module's tests in the order written) keep the workers the module's Ray started.
+
+
+@pytest.mark.realtime  # (a wall-clock timeout, and its bound: what only real time shows)
+@pytest.mark.parametrize("mode", ["serial", "ray"])
+def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, mode, request):
+    if mode == "ray":
+        request.getfixturevalue("running_ray")
+    # 300 s of simulated HIT take far longer than the 2 s allowed; the 0.2 s run finishes (in ~0.2 s: a tenth of the
+    # timeout, a larger share to spare than the 0.5 s run had of 3 s; the stopped run's timeout is the test's CPU)
+    result = run_sweep(HIT, ["duration=0.2,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=2)
+    by = {r["duration"]: r for r in result.records}  # (a grid of numbers: a column of numbers)
+    assert by[0.2]["error"] is None and by[0.2]["metric.sim_time_s"] == pytest.approx(0.2)
+    assert by[300]["error"].startswith("RunTimeoutError") and not by[300]["passed"]
+    assert by[300]["wall_time_s"] < 30
+    assert [a["errors"] for a in result.aggregate] == [0, 1]
+
+
+def test_a_ray_sweep_stopped_by_ctrl_c_records_the_run_under_way_as_interrupted(tmp_path, monkeypatch, running_ray):
+    """Ctrl-C while a run goes on Ray (raised where the driver waits, once the short run is recorded): the finished
+    run kept, the one under way recorded as interrupted and so left to run again on resuming, the Ctrl-C passed on.
+    (A Ray sweep lost its runs under way without a word.)"""
+    import ray
+
+    from rehabkit.sweep.grid import expand
+    from rehabkit.sweep.store import RunStore
+
+    wait = ray.wait
+
+    def interrupted_once_one_is_recorded(*args, **kwargs):
+        if list((tmp_path / "runs").glob("*.json")):
+            raise KeyboardInterrupt
+        return wait(*args, **kwargs)
+
+    monkeypatch.setattr(ray, "wait", interrupted_once_one_is_recorded)
+    with pytest.raises(KeyboardInterrupt):  # (300 s of HIT: seconds of wall time, under way at the Ctrl-C)
+        run_sweep(HIT, ["duration=0.2,300"], 1, tmp_path, workers=2)
+    rows = {r.point[0][1]: r for r in expand(HIT, {"duration": [0.2, 300]}, 1)}
+    short, cut = (json.loads((tmp_path / "runs" / f"{rows[d].run_id}.json").read_text()) for d in (0.2, 300))
+    assert short["error"] is None and short["metrics"]["sim_time_s"] == pytest.approx(0.2)
+    assert cut["ended"]["how"] == "interrupted" and cut["ended"]["signal"] == "SIGINT" and not cut["passed"]
+    assert set(RunStore(tmp_path).done(list(rows.values()))) == {rows[0.2].run_id}  # (resuming runs it again)

@@ -9,6 +9,7 @@ A number that is not finite (NaN, ±inf) in a joint's position, the person's wre
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -83,10 +84,11 @@ REPLAY_NEEDS = {
 }
 
 
-def refuse_rows(bag: Path, role: str, values: np.ndarray, wheres: list[Where], fields: list[str],
+def refuse_rows(bag: Path, role: str, values: np.ndarray, wheres: Sequence[Where], fields: list[str],
                 words: list[str] | None = None) -> None:
     """Refuse the first message whose ``values`` row holds a number that is not finite, at its column's field
-    (``fields``, e.g. ``position[j2]``), said in its ``words`` (default: the field)."""
+    (``fields``, e.g. ``position[j2]``), said in its ``words`` (default: the field); ``wheres[i]``: row ``i``'s message
+    (only the refused one's is asked for)."""
     row = first_bad(values)
     if row is None:
         return

@@ -16,6 +16,9 @@ readings): the session is replayed without a recorded person, said.
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,6 +45,11 @@ SENSORS = "/sensors/"  # rehabkit's bags: each sensor's readings (a force-torque
 COMPANIONS = {"/pose": "geometry_msgs/msg/PoseStamped", "/joint_states": "sensor_msgs/msg/JointState"}
 GAP_PERIODS = 5.0  # a stretch this many usual periods long without a message is a gap
 GAP_MIN_S = 0.05  # ... and at least this long (a 1 kHz topic missing 6 ms is jitter, not a gap)
+# the messages read from bags while :func:`reading_once` holds: (bag, connections read) → (connection, log time,
+# message) in the order read. A replay reads its bag, then the recorded-wrench patient it builds reads the same joint
+# states and wrench again; deserialising a 1 kHz session's messages is most of the reading (an 8-s session: 16,000
+# messages, ~0.3 s of a ~1.9 s replay), so read twice it was a third of the replay
+_READ: ContextVar[dict | None] = ContextVar("rehabkit_bags_read", default=None)
 
 
 @dataclass(frozen=True)
@@ -176,8 +184,7 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
             if problems:
                 raise BagError(path, *problems[0], more=problems[1:])
             conns = [c for c in reader.connections if c.topic in wanted]
-            for conn, log_ns, data in reader.messages(connections=conns):
-                msg = reader.deserialize(data, conn.msgtype)
+            for conn, log_ns, msg in _messages(reader, path, conns):
                 raw[wanted[conn.topic]].append((_stamp_ns(msg, log_ns), conn.topic, conn.msgtype, msg))
     except BagError:
         raise
@@ -185,6 +192,48 @@ def read_session(path: str | Path, topics: dict[str, str] | None = None,
         raise BagError(path, "", f"can't be read as a ROS bag: {exc}") from exc
     roles_read = set(wanted.values())
     return _session(path, topics, raw, remarks, {role: topics[role] if role in roles_read else "" for role in TOPICS})
+
+
+@contextmanager
+def reading_once() -> Iterator[None]:
+    """Within it, a bag's messages are deserialised once: a later :func:`read_session` of the same bag, unchanged on
+    disk, for the same connections or some of them takes them from the first read (a connection's messages in the
+    order read: the order rosbags' readers give them alone or among others — time order, ties in the file's order).
+    Outside it (and once it ends) nothing is kept: a long session's messages are not held for the process's life."""
+    if _READ.get() is not None:  # (nested: the outer one keeps them)
+        yield
+        return
+    token = _READ.set({})
+    try:
+        yield
+    finally:
+        _READ.reset(token)
+
+
+def _identity(path: Path) -> tuple:
+    """The bag as it is on disk: its path and each of its files' name, size and modification time."""
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    return str(path.resolve()), tuple((str(p), st.st_size, st.st_mtime_ns) for p in files for st in [p.stat()])
+
+
+def _messages(reader, path: Path, conns: list) -> Iterator[tuple]:
+    """``conns``' messages, deserialised, in the order the reader gives them: (connection, log time [ns], message);
+    within :func:`reading_once`, those of an earlier read of the bag that had them all."""
+    kept = _READ.get()
+    if kept is None:
+        for conn, log_ns, data in reader.messages(connections=conns):
+            yield conn, log_ns, reader.deserialize(data, conn.msgtype)
+        return
+    bag = _identity(path)
+    mine = {(c.id, c.topic, c.msgtype): c for c in conns}
+    for (other, read), messages in kept.items():
+        if other == bag and mine.keys() <= read:
+            yield from ((mine[key], log_ns, msg) for key, log_ns, msg in messages if key in mine)
+            return
+    messages = [((conn.id, conn.topic, conn.msgtype), log_ns, reader.deserialize(data, conn.msgtype))
+                for conn, log_ns, data in reader.messages(connections=conns)]
+    kept[bag, frozenset(mine)] = messages
+    yield from ((mine[key], log_ns, msg) for key, log_ns, msg in messages)
 
 
 def _wanted(topics: dict[str, str], have: dict[str, str], named: set[str] = frozenset(), path: Path | str = "",
@@ -226,7 +275,21 @@ def _wanted(topics: dict[str, str], have: dict[str, str], named: set[str] = froz
     return wanted, problems
 
 
-def _series_rows(path: Path, topic: str, rows: list, t: np.ndarray, names: list[str], wheres: list[Where],
+class _Wheres(Sequence):
+    """Each of ``rows``' messages as a :class:`Where` (``wheres[i]``), made for the one said only: a 1 kHz session has
+    tens of thousands, and almost always none is."""
+
+    def __init__(self, rows: list, where):
+        self.rows, self.where = rows, where
+
+    def __getitem__(self, i: int) -> Where:
+        return self.where(self.rows[i])
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+def _series_rows(path: Path, topic: str, rows: list, t: np.ndarray, names: list[str], wheres: _Wheres,
                  remarks: list[Remark]) -> tuple[Series, Series | None, Series | None]:
     """The joint states' position, velocity and effort series; a position that is not finite refused, a velocity or
     effort said and left out."""
@@ -277,14 +340,14 @@ def _session(path: Path, topics: dict[str, str], raw: dict[str, list], remarks: 
         raise BagError(path, "joint_states", f"gives {len(short[0][3].position)} positions for the joints {names}: "
                                               "a replay needs every joint's position in every message",
                        where=where(short[0]), field="position")
-    joints, velocity, effort = _series_rows(path, topics["joint_states"], rows, t, names, [where(r) for r in rows],
+    joints, velocity, effort = _series_rows(path, topics["joint_states"], rows, t, names, _Wheres(rows, where),
                                             remarks)
     gaps = _gaps(topics["joint_states"], t)
     wrench = None
     if raw["wrench"]:
         ws = sorted(raw["wrench"], key=lambda r: r[0])
         values = np.array([_vec(r[3].wrench.force) + _vec(r[3].wrench.torque) for r in ws])
-        refuse_rows(path, "wrench", values, [where(r) for r in ws],
+        refuse_rows(path, "wrench", values, _Wheres(ws, where),
                     [f"wrench.{a}.{x}" for a in ("force", "torque") for x in "xyz"])
         frame = ws[0][3].header.frame_id
         other = next((r for r in ws if r[3].header.frame_id != frame), None)
@@ -345,7 +408,7 @@ def _shown(path: Path, r: tuple, at: Where, t0: int) -> ShownTarget:
         kind, values = "pose", np.array(_vec(msg.pose.position) + [o.x, o.y, o.z, o.w])
         fields = [f"pose.position.{x}" for x in "xyz"] + [f"pose.orientation.{x}" for x in "xyzw"]
     else:
-        kind, values = "joints", np.asarray(msg.position, float)
+        kind, values = "joints", np.array(msg.position, float)  # (a copy: the message may be read again)
         fields = [f"position[{n}]" for n in msg.name]
         if len(values) != len(msg.name):
             raise BagError(path, "targets", f"gives {len(values)} positions for the joints {list(msg.name)}: a "

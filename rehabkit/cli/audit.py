@@ -250,7 +250,9 @@ def _indexed(path: Path) -> bool:
     import subprocess
 
     backup = path.with_name(f"{path.stem}.backup{path.suffix}")
-    done = subprocess.run([sys.executable, "-m", "rerun", "rrd", "migrate", str(path)], capture_output=True,
+    # (rerun_cli, shipped with the SDK, starts the same `rerun` binary as `python -m rerun` without importing the
+    # SDK first: ~0.5 s of CPU and a second of a recovery's wall time less)
+    done = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "migrate", str(path)], capture_output=True,
                           text=True, timeout=300)
     if done.returncode == 0 and path.exists():
         backup.unlink(missing_ok=True)

@@ -34,7 +34,7 @@ from rehabkit.ros.replay.bag_scenario import (
     write_session_scenario,
 )
 from rehabkit.ros.replay.deviation import largest_deviation
-from rehabkit.ros.replay.session_bag import SessionBag, read_session
+from rehabkit.ros.replay.session_bag import SessionBag, read_session, reading_once
 
 SESSION_SCENARIO = "replayed_session.yaml"  # the scenario the session was replayed in, beside the replay's outputs
 SESSION_MEASURES = "session.json"  # the recorded session's own outcome measures, the table's first column
@@ -110,11 +110,18 @@ def replay_bag(bag_path: str | Path, scenario: str | Path, topics: dict[str, str
             not finite, a wrench frame the robot has not: a :class:`BagError` at the message), or the scenario or
             overrides are invalid. Nothing is left of the output folder where it did not exist.
     """
+    bag_path, scenario, overrides = Path(bag_path), Path(scenario), list(overrides)
+    registry = registry or default_registry()
+    with reading_once():  # (the recorded-wrench patient reads the bag this reads: its messages deserialised once)
+        return _replay_bag(bag_path, scenario, topics, overrides, out_dir, registry, progress, say)
+
+
+def _replay_bag(bag_path: Path, scenario: Path, topics: dict[str, str] | None, overrides: list[str],
+                out_dir: str | Path | None, registry: PluginRegistry, progress: bool,
+                say: Callable[[str], None] | None) -> Replay:
     from rehabkit.core.plugins.lifecycle import default_extensions
     from rehabkit.core.setup.assembly import assemble
 
-    bag_path, scenario, overrides = Path(bag_path), Path(scenario), list(overrides)
-    registry = registry or default_registry()
     bag = read_session(bag_path, topics)
     topics = bag.topics  # (those read: a wrench not named and not in the bag is none)
     plain = load_scenario(scenario, [], registry)

@@ -17,4 +17,5 @@ from rehabkit.bags.session_bag import (  # noqa: F401
     ShownTarget,
     parse_topics,
     read_session,
+    reading_once,
 )
