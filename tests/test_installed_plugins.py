@@ -70,15 +70,21 @@ def test_broken_distribution_is_listed_and_the_rest_still_runs(tmp_path, monkeyp
 
 def test_a_run_imports_only_the_plugins_it_names(tmp_path):
     """Discovery reads metadata; ``rehabkit run`` of the HIT round trip imports its robot, planner, controller,
-    sensor and backend, and none of the engines other plugins need."""
+    sensor and backend, and none of the engines other plugins need; a run with no folder imports no Rerun."""
+    # first a run with no folder (a sweep's, a notebook's): no recording, so no Rerun imported; then the command as a
+    # user runs it, to its exit
+    unrecorded = (f"from rehabkit.api import run_scenario; run_scenario({str(SCENARIOS / 'hit_roundtrip.yaml')!r}, "
+                  "['duration=0.1', 'expect=null']); print(json.dumps(sorted(m for m in ('rerun', 'pyarrow') "
+                  "if m in sys.modules)))")
     code = ("import atexit, json, runpy, sys; atexit.register(lambda: print(json.dumps(sorted(sys.modules)))); "
-            "runpy.run_module('rehabkit.cli', run_name='__main__')")  # (the command as a user runs it, to its exit)
+            f"{unrecorded}; runpy.run_module('rehabkit.cli', run_name='__main__')")
     done = subprocess.run([sys.executable, "-c", code, "run", str(SCENARIOS / "hit_roundtrip.yaml"), "--out",
                            str(tmp_path), "--set", "duration=0.2", "--set", "expect=null"], capture_output=True,
                           text=True, env={**os.environ, "MUJOCO_GL": "egl"})
     assert done.returncode == 0, done.stderr
     loaded = set(json.loads(done.stdout.splitlines()[-1]))
-    assert (tmp_path / "run.rrd").stat().st_size > 0
+    assert json.loads(done.stdout.splitlines()[0]) == []  # (the run with no folder)
+    assert (tmp_path / "run.rrd").stat().st_size > 0 and "rerun" in loaded
     plugins = {m for m in loaded if m.count(".") == 2 and m.startswith("rehabkit_plugins.")}  # modules, not packages
     assert plugins == {"rehabkit_plugins.robots.hit", "rehabkit_plugins.planners.multi_cubic",
                        "rehabkit_plugins.controllers.joint_pd", "rehabkit_plugins.sensors.joint_encoder"}, plugins

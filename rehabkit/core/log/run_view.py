@@ -20,7 +20,6 @@ import numpy as np
 from rehabkit.core.kinds.capabilities import SceneGeometry
 from rehabkit.core.kinds.interfaces import BodyPoses, Patient, Plan
 from rehabkit.core.kinds.trace import Trace
-from rehabkit.core.log.rerun_log import RerunLog
 from rehabkit.core.setup.assembly import Assembly
 
 NO_BODIES = BodyPoses([], np.zeros((0, 3)), np.zeros((0, 4)))
@@ -52,6 +51,9 @@ class RunView:
         self._flush_by = time.monotonic() + FLUSH_EVERY_S
         self._upto = 0
         self._joint_space = False
+        # Rerun (~0.3 s to import, with pyarrow) only where a run is recorded: a sweep's or a test's runs often are not
+        from rehabkit.core.log.rerun_log import RerunLog
+
         sc, out = setup.sc, setup.out_dir
         model = setup.robot.model
         log = RerunLog(out / "run.rrd", sc.logging.application_id, model.joint_names, spawn=spawn,

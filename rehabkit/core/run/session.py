@@ -20,7 +20,6 @@ from rehabkit.core.kinds.capabilities import NamedJoints, PassiveJoints
 from rehabkit.core.kinds.interfaces import BackendFaultError, Plan, PlanningError, Target
 from rehabkit.core.kinds.metric import MetricCatalogue
 from rehabkit.core.kinds.trace import Trace
-from rehabkit.core.log.archetypes import encode_images
 from rehabkit.core.log.run_view import NullView, RunView, open_view
 from rehabkit.core.log.safety_log import SNAPSHOT, SafetyLog, open_log
 from rehabkit.core.run.plan_gate import PlanGate
@@ -231,6 +230,8 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
         tap.follow(trace, lambda: session.ref.movements)
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
+        from rehabkit.core.log.archetypes import encode_images  # (Rerun's, imported where a recording is made)
+
         # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are)
         threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
                                 prepare=encode_images if view.active and not session.taps else None)
