@@ -9,13 +9,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-import can
 import pytest
+import yaml
 
 from rehabkit.canopen.bus.drive_dictionary import read_dictionary
 from rehabkit.canopen.bus.pdo_layout import needed
 from rehabkit.canopen.bus.pdo_plan import PdoPlanError, plan_pdos
-from tests.conftest import ROOT
+from tests.canopen_runs import SHARED, cli_run
+from tests.conftest import FIRST_ROUND_TRIP, ROOT
 from tests.located import located
 from tests.test_cli import cli
 
@@ -24,17 +25,20 @@ SECTION = README[README.index("## On CANopen drives"):README.index("## Benchmark
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", SECTION, re.S)
 
 
-def test_the_canopen_commands_run_as_written(tmp_path):
+@pytest.mark.xdist_group(SHARED)
+def test_the_canopen_commands_run_as_written(request):
     validate, run = (c.split("#")[0].strip() for c in BLOCKS[0][1].strip().splitlines())
     refused = cli(*shlex.split(validate)[1:], cwd=ROOT)
     # refused at the control rate (what it says there, and its fix: tests/test_canopen_setup.py)
     assert (refused.returncode, located(refused.stderr)) == (2, [("scenarios/hit_roundtrip.yaml", 37, 9,
                                                                   "rates.control_hz")]), refused.stderr
-    done = cli(*shlex.split(run)[1:], "--out", str(tmp_path / "run"), cwd=ROOT)
+    # the command run as written (with --out), once: tests/test_canopen_backend.py's tracking test reads it too
+    shared = cli_run(request, *shlex.split(run)[1:])
+    done = shared.done
     assert done.returncode == 0, done.stderr
-    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    summary = json.loads((shared.out / "summary.json").read_text())
     assert summary["metrics"]["can_cycles"] == 4250 and summary["metrics"]["can_emcy"] == 0
-    frames = list(can.LogReader(tmp_path / "run" / "can.asc"))  # (as the README says to read it)
+    frames = shared.frames  # (can.LogReader on its can.asc, as the README says to read it)
     assert len(frames) > 4250 * 19 and 4250 + 8 <= sum(f.arbitration_id == 0x80 for f in frames) < 4250 + 8 + 100
 
 
@@ -64,8 +68,9 @@ def test_the_lab_robots_wiring_validates_and_its_mistakes_are_located(tmp_path):
 @pytest.mark.xdist_group("realtime")
 def test_simulated_drives_in_another_process_as_the_readme_runs_them(tmp_path):
     """``rehabkit drives`` and the run in a network namespace of their own, over udp_multicast, in real time: the
-    host waits for the drives to answer, runs its cycles against them and writes its summary; then the drives it
-    leaves behind are listened to for 0.3 s (tests/listen_can.py, in the same namespace) before they are stopped.
+    host waits for the drives to answer, runs its cycles against them (HIT's first round trip, tests/conftest.py's
+    FIRST_ROUND_TRIP given as --set) and writes its summary; then the drives it leaves behind are listened to for
+    0.3 s (tests/listen_can.py, in the same namespace) before they are stopped.
 
     Only what holds under any load is asserted (this 2-core VM busy with the other tests stalls a process for tens of
     ms at times): the run ends safe, completed (exit 0, every cycle) or stopped for one of the reasons a stalled
@@ -78,14 +83,19 @@ def test_simulated_drives_in_another_process_as_the_readme_runs_them(tmp_path):
     assert command.startswith("unshare -n sh -c '") and command.endswith("RC=$?; kill $!; exit $RC'")
     out = tmp_path / "run"
     listen = f"{sys.executable} {ROOT / 'tests' / 'listen_can.py'} udp_multicast 239.74.163.2 0.3"
-    command = command.replace("; RC=$?; kill $!;", f" --out {out}; RC=$?; {listen}; kill $!; wait $!;")
+    # the first round trip only (A → B → A, 4.5 s of the wall clock, not 8.5): the two processes, the drives' answer,
+    # the paced cycles, a run that completes and what it leaves behind are all there by then; the second round trip
+    # is the first again. (Flow YAML in double quotes: the command is already in single ones.)
+    first = " ".join(f'--set "{k}={yaml.safe_dump([v], default_flow_style=True, width=1000).strip()[1:-1]}"'
+                     for k, v in FIRST_ROUND_TRIP.items())
+    command = command.replace("; RC=$?; kill $!;", f" {first} --out {out}; RC=$?; {listen}; kill $!; wait $!;")
     done = subprocess.run(command, shell=True, cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode in (0, 1), done.stderr
     summary = json.loads((out / "summary.json").read_text())
     metrics, events = summary["metrics"], summary["safety"]["events"]
     assert metrics["can_cycles"] > 0 and metrics["can_latency_median_ms"] > 0  # (its figures: canopen_loop.py)
     if done.returncode == 0:
-        assert metrics["can_cycles"] == 4250 and not events
+        assert metrics["can_cycles"] == 2250 and not events  # (4.5 s at 500 Hz)
     else:
         rule, said = events[0]["rule"], events[0]["message"]
         assert rule in ("velocity", "position") or rule == "backend" and re.search(
