@@ -265,13 +265,12 @@ def test_muscle_paths_move_with_the_bones_at_their_rate(scenario_run):
     origins = np.array([[strip[0] for strip in row] for row in paths])  # sample, muscle, xyz (world)
     bodies = {p: c for p, c in data.items() if p.startswith("world/bodies/") and "Transform3D:translation" in c
               and len(c["Transform3D:translation"]) == samples}
+    # each body's poses over the samples, read once (not once per muscle: that was most of this test's time)
+    poses = [(np.array([p[0] for p in pose["Transform3D:translation"]]),
+              Rotation.from_quat([q[0] for q in pose["Transform3D:quaternion"]]).inv()) for pose in bodies.values()]
     moved = 0
     for k in range(origins.shape[1]):
-        spread = []
-        for pose in bodies.values():
-            where = np.array([p[0] for p in pose["Transform3D:translation"]])
-            turn = Rotation.from_quat([q[0] for q in pose["Transform3D:quaternion"]])
-            spread.append(np.ptp(turn.inv().apply(origins[:, k] - where), axis=0).max())
+        spread = [np.ptp(to_body.apply(origins[:, k] - where), axis=0).max() for where, to_body in poses]
         assert min(spread) < 2e-5, k  # fixed on a body
         moved += np.ptp(origins[:, k], axis=0).max() > 0.02
     assert moved > 30  # (most of them on bones that move centimetres)
