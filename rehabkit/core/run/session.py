@@ -230,11 +230,12 @@ def _standing(a: Assembly, view, trace: Trace, packed: np.ndarray, notes: list[d
         tap.follow(trace, lambda: session.ref.movements)
     threads = None
     if a.backend.realtime and any(s.blocking for s in a.sensors.values()):
-        from rehabkit.core.log.archetypes import encode_images  # (Rerun's, imported where a recording is made)
-
-        # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are)
-        threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking],
-                                prepare=encode_images if view.active and not session.taps else None)
+        prepare = None
+        if view.active and not session.taps:
+            # images encoded for the log where they are taken, off the loop (not when a tap takes them as they are);
+            # Rerun's encoder, imported only where a recording is made
+            from rehabkit.core.log.archetypes import encode_images as prepare
+        threads = SensorThreads([name for name, s in a.sensors.items() if s.blocking], prepare=prepare)
     session.threads = threads
     session.timeline = Timeline(a, view, threads, session.taps, session.targets, safety)
     try:
