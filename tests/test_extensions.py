@@ -35,6 +35,11 @@ def test_the_readme_extension_adds_its_metric_to_every_run():
     result = Runner(loaded, extensions=exts).run()
     metrics = result.summary["metrics"]
     assert result.summary["metric_info"]["fast_time_s"]["unit"] == "s"
+    # each description is its every field but the name (written out for speed: a field added is a field listed)
+    from dataclasses import asdict
+
+    fast = next(m for m in exts.metrics() if m.name == "fast_time_s")
+    assert result.summary["metric_info"]["fast_time_s"] == {k: v for k, v in asdict(fast).items() if k != "name"}
     # recomputed from the trace: the time steps any joint exceeded a fifth of its speed limit
     from rehabkit_plugins.robots.hit import HitConfig, HitRobot
 

@@ -189,17 +189,26 @@ class KinematicChain:
         """Tip poses (N, 4, 4) for many configurations (N, n) at once."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         n = len(q)
-        t = np.broadcast_to(self.fixed[0], (n, 4, 4)).copy()
+        # the poses' top three rows held column by column, each column's entries contiguous over the batch:
+        # t[column, row, sample]. A joint's motion mixes whole columns (a rotation about z mixes x and y, a slide adds
+        # z to the origin); the constant part is one (4, 3) @ (3, 3N) product (its bottom row [0 0 0 1] carries the
+        # origin over). ~2x faster than (N, 4, 4) stacks, whose columns are strided
+        t = np.empty((4, 3, n))
+        t[:] = self.fixed[0][:3].T[:, :, None]
         for i, kind in enumerate(self.joints):
-            # the joint's motion applied to the columns it changes (a rotation about z mixes x and y, a slide adds
-            # z to the origin), then the constant part as one (4N, 4) @ (4, 4) product: a stack of 4x4 products
-            # would be N small ones (~3x slower, and as many again for a motion that is mostly identity)
             if kind == "revolute":
-                c, s = np.cos(q[:, i])[:, None], np.sin(q[:, i])[:, None]
-                x, y = t[:, :, 0].copy(), t[:, :, 1]
-                t[:, :, 0] = c * x + s * y
-                t[:, :, 1] = c * y - s * x
+                c, s = np.cos(q[:, i]), np.sin(q[:, i])
+                x = t[0] * c
+                x += s * t[1]
+                t[1] *= c
+                t[1] -= s * t[0]
+                t[0] = x
             else:
-                t[:, :, 3] += q[:, i, None] * t[:, :, 2]
-            t = (t.reshape(4 * n, 4) @ self.fixed[i + 1]).reshape(n, 4, 4)
-        return t
+                t[3] += q[:, i] * t[2]
+            origin = t[3].copy()
+            t = (self.fixed[i + 1][:3].T @ t[:3].reshape(3, 3 * n)).reshape(4, 3, n)
+            t[3] += origin
+        out = np.zeros((n, 4, 4))
+        out[:, :3, :] = t.transpose(2, 1, 0)
+        out[:, 3, 3] = 1.0
+        return out

@@ -11,7 +11,7 @@ outcome measures, without lists of names of their own.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Literal
 
 Clock = Literal["sim", "wall"]
@@ -40,7 +40,9 @@ class Metric:
 
     def info(self) -> dict:
         """The description as ``summary.json`` holds it (without the name)."""
-        return {k: v for k, v in asdict(self).items() if k != "name"}
+        # (its fields are plain values: no dataclasses.asdict, which deep-copies each, ~5 µs a metric, ~200 a run)
+        return {"unit": self.unit, "clock": self.clock, "combine": self.combine, "outcome": self.outcome,
+                "description": self.description}
 
 
 def combine(rule: Combine, old: float | None, new: float) -> float:

@@ -98,10 +98,12 @@ class SensorSeries:
         self.rec.log(f"sensors/{sensor}/{key}", rr.SeriesLines(names=names), static=True)
         self.contents.add_sensor(sensor, key, False)
 
-    def flush(self, send: Send) -> None:
+    def flush(self, out) -> None:
+        """The readings since the last flush into ``out`` (an :class:`~rehabkit.core.log.entity_columns.EntityColumns`),
+        a :class:`rr.Scalars` series a reading key."""
         for sensor, columns in self._columns.items():
             for key, column in columns.items():
                 if column.n:
                     t, values = column.take()
                     logged, scale = in_degrees(key)
-                    send(f"sensors/{sensor}/{logged}", t, lambda v=values * scale: rr.Scalars.columns(scalars=v))
+                    out.scalars(f"sensors/{sensor}/{logged}", t, values * scale)

@@ -27,6 +27,7 @@ from rehabkit.core.log import background
 from rehabkit.core.log.archetypes import LIMIT_RGB, PALETTE, entity_part, paler, shape, xyzw
 from rehabkit.core.log.blueprint import Contents, blueprint, labelled
 from rehabkit.core.log.buffers import TIMELINE, Drawings, SensorSeries
+from rehabkit.core.log.entity_columns import EntityColumns
 
 # the joints' shared series: entity → (what it shows, its unit, whether it holds the revolute joints or the prismatic
 # ones)
@@ -67,7 +68,9 @@ class RerunLog:
         self.deferred = False
         self._queue: deque[Callable[[], None]] = deque()
         self._rows: list[tuple] = []
+        self._columns = EntityColumns()  # the series gathered until a flush sends them in one call
         self._closing: Callable[[], None] | None = None
+        self._settling: Callable[[], None] | None = None  # (the end's first part, begun early: begin_settle)
         self._ee_path: list[np.ndarray] = []
         rec = self.rec
         self._drawings, self._sensors = Drawings(), SensorSeries(rec, self.contents)
@@ -165,17 +168,16 @@ class RerunLog:
         in degrees and N·m, a prismatic joint's in metres and N)."""
         if not len(t):
             return
-        t, scale = np.array(t), self._scale
+        t, scale, columns = np.array(t), self._scale, self._columns
         q_own, ref_own = np.asarray(q) * scale, np.asarray(q_ref) * scale
         for i, (part, u) in enumerate(zip(self.joint_parts, self.units)):
-            self._send(f"joints/{part}/measured_{u}", t, lambda v=q_own[:, i]: rr.Scalars.columns(scalars=v))
-            self._send(f"joints/{part}/reference_{u}", t, lambda v=ref_own[:, i]: rr.Scalars.columns(scalars=v))
+            columns.scalars(f"joints/{part}/measured_{u}", t, q_own[:, i])
+            columns.scalars(f"joints/{part}/reference_{u}", t, ref_own[:, i])
         values = {"speed": np.asarray(qd) * scale, "effort": np.array(tau), "error": ref_own - q_own}
         for series, (what, _, turns) in JOINT_SERIES.items():
             which = self.revolute == turns
             if which.any():
-                part = values[what] if which.all() else values[what][:, which]
-                self._send(series, t, lambda v=part: rr.Scalars.columns(scalars=v))
+                columns.scalars(series, t, values[what] if which.all() else values[what][:, which])
 
     def in_own_units(self, q: np.ndarray) -> np.ndarray:
         """Joint values [rad, m] (rows of ``dof``) in each joint's own unit, as the log shows them: a revolute
@@ -188,7 +190,7 @@ class RerunLog:
         for i, (part, u) in enumerate(zip(self.joint_parts, self.units)):
             both = np.array([[lower[i], upper[i]]] * 2) * self._scale[i]
             if np.all(np.isfinite(both)):
-                self._send(f"joints/{part}/limits_{u}", t, lambda v=both: rr.Scalars.columns(scalars=v))
+                self._columns.scalars(f"joints/{part}/limits_{u}", t, both)
 
     def frame_on(self, points_world: np.ndarray) -> None:
         """Points the 3-D view must hold (the robot's bodies, the person, the targets)."""
@@ -200,7 +202,7 @@ class RerunLog:
             values = np.array(values, float)
             self.rec.log(path, rr.SeriesLines(names=[labelled(path.split("/")[-1])]), static=True)
             self.contents.add_series(path)
-            self._send(path, np.array(t, float), lambda: rr.Scalars.columns(scalars=values))
+            self._columns.scalars(path, np.array(t, float), values)
 
     def sensor(self, t: float, sensor: str, reading: dict,
                channels: Callable[[str, int], list[str] | None] | None = None) -> None:
@@ -209,7 +211,7 @@ class RerunLog:
         self._sensors.add(t, sensor, reading, channels)
 
     def flush(self) -> None:
-        """Send buffered poses and sensor readings as columns."""
+        """Send the buffered poses, sensor readings and series as columns."""
         rows, self._rows = self._rows, []
         if rows:
             times = np.array([r[0] for r in rows])
@@ -217,12 +219,21 @@ class RerunLog:
             pos = np.array([r[1].positions for r in rows])
             quat = xyzw(np.array([r[1].quats_wxyz for r in rows]))
             for i, name in enumerate(names):
-                self._send(f"world/bodies/{entity_part(name)}", times,
-                           lambda i=i: rr.Transform3D.columns(translation=pos[:, i], quaternion=quat[:, i]))
-            ee = np.array(self._ee_path[-len(rows):])
-            self._send("world/end_effector", times, lambda: rr.Points3D.columns(positions=ee.reshape(-1, 3)))
+                self._columns.transforms(f"world/bodies/{entity_part(name)}", times, pos[:, i], quat[:, i])
+            self._columns.points("world/end_effector", times, np.array(self._ee_path[-len(rows):]))
         self._drawings.flush(self._send)
-        self._sensors.flush(self._send)
+        self._sensors.flush(self._columns)
+        if len(self._columns):  # (in a real-time run, an entity a tick: see send_one)
+            for batch in self._columns.take(per_entity=self.deferred):
+                if self.deferred:
+                    self._queue.append(lambda b=batch: self.rec.send_record_batch(b))
+                else:
+                    self.rec.send_record_batch(batch)
+
+    def encode_now(self) -> None:
+        """Have Rerun encode and write what it holds now, in its own threads, without waiting (its batcher would wait
+        for its next tick or the close): a run's series, sent at its end, are encoded while the run is summed up."""
+        self.rec.flush(timeout_sec=0.0)
 
     def _send(self, path: str, t: np.ndarray, columns: Callable[[], Any]) -> None:
         """Send one entity's columns now, or queue it in deferred mode (``columns`` builds them then)."""
@@ -248,17 +259,38 @@ class RerunLog:
 
     def discard(self) -> None:
         """Drop an unfinished recording (a run that died outside plugin code)."""
-        if self._closing is not None:  # (its end under way in the background: waited for, then dropped)
-            with contextlib.suppress(Exception):
-                self._closing()
+        for pending in (self._settling, self._closing):  # (its end under way in the background: waited for, dropped)
+            if pending is not None:
+                with contextlib.suppress(Exception):
+                    pending()
         self.rec.disconnect()
         self.tmp.unlink(missing_ok=True)
 
+    def begin_settle(self) -> None:
+        """Send everything buffered, the hand's path and the layout in a background thread, the file's encoding
+        started: what the recording's end can do once nothing but text events (:meth:`event`) is logged any more,
+        while the caller sums the run up. :meth:`begin_close` waits for it."""
+        if self._settling is None:
+            self._settling = background.begin(self._settle, name="rerun-settle")
+
+    def _settle(self) -> None:
+        self.flush()
+        while self._queue:
+            self.send_one()
+        if self._ee_path:
+            path = np.array(self._ee_path)
+            self.rec.log("world/end_effector_path", rr.LineStrips3D([path], colors=[[250, 180, 40]], radii=0.004),
+                         static=True)
+            self.frame_on(path)
+        self.send_layout()
+        self.encode_now()
+
     def begin_close(self) -> Callable[[], Path]:
-        """Finish the recording in a background thread — send everything left and the layout, encode and write it —
-        while the caller writes its other files (their disk waits leave the interpreter free for it); returns the
-        call that waits for it and moves the file into place (until then it is ``run.rrd.tmp``: the file is whole
-        at its name or not there). Nothing is logged to this log once it is called."""
+        """Finish the recording in a background thread — send everything left and the layout (:meth:`begin_settle`,
+        unless it was begun), encode and write it — while the caller writes its other files (their disk waits leave
+        the interpreter free for it); returns the call that waits for it and moves the file into place (until then
+        it is ``run.rrd.tmp``: the file is whole at its name or not there). Nothing is logged to this log once it is
+        called."""
         written = background.begin(self._end, name="rerun-close")
         self._closing = written
 
@@ -269,15 +301,12 @@ class RerunLog:
         return wait
 
     def _end(self) -> None:
-        self.flush()
-        while self._queue:
-            self.send_one()
-        if self._ee_path:
-            path = np.array(self._ee_path)
-            self.rec.log("world/end_effector_path", rr.LineStrips3D([path], colors=[[250, 180, 40]], radii=0.004),
-                         static=True)
-            self.frame_on(path)
-        self.send_layout()
+        settled, self._settling = self._settling, None
+        if settled is not None:
+            settled()
+        else:
+            self._settle()
+        self.flush()  # (whatever came after the settling: nothing, or a straggler's columns)
         self.rec.flush()
         self.rec.disconnect()
 

@@ -149,13 +149,18 @@ class RunView:
         self.log.joint_limits(float(trace.t[k - 1]) if k else 0.0, limits.lower, limits.upper)
         if self._joint_space and k:
             self.log.line("joint_space/executed", self.log.in_own_units(trace.q[:k:10]), (250, 180, 40), 0.3)
+        self.log.encode_now()
 
     def finish(self, interventions: list, series: Callable[[], dict[str, tuple[np.ndarray, np.ndarray]]]) -> None:
-        """The safety layer's interventions as events, and the run's series (backend, plugins, extensions)."""
+        """The safety layer's interventions as events, and the run's series (backend, plugins, extensions); after it,
+        only text lines (:meth:`event`, :meth:`verdicts`) are logged."""
         for ev in interventions:
             self.log.safety_event(ev)
         for path, (t, values) in series().items():
             self.log.series(path, np.asarray(t, float), np.asarray(values, float))
+        # all the recording holds but the verdicts' lines is known: sent, laid out and encoded while the run is
+        # summed up
+        self.log.begin_settle()
 
     def close(self) -> dict[str, str]:
         """The recording written whole; what the summary lists of it."""
