@@ -37,6 +37,7 @@ The TEXT assertions split in two kinds (an assertion with both is an "errors" on
           (``f"PLAN {warning}" in log_lines`` reads log lines). A local name has the kinds of what it was
           assigned from, at its line.
 Usage: python count_message_assertions.py [tests-dir] [-v]   (prints per-file counts and totals, then the split)
+       --list: also print each TEXT assertion's file:line and its kind (errors/output); counts unchanged
 """
 import ast
 import re
@@ -339,6 +340,9 @@ def main():
         e_all += len(e)
         if t or f:
             per[p.name] = (len(t), len(f), len(e))
+        if "--list" in sys.argv:  # each counted TEXT line with its kind, to find the ones to convert
+            for ln in sorted(t):
+                print(f"{p.name}:{ln}: {'errors' if ln in e else 'output'}")
     if "-v" in sys.argv:
         for name, (t, f, e) in sorted(per.items(), key=lambda kv: (-kv[1][0], kv[0])):
             print(f"{t:4d} text {f:4d} field  {name}   (errors {e}, output {t - e})")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 
+import pytest
 import yaml
 
 from rehabkit.cli import main
@@ -44,8 +45,13 @@ def test_an_assessment_recovers_the_persons_ranges_and_narrows_the_next_session(
 
 
 def test_an_assessment_needs_a_person(capsys):
+    from rehabkit.core.setup.errors import SetupError
+    from rehabkit.rehab.assess import assess
+
     assert main(["assess", str(SCENARIOS / "hit_roundtrip.yaml"), "--out", "/nonexistent/x"]) == 1
-    assert "needs a patient profile" in capsys.readouterr().err
+    with pytest.raises(SetupError) as refused:  # (what the command refused with: HIT's scenario has no patient)
+        assess(SCENARIOS / "hit_roundtrip.yaml", "/nonexistent/x")
+    assert refused.value.setting == ("patient",)
 
 
 def test_a_session_the_envelope_stops_leaves_the_rest_measured_and_the_profile_as_it_was(tmp_path, capsys):

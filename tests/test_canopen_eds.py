@@ -22,8 +22,8 @@ EDS = ROOT / "tests" / "data" / "canopen_eds"
 HIT = ROOT / "scenarios" / "hit_roundtrip.yaml"
 
 
-def _validate(tmp_path, backend: dict, rate: float = 250):
-    """``validate``'s first diagnostic of HIT on ``backend`` (None: valid), as the CLI checks it."""
+def _refusal(tmp_path, backend: dict, rate: float = 250):
+    """What ``validate`` refuses of HIT on ``backend`` (None: valid), as the CLI checks it: the ``ScenarioError``."""
     from rehabkit.core.plugins.lifecycle import default_extensions
     from rehabkit.core.plugins.registry import default_registry
     from rehabkit.core.scenario.errors import ScenarioError
@@ -36,8 +36,20 @@ def _validate(tmp_path, backend: dict, rate: float = 250):
     try:
         assemble(load_scenario(path), default_registry(), default_extensions(), upto="plugins")
     except ScenarioError as err:
-        return err.diagnostics[0]
+        return err
     return None
+
+
+def _validate(tmp_path, backend: dict, rate: float = 250):
+    """``validate``'s first diagnostic of HIT on ``backend`` (None: valid), as the CLI checks it."""
+    err = _refusal(tmp_path, backend, rate)
+    return None if err is None else err.diagnostics[0]
+
+
+def _refused(tmp_path, backend: dict, rate: float = 250):
+    """What the backend refused, as the plugin raised it: the ``SettingError`` behind ``validate``'s diagnostic (its
+    ``data``: the values the problem names)."""
+    return _refusal(tmp_path, backend, rate).__cause__
 
 
 def _six(name: str, **kw) -> list[dict]:
@@ -158,14 +170,17 @@ def test_a_dcf_for_node_1_given_to_node_2_is_refused_for_its_cob_ids(tmp_path):
     drives = [{"node_id": k} for k in range(1, 7)]
     drives[1]["eds"] = str(EDS / "maxon_EPOS4-Module-50-15_node1.dcf")
     diag = _validate(tmp_path, {"drives": drives})
-    assert diag.path == "backend.drives.1.eds" and "is a DCF commissioned for node 1 (maxon_EPOS4-Module-50-15_node1" \
-        ".dcf:54: NodeID=1): its PDOs' COB-IDs are node 1's, not node 2's" in diag.message
+    assert diag.path == "backend.drives.1.eds"
+    # commissioned for node 1 (the DCF's line 54: NodeID=1), given to node 2
+    assert _refused(tmp_path, {"drives": drives}).data == {"commissioned": (1, 54), "node_id": 2}
     assert diag.fix == "give this drive node_id: 1, or commission a DCF for node 2"
     text = (EDS / "maxon_EPOS4-Module-50-15_node1.dcf").read_text("latin-1").replace("NodeID=1\n", "NodeID=2\n")
     (tmp_path / "uncommissioned.dcf").write_text(text, "latin-1")  # (said to be node 2's: its COB-IDs are still 1's)
     drives[1]["eds"] = str(tmp_path / "uncommissioned.dcf")
     diag = _validate(tmp_path, {"drives": drives})
-    assert diag.path == "backend.drives.1.eds" and "COB-ID 0x201, as node 1's RPDO1 has" in diag.message
+    assert diag.path == "backend.drives.1.eds"
+    shared = _refused(tmp_path, {"drives": drives}).data  # (node 2's PDO has node 1's RPDO1's COB-ID)
+    assert (shared["cob_id"], shared["node"], shared["other_node"], shared["other_pdo"]) == (0x201, 2, 1, "RPDO1")
 
 
 def test_the_drives_own_pdos_count_in_the_bus_load_and_the_fix_is_named(tmp_path):

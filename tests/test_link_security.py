@@ -98,13 +98,14 @@ def test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret
     link.symlink_to(made.path)
     with pytest.raises(KeyFileError) as symlink:  # (read with O_NOFOLLOW: a link could be pointed anywhere)
         load_key(link)
-    assert symlink.value.problem == "a symbolic link"
-    with pytest.raises(KeyFileError):  # (nor written through one)
+    assert (symlink.value.path, symlink.value.kind) == (str(link), "symlink")
+    with pytest.raises(KeyFileError) as written:  # (nor written through one)
         new_key("hit-1", link, replace=True)
+    assert written.value.kind == "symlink"
     os.chown(made.path, 1234, -1)  # (another user's file: as root the test can give it away)
     with pytest.raises(KeyFileError) as theirs:
         load_key(made.path)
-    assert theirs.value.problem == f"owned by user 1234, not this one ({os.geteuid()})"
+    assert (theirs.value.kind, theirs.value.owner) == ("owner", 1234)
     with pytest.raises(KeyFileError) as other_robot:
         check_robot(key, "lexos-1")
     assert (other_robot.value.path, other_robot.value.fix) == (

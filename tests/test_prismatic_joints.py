@@ -184,14 +184,14 @@ def test_a_prismatic_joint_s_breaches_are_said_in_metres_and_newtons_and_its_mar
     assert step(0.204, 10.0) == [] and step(0.204, 120.0) == []  # within the margin; a force clipped
     (beyond,) = step(0.207, 10.0)  # 7 mm out: beyond the 5 mm margin
     assert (beyond.rule, beyond.joint, beyond.value, beyond.limit) == ("position", "slide", 0.207, pytest.approx(0.205))
-    assert "(0.207 m, limit 0.205 m)" in beyond.message  # in metres: no field says the unit (LimitBreach.revolute)
+    assert (beyond.breach.quantity, beyond.breach.revolute) == ("position", False)  # said in metres: not revolute
     assert step(0.207, 10.0, position_margin_m=0.01) == []
     (fast,) = step(0.1, 10.0, speed=0.6)
     assert (fast.rule, fast.joint, fast.value, fast.limit) == ("velocity", "slide", 0.6, pytest.approx(0.5))
-    assert "(0.600 m/s, limit 0.500 m/s)" in fast.message
+    assert (fast.breach.quantity, fast.breach.revolute) == ("velocity", False)  # in m/s
     (pushed,) = step(0.1, 120.0, torque_policy="stop")
     assert (pushed.rule, pushed.joint, pushed.value, pushed.limit) == ("torque", "slide", 120.0, 100.0)
-    assert "(120.0 N, limit 100.0 N)" in pushed.message  # a force, in N
+    assert (pushed.breach.quantity, pushed.breach.revolute) == ("torque", False)  # a force, in N
 
 
 def test_a_stop_s_figures_give_each_kind_of_joint_in_its_own_unit():

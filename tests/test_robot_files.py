@@ -159,7 +159,9 @@ def test_urdf_limits_written_in_degrees_are_refused_with_their_radians(tmp_path)
     out = cli("validate", "s.yaml", cwd=tmp_path)
     assert out.returncode == 2
     (line,) = [x for x in out.stderr.splitlines() if "URDF limits are radians" in x]
-    assert ": robot.file: " in line and "has limits -110 to 110 rad, 17.5 turns" in line
+    assert [x[3] for x in located(out.stderr)] == ["robot.file"]
+    # the limits as the plugin read them, in radians (17.5 turns each way): as fields of its refusal
+    assert refusal(tmp_path / "s.yaml").__cause__.data == {"joint": "shoulder", "lower": -110.0, "upper": 110.0}
     assert line.endswith('write lower="-1.9199" upper="1.9199"')
 
 
@@ -190,7 +192,8 @@ def test_a_prismatic_joint_is_read_written_and_judged_in_metres(tmp_path):
     p.write_text(p.read_text().replace("joints: [30, 0.15]", "joints_deg: [30, 0.15]"))
     refused = cli("validate", str(p))
     assert (refused.returncode, [x[3] for x in located(refused.stderr)]) == (2, ["task.targets.1.joints_deg"])
-    assert "write this posture as `joints: [...]`" in refused.stderr  # (the fix)
+    why = refusal(p).__cause__  # (B's slide, a prismatic joint, given in degrees: to be written as `joints: [...]`)
+    assert (why.target, why.code) == ("B", "prismatic-in-degrees")
 
 
 def test_a_misspelt_end_effector_is_said_at_its_setting_with_the_names_nearest(tmp_path):

@@ -161,9 +161,11 @@ def test_a_posture_written_in_radians_is_said_so_where_it_is_refused(tmp_path):
                  "    - {name: B, position: [-0.45, -0.1, -0.3], orientation_of: A}\n    - {name: C, same_as: A}\n"
                  "    - {name: D, same_as: B}\n    - {name: E, same_as: A}\n")
     radians = "written in radians? joints_deg takes degrees (joints_rad takes SI: radians, and metres)"
-    (d,) = refusal(p).diagnostics
+    refused = refusal(p)
+    (d,) = refused.diagnostics
     assert (d.mark.file, d.mark.line, d.mark.col, d.path) == (str(p), 5, 17, "task.targets.1.position")
-    assert d.message.endswith("out of reach: no pose solution within the joint limits")
+    # out of reach (no IK solution within the joint limits), as the planner refused it: B, for its own position
+    assert (refused.__cause__.target, refused.__cause__.code) == ("B", "out-of-reach")
     assert d.fix == f"its orientation is A's, whose joint values are all within ±2π: {radians}"
     urdf = tmp_path / "knee.urdf"  # (a joint that cannot go below 0.5 rad, 28.6°)
     urdf.write_text((DATA / "arm2.urdf").read_text().replace('lower="-2" upper="2"', 'lower="0.5" upper="2"'))

@@ -75,7 +75,8 @@ def _radians(urdf, jid: int, path) -> None:
         raise SettingError("file", f"{path.name}: joint '{urdf.names[jid]}' has limits {lo:g} to {hi:g} rad, "
                                    f"{max(abs(lo), abs(hi)) / (2 * math.pi):.1f} turns: URDF limits are radians — if "
                                    f"those are degrees, write lower=\"{math.radians(lo):.4f}\" upper=\""
-                                   f"{math.radians(hi):.4f}\"")
+                                   f"{math.radians(hi):.4f}\"",
+                           data={"joint": urdf.names[jid], "lower": lo, "upper": hi})
 
 
 @hookimpl

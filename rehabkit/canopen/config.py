@@ -60,12 +60,14 @@ class DriveFaultError(BackendFaultError):
     """A drive, or the bus, can no longer drive its joint: ``node`` (its node id, None for the bus), ``joint`` (its
     joint's name, or None), ``code`` (the CiA 301/402 error code, 0 where none applies), ``what`` (in words).
     ``observable``: the other drives still report their state, so the run watches its safety stop bring them to
-    rest (not so when the whole bus is silent)."""
+    rest (not so when the whole bus is silent). ``setting``: the backend setting the fault is measured against
+    (``backend.sdo_timeout_ms``), where one is, else empty; ``limit``: that setting's value (None where none)."""
 
     def __init__(self, what: str, node: int | None = None, joint: str | None = None, code: int = 0,
-                 observable: bool = True):
+                 observable: bool = True, setting: str = "", limit: float | None = None):
         self.what, self.node, self.joint, self.code = what, node, joint, code
         self.observable = observable  # (a silent bus reports nothing more to watch)
+        self.setting, self.limit = setting, limit  # (the setting the words name, as fields)
         where = f"drive {node} ({joint})" if node is not None else "the CAN bus"
         super().__init__(f"{where}: {what}")
 

@@ -131,7 +131,8 @@ class DriveMaster:
             except canopen.SdoCommunicationError:  # (it answered a moment ago: the bus or the drive stalled)
                 raise DriveFaultError(f"stopped answering SDO requests while it was set up (none within "
                                       f"{cfg.sdo_timeout_ms:g} ms: backend.sdo_timeout_ms)", r.id, self.names[i],
-                                      observable=False) from None
+                                      observable=False, setting="backend.sdo_timeout_ms",
+                                      limit=cfg.sdo_timeout_ms) from None
             self.units[i] = u = setup.units
             self._scale[i] = u.position * u.direction
             self._vscale[i] = u.velocity * u.direction

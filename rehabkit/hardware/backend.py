@@ -154,7 +154,8 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
                 self.held_at = now - self.t0
                 if not self._estop_sent:  # the bridge stopped the robot on its own: the run must know why
                     self._fault = BridgeHoldError(f"the bridge holds the robot ({hold_reason(self, msg.status)}) "
-                                                  f"at t={self.held_at:.3f}s", hold_breach(self, msg.status))
+                                                  f"at t={self.held_at:.3f}s", hold_breach(self, msg.status),
+                                                  status=msg.status, at_s=self.held_at)
             if msg.echo > 0:
                 self.rtt.append(now - msg.echo)
 

@@ -57,13 +57,16 @@ class LinkKeyError(BackendFaultError):
 
 class BridgeHoldError(BackendFaultError):
     """The bridge stopped the robot on its own (its command watchdog, an e-stop at the robot, its own limit check:
-    then ``breach``, the limit it saw broken); it still reports the robot's state."""
+    then ``breach``, the limit it saw broken); it still reports the robot's state. ``status``: the status bits the
+    bridge held with (its ``WATCHDOG``, ``ESTOPPED`` or ``LIMIT`` bit says why; 0 where not given), ``at_s``: when,
+    in seconds from the run's start (None where not given)."""
 
     observable = True
 
-    def __init__(self, message: str, breach=None):
+    def __init__(self, message: str, breach=None, status: int = 0, at_s: float | None = None):
         super().__init__(message)
         self.breach = breach
+        self.status, self.at_s = status, at_s  # (why and when as fields: the message says them in words)
 
 
 class HardwareConfig(StrictModel):

@@ -113,7 +113,7 @@ def assess(path: str | Path, out_dir: str | Path, overrides: Any = (), joints: l
     setup = _assembled(path, given)  # the scenario as given: where it starts, within the profile's ranges
     loaded, profile, q0 = setup.loaded, setup.sc.patient, start_posture(setup)
     if profile is None:
-        raise SetupError(f"{path}: an assessment needs a patient profile (patient: FILE)")
+        raise SetupError(f"{path}: an assessment needs a patient profile (patient: FILE)", setting="patient")
     if isinstance(given.get("patient"), str):  # a profile --set names: inlined, as the sessions change it
         given["patient"] = loaded.source.data["patient"]
     base = _merge(given, _sessions_base(loaded))

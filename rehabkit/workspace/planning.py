@@ -127,7 +127,7 @@ class VoxelPlanner(Planner):
             voxels = self.search(self.ws, a, b)
         except SearchFailedError as exc:
             if self.config.fallback == "none":
-                raise PlanningError(f"{self.name}: {exc}") from None
+                raise PlanningError(f"{self.name}: {exc}", code=exc.kind) from None
             voxels = FALLBACKS[self.config.fallback](self.ws, a, b)
             diag["fallbacks"] = diag.get("fallbacks", 0) + 1
         diag["searched_legs"] = diag.get("searched_legs", 0) + 1

@@ -51,7 +51,8 @@ def _check_eds(config: CanopenConfig, spec: DriveSpec | SensorSpec, i: int, cont
         node, line = d.commissioned
         raise SettingError(where, f"{path.name} is a DCF commissioned for node {node} ({path.name}:{line}: NodeID="
                            f"{node}): its PDOs' COB-IDs are node {node}'s, not node {spec.node_id}'s",
-                           fix=f"give this drive node_id: {node}, or commission a DCF for node {spec.node_id}")
+                           fix=f"give this drive node_id: {node}, or commission a DCF for node {spec.node_id}",
+                           data={"commissioned": (node, line), "node_id": spec.node_id})
     missing = [f"0x{x:04X}" + (f"sub{s}" if s else "") for x, s in (SENSOR_SET if sensor else SET) if not d.has(x, s)]
     if missing:
         what = "a CiA 404 device's EDS" if sensor else "a CiA 402 drive's EDS"
@@ -143,7 +144,8 @@ def check_bus(config: CanopenConfig, context: Context) -> tuple[list[DriveSpec],
                            + ("turn off the drives' own PDOs the run does not use (backend.other_pdos: disable), "
                               if load.others_bits else "")
                            + (f"raise backend.bitrate (now {config.bitrate}; CAN's top: 1000000), "
-                              if config.bitrate < 1_000_000 else "") + "or put fewer nodes on this bus")
+                              if config.bitrate < 1_000_000 else "") + "or put fewer nodes on this bus",
+                           data={"load": load})
     return specs, sensors, load
 
 
@@ -159,7 +161,9 @@ def _check_cob_ids(plans: list[PdoPlan], specs: list[DriveSpec], sensors: list[S
                 other = nodes[owner[cob][0]]
                 raise SettingError((kind, i, "eds"), f"its {name} (node {node}) has COB-ID 0x{cob:03X}, as node "
                                    f"{other[2]}'s {owner[cob][1]} has: frames on a bus must not share one (a DCF "
-                                   "is written for one node id: give each node its own)")
+                                   "is written for one node id: give each node its own)",
+                                   data={"cob_id": cob, "pdo": name, "node": node, "other_node": other[2],
+                                         "other_pdo": owner[cob][1]})
             owner[cob] = (k, name)
 
 

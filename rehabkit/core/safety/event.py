@@ -5,8 +5,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # (annotation only: the event module stays free of the limit checks' imports)
+    from rehabkit.core.safety.limit_breach import LimitBreach
 
 
 @dataclass
@@ -22,9 +26,15 @@ class SafetyEvent:
     data: dict = field(default_factory=dict)  # rule-specific values (a clipping episode's length, a box axis)
     level: str = "ERROR"  # how the log shows it: INFO (a ramp), WARN (clipping, a held command), ERROR (a stop)
     cause: str = ""  # what happened in the event's own words: the message without its time and the stop it led to
+    # the joint limit broken where a limit rule tripped, or the one a refused plan or the bridge's own check names
+    # (its quantity, and its unit: ``revolute``), else None. In memory only: the event's record (``as_dict``) keeps
+    # the keys it had (its joint, value and limit are the breach's already)
+    breach: LimitBreach | None = field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        del d["breach"]  # (in memory only: summary.json and the safety log keep their keys)
+        return d
 
 
 class Clipping:

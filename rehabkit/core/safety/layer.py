@@ -284,7 +284,8 @@ class SafetyLayer(RunState):
         and limit become the event's, its quantity ``data["quantity"]``); ``data``: the rule's own fields."""
         if breach is not None:
             self._trip(t, q, rule, breach.joint, breach.value, breach.limit, message,
-                       {**(data or {}), "quantity": breach.quantity, "at_s": breach.at_s}, described=True, qd=qd)
+                       {**(data or {}), "quantity": breach.quantity, "at_s": breach.at_s}, described=True, qd=qd,
+                       breach=breach)
         else:
             self._trip(t, q, rule, None, None, None, message, data, qd=qd)
 
@@ -307,9 +308,10 @@ class SafetyLayer(RunState):
     def _breach(self, t: float, q: np.ndarray, breach: LimitBreach, what: str, qd: np.ndarray) -> None:
         """A limit rule's trip: the event's fields are the breach's, its message the breach's one wording."""
         self._trip(t, q, breach.quantity, breach.joint, breach.value, breach.limit, f"{what}: {breach.describe()}",
-                   described=True, qd=qd)
+                   described=True, qd=qd, breach=breach)
 
-    def _trip(self, t, q, rule, joint, value, limit, message, data=None, described=False, qd=None) -> None:
+    def _trip(self, t, q, rule, joint, value, limit, message, data=None, described=False, qd=None,
+              breach=None) -> None:
         name = self.names[joint] if isinstance(joint, int) else joint
         subject = f"{name} = " if name else ""
         digits = 4 if name else 6  # positions of the hand [m]: to the micrometre
@@ -319,14 +321,14 @@ class SafetyLayer(RunState):
         self._breaches.said(rule, name)
         if self.tripped_at is not None:  # already stopping: what else happened is noted, the stop goes on
             self.interventions.append(SafetyEvent(t, rule, name, value, limit, text + "; while stopping", data or {},
-                                                  cause=cause))
+                                                  cause=cause, breach=breach))
             return
         reaction = self.config.reactions.get(rule)
         if reaction is not None and reaction.type != "stop":
             words = {"yield": "yield: compliant, gravity compensated, no stop",
                      "retreat": "retreat: away along the force, then hold"}[reaction.type]
             self._record(SafetyEvent(t, rule, name, value, limit, f"{text}; {words}",
-                                     {**(data or {}), "reaction": reaction.type}, cause=cause))
+                                     {**(data or {}), "reaction": reaction.type}, cause=cause, breach=breach))
             self.tripped_at = t
             self.compliance = Compliance.start(reaction, float(self.config.interaction_force_n), t, q, self._robot,
                                                self.lo, self.hi, self.stopping.gravity, self.config, self.joint_torque,
@@ -335,14 +337,14 @@ class SafetyLayer(RunState):
                 self.on_yield(True)
             return
         self.tripped_at = t
-        self._stop(t, q, qd, rule, name, value, limit, cause, data)
+        self._stop(t, q, qd, rule, name, value, limit, cause, data, breach)
 
-    def _stop(self, t, q, qd, rule, name, value, limit, cause, data=None) -> None:
+    def _stop(self, t, q, qd, rule, name, value, limit, cause, data=None, breach=None) -> None:
         """The stop a trip begins (its rule's category), as an event: a rule broken, or a reaction that ended in one."""
         category = self.stopping.category_of(rule)
         try:
             self._record(SafetyEvent(t, rule, name, value, limit, f"t={t:.3f}s: {cause}; {WORDS[category]}",
-                                     {**(data or {}), "category": category}, cause=cause))
+                                     {**(data or {}), "category": category}, cause=cause, breach=breach))
         finally:  # (recorded first; begun whatever the recording met: Ctrl-C as it wrote, say)
             self.stopping.begin(t, category, q, qd)
 

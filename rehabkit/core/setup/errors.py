@@ -13,14 +13,17 @@ class SetupError(RuntimeError):
     there is a way; said after the message).
 
     ``breach`` is set (a :class:`rehabkit.core.setup.limits.LimitBreach`) when the reason is a joint limit a plan
-    would break.
+    would break. ``setting``: the scenario setting the refusal is about (``("patient",)``), where it names one,
+    else ``()``.
     """
 
     fix = ""  # (a PluginSetupError's fixes are its diagnostics')
+    setting: tuple = ()  # (a PluginSetupError's: the plugin's setting it is located at)
 
-    def __init__(self, message: str, breach: Any = None, fix: str = ""):
+    def __init__(self, message: str, breach: Any = None, fix: str = "", setting: str | tuple = ()):
         super().__init__(with_fix(message, fix))
         self.breach, self.said, self.fix = breach, message, fix
+        self.setting = tuple(setting.split(".")) if isinstance(setting, str) else tuple(setting)
 
 
 class PluginSetupError(ScenarioError, SetupError):

@@ -131,7 +131,7 @@ def joint_waypoints(targets: list[Target], robot: Robot, q_start: np.ndarray,
                                     fix="give it as joint values") from exc
             if not sols:
                 said, fix = _unreachable(tgt, robot)
-                raise PlanningError(said, target=tgt.name, fix=fix)
+                raise PlanningError(said, target=tgt.name, fix=fix, code="out-of-reach")
             sols = [prev + angular_distance(s, prev) for s in sols]
             inside = [s for s in sols if np.all(s >= lim.lower) and np.all(s <= lim.upper)]
             if not inside:
@@ -213,7 +213,8 @@ def posture_si(name: str, spec, model) -> np.ndarray:
         raise PlanningError(f"target '{name}': joints_deg gives every joint in degrees, and {', '.join(sliding)} "
                             f"{'is' if len(sliding) == 1 else 'are'} prismatic (metres): write this posture as "
                             "`joints: [...]`, degrees for the revolute joints and metres for the prismatic ones"
-                            + (f"; its revolute values {hint}" if hint else ""), target=name)
+                            + (f"; its revolute values {hint}" if hint else ""), target=name,
+                            code="prismatic-in-degrees")
     return np.where(revolute, np.radians(values), values)
 
 

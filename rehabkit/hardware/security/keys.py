@@ -28,10 +28,13 @@ HEADLINE = "# rehabkit link key: secret. Keep it owner-only (chmod 600); the sam
 
 
 class KeyFileError(ValueError):
-    """A key file that cannot be used: ``path``, what is wrong (``problem``) and how to put it right (``fix``)."""
+    """A key file that cannot be used: ``path``, what is wrong (``problem``) and how to put it right (``fix``);
+    ``kind``: what is wrong as a code (``symlink``, ``owner``, …; empty where none is given), ``owner``: the user
+    who owns the file where that is what is wrong (``kind == "owner"``)."""
 
-    def __init__(self, path: str | Path, problem: str, fix: str):
+    def __init__(self, path: str | Path, problem: str, fix: str, kind: str = "", owner: int | None = None):
         self.path, self.problem, self.fix = str(path), problem, fix
+        self.kind, self.owner = kind, owner  # (the problem as fields: tests and callers need not read its words)
         super().__init__(f"key file {path}: {problem}; {fix}")
 
 
@@ -74,7 +77,8 @@ def new_key(robot: str, out: str | Path, replace: bool = False) -> LinkKey:
                            "named, e.g. hit-1 (robot hit, robot_id 1)")
     out = Path(out)
     if out.is_symlink():
-        raise KeyFileError(out, "a symbolic link", "write the key to a file of its own (a link could point anywhere)")
+        raise KeyFileError(out, "a symbolic link", "write the key to a file of its own (a link could point anywhere)",
+                           kind="symlink")
     if out.exists() and not replace:
         raise KeyFileError(out, "exists", "pass --replace to rotate the key (then give the new file to both ends)")
     out.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # (a keys/ folder made here: its owner's only)
@@ -103,7 +107,7 @@ def load_key(path: str | Path) -> LinkKey:
     except OSError as exc:
         if exc.errno == errno.ELOOP:
             raise KeyFileError(path, "a symbolic link", "name the key file itself (a link could be pointed "
-                               "elsewhere)") from None
+                               "elsewhere)", kind="symlink") from None
         raise KeyFileError(path, f"cannot be read ({exc.strerror})", "check the path") from None
     with os.fdopen(fd, errors="replace") as f:
         _strict(path, os.fstat(f.fileno()))
@@ -135,7 +139,8 @@ def _strict(path: Path, st: os.stat_result) -> None:
         raise KeyFileError(path, "not a file", "name the key file itself")
     if st.st_uid not in (me, 0):
         raise KeyFileError(path, f"owned by user {st.st_uid}, not this one ({me})",
-                           "make this user's own key (`rehabkit keys new ROBOT-ID`), or chown it")
+                           "make this user's own key (`rehabkit keys new ROBOT-ID`), or chown it", kind="owner",
+                           owner=st.st_uid)
     if st.st_mode & 0o077:
         raise KeyFileError(path, f"readable by others (mode {stat.S_IMODE(st.st_mode):o})", f"chmod 600 {path}")
     folder = path.absolute().parent
