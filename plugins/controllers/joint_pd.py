@@ -6,13 +6,17 @@ from typing import Literal
 
 import numpy as np
 import pinocchio as pin
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from rehabkit.plugin import Context, Controller, SettingError, StrictModel, hookimpl
 
 
 class JointPDConfig(StrictModel):
     """Gains per joint (a list) or for all joints (one number); or ``gains: auto`` from the model's inertia."""
+
+    # built where first used: the registry's model of the plugin (this one with its `type`), built as it is
+    # registered, is what a scenario is validated with (~0.5 ms less of every run's start)
+    model_config = ConfigDict(defer_build=True)
 
     gains: Literal["manual", "auto"] = Field(
         "manual", description="auto: τ = M(q)(ω²e + 2ζωė) with the joint-space inertia M(q) of the robot's model, "

@@ -11,7 +11,7 @@ equations for m segments, solved as one linear system shared by all joints.
 from __future__ import annotations
 
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from rehabkit.plugin import (
     Context,
@@ -121,6 +121,10 @@ class MultiCubicTrajectory:
 
 class MultiCubicConfig(StrictModel):
     """Segment durations of a multi-cubic trajectory."""
+
+    # built where first used: the registry's model of the plugin (this one with its `type`), built as it is
+    # registered, is what a scenario is validated with (~0.5 ms less of every run's start)
+    model_config = ConfigDict(defer_build=True)
 
     segment_durations: list[float] = Field(min_length=1, description="[s], one per segment between via points")
     start_from_current: bool = Field(

@@ -27,7 +27,7 @@ from functools import lru_cache
 from importlib import resources
 
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from rehabkit.kinematics import (
     DHRobotSpec,
@@ -152,6 +152,10 @@ def hit_wearable(l1: float) -> Wearable:
 
 class HitConfig(StrictModel):
     """HIT exoskeleton: segment lengths, base placement and stop behaviour."""
+
+    # built where first used: the registry's model of the plugin (this one with its `type`), built as it is
+    # registered, is what a scenario is validated with (~0.5 ms less of every run's start)
+    model_config = ConfigDict(defer_build=True)
 
     l1: float = Field(L1, gt=0, description="upper arm [m]")
     l2: float = Field(L2, gt=0, description="forearm [m]")

@@ -17,9 +17,9 @@ import traceback
 from pathlib import Path
 
 from rehabkit.cli.exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, unwritable
-from rehabkit.core.plugins.registry import PluginError, default_registry
-from rehabkit.core.scenario.errors import ScenarioError
-from rehabkit.core.setup.errors import SetupError
+
+# (the core, and pydantic with it, is imported by main() and the commands, not with this module: the collector's
+# thresholds entry() sets hold by then)
 
 
 def _err(msg: str) -> None:
@@ -139,7 +139,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
+    from rehabkit.core.scenario.errors import ScenarioError
     from rehabkit.core.scenario.loader import load_scenario
+    from rehabkit.core.setup.errors import SetupError
 
     status = EXIT_OK
     for path in args.scenarios:
@@ -190,6 +192,7 @@ def _admission(loaded, joints: bool = False) -> str:
     ``joints``, the robot's joints in order."""
     from rehabkit.cli.estop import latched_note
     from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
     from rehabkit.core.setup.assembly import assemble
     from rehabkit.core.setup.first_plan import check_first_plan
 
@@ -214,6 +217,8 @@ def _admission(loaded, joints: bool = False) -> str:
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:
+    from rehabkit.core.plugins.registry import PluginError, default_registry
+
     reg = default_registry()
     if args.fields:
         from rehabkit.cli.plugin_reference import plugin_reference
@@ -265,6 +270,7 @@ def cmd_plugins(args: argparse.Namespace) -> int:
 
 def cmd_schema(args: argparse.Namespace) -> int:
     from rehabkit.core.plugins.lifecycle import default_extensions
+    from rehabkit.core.plugins.registry import default_registry
     from rehabkit.core.scenario.json_schema import scenario_json_schema
     from rehabkit.core.scenario.models import scenario_model
 
@@ -275,7 +281,10 @@ def cmd_schema(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def parser() -> argparse.ArgumentParser:
+def parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser. ``only="run"``: the parser as far as ``rehabkit run ARGS`` goes (the top level and
+    ``run``: the same parse and the same messages for those arguments), without the other commands' sub-parsers and
+    the modules that make them (~5 ms of every run's start)."""
     from rehabkit.core.version import __version__
 
     p = argparse.ArgumentParser(prog="rehabkit", description=" ".join(__doc__.split("\n\n")[0].split()))
@@ -290,6 +299,8 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--spawn", action="store_true", help="also stream to a Rerun viewer")
     r.add_argument("--bag", action="store_true", help="also write run.mcap, a ROS 2 bag of the run (ros.bag)")
     r.set_defaults(func=cmd_run)
+    if only == "run":
+        return p
     w = sub.add_parser("sweep", help="run a scenario over a grid of settings x seeds, on Ray; resumable")
     w.add_argument("scenario")
     w.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2,...",
@@ -359,11 +370,26 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def _parse(argv: list[str]) -> argparse.Namespace:
+    """``argv`` parsed: ``rehabkit run ARGS`` by :func:`parser` ``(only="run")`` where all of ARGS are run's (its
+    errors, and ``--help``, are its sub-parser's own: the same), anything else by the whole parser, which says what the
+    top level says (``unrecognized arguments``, with the list of commands in its usage)."""
+    if argv[:1] == ["run"]:
+        args, rest = parser(only="run").parse_known_args(argv)
+        if not rest:
+            return args
+    return parser().parse_args(argv)
+
+
 def main(argv: list[str] | None = None) -> int:
     import warnings
 
     warnings.formatwarning = lambda msg, category, *a, **k: f"warning: {msg}\n"
-    args = parser().parse_args(argv)
+    args = _parse(sys.argv[1:] if argv is None else list(argv))
+    from rehabkit.core.plugins.registry import PluginError
+    from rehabkit.core.scenario.errors import ScenarioError
+    from rehabkit.core.setup.errors import SetupError
+
     if args.debug:
         os.environ["REHABKIT_DEBUG"] = "1"
     try:
@@ -402,7 +428,8 @@ def entry() -> None:
     """The ``rehabkit`` command: :func:`main`, then the exit, without the interpreter's last collections."""
     # the engines' imports and a run's set-up make ~10^6 objects that live as long as the process: the collector's
     # default thresholds walk them all again twice on the way (~40 ms of a 1 s run); its youngest generation is
-    # still swept, every 10^5 allocations, and a run's loop sweeps and freezes it as it starts
+    # still swept, every 10^5 allocations, and a run's loop sweeps and freezes it as it starts. Set before the core
+    # and pydantic are imported (by main(): this module imports neither), whose imports it spares ~5 ms of collections
     gc.set_threshold(100_000, 50, 1000)
     code = main()
     # the collections at interpreter exit walk every object the engines made: ~0.2 s of a 1.3 s run. Frozen, they

@@ -7,7 +7,7 @@ from typing import Literal
 
 import mujoco
 import numpy as np
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from rehabkit.core.kinds.backend import EStopLatchedError
 from rehabkit.core.kinds.capabilities import (
@@ -34,6 +34,10 @@ from rehabkit.sim.scene_view import SceneView
 
 class MujocoConfig(StrictModel):
     """Physics settings."""
+
+    # built where first used: the registry's model of the plugin (this one with its `type`), built as it is
+    # registered, is what a scenario is validated with (~0.5 ms less of every run's start)
+    model_config = ConfigDict(defer_build=True)
 
     timestep: float = Field(0.001, gt=0, le=0.01, description="physics step [s]")
     integrator: Literal[tuple(INTEGRATORS)] = "implicitfast"  # type: ignore[valid-type]

@@ -36,7 +36,6 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from importlib import metadata
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -45,6 +44,7 @@ import pluggy
 
 from rehabkit.core.kinds.interfaces import Backend, Patient, Robot, Sensor, Target
 from rehabkit.core.kinds.metric import Metric
+from rehabkit.core.plugins.discovery import installed_entry_points
 from rehabkit.models.robot_model import JointLimits, RobotModel
 
 # Types of the stages above this one (not imported here: those modules call the hooks): ``Scenario`` the validated
@@ -238,7 +238,7 @@ class Extensions:
         found: list[tuple[str, Any]] = []
         if entry_points:
             seen = set()
-            for ep in metadata.entry_points(group=GROUP):
+            for ep in installed_entry_points().select(group=GROUP):  # (the scan discovery made for the plugins)
                 if (ep.name, ep.value) not in seen:
                     seen.add((ep.name, ep.value))
                     found.append((ep.name, ep.load))

@@ -87,10 +87,15 @@ class Registrar:
             __base__=config,
             __module__=config.__module__,
             __doc__=config.__doc__,
+            # (built now whatever its base defers: it is the model scenarios are validated with)
+            __cls_kwargs__={"defer_build": False} if config.model_config.get("defer_build") else None,
             type=(Literal[name], ...),  # type: ignore[valid-type]
         )
-        typed.model_config = ConfigDict(**{**config.model_config, "extra": "forbid"})
-        typed.model_rebuild(force=True)
+        if config.model_config.get("extra") != "forbid" or not typed.__pydantic_complete__:
+            # (a StrictModel forbids them already, and its subclass, built complete, takes its config as it is: made
+            # again with the same config it would be the same model, at ~1 ms a plugin)
+            typed.model_config = ConfigDict(**{**config.model_config, "extra": "forbid"})
+            typed.model_rebuild(force=True)
         self._registry._staged.append(PluginInfo(self.kind, name, typed, factory, description.strip(),
                                                  self._registry._current, declared or Declared.of(factory)))
 

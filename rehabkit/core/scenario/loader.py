@@ -132,15 +132,22 @@ def load_scenario(
 def _relabel(src: Source, path: Path) -> None:
     """Show marks relative to the working directory when that is shorter."""
     cwd = Path.cwd()
+    files: dict[str, str | None] = {}  # each file's name as shown (None: as it is), found once (not once a mark)
 
-    def short(m: Mark) -> Mark:
-        p = Path(m.file)
+    def shorter(file: str) -> str | None:
+        p = Path(file)
         if p.is_absolute():
             try:
-                return Mark(str(p.relative_to(cwd)), m.line, m.col)
+                return str(p.relative_to(cwd))
             except ValueError:
-                return m
-        return m
+                return None
+        return None
+
+    def short(m: Mark) -> Mark:
+        if m.file not in files:
+            files[m.file] = shorter(m.file)
+        file = files[m.file]
+        return m if file is None else Mark(file, m.line, m.col)
 
     src.key_marks = {k: short(v) for k, v in src.key_marks.items()}
     src.value_marks = {k: short(v) for k, v in src.value_marks.items()}

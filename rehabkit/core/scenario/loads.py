@@ -1,8 +1,8 @@
 """Test-rig loads in the scene (``world.loads``): a known force pushed on a robot body, the way a safety skill's
 validation protocol pushes on a handle with a force gauge or hangs a weight from it."""
 
-from __future__ import annotations
-
+# (no `from __future__ import annotations`: pydantic would evaluate each field's annotation from its text, as
+# each model and every subclass is built, ~1 ms a module; a model's own name in a method's is quoted)
 from pydantic import Field, model_validator
 
 from rehabkit.models.strict import StrictModel
@@ -30,7 +30,7 @@ class Load(StrictModel):
                                         "the force falls as the body gives way (default: a set force)")
 
     @model_validator(mode="after")
-    def _ordered(self) -> Load:
+    def _ordered(self) -> 'Load':
         if self.release_s is not None and self.release_s <= self.start_s:
             raise ValueError(f"load '{self.name}': release_s ({self.release_s:g}) must come after start_s "
                              f"({self.start_s:g})")

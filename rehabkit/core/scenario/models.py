@@ -6,12 +6,12 @@ by ``type``; :func:`scenario_model` builds them from the registry after plugins
 load. Angles in the DSL carry a ``_deg`` suffix; everything else is SI.
 """
 
-from __future__ import annotations
-
+# (no `from __future__ import annotations`: pydantic would evaluate each field's annotation from its text, as
+# each model and every subclass is built, ~1 ms a module; a model's own name in a method's is quoted)
 import math
 from typing import Annotated, Any, Literal, Optional, Union
 
-from pydantic import Field, create_model, model_validator
+from pydantic import ConfigDict, Field, create_model, model_validator
 
 from rehabkit.core.kinds.interfaces import StrictModel
 from rehabkit.core.plugins.lifecycle import Extensions, default_extensions
@@ -48,7 +48,7 @@ class WorldObject(StrictModel):
                                                   "hand); plans release and grasp it again")
 
     @model_validator(mode="after")
-    def _size_matches_shape(self) -> WorldObject:
+    def _size_matches_shape(self) -> 'WorldObject':
         what, n = _SIZES[self.shape]
         if len(self.size) != n:
             raise ValueError(f"a {self.shape} takes {n} size value(s) ({what}), got {len(self.size)}")
@@ -78,7 +78,7 @@ class World(StrictModel):
     loads: list[Load] = Field([], description="test-rig forces on robot bodies (a push on the handle)")
 
     @model_validator(mode="after")
-    def _unique_names(self) -> World:
+    def _unique_names(self) -> 'World':
         names = [o.name for o in self.objects] + [c.name for c in self.cameras] + [x.name for x in self.loads]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -115,7 +115,7 @@ class TargetSpec(StrictModel):
     random: RandomTargetSpec | None = Field(None, description="a random point of the workspace (seeded)")
 
     @model_validator(mode="after")
-    def _one_kind(self) -> TargetSpec:
+    def _one_kind(self) -> 'TargetSpec':
         kinds = ("joints_deg", "joints_rad", "joints", "position", "same_as", "sensor", "random")
         given = [k for k in kinds if getattr(self, k) is not None]
         if len(given) != 1:
@@ -154,7 +154,7 @@ class EventSpec(StrictModel):
     position: Vec3 | None = Field(None, description="'move': its new world position [m]")
 
     @model_validator(mode="after")
-    def _one_trigger(self) -> EventSpec:
+    def _one_trigger(self) -> 'EventSpec':
         if sum(x is not None for x in (self.at, self.reached, self.moved)) != 1:
             raise ValueError("an event needs exactly one trigger: 'at', 'reached' or 'moved'")
         if self.planner is not None and self.action != "replan":
@@ -173,7 +173,7 @@ class TaskSpec(StrictModel):
     events: list[EventSpec] = []
 
     @model_validator(mode="after")
-    def _names_exist(self) -> TaskSpec:
+    def _names_exist(self) -> 'TaskSpec':
         names = [t.name for t in self.targets]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -217,7 +217,7 @@ class Bound(StrictModel):
     tol: float = Field(1e-9, ge=0, description="tolerance for eq")
 
     @model_validator(mode="after")
-    def _some_bound(self) -> Bound:
+    def _some_bound(self) -> 'Bound':
         if all(getattr(self, k) is None for k in ("lt", "le", "gt", "ge", "eq")):
             raise ValueError("give at least one of lt, le, gt, ge, eq")
         return self
@@ -243,6 +243,9 @@ class Bound(StrictModel):
 class ScenarioBase(StrictModel):
     """The plugin-independent part of a scenario: the core's sections (the layers' own are added by
     :func:`scenario_model`, each from the extension that owns it)."""
+
+    # never validated itself: the Scenario model scenario_model makes of it is (built when made: defer_build=False)
+    model_config = ConfigDict(defer_build=True)
 
     name: str | None = None
     description: str | None = None
@@ -308,4 +311,4 @@ def _scenario_model(registry: PluginRegistry, sections: dict) -> type[ScenarioBa
             raise ValueError(f"extension '{owner}' declares the scenario section '{name}', which is the core's")
         kind = section.model if section.default is not None else Optional[section.model]  # noqa: UP045
         fields[name] = (kind, Field(section.default, description=section.description or None))
-    return create_model("Scenario", __base__=ScenarioBase, **fields)
+    return create_model("Scenario", __base__=ScenarioBase, __cls_kwargs__={"defer_build": False}, **fields)

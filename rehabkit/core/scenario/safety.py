@@ -1,8 +1,8 @@
 """The scenario's ``safety:`` section: the envelope every command passes (the DSL; the layer enforcing it is
 :mod:`rehabkit.core.safety.layer`)."""
 
-from __future__ import annotations
-
+# (no `from __future__ import annotations`: pydantic would evaluate each field's annotation from its text, as
+# each model and every subclass is built, ~1 ms a module; a model's own name in a method's is quoted)
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -30,7 +30,7 @@ class JointEnvelope(StrictModel):
     force_n: float | None = Field(None, gt=0, description="largest force of a prismatic joint [N]")
 
     @model_validator(mode="after")
-    def _ordered(self) -> JointEnvelope:
+    def _ordered(self) -> 'JointEnvelope':
         for key in ("range_deg", "range_m"):
             value = getattr(self, key)
             if value is not None and value[0] >= value[1]:
@@ -50,7 +50,7 @@ class KeepInBox(StrictModel):
     frame: Literal["world", "base"] = Field("world", description="frame of the corners: world or robot base")
 
     @model_validator(mode="after")
-    def _ordered(self) -> KeepInBox:
+    def _ordered(self) -> 'KeepInBox':
         if any(a >= b for a, b in zip(self.min, self.max)):
             raise ValueError(f"keep_in: min {list(self.min)} must be below max {list(self.max)} on every axis")
         return self
@@ -72,7 +72,7 @@ class Heartbeat(StrictModel):
         return self.hold_after_ms if self.hold_after_ms is not None else min(10.0, self.command_timeout_ms / 2)
 
     @model_validator(mode="after")
-    def _ordered(self) -> Heartbeat:
+    def _ordered(self) -> 'Heartbeat':
         if self.hold_after_ms is not None and self.hold_after_ms >= self.command_timeout_ms:
             raise ValueError(f"hold_after_ms ({self.hold_after_ms:g}) must be below command_timeout_ms "
                              f"({self.command_timeout_ms:g}): the hold bridges a gap before the watchdog latches")
@@ -105,7 +105,7 @@ class ForceReaction(StrictModel):
     retreat_speed_m_s: float = Field(0.02, gt=0, description="retreat: the fastest prismatic joint's speed [m/s]")
 
     @model_validator(mode="after")
-    def _within(self) -> ForceReaction:
+    def _within(self) -> 'ForceReaction':
         for bound, names in (("max_speed_deg_s", ("retreat_speed_deg_s", "yield_speed_deg_s")),
                              ("max_speed_m_s", ("retreat_speed_m_s", "yield_speed_m_s"))):
             for name in names:
@@ -152,7 +152,7 @@ class SafetyConfig(StrictModel):
     heartbeat: Heartbeat | None = Field(None, description="link timing (hardware backends)")
 
     @model_validator(mode="after")
-    def _release_below_limit(self) -> SafetyConfig:
+    def _release_below_limit(self) -> 'SafetyConfig':
         reaction = self.reactions.get("interaction-force")
         if reaction is not None and reaction.release_n is not None and self.interaction_force_n is not None \
                 and reaction.release_n >= self.interaction_force_n:
