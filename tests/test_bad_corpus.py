@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from rehabkit.cli import main
+from rehabkit.cli import exits, main
 
 CORPUS = sorted((Path(__file__).parent / "bad_scenarios").glob("*.yaml"))
 
@@ -40,5 +40,6 @@ def test_an_unwritable_out_is_refused_before_anything_runs(tmp_path, capsys):
     blocker.write_text("")
     scenario = CORPUS[0].parents[1].parent / "examples" / "robots" / "dh_arm3.yaml"
     assert main(["run", str(scenario), "--out", str(blocker / "out")]) == 2
-    err = capsys.readouterr().err
-    assert f"--out {blocker / 'out'}: cannot write there" in err and "internal error" not in err
+    err, refused = capsys.readouterr().err, exits.last_refusal
+    assert refused.code == "out-unwritable" and refused.option == "--out"
+    assert err.splitlines() == [refused.message]  # said as that refusal alone: no internal error

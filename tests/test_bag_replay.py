@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from rehabkit.api import load_scenario
+from rehabkit.cli import exits
 from rehabkit.ros.replay.bag_replay import replay_bag
 from rehabkit.ros.replay.session_bag import BagError, read_session, reading_once
 from tests.conftest import ROOT
@@ -147,7 +148,8 @@ def test_bags_that_do_not_fit_are_said_at_the_bag(bags, tmp_path):
     assert frame.returncode == 2
     assert set_located(frame.stderr) == [("patient.model.frame", "patient.model.frame")]
     no_scenario = cli("replay", bag)
-    assert no_scenario.returncode == 2 and "--scenario S.yaml" in no_scenario.stderr
+    assert no_scenario.returncode == 2 and exits.last_refusal.code == "bag-needs-scenario"
+    assert exits.last_refusal.option == "--scenario"
     fields = cli("plugins", "--fields", "recorded-wrench")
     assert fields.returncode == 0 and "max_gap_s" in fields.stdout and "reaction" in fields.stdout
 

@@ -228,9 +228,11 @@ def test_an_attacked_round_trip_moves_exactly_as_an_unattacked_one_and_applies_n
 
 
 def test_a_bridge_beyond_loopback_needs_a_key():
+    from rehabkit.cli import exits
+
     out = cli("bridge", "hit", "--listen", "0.0.0.0:0")
-    assert out.returncode == 2 and "beyond this machine's loopback anyone on the network could drive the robot" in \
-        out.stderr and "--key FILE" in out.stderr
+    assert out.returncode == 2 and exits.last_refusal.code == "listen-needs-key"
+    assert exits.last_refusal.option == "--listen"
 
 
 def test_a_latched_estop_is_cleared_over_the_link_only_in_a_session_and_with_a_name(key, tmp_path):

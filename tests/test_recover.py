@@ -80,6 +80,7 @@ def test_a_killed_runs_folder_is_recovered(tmp_path):
 
 
 def test_validate_and_run_say_the_folder_holds_a_killed_run_not_recovered(tmp_path, capsys):
+    from rehabkit.cli import exits
     from rehabkit.cli.main import main
 
     scenario = str(SCENARIOS / "hit_roundtrip.yaml")
@@ -93,8 +94,9 @@ def test_validate_and_run_say_the_folder_holds_a_killed_run_not_recovered(tmp_pa
     assert str(out) in warning and f"`rehabkit recover {out}`" in warning
     assert "run.rrd.tmp" in warning and ".run.mcap.part" in warning
     assert main(["run", scenario, "--out", str(out)]) == 2  # refused: the leftovers kept
-    error = capsys.readouterr().err
-    assert f"`rehabkit recover {out}`" in error
+    refused = exits.last_refusal
+    assert refused.code == "out-killed-run" and refused.option == "--out"
+    assert capsys.readouterr().err.splitlines() == [refused.message]  # (said once, as that refusal)
     assert {p.name for p in out.iterdir()} == {"run.rrd.tmp", ".run.mcap.part"}
     (out / "run.rrd.tmp").unlink()
     (out / ".run.mcap.part").unlink()

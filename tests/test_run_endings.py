@@ -82,7 +82,7 @@ def test_an_error_out_of_the_loop_is_a_plugin_fault_with_the_robot_at_rest(tmp_p
 
     runner, result = _run_cut(tmp_path, monkeypatch, fault)
     summary = _written(tmp_path / "run")
-    assert summary["ended"]["how"] == "plugin-fault" and "ZeroDivisionError" in summary["ended"]["reason"]
+    assert summary["ended"]["how"] == "plugin-fault" and summary["ended"]["error_type"] == "ZeroDivisionError"
     assert result.exit_code == 3
     assert [e["rule"] for e in summary["safety"]["events"]] == ["plugin-error"]
     assert np.abs(result.trace.qd[-1]).max() < np.radians(1.0)

@@ -67,7 +67,8 @@ def test_rrd_holds_geometry_poses_paths_and_series(hit_run):
 def test_replan_that_cannot_be_planned_holds_the_robot():
     r = run_scenario(HIT, {"task.events": [{"at": 1.0, "action": "replan", "sequence": ["B", "C"]}], "expect": None})
     (ev,) = r.summary["safety"]["events"]
-    assert ev["rule"] == "plan" and "need 1 segment durations" in ev["message"] and ev["t"] == 1.0
+    assert ev["rule"] == "plan" and ev["t"] == 1.0  # too few segment durations for the replan's via points:
+    assert ev["data"]["cause"] == "segment-count" and ev["data"]["setting"] == "segment_durations"
     assert r.summary["metrics"]["sim_time_s"] == pytest.approx(1.5)  # held for stop_after_s, then ended
 
 

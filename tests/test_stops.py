@@ -132,7 +132,7 @@ def test_a_running_bridge_clears_its_latch_on_command(hit, tmp_path):
     latch = EStopLatch(tmp_path / "hit-1.json", "hit-1")
     bridge = Bridge(MujocoPlant(hit), latch=latch)
     bridge.press_estop(0.0)
-    assert latch.latched()["by"] == "robot" and bridge.status & ESTOPPED
+    assert latch.latched()["by"] == "robot" and latch.latched()["source"] == "button" and bridge.status & ESTOPPED
     restarted = Bridge(MujocoPlant(hit), latch=latch)  # a restart keeps it latched
     assert restarted.status & ESTOPPED and restarted.status & HOLDING
     thread = threading.Thread(target=serve, args=(restarted, 1.0), daemon=True)
@@ -189,7 +189,7 @@ def test_the_keypad_at_the_robot_presses_and_clears_the_estop(tmp_path):
             return proc.stdout.readline()  # (said once done)
 
         assert said_after("e") == "keypad: e-stop pressed, latched\n"
-        assert json.loads(latch.read_text())["reason"] == "the e-stop key of the keypad at the robot"
+        assert json.loads(latch.read_text())["source"] == "keypad"  # (pressed at the robot: its keypad's e)
         assert said_after("c") == "keypad: e-stop cleared; the next session ramps in\n"
         assert json.loads(latch.read_text())["cleared_by"] == "the keypad at the robot"
         assert said_after("c") == "keypad: e-stop not latched (nothing to clear)\n"
@@ -249,7 +249,7 @@ def test_a_lockstep_bridge_cleared_of_its_estop_serves_the_next_host_and_reads_i
         while latch.latched() is None:  # (polled: the bridge reads its keypad between datagrams)
             assert time.monotonic() < until, "the keypad's e was not read"
             time.sleep(0.01)
-        assert latch.latched()["reason"] == "the e-stop key of the keypad at the robot"
+        assert latch.latched()["by"] == "robot" and latch.latched()["source"] == "keypad"
         refused, status = _lockstep_reset(bridge.port, key, q0)
         refused.close()
         assert status & ESTOPPED and status & CLEAR_BY_KEY and clear_right(status) == "key"

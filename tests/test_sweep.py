@@ -141,8 +141,8 @@ def test_a_crashing_run_is_recorded_with_its_error_and_the_others_complete(tmp_p
     assert labels[:2] == ["clik-pd"] * 2 and labels[2] == labels[3] and labels[2].startswith("qp-stack #")
     ok, crashed = result.records[:2], result.records[2:]
     assert all(r["error"] is None and r["passed"] for r in ok)
-    assert all("controller 'qp-stack' needs a robot that has a floating base" in r["error"] and not r["passed"]
-               for r in crashed)
+    assert all(r["error"] is not None and r["error_type"] == "PluginSetupError" and not r["passed"]
+               and r["error_missing"] == ["FloatingBase"] for r in crashed)  # (the qp-stack controller's need)
     assert [a["errors"] for a in result.aggregate] == [0, 2] and len(result.failed) == 2
 
 
@@ -179,7 +179,7 @@ def test_a_finished_run_is_freed_without_a_full_collection_and_a_failed_one_is_c
     ok = execute(str(HIT), {"duration": 0.05, "logging.rrd": False})
     assert ok["error"] is None and [g for g in full if not g] == []
     failed = execute(str(TRIAL), {"controller": {"type": "qp-stack", "levels": [{"tasks": [{"type": "com"}]}]}})
-    assert "floating base" in failed["error"] and [g for g in full if not g] == [()]
+    assert failed["error_missing"] == ["FloatingBase"] and [g for g in full if not g] == [()]
 
 
 # The two tests below stop a run under way on Ray, and Ray stops it by killing its worker: a worker started in its place
@@ -198,7 +198,7 @@ def test_a_hanging_run_is_stopped_and_recorded_and_the_sweep_goes_on(tmp_path, m
     result = run_sweep(HIT, ["duration=0.2,300"], 1, tmp_path, serial=mode == "serial", workers=2, timeout_s=2)
     by = {r["duration"]: r for r in result.records}  # (a grid of numbers: a column of numbers)
     assert by[0.2]["error"] is None and by[0.2]["metric.sim_time_s"] == pytest.approx(0.2)
-    assert by[300]["error"].startswith("RunTimeoutError") and not by[300]["passed"]
+    assert by[300]["error_type"] == "RunTimeoutError" and not by[300]["passed"]
     assert by[300]["wall_time_s"] < 30
     assert [a["errors"] for a in result.aggregate] == [0, 1]
 

@@ -159,7 +159,8 @@ class MultiCubicPlanner(Planner):
         if len(durations) != len(points) - 1:
             raise PlanningError(
                 f"multi-cubic: {len(points)} via points ({', '.join(names)}) need {len(points) - 1} segment "
-                f"durations; segment_durations has {len(durations)}", setting="segment_durations")
+                f"durations; segment_durations has {len(durations)}", setting="segment_durations",
+                code="segment-count")
         v0 = np.asarray(request.qd, float) if self.config.start_from_current else None
         traj = MultiCubicTrajectory(solve_multi_cubic(points, durations, v0), durations)
         jumps = np.degrees(traj.continuity())

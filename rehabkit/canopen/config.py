@@ -61,15 +61,34 @@ class DriveFaultError(BackendFaultError):
     joint's name, or None), ``code`` (the CiA 301/402 error code, 0 where none applies), ``what`` (in words).
     ``observable``: the other drives still report their state, so the run watches its safety stop bring them to
     rest (not so when the whole bus is silent). ``setting``: the backend setting the fault is measured against
-    (``backend.sdo_timeout_ms``), where one is, else empty; ``limit``: that setting's value (None where none)."""
+    (``backend.sdo_timeout_ms``), where one is, else empty; ``limit``: that setting's value (None where none).
+    ``cause_code``: why, as a code (``emcy``, ``no-tpdo``, ``bus-silent``, ``heartbeat-lost``,
+    ``left-operation-enabled``, ``not-operation-enabled``), where given; ``state``: the CiA 402 state the drive was
+    in where that is why (``QUICK_STOP_ACTIVE``), else None."""
 
     def __init__(self, what: str, node: int | None = None, joint: str | None = None, code: int = 0,
-                 observable: bool = True, setting: str = "", limit: float | None = None):
+                 observable: bool = True, setting: str = "", limit: float | None = None,
+                 cause_code: str | None = None, state: str | None = None):
         self.what, self.node, self.joint, self.code = what, node, joint, code
         self.observable = observable  # (a silent bus reports nothing more to watch)
         self.setting, self.limit = setting, limit  # (the setting the words name, as fields)
+        self.cause_code, self.state = cause_code, state  # (why as fields: the words say it too)
         where = f"drive {node} ({joint})" if node is not None else "the CAN bus"
         super().__init__(f"{where}: {what}")
+
+    def event_data(self) -> dict | None:
+        """``cause`` (its code) and, where they apply, the drive's ``node``, its ``error_code`` (CiA 301/402) and its
+        ``state``, for the safety event's ``data``."""
+        if self.cause_code is None:
+            return None
+        data: dict = {"cause": self.cause_code}
+        if self.node is not None:
+            data["node"] = self.node
+        if self.code:
+            data["error_code"] = self.code
+        if self.state is not None:
+            data["state"] = self.state
+        return data
 
 
 class Bus(StrictModel):

@@ -237,7 +237,8 @@ class DriveMaster:
                 code = self.remotes[i].sdo[0x603F].raw
                 raise DriveFaultError(f"did not reach OPERATION ENABLED: {s}" + (
                     f" ({describe(code)}); a drive's fault is reset only once a person has cleared the robot's "
-                    "e-stop latch" if s == State.FAULT.name else ""), self.remotes[i].id, self.names[i], code)
+                    "e-stop latch" if s == State.FAULT.name else ""), self.remotes[i].id, self.names[i], code,
+                    cause_code="not-operation-enabled", state=s)
         self.enabled = True
 
     def cycle(self, tau: np.ndarray, wait_s: float = 0.0, q: np.ndarray | None = None,
@@ -307,25 +308,27 @@ class DriveMaster:
             node, code = self._emcy_new.pop(0)
             self.emcys.append((now, node, code))
             if code:  # (0: the error reset)
-                return DriveFaultError(f"EMCY: {describe(code)}", node, self.names[self.ids.index(node)], code)
+                return DriveFaultError(f"EMCY: {describe(code)}", node, self.names[self.ids.index(node)], code,
+                                       cause_code="emcy")
         late = np.flatnonzero(self.missed >= self.missed_limit)
         if len(late) == len(self.ids):
             return DriveFaultError(f"no TPDO from any node for {self.missed_limit} cycles: the bus is silent",
-                                   observable=False)
+                                   observable=False, cause_code="bus-silent")
         if len(late):
             i = int(late[0])
             return DriveFaultError(f"no TPDO for {self.missed[i]} cycles ({self.config.tpdo_timeout_ms:g} ms)",
-                                   self.ids[i], self.names[i])
+                                   self.ids[i], self.names[i], cause_code="no-tpdo")
         silent = np.flatnonzero(now - self.heard > self.config.heartbeat_timeout_ms * 1e-3)
         if len(silent):
             i = int(silent[0])
             return DriveFaultError(f"its heartbeat is lost (silent {1e3 * (now - self.heard[i]):.0f} ms > "
                                    f"{self.config.heartbeat_timeout_ms} ms: {describe(0x8130)})", self.ids[i],
-                                   self.names[i], 0x8130)
+                                   self.names[i], 0x8130, cause_code="heartbeat-lost")
         if self.enabled:
             for i, s in enumerate(self.states):
                 if s != State.OPERATION_ENABLED.name and self.controlword[i] == ENABLE_OPERATION_CMD:
-                    return DriveFaultError(f"left OPERATION ENABLED: now {s}", self.remotes[i].id, self.names[i])
+                    return DriveFaultError(f"left OPERATION ENABLED: now {s}", self.remotes[i].id, self.names[i],
+                                           cause_code="left-operation-enabled", state=s)
         return None
 
     def torque_off(self) -> None:

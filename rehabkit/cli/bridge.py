@@ -8,7 +8,7 @@ import json
 import signal
 import sys
 
-from rehabkit.cli.exits import EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK
+from rehabkit.cli.exits import EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, Refusal, refuse
 
 
 def _err(msg: str) -> None:
@@ -36,9 +36,8 @@ def cmd_bridge(args: argparse.Namespace) -> int:
     here = Context(Path.cwd(), np.random.default_rng(args.seed), 1.0 / args.rate)
     robot = info.factory(info.config.model_validate({**json.loads(args.config), "type": args.robot}), here)
     where = _listen(args, f"{robot.model.name}-{args.robot_id}")
-    if isinstance(where, str):
-        _err(f"error: {where}")
-        return EXIT_INVALID
+    if isinstance(where, Refusal):
+        return refuse(f"error: {where.message}", where.code, where.option)
     host, port, key = where
     clear_key = None
     if key is not None:
@@ -150,9 +149,9 @@ def _interrupt(signum, frame) -> None:
     raise exc
 
 
-def _listen(args: argparse.Namespace, name: str) -> tuple[str, int, object] | str:
-    """Where the bridge for robot ``name`` (``hit-1``) listens and its key, or why it must not start: beyond loopback
-    only with a key."""
+def _listen(args: argparse.Namespace, name: str) -> tuple[str, int, object] | Refusal:
+    """Where the bridge for robot ``name`` (``hit-1``) listens and its key, or why it must not start (its words, the
+    code and the option refused): beyond loopback only with a key."""
     import ipaddress
 
     from rehabkit.hardware.security.keys import KeyFileError, load_key
@@ -161,22 +160,24 @@ def _listen(args: argparse.Namespace, name: str) -> tuple[str, int, object] | st
     if args.listen:
         host, _, given = args.listen.rpartition(":")
         if not host or not given.isdigit():
-            return f"--listen takes HOST:PORT (e.g. 0.0.0.0:7000 or 192.168.1.20:7000), not '{args.listen}'"
+            return Refusal("listen-format", "--listen",
+                           f"--listen takes HOST:PORT (e.g. 0.0.0.0:7000 or 192.168.1.20:7000), not '{args.listen}'")
         host, port = host.strip("[]"), int(given)
     key = None
     if args.key:
         try:
             key = load_key(args.key)
         except KeyFileError as exc:
-            return f"--key: {exc}"
+            return Refusal("key-file", "--key", f"--key: {exc}")
     try:
         loopback = ipaddress.ip_address(host).is_loopback
     except ValueError:
         loopback = host == "localhost"
     if not loopback and key is None:
-        return (f"--listen {args.listen}: beyond this machine's loopback anyone on the network could drive the robot; "
-                f"give the bridge the robot's key (`rehabkit keys new {name}`, then --key FILE, "
-                "the same file as the host's backend.key_file)")
+        return Refusal("listen-needs-key", "--listen",
+                       f"--listen {args.listen}: beyond this machine's loopback anyone on the network could drive the "
+                       f"robot; give the bridge the robot's key (`rehabkit keys new {name}`, then --key FILE, "
+                       "the same file as the host's backend.key_file)")
     return host, port, key
 
 

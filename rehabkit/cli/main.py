@@ -16,7 +16,8 @@ import sys
 import traceback
 from pathlib import Path
 
-from rehabkit.cli.exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, unwritable
+from rehabkit.cli import exits
+from rehabkit.cli.exits import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_INVALID, EXIT_OK, refuse, unwritable
 
 # (the core, and pydantic with it, is imported by main() and the commands, not with this module: the collector's
 # thresholds entry() sets hold by then)
@@ -65,12 +66,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     from rehabkit.cli.audit import killed_leftovers
 
     if left := killed_leftovers(out):  # (a run over it would overwrite what is left of the killed one)
-        _err(f"error: --out {out} holds a killed run that was not recovered ({', '.join(left)}): `rehabkit recover "
-             f"{out}` makes it a run folder; or choose another --out")
-        return EXIT_INVALID
+        return refuse(f"error: --out {out} holds a killed run that was not recovered ({', '.join(left)}): "
+                      f"`rehabkit recover {out}` makes it a run folder; or choose another --out", "out-killed-run",
+                      "--out")
     if (why := unwritable(out)) is not None:
-        _err(why)
-        return EXIT_INVALID
+        return refuse(why, "out-unwritable", "--out")
     sets = [*args.set, "ros.bag=true"] if args.bag else args.set
     try:
         result = run_scenario(args.scenario, overrides=sets, out_dir=out, spawn=args.spawn, progress=True)
@@ -392,6 +392,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.debug:
         os.environ["REHABKIT_DEBUG"] = "1"
+    exits.last_refusal = None  # (this command's refusal, if it makes one: not an earlier command's in this process)
     try:
         return args.func(args)
     except ScenarioError as exc:

@@ -9,7 +9,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, unwritable
+from rehabkit.cli.exits import EXIT_FAILED, EXIT_INVALID, EXIT_OK, refuse, unwritable
 from rehabkit.cli.run_report import verdict_lines, wrote
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
@@ -39,9 +39,8 @@ def _replay(args: argparse.Namespace) -> int:
     sets = [*args.set, "ros.bag=true"] if args.bag else args.set
     source = Path(args.source)
     if args.scenario is None and _is_bag(source):
-        print(f"error: {source} is a ROS bag: name the scenario to replay it on (--scenario S.yaml: the robot it was "
-              "recorded on, the controller and planner to try)", file=sys.stderr)
-        return EXIT_INVALID
+        return refuse(f"error: {source} is a ROS bag: name the scenario to replay it on (--scenario S.yaml: the robot "
+                      "it was recorded on, the controller and planner to try)", "bag-needs-scenario", "--scenario")
     if args.scenario is None:
         if args.topics:
             print("error: --topics goes with a bag and --scenario", file=sys.stderr)

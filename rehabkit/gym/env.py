@@ -167,7 +167,9 @@ class ScenarioEnv(gym.Env):
             terms["safety_stop"] = -self.spec_learning.stop_penalty
             reward -= self.spec_learning.stop_penalty
             trip = next(e for e in reversed(safety.events) if e.t == safety.tripped_at)
-            info["safety"] = {"rule": trip.rule, "joint": trip.joint, "t": trip.t, "message": trip.message}
+            # the stop's category as a field (0 off, 1 ramp then off, 2 ramp then held; None: a reaction, no stop)
+            info["safety"] = {"rule": trip.rule, "joint": trip.joint, "t": trip.t, "message": trip.message,
+                              "category": trip.data.get("category")}
         return self.observer.observe(st.k), reward, terminated, truncated, info
 
     def policy_meta(self) -> dict:

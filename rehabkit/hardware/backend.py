@@ -258,7 +258,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
             silent = self._now() - self.last_state
             if silent > self.config.state_timeout_s and self.silent_ticks * self.timestep > self.config.state_timeout_s:
                 raise LinkLostError(f"no valid state from the bridge for {1e3 * silent:.0f} ms "
-                                    f"(dropped: {dict(self.rx.dropped) or 'none'})")
+                                    f"(dropped: {dict(self.rx.dropped) or 'none'})", "state-timeout")
 
     def _pace(self, sent: bool) -> float:
         """Wait for this tick's deadline; how late it came [s]. Lock-step: until the bridge has ticked (never late;
@@ -269,7 +269,7 @@ class HardwareBackend(MirroredScene, Backend, Instruments, CompliantGaps):
         if not self._tick_lockstep(sent=sent):
             self._taken_over()
             raise LinkLostError(f"no valid state from the bridge: it did not answer tick {self.wire.clock - 1} of the "
-                                f"lock-step clock within {LOCKSTEP_REPLY_S:g} s of wall time")
+                                f"lock-step clock within {LOCKSTEP_REPLY_S:g} s of wall time", "tick-unanswered")
         return 0.0
 
     def _taken_over(self) -> None:

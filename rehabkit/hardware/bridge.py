@@ -122,13 +122,14 @@ class Bridge:
             self.waiting = False
         self.status = (self.status | HOLDING | bit) & ~(ENABLED | STALE)
 
-    def _press(self, reason: str, by: str) -> None:
+    def _press(self, reason: str, by: str, source: str | None = None) -> None:
         if self.latch is not None:
-            self.latch.press(reason, by)
+            self.latch.press(reason, by, source)
 
-    def press_estop(self, now: float, by: str = "the e-stop button at the robot") -> None:
-        """The e-stop at the robot: held at once, latched until cleared."""
-        self._press(by, "robot")
+    def press_estop(self, now: float, by: str = "the e-stop button at the robot", source: str = "button") -> None:
+        """The e-stop at the robot: held at once, latched until cleared. ``source``: the device pressed, as the latch
+        file's ``source`` (``button``; the keypad's ``e``: ``keypad``)."""
+        self._press(by, "robot", source)
         self._hold(now, "e-stop", ESTOPPED)
 
     def clear_estop(self, by: str, source: tuple | None = None, **how: str) -> bool:

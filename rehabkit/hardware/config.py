@@ -13,7 +13,12 @@ from rehabkit.models.strict import FilePath
 
 
 class LinkLostError(BackendFaultError):
-    """No valid state from the robot for longer than allowed."""
+    """No valid state from the robot for longer than allowed. ``cause_code``: ``state-timeout`` (the host's state
+    watchdog ran out), ``tick-unanswered`` (a lock-step tick went unanswered), or None where neither is why."""
+
+    def __init__(self, message: str, cause_code: str | None = None):
+        super().__init__(message)
+        self.cause_code = cause_code  # (why as a code: the message says it in words)
 
 
 class SessionTakenOverError(LinkLostError):
@@ -62,6 +67,7 @@ class BridgeHoldError(BackendFaultError):
     in seconds from the run's start (None where not given)."""
 
     observable = True
+    cause_code = "bridge-hold"
 
     def __init__(self, message: str, breach=None, status: int = 0, at_s: float | None = None):
         super().__init__(message)

@@ -33,7 +33,7 @@ def handle(bridge, keys: list[str], now: float) -> None:
     """Do what the keys say at the bridge, and say it (a line on standard output)."""
     for key in keys:
         if key == "estop":
-            bridge.press_estop(now, "the e-stop key of the keypad at the robot")
+            bridge.press_estop(now, "the e-stop key of the keypad at the robot", source="keypad")
             print("keypad: e-stop pressed, latched", flush=True)
         elif key == "allow":
             bridge.link.gate.allow(time.monotonic())

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from rehabkit.core.scenario.loader import load_scenario
 from rehabkit.core.scenario.source import parse_override
-from rehabkit.sweep.execute import execute
+from rehabkit.sweep.execute import RunTimeoutError, execute
 from rehabkit.sweep.grid import RunSpec, expand, parse_grid
 from rehabkit.sweep.store import RunStore
 from rehabkit.sweep.tables import aggregate, flat_rows, format_table, write_csv, write_parquet
@@ -183,14 +183,16 @@ def _drain(queue: deque, running: dict, slots: int, remote, path: str, timeout_s
             try:
                 row = ray.get(ref)
             except Exception as exc:  # noqa: BLE001 (the worker died, the task failed: recorded)
-                row = _failed(f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1][:500]}", t_start)
+                row = _failed(f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1][:500]}", t_start,
+                              type(exc).__name__)
             record(s, row)
         now = time.monotonic()
         for ref, (s, t_start) in list(running.items()):
             if now - t_start > timeout_s:
                 ray.cancel(ref, force=True)
                 del running[ref]
-                record(s, _failed(f"RunTimeoutError: timeout: still running after {timeout_s:g} s", t_start))
+                record(s, _failed(f"RunTimeoutError: timeout: still running after {timeout_s:g} s", t_start,
+                                  RunTimeoutError.__name__))
 
 
 def _interrupted(signal: str, t_start: float) -> dict[str, Any]:
@@ -199,6 +201,8 @@ def _interrupted(signal: str, t_start: float) -> dict[str, Any]:
             "ended": {"how": "interrupted", "signal": signal, "reason": "the sweep was stopped while it ran"}}
 
 
-def _failed(error: str, t_start: float) -> dict[str, Any]:
-    return {"error": error, "passed": False, "metrics": {}, "expectations": {},
-            "wall_time_s": time.monotonic() - t_start}
+def _failed(error: str, t_start: float, error_type: str | None = None) -> dict[str, Any]:
+    """A run that left no row of its own (its worker died, it timed out on Ray, the sweep was stopped): ``error``
+    in words, ``error_type`` the error's class name where there was one."""
+    return {"error": error, "error_type": error_type, "error_missing": None, "passed": False, "metrics": {},
+            "expectations": {}, "wall_time_s": time.monotonic() - t_start}

@@ -22,6 +22,15 @@ class RunTimeoutError(BaseException):
     """A run took longer than the sweep allows (a BaseException: plugin-error handlers must not catch it)."""
 
 
+def error_fields(exc: BaseException) -> dict[str, Any]:
+    """A failed run's error as fields, beside the row's ``error`` (its words): ``error_type``, the error's class name;
+    ``error_missing``, the capabilities (protocol names, sorted) its plugins needed that the robot or backend lacks,
+    where that is why (a :class:`~rehabkit.core.setup.errors.PluginSetupError`'s ``missing``), else None."""
+    missing = getattr(exc, "missing", None)
+    lacked = sorted({cap.__name__ for caps in missing.values() for cap in caps}) if missing else None
+    return {"error_type": type(exc).__name__, "error_missing": lacked}
+
+
 def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None,
             out_dir: str | None = None) -> dict[str, Any]:
     """Run the scenario with ``overrides``; the row (never raises for the run's own failures). With ``out_dir``
@@ -54,7 +63,8 @@ def execute(path: str, overrides: dict[str, Any], timeout_s: float | None = None
         row["wall_clock"] = sorted(wall_clock(result.summary.get("metric_info", {})))  # as the run described them
         del result
     except (Exception, RunTimeoutError) as exc:  # noqa: BLE001 (recorded: the sweep goes on)
-        row.update(passed=False, metrics={}, expectations={}, error=f"{type(exc).__name__}: {exc}")
+        row.update(passed=False, metrics={}, expectations={}, error=f"{type(exc).__name__}: {exc}",
+                   **error_fields(exc))
     finally:
         if alarm:
             signal.setitimer(signal.ITIMER_REAL, 0)

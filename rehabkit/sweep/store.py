@@ -4,8 +4,9 @@
     DIR/runs/<run id>.json  one row per finished run, written whole (temp file, then rename); a run Ctrl-C or
                             SIGTERM cut short is recorded so ("ended") and run again when the sweep resumes
     DIR/results.parquet     all rows, in grid order (columnar: grid keys, seed, passed, error,
-                            wall_time_s, metric.<name>, wall.<name> for wall-clock metrics,
-                            expect.<metric>)
+                            error_type (the error's class name), error_missing (the capabilities a plugin
+                            needed that the robot or backend lacks, where that is why), wall_time_s,
+                            metric.<name>, wall.<name> for wall-clock metrics, expect.<metric>)
     DIR/aggregate.csv       per grid point: runs, failures, share passed, mean/std of each metric
 """
 

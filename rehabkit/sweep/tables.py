@@ -25,6 +25,8 @@ def flat_rows(specs: list[RunSpec], rows: dict[str, dict[str, Any]]) -> list[dic
         label = {**point_label(spec.point), **{k: v for k, v in spec.point if k in numeric}}
         rec: dict[str, Any] = {"run_id": spec.run_id, **label, "seed": spec.seed,
                                "passed": bool(row["passed"]), "error": row["error"],
+                               # the error as fields (a row stored before they were: none)
+                               "error_type": row.get("error_type"), "error_missing": row.get("error_missing"),
                                "wall_time_s": float(row["wall_time_s"]),
                                **({"run_dir": row["run_dir"]} if row.get("run_dir") else {})}
         wall = set(row.get("wall_clock", ()))  # wall-clock figures: columns of their own, not compared

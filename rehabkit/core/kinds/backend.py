@@ -82,10 +82,17 @@ class BackendFaultError(RuntimeError):
     """The backend can no longer drive the robot (e.g. its link is lost); the run stops with this reason.
     ``observable``: the robot side holds it and still reports its state, so the run watches it come to rest (the
     safety stop's ``stop_after_s``) before ending. ``breach``: the joint limit the robot side saw broken, where that
-    is why (a :class:`~rehabkit.core.setup.limits.LimitBreach`: its joint, value and limit become the event's)."""
+    is why (a :class:`~rehabkit.core.setup.limits.LimitBreach`: its joint, value and limit become the event's).
+    ``cause_code``: why, as a code (``bridge-hold``, ``state-timeout``, ``tick-unanswered``, ...), or None; the safety
+    event's ``data["cause"]``, so a reader tells the causes apart without parsing the message."""
 
     observable = False
     breach = None
+    cause_code: str | None = None
+
+    def event_data(self) -> dict | None:
+        """The fault's fields for its safety event's ``data`` (``cause``: its ``cause_code``), or None without any."""
+        return {"cause": self.cause_code} if self.cause_code is not None else None
 
 
 class EStopLatchedError(BackendFaultError):

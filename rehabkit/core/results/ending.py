@@ -24,14 +24,15 @@ SIGNAL_EXITS = {"SIGINT": 130, "SIGTERM": 143}  # 128 + the signal's number, as 
 
 @dataclass(frozen=True)
 class RunEnding:
-    """How the run ended (``how``), why (``reason``, for people), at what time [s], and the signal that ended it where
-    one did."""
+    """How the run ended (``how``), why (``reason``, for people), at what time [s], the signal that ended it where
+    one did, and the class name of the error that ended it (``error_type``) where one did."""
 
     how: How
     reason: str = ""
     t: float | None = None
     signal: str | None = None
     cut_short: bool = False  # the loop did not run its course (a signal, an error out of it): not a safety stop's end
+    error_type: str | None = None  # (the error's class as a field: the reason says it in words)
 
     @property
     def words(self) -> str:
@@ -60,6 +61,8 @@ class RunEnding:
             out["t"] = round(self.t, 6)
         if self.signal is not None:
             out["signal"] = self.signal
+        if self.error_type is not None:
+            out["error_type"] = self.error_type
         return out
 
 

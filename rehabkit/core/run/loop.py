@@ -150,7 +150,8 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
                     push(tau_h[k])
                 step(sub)
             except BackendFaultError as exc:  # the robot can't be driven any more: stop, logs complete
-                safety.trip(t, q, "backend", str(exc), qd, breach=exc.breach)
+                # (its cause as fields too: a bridge's hold, a lost state, an unanswered tick, a drive's fault)
+                safety.trip(t, q, "backend", str(exc), qd, breach=exc.breach, data=exc.event_data())
                 if not exc.observable:  # (else watched while the robot side stops it, as any safety stop)
                     k += 1
                     st.stopped = True
@@ -184,7 +185,7 @@ def run_loop(session: RunSession, progress: bool = False, k_to: int | None = Non
     return LoopResult(k, time.perf_counter() - t_loop, contact_steps, t_loop)
 
 
-def bring_to_rest(session: RunSession, rule: str, message: str) -> None:
+def bring_to_rest(session: RunSession, rule: str, message: str, data: dict | None = None) -> None:
     """End a run that was cut short (Ctrl-C, SIGTERM, a plugin's error out of the loop) as a safety stop ends one: the
     safety layer trips with ``rule`` (its stop category) and drives the robot — the controller, the person and the
     recording left out — until the stop has run its course, or the run's end. A backend that can't be driven any more
@@ -198,7 +199,7 @@ def bring_to_rest(session: RunSession, rule: str, message: str) -> None:
     try:
         _, q, qd = backend.state()
         if safety.tripped_at is None:
-            safety.trip(k * dt, q, rule, message, qd)
+            safety.trip(k * dt, q, rule, message, qd, data=data)
         while k < n:
             t = k * dt
             _, q, qd = backend.state()
@@ -213,7 +214,7 @@ def bring_to_rest(session: RunSession, rule: str, message: str) -> None:
                 break
     except BackendFaultError as exc:  # (the robot side stops it on its own: its watchdogs)
         if safety.tripped_at is None:
-            safety.trip(k * dt, trace.q[max(k - 1, 0)], "backend", str(exc))
+            safety.trip(k * dt, trace.q[max(k - 1, 0)], "backend", str(exc), data=exc.event_data())
     except Exception:  # noqa: BLE001 (what failed the run fails the stop too: the backend's close releases the robot)
         logging.getLogger(__name__).warning("the robot could not be brought to rest through the loop", exc_info=True)
     finally:

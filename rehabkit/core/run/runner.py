@@ -122,6 +122,7 @@ class Runner:
         the backend — and then the robot brought to rest by the safety layer before anything else (a second Ctrl-C
         does not cut that short)."""
         t0 = time.perf_counter()
+        data = None  # (a backend fault's fields for its event)
         try:
             # a control loop's matrices are small: BLAS worker threads only spin against it, and against a bridge or
             # renderer sharing the machine
@@ -131,18 +132,20 @@ class Runner:
         except KeyboardInterrupt as exc:
             name = exc.signal if isinstance(exc, Terminated) else "SIGINT"
             said = "SIGTERM: the process was asked to stop" if name == "SIGTERM" else "Ctrl-C (SIGINT)"
-            rule, how = "interrupt", "interrupted"
+            rule, how, error = "interrupt", "interrupted", None
         except BackendFaultError as exc:
             name, said, rule, how = None, str(exc), "backend", "backend-fault"
+            data = exc.event_data()  # (its cause as fields, as the loop's own trip on a fault gives them)
+            error = type(exc).__name__
         except Exception as exc:  # noqa: BLE001 (a plugin's error out of the loop: the run ends, the robot at rest)
-            name, rule, how = None, "plugin-error", "plugin-fault"
+            name, rule, how, error = None, "plugin-error", "plugin-fault", type(exc).__name__
             said = f"{type(exc).__name__} out of the control loop: {exc}"
             logging.getLogger(__name__).debug("the run's loop raised", exc_info=True)
         with signals_held():
             t = session.loop.k * session.setup.schedule.control_dt
-            bring_to_rest(session, rule, said)
+            bring_to_rest(session, rule, said, data)
         loop = LoopResult(session.loop.k, time.perf_counter() - t0, session.loop.contact_steps, t0)
-        return loop, RunEnding(how, said, t, name, cut_short=True)
+        return loop, RunEnding(how, said, t, name, cut_short=True, error_type=error)
 
 
 def release_backend(backend) -> None:

@@ -149,8 +149,14 @@ class RunSession:
             refusal = replace(refusal, located=first_plan_refusal(self.setup, failure))
         if self.first_refusal is None:  # (the first plan's refusal is kept: the robot never moved)
             self.refusal = refusal
-        self.safety.trip(refusal.t, q, "plan", refusal.reason + then, breach=refusal.breach,
-                               data={"actions": list(refusal.actions)} if refusal.actions else None)
+        data = {"actions": list(refusal.actions)} if refusal.actions else {}
+        error = refusal.error
+        if error is not None:  # the planner's cause and setting as fields (its message says them in words)
+            if error.code:
+                data["cause"] = error.code
+            if error.setting:
+                data["setting"] = ".".join(str(part) for part in error.setting)
+        self.safety.trip(refusal.t, q, "plan", refusal.reason + then, breach=refusal.breach, data=data or None)
 
     def plan_for_controller(self, t: float, q: np.ndarray, qd: np.ndarray, targets: list[Target]) -> Plan:
         """A plan a controller asks for (e.g. a keypad's replay); it follows the trajectory itself.

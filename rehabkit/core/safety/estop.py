@@ -79,10 +79,12 @@ class EStopLatch:
         rec = self.record()
         return rec if rec.get("latched") else None
 
-    def press(self, reason: str, by: str) -> None:
-        """Latch (a press while latched keeps the first press's record)."""
+    def press(self, reason: str, by: str, source: str | None = None) -> None:
+        """Latch (a press while latched keeps the first press's record). ``source``: which device at ``by`` pressed
+        it, as a code (``button``, ``keypad``), kept as the record's ``source`` where given."""
         if self.latched() is None:
-            self._write({"latched": True, "since": _now(), "reason": reason, "by": by, "ramp_in_pending": False})
+            self._write({"latched": True, "since": _now(), "reason": reason, "by": by, "ramp_in_pending": False,
+                         **({"source": source} if source is not None else {})})  # (the device as a field)
 
     def clear(self, by: str, **how: str) -> dict | None:
         """Clear it, deliberately (``by``: who; ``how``: e.g. over which link, in which session, with which key id,
