@@ -16,6 +16,9 @@ from rehabkit.cli import main
 from tests.conftest import SCENARIOS
 from tests.test_cli import cli
 
+# the module's tests read one check-jsonschema verdict over every file (the `verdicts` fixture, ~2.7 s): on one
+# pytest-xdist worker, so it is made once
+pytestmark = pytest.mark.xdist_group("schema")
 ROOT = SCENARIOS.parent
 SHIPPED = sorted(p for d in (SCENARIOS, ROOT / "examples") for p in d.rglob("*.yaml") if "patients" not in p.parts)
 CORPUS = sorted((ROOT / "tests" / "bad_scenarios").glob("*.yaml"))
