@@ -375,9 +375,10 @@ def test_a_urdf_robot_runs_over_an_authenticated_link_and_validate_checks_its_ke
     (the spawned bridge finds the URDF where the host does); a missing or open key file is refused by ``validate``,
     at the scenario's line, before anything runs."""
     scenario = tmp_path / "lab_arm4.yaml"
-    # (its plan ends at 6.7 s: run to 7.5, not the example's 12, each tick a round trip to the bridge)
+    # (its plan ends at 6.7 s: run to 7.0, not the example's 12, each tick a round trip to the bridge; in simulation
+    # its final error is then 6e-8 m against the example's 2 mm, its tracking as at 12 s)
     scenario.write_text(f"extends: {ROOT}/examples/robots/urdf_arm4.yaml\n"
-                        "backend: {type: hardware, clock: lockstep, key_file: keys/arm4.key}\nduration: 7.5\n")
+                        "backend: {type: hardware, clock: lockstep, key_file: keys/arm4.key}\nduration: 7.0\n")
     missing = cli("validate", scenario)
     # (the key file's own error, its fix: test_a_key_file_is_owner_only_named_for_its_robot_and_never_shows_its_secret)
     assert missing.returncode == 2 and located(missing.stderr) == [(str(scenario), 2, 44, "backend.key_file")]
